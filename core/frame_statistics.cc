@@ -1,0 +1,48 @@
+#include "core/frame_statistics.h"
+
+#include <cmath>
+#include <algorithm>
+#include <cstdint>
+
+namespace inspection {
+
+namespace {
+template <typename T>
+FrameStatistics Compute(const cv::Mat& frame, int bit_depth) {
+  const double full = double((1u << bit_depth) - 1u);
+  const T sat = T(full);
+  const T under = T(std::floor(0.02 * full));
+  double sum = 0, sum2 = 0;
+  uint64_t n_sat = 0, n_under = 0;
+  for (int y = 0; y < frame.rows; ++y) {
+    const T* row = frame.ptr<T>(y);
+    double rs = 0, rs2 = 0;
+    for (int x = 0; x < frame.cols; ++x) {
+      const double v = row[x];
+      rs += v;
+      rs2 += v * v;
+      n_sat += row[x] >= sat;
+      n_under += row[x] < under;
+    }
+    sum += rs;
+    sum2 += rs2;
+  }
+  const double n = double(frame.total());
+  FrameStatistics s;
+  if (n == 0) return s;
+  const double scale = 255.0 / full;
+  const double mean = sum / n;
+  s.mean_grey = mean * scale;
+  s.stddev_grey = std::sqrt(std::max(0.0, sum2 / n - mean * mean)) * scale;
+  s.saturated_percent = 100.0 * double(n_sat) / n;
+  s.underexposed_percent = 100.0 * double(n_under) / n;
+  return s;
+}
+}  // namespace
+
+FrameStatistics ComputeFrameStatistics(const cv::Mat& frame, int bit_depth) {
+  if (frame.depth() == CV_16U) return Compute<uint16_t>(frame, std::clamp(bit_depth, 8, 16));
+  return Compute<uint8_t>(frame, 8);
+}
+
+}  // namespace inspection

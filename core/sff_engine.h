@@ -1,0 +1,76 @@
+// Shape-from-focus engine (thesis 3.1): frames are pushed one by one as the camera delivers
+// them; the engine keeps O(pixels) state (best focus value, its neighbours and the all-in-focus
+// grey value per pixel), never a pixels x frames focus volume, so the depth map is ready when
+// the last frame arrives. Scans and Reconstruct both run through it.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "core/status.h"
+
+namespace inspection {
+
+// Focus measure operators of thesis 3.1.3.
+enum class FocusMeasure {
+  kModifiedLaplacian,      // ML, eq. 3.8-3.11, summed over the window (thesis SML, eq. 3.12)
+  kSumModifiedLaplacian,   // SML, eq. 3.12
+  kTenengrad,              // eq. 3.14
+  kGreyLevelVariance,      // eq. 3.15
+  kHelmliMean,             // Helmli-Scherer mean ratio, eq. 3.16
+  kChebyshevMoments,       // Yap & Raveendran ratio, eq. 3.17-3.22
+  kGreyLevelLocalVariance, // GLVM: local variance from the mean
+};
+
+// Depth interpolation of thesis 3.1.4.
+enum class DepthInterpolation {
+  kMaximum,   // eq. 3.23-3.24
+  kLineFit,   // Malik & Choi, eq. 3.25-3.29
+  kGaussian,  // three-point Gaussian, eq. 3.30-3.34
+};
+
+const char* FocusMeasureName(FocusMeasure m);              // "tenengrad", "sml", ...
+StatusOr<FocusMeasure> ParseFocusMeasure(const std::string& name);
+const char* DepthInterpolationName(DepthInterpolation i);  // "maximum", "linefit", "gaussian"
+StatusOr<DepthInterpolation> ParseDepthInterpolation(const std::string& name);
+
+struct SffOptions {
+  FocusMeasure focus_measure = FocusMeasure::kTenengrad;
+  int window_px = 7;  // odd, 3..31: side of the square summation window U of eq. 3.12/3.14
+  DepthInterpolation interpolation = DepthInterpolation::kGaussian;
+  // Pixels whose confidence (0..1, see DepthResult) is below this get NaN depth.
+  double min_confidence = 0.05;
+  // Worker threads for the per-frame pass; 0 = all hardware threads.
+  int threads = 0;
+
+  // INVALID_ARGUMENT naming the field when out of range.
+  Status Validate() const;
+};
+
+struct DepthResult {
+  cv::Mat depth_um;      // CV_32FC1: stage z (µm) at which the pixel is sharpest; NaN = no depth
+  cv::Mat confidence;    // CV_32FC1 in [0, 1]
+  cv::Mat all_in_focus;  // same type as the frames: grey value from the sharpest frame
+  double valid_fraction = 0.0;  // share of pixels with finite depth
+  int frame_count = 0;
+};
+
+// Not thread-safe: one producer pushes frames in acquisition order. The engine may use
+// several threads internally per frame.
+class SffEngine {
+ public:
+  // frame_type: CV_8UC1 or CV_16UC1.
+  static StatusOr<std::unique_ptr<SffEngine>> Create(const SffOptions& options, cv::Size frame_size,
+                                                     int frame_type);
+  virtual ~SffEngine() = default;
+
+  // z_um must be strictly monotonic over the pushed frames (either direction).
+  virtual Status PushFrame(const cv::Mat& frame, double z_um) = 0;
+  // Needs >= 3 frames. After Finish the engine cannot take more frames.
+  virtual StatusOr<DepthResult> Finish() = 0;
+  virtual int frames_pushed() const = 0;
+};
+
+}  // namespace inspection

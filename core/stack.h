@@ -1,0 +1,69 @@
+// The stack folder: the one on-disk form of an SFF image stack, used by scans (the server
+// writes it), Reconstruct (reads it) and the CLI (uploads it). Format (README "Stack format"):
+//
+//   <dir>/stack.json          manifest, see StackManifest
+//   <dir>/<frame files>       8- or 16-bit single-channel PNG or TIFF, one per z position
+//   <dir>/ground_truth_depth.tiff   optional, float32 µm, written by the simulated rig
+//
+// stack.json:
+//   { "format": "inspection-stack", "version": 1, "pixel_size_um": 0.74,
+//     "frames": [ { "file": "frame_0000.png", "z_um": 0.0, "exposure_us": 8000,
+//                   "pattern": "uniform:128" }, ... ],
+//     "bit_depth": 8, "specimen": "skew5", "calibration_id": "", "illumination": "STD" }
+// Frames are listed in acquisition order; z_um must be strictly monotonic (either direction,
+// steps need not be uniform). "pattern" names what the projector showed for that frame.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/status.h"
+
+namespace inspection {
+
+struct StackFrame {
+  std::string file;          // relative to the stack folder, no ".." components
+  double z_um = 0.0;         // stage position when the frame was exposed
+  double exposure_us = 0.0;  // camera exposure time; 0 when unknown
+  std::string pattern;       // projector pattern, e.g. "uniform:128", "checkerboard:8", "file:p/0001.png"
+};
+
+struct StackManifest {
+  int version = 1;
+  double pixel_size_um = 0.0;  // lateral size of one camera pixel on the specimen
+  int bit_depth = 8;           // significant bits per pixel: 8, 10, 12 or 16
+  std::string specimen;        // free text; the simulated rig writes its specimen name
+  std::string calibration_id;  // calibration bundle active when acquired, empty if none
+  std::string illumination;    // illumination mode, e.g. "STD"
+  std::vector<StackFrame> frames;
+};
+
+inline constexpr const char* kStackManifestName = "stack.json";
+inline constexpr const char* kGroundTruthDepthName = "ground_truth_depth.tiff";
+
+// Parses <dir>/stack.json and checks what can be checked without decoding images: required
+// fields present and typed, >= 3 frames, z strictly monotonic, files exist and stay inside dir.
+// Errors are INVALID_ARGUMENT naming the field or frame, e.g. "stack.json: frames[4].z_um ...".
+StatusOr<StackManifest> ReadStackManifest(const std::filesystem::path& dir);
+
+// Parses manifest text (for uploads before files exist). Does not check that files exist.
+StatusOr<StackManifest> ParseStackManifest(const std::string& json_text);
+
+// Writes <dir>/stack.json atomically (temporary file + rename).
+Status WriteStackManifest(const std::filesystem::path& dir, const StackManifest& manifest);
+
+// Decodes one frame as stored (CV_8UC1 or CV_16UC1); colour images are rejected.
+StatusOr<cv::Mat> LoadStackFrame(const std::filesystem::path& dir, const StackManifest& manifest,
+                                 size_t index);
+
+// Decodes every frame header and checks that all frames share size and pixel depth.
+// Errors name the frame: "frame 3 (frame_0003.png): size 640x480 differs from frame 0 (1024x768)".
+Status ValidateStackFrames(const std::filesystem::path& dir, const StackManifest& manifest);
+
+// Returns INVALID_ARGUMENT unless z is strictly monotonic; names the first offending frame.
+Status CheckMonotonicZ(const std::vector<double>& z_um);
+
+}  // namespace inspection

@@ -1,0 +1,59 @@
+// Rig: the camera, projector and stage of one microscope, as the server's job worker drives
+// them. Built from a rig configuration (devices/rig_config.h) or as the simulated rig.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "devices/camera.h"
+#include "devices/projector.h"
+#include "devices/stage.h"
+
+namespace inspection {
+
+// Simulation-only view of a rig: ground truth and specimen choice. Real rigs return nullptr
+// from Rig::simulation().
+class SimulationControl {
+ public:
+  virtual ~SimulationControl() = default;
+  virtual std::vector<std::string> specimen_names() const = 0;
+  virtual std::string specimen() const = 0;
+  // Loads a built-in specimen by name or a user scene ("file:/path/scene.json").
+  virtual Status SetSpecimen(const std::string& name) = 0;
+  // Height map (CV_32FC1, µm) in the depth convention: the stage z at which each camera pixel
+  // is in focus.
+  virtual cv::Mat GroundTruthDepthUm() const = 0;
+  // The z range covering the specimen's heights, used for default scan ranges.
+  virtual std::pair<double, double> SpecimenZRangeUm() const = 0;
+};
+
+struct ScanDefaults {
+  double z_start_um = 0.0;
+  double z_end_um = 0.0;
+  double z_step_um = 5.0;  // thesis rig: 5.059 µm
+  double exposure_us = 10000.0;
+};
+
+class Rig {
+ public:
+  virtual ~Rig() = default;
+
+  virtual Camera& camera() = 0;
+  virtual Projector& projector() = 0;
+  virtual Stage& stage() = 0;
+  virtual double pixel_size_um() const = 0;
+  virtual ScanDefaults scan_defaults() const = 0;
+  // Non-null only on the simulated rig.
+  virtual SimulationControl* simulation() { return nullptr; }
+
+  // Checks every device is reachable; UNAVAILABLE naming the device otherwise.
+  virtual Status CheckDevices();
+  // Reconnects devices after an error (e.g. camera unplugged and plugged back).
+  virtual Status Reset() { return CheckDevices(); }
+};
+
+}  // namespace inspection
