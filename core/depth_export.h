@@ -1,0 +1,38 @@
+// Depth map exports: float32 TIFF (µm), confidence TIFF, colour preview with scale bar,
+// 16-bit PNG with recorded scale/offset, PLY point cloud and ISO 25178-72 x3p.
+// Every writer writes to "<path>.tmp" and renames, so a failed export leaves nothing behind.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "core/status.h"
+
+namespace inspection {
+
+struct DepthExportMeta {
+  double pixel_size_um = 0.0;  // lateral sampling in x and y
+  std::string description;     // free text stored where the format allows (TIFF ImageDescription, x3p comment)
+};
+
+// float32 single-channel TIFF, values in µm, NaN where no depth. Pixel size stored as resolution.
+Status WriteDepthTiff(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
+// Reads back a float32 TIFF written by WriteDepthTiff (or ground_truth_depth.tiff).
+StatusOr<cv::Mat> ReadDepthTiff(const std::filesystem::path& path);
+// float32 TIFF of confidence values in [0, 1].
+Status WriteConfidenceTiff(const std::filesystem::path& path, const cv::Mat& confidence, const DepthExportMeta& meta);
+// 8-bit colour PNG: depth through a perceptual colour map, NaN in black, with a scale bar
+// labelled in µm along the right edge.
+Status WriteDepthPreviewPng(const std::filesystem::path& path, const cv::Mat& depth_um);
+// 16-bit PNG: value = round((depth_um - offset_um) / scale_um), 0 reserved for NaN; scale and
+// offset go into a tEXt chunk and a sidecar "<path>.json".
+Status WriteDepthPng16(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
+// ASCII or binary little-endian PLY: x, y = pixel * pixel_size_um, z = depth_um; NaN skipped.
+Status WriteDepthPly(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
+// ISO 25178-72 x3p: zip holding main.xml (with md5 of bindata), bindata/data.bin (float64 µm
+// converted to metres as the format wants), md5checksum.hex.
+Status WriteDepthX3p(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
+
+}  // namespace inspection
