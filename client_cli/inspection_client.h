@@ -86,6 +86,8 @@ class InspectionClient {
                             v1::Job* job);
 
   ClientOptions options_;
+  // Set when the options cannot be used (e.g. an unreadable CA file); every call returns it.
+  grpc::Status init_status_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::InspectionService::Stub> stub_;
   std::unique_ptr<v1::SimulationService::Stub> sim_stub_;
