@@ -20,7 +20,11 @@ struct DepthExportMeta {
 // float32 single-channel TIFF, values in µm, NaN where no depth. Pixel size stored as resolution.
 Status WriteDepthTiff(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
 // Reads back a float32 TIFF written by WriteDepthTiff (or ground_truth_depth.tiff).
+// Also reads float32 (or float64, converted) TIFFs written by cv::imwrite, striped or tiled.
 StatusOr<cv::Mat> ReadDepthTiff(const std::filesystem::path& path);
+// As above; when meta is not null it receives the pixel size (from the resolution tags,
+// 0 if absent) and the ImageDescription.
+StatusOr<cv::Mat> ReadDepthTiff(const std::filesystem::path& path, DepthExportMeta* meta);
 // float32 TIFF of confidence values in [0, 1].
 Status WriteConfidenceTiff(const std::filesystem::path& path, const cv::Mat& confidence, const DepthExportMeta& meta);
 // 8-bit colour PNG: depth through a perceptual colour map, NaN in black, with a scale bar
