@@ -31,7 +31,7 @@ namespace inspection::client {
 namespace {
 
 namespace fs = std::filesystem;
-using nlohmann::json;
+using json = nlohmann::ordered_json;
 
 // Exit codes (USAGE.md "Exit codes").
 constexpr int kExitOk = 0;
@@ -202,7 +202,7 @@ int TerminalWidth() {
   return 80;
 }
 
-std::string Bar(double fraction, int width = 20) {
+std::string Bar(double fraction, int width = 10) {
   fraction = std::clamp(fraction, 0.0, 1.0);
   const int filled = static_cast<int>(fraction * width + 0.5);
   return "[" + std::string(filled, '#') + std::string(width - filled, '-') + "]";
@@ -224,7 +224,7 @@ class ProgressPrinter {
       return;
     }
     if (out_.quiet) return;
-    std::string line = EventText(event);
+    std::string line = EventText(event, out_.tty);
     if (out_.tty) {
       Redraw(Bar(event.progress()) + " " + line);
       // Keep the line of a terminal event on screen.
@@ -238,12 +238,8 @@ class ProgressPrinter {
     std::lock_guard<std::mutex> lock(mu_);
     if (out_.json || out_.quiet) return;
     const double fraction = total > 0 ? static_cast<double>(done) / static_cast<double>(total) : 0.0;
-    if (out_.tty) {
-      Redraw(Bar(fraction) + " " + what + " " + Megabytes(done) + " / " + Megabytes(total));
-    } else if (done == total) {
-      // One line per transfer when not on a terminal.
-      std::cout << what << " " << Megabytes(done) << " done\n" << std::flush;
-    }
+    // Only on a terminal: in logs the list of written files says enough.
+    if (out_.tty) Redraw(Bar(fraction) + " " + what + " " + Megabytes(done) + " / " + Megabytes(total));
   }
 
   void Finish() {
@@ -252,17 +248,20 @@ class ProgressPrinter {
   }
 
  private:
-  static std::string EventText(const v1::JobEvent& e) {
+  static std::string EventText(const v1::JobEvent& e, bool terminal) {
     std::string text;
+    const bool frame = e.has_frame() && e.frame().frame_count() > 0;
+    // On a terminal a frame line leaves out the phase (it is always acquiring) to fit 80 columns.
     if (e.state() >= v1::JOB_STATE_SUCCEEDED) {
       text = Short(v1::JobState_Name(e.state()), "JOB_STATE_");
-    } else {
+    } else if (!(frame && terminal)) {
       text = Short(v1::JobPhase_Name(e.phase()), "JOB_PHASE_");
     }
-    if (e.has_frame() && e.frame().frame_count() > 0) {
+    if (frame) {
       const auto& f = e.frame();
       const auto& s = f.statistics();
-      text += Format(" %d/%d z=%.1fum mean=%.0f sat=%.1f%% under=%.1f%%", f.frame_index() + 1, f.frame_count(),
+      if (!text.empty()) text += ' ';
+      text += Format("%d/%d z=%.1fum mean=%.0f sat=%.1f%% under=%.1f%%", f.frame_index() + 1, f.frame_count(),
                      f.z_um(), s.mean_grey(), s.saturated_percent(), s.underexposed_percent());
     } else {
       text += Format(" %3.0f%%", 100.0 * e.progress());
