@@ -247,10 +247,11 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
                                    " is not supported by this server");
   }
   const ScanDefaults defaults = rig_->rig().scan_defaults();
-  const bool default_range = req.z_start_um() == 0.0 && req.z_end_um() == 0.0 && req.z_step_um() == 0.0;
+  // Range unset (both ends zero) = the rig's default range; step zero = the rig's default step.
+  const bool default_range = req.z_start_um() == 0.0 && req.z_end_um() == 0.0;
   const double z0 = default_range ? defaults.z_start_um : req.z_start_um();
   const double z1 = default_range ? defaults.z_end_um : req.z_end_um();
-  const double dz = default_range ? defaults.z_step_um : req.z_step_um();
+  const double dz = req.z_step_um() == 0.0 ? defaults.z_step_um : req.z_step_um();
   if (req.exposure_us() < 0) return Status::InvalidArgument("exposure_us must be >= 0 (0 = rig default)");
   const double exposure = req.exposure_us() > 0 ? req.exposure_us() : defaults.exposure_us;
   INSPECT_ASSIGN_OR_RETURN(ScanPlan plan, MakeScanPlan(z0, z1, dz, exposure, rig_->rig().stage()));
