@@ -24,6 +24,8 @@ struct FocusPeak {
 // which for u1 = -dz, u3 = dz reduces to the thesis' equations. Falls back to z2 when a value is
 // not positive or the denominator vanishes.
 FocusPeak GaussianPeak(double z1, double z2, double z3, double f1, double f2, double f3);
+// The same peak position without sigma and height (the engine's per-pixel hot path).
+double GaussianPeakZ(double z1, double z2, double z3, double f1, double f2, double f3);
 
 // Malik & Choi line fit (eq. 3.25-3.29). z/f hold the samples m - before .. m + after around the
 // maximum at position `before` (so count = before + after + 1). DS1 = the `before` samples and

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <thread>
@@ -143,7 +144,7 @@ struct StatePlanes {
   // Sum of F; sum of squared second differences t_k = F_k - 2 F_(k-1) + F_(k-2) over the curve,
   // and over the (up to three) t_k that involve the current maximum (excluded at the end).
   std::vector<float> sum, curv_all, curv_excl;
-  std::vector<P> aif;
+  std::vector<int32_t> aif;  // 32-bit lanes like the rest, so one vectorised loop updates all
 
   void Allocate(int w, int h, int jj) {
     width = w;
@@ -161,7 +162,7 @@ struct StatePlanes {
     sum.assign(n, 0.f);
     curv_all.assign(n, 0.f);
     curv_excl.assign(n, 0.f);
-    aif.assign(n, P(0));
+    aif.assign(n, 0);
   }
 };
 
@@ -171,7 +172,7 @@ SFF_INLINE void InitRow(StatePlanes<T, P>& s, size_t off, const T* __restrict f,
   T* __restrict best = s.best.data() + off;
   int32_t* __restrict idx = s.idx.data() + off;
   float* __restrict sum = s.sum.data() + off;
-  P* __restrict aif = s.aif.data() + off;
+  int32_t* __restrict aif = s.aif.data() + off;
   for (int x = 0; x < n; ++x) {
     best[x] = f[x];
     idx[x] = 0;
@@ -189,55 +190,92 @@ SFF_INLINE void InitRow(StatePlanes<T, P>& s, size_t off, const T* __restrict f,
   }
 }
 
-// Curve statistics of frame k >= 1 (before the maximum is updated): sum, second differences.
-template <typename T>
-SFF_INLINE void CurveStats(int k, const T* __restrict f, const T* __restrict best, const int32_t* __restrict idx,
-                           const T* __restrict last, const T* __restrict last2, float* __restrict sum,
-                           float* __restrict curv_all, float* __restrict curv_excl, int n) {
-  for (int x = 0; x < n; ++x) sum[x] += ToFloat(f[x]);
-  if (k < 2) return;
-  const int32_t km1 = k - 1, km2 = k - 2;
-  for (int x = 0; x < n; ++x) {
-    const float t = ToFloat(f[x]) - 2.f * ToFloat(last[x]) + ToFloat(last2[x]);
-    const float t2 = t * t;
-    const bool gt = f[x] > best[x];
-    const bool near = idx[x] == km1 || idx[x] == km2;  // t involves the current maximum
-    curv_all[x] += t2;
-    curv_excl[x] = gt ? t2 : (near ? curv_excl[x] + t2 : curv_excl[x]);
-  }
+bool HasAvx2() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
 }
 
-// Frame k >= 1 with one neighbour on each side (maximum and Gaussian interpolation): the hot loop.
-template <typename T, typename P>
-SFF_INLINE void UpdateRowJ1(int k, const T* __restrict f, const P* __restrict pix, int n, T* __restrict best,
-                            int32_t* __restrict idx, T* __restrict prev, T* __restrict next, T* __restrict last,
-                            T* __restrict last2, float* __restrict sum, float* __restrict curv_all,
-                            float* __restrict curv_excl, P* __restrict aif) {
-  const int32_t kk = k, km1 = k - 1;
-  // Separate loops, each with lanes of one width, which GCC vectorises (one fused loop it does
-  // not): the all-in-focus plane, the curve statistics, the selects on 32-bit values.
-  for (int x = 0; x < n; ++x) {
-    const P m = P(-int(f[x] > best[x]));  // all ones where this frame is sharper
-    aif[x] = P((pix[x] & m) | (aif[x] & P(~m)));
-  }
-  CurveStats(k, f, best, idx, last, last2, sum, curv_all, curv_excl, n);
-  for (int x = 0; x < n; ++x) {
-    const T v = f[x], b = best[x], l = last[x];
-    const int32_t id = idx[x];
-    const bool gt = v > b;
-    const T nx = next[x], pv = prev[x];
-    next[x] = gt ? T(0) : (id == km1 ? v : nx);
-    prev[x] = gt ? l : pv;
-    best[x] = gt ? v : b;
-    idx[x] = gt ? kk : id;
-    last2[x] = l;
-    last[x] = v;
-  }
+// Row kernels of the state update, compiled twice: for AVX2 and portable (the ISA is chosen at
+// run time). Each is a separate non-inlined function with restrict pointers and lanes of one
+// width, the form in which GCC vectorises them; masks are built with integer bit operations
+// because GCC does not if-convert an integer comparison selecting a float.
+#define SFF_DEFINE_ROW_KERNELS(NS, ...)                                                                       \
+  namespace NS {                                                                                              \
+  /* Sum of F and, for k >= 2, t_k = F_k - 2 F_(k-1) + F_(k-2) (exact in T for int32), whose square */   \
+  /* goes to curv_all and, when t_k involves the maximum (m is k-2, k-1 or k: new max), to curv_excl. */      \
+  template <typename T>                                                                                       \
+  __VA_ARGS__ void StatsRow(int n, int k, const T* __restrict f, const T* __restrict best,                   \
+                            const int32_t* __restrict idx, const T* __restrict last,                          \
+                            const T* __restrict last2, float* __restrict sum, float* __restrict curv_all,     \
+                            float* __restrict curv_excl) {                                                    \
+    if (k < 2) {                                                                                              \
+      for (int x = 0; x < n; ++x) sum[x] += ToFloat(f[x]);                                                    \
+      return;                                                                                                 \
+    }                                                                                                         \
+    const int32_t km1 = k - 1, km2 = k - 2;                                                                   \
+    for (int x = 0; x < n; ++x) {                                                                             \
+      const T v = f[x];                                                                                       \
+      const float t = ToFloat(T(v - 2 * last[x] + last2[x]));                                                 \
+      const float t2 = t * t;                                                                                 \
+      const uint32_t mgt = uint32_t(-int32_t(v > best[x]));                                                   \
+      const int32_t id = idx[x];                                                                              \
+      const uint32_t mnear = uint32_t(-int32_t((id == km1) | (id == km2)));                                   \
+      const uint32_t tb = std::bit_cast<uint32_t>(t2);                                                        \
+      const float kept = curv_excl[x] + std::bit_cast<float>(tb & mnear);                                     \
+      sum[x] += ToFloat(v);                                                                                   \
+      curv_all[x] += t2;                                                                                      \
+      curv_excl[x] = std::bit_cast<float>((tb & mgt) | (std::bit_cast<uint32_t>(kept) & ~mgt));              \
+    }                                                                                                         \
+  }                                                                                                           \
+  /* Frame k >= 1, one neighbour each side: statistics and maximum tracking in one pass. For k == 1 */  \
+  /* t_k does not exist: curv_scale = 0 makes it contribute nothing. */                                     \
+  template <typename T, typename P>                                                                           \
+  __VA_ARGS__ void UpdateRowJ1(int n, int k, float curv_scale, const T* __restrict f,                        \
+                               const P* __restrict pix, T* __restrict best, int32_t* __restrict idx,          \
+                               T* __restrict prev, T* __restrict next, T* __restrict last,                    \
+                               T* __restrict last2, int32_t* __restrict aif, float* __restrict sum,           \
+                               float* __restrict curv_all, float* __restrict curv_excl) {                     \
+    const int32_t kk = k, km1 = k - 1, km2 = k - 2;                                                           \
+    for (int x = 0; x < n; ++x) {                                                                             \
+      const T v = f[x], b = best[x], l = last[x], l2 = last2[x];                                              \
+      const int32_t id = idx[x];                                                                              \
+      const float t = ToFloat(T(v - 2 * l + l2));                                                             \
+      const float t2 = curv_scale * (t * t);                                                                  \
+      const uint32_t mgt = uint32_t(-int32_t(v > b));                                                         \
+      const uint32_t mnear = uint32_t(-int32_t((id == km1) | (id == km2)));                                   \
+      const uint32_t tb = std::bit_cast<uint32_t>(t2);                                                        \
+      const float kept = curv_excl[x] + std::bit_cast<float>(tb & mnear);                                     \
+      sum[x] += ToFloat(v);                                                                                   \
+      curv_all[x] += t2;                                                                                      \
+      curv_excl[x] = std::bit_cast<float>((tb & mgt) | (std::bit_cast<uint32_t>(kept) & ~mgt));              \
+      const bool gt = v > b;                                                                                  \
+      const T nx = next[x], pv = prev[x];                                                                     \
+      const int32_t a = aif[x], p = pix[x];                                                                   \
+      next[x] = gt ? T(0) : (id == km1 ? v : nx);                                                             \
+      prev[x] = gt ? l : pv;                                                                                  \
+      best[x] = gt ? v : b;                                                                                   \
+      idx[x] = gt ? kk : id;                                                                                  \
+      aif[x] = gt ? p : a;                                                                                    \
+      last2[x] = l;                                                                                           \
+      last[x] = v;                                                                                            \
+    }                                                                                                         \
+  }                                                                                                           \
+  }  // namespace NS
+
+SFF_DEFINE_ROW_KERNELS(avx2, __attribute__((target("avx2"), noinline)))
+SFF_DEFINE_ROW_KERNELS(portable, __attribute__((noinline)))
+
+// Curve statistics of frame k >= 1, before the maximum is updated: sum, second differences.
+template <typename T>
+void CurveStats(int k, const T* f, const T* best, const int32_t* idx, const T* last, const T* last2, float* sum,
+                float* curv_all, float* curv_excl, int n) {
+  if (HasAvx2()) avx2::StatsRow(n, k, f, best, idx, last, last2, sum, curv_all, curv_excl);
+  else portable::StatsRow(n, k, f, best, idx, last, last2, sum, curv_all, curv_excl);
 }
 
 // Frame k >= 1, general j (line fit).
 template <typename T, typename P>
-SFF_INLINE void UpdateRowGeneral(StatePlanes<T, P>& s, size_t off, int k, const T* f, const P* pix, int n) {
+void UpdateRowGeneral(StatePlanes<T, P>& s, size_t off, int k, const T* f, const P* pix, int n) {
   const int J = s.j;
   CurveStats(k, f, s.best.data() + off, s.idx.data() + off, s.ring[0].data() + off, s.last2.data() + off,
              s.sum.data() + off, s.curv_all.data() + off, s.curv_excl.data() + off, n);
@@ -266,13 +304,23 @@ SFF_INLINE void UpdateRowGeneral(StatePlanes<T, P>& s, size_t off, int k, const 
 }
 
 template <typename T, typename P>
-SFF_INLINE void UpdateRow(StatePlanes<T, P>& s, size_t off, int k, const T* f, const P* pix, int n) {
+inline void UpdateRow(StatePlanes<T, P>& s, size_t off, int k, const T* f, const P* pix, int n) {
   if (k == 0) {
     InitRow(s, off, f, pix, n);
   } else if (s.j == 1) {
-    UpdateRowJ1<T, P>(k, f, pix, n, s.best.data() + off, s.idx.data() + off, s.before[0].data() + off,
-                      s.after[0].data() + off, s.ring[0].data() + off, s.last2.data() + off, s.sum.data() + off,
-                      s.curv_all.data() + off, s.curv_excl.data() + off, s.aif.data() + off);
+    // The hot path (maximum and Gaussian interpolation).
+    const float curv_scale = k >= 2 ? 1.f : 0.f;
+    if (HasAvx2()) {
+      avx2::UpdateRowJ1<T, P>(n, k, curv_scale, f, pix, s.best.data() + off, s.idx.data() + off,
+                              s.before[0].data() + off, s.after[0].data() + off, s.ring[0].data() + off,
+                              s.last2.data() + off, s.aif.data() + off, s.sum.data() + off, s.curv_all.data() + off,
+                              s.curv_excl.data() + off);
+    } else {
+      portable::UpdateRowJ1<T, P>(n, k, curv_scale, f, pix, s.best.data() + off, s.idx.data() + off,
+                                  s.before[0].data() + off, s.after[0].data() + off, s.ring[0].data() + off,
+                                  s.last2.data() + off, s.aif.data() + off, s.sum.data() + off,
+                                  s.curv_all.data() + off, s.curv_excl.data() + off);
+    }
   } else {
     UpdateRowGeneral(s, off, k, f, pix, n);
   }
@@ -317,22 +365,31 @@ SFF_INLINE void WindowRow(const int32_t* __restrict colsum, int32_t* __restrict 
 // sink(y, focus_row, pixel_row) receives each output row (tw values).
 template <typename Sink>
 SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int th, int window,
-                              TenengradScratch& sc, Sink&& sink) {
+                              TenengradScratch& sc, Sink&& sink, const cv::Mat* prefetch_next = nullptr) {
   const int r = window / 2, ew = tw + 2 * r, pw = ew + 2;
   const int rows = frame.rows, cols = frame.cols;
   std::fill_n(sc.colsum.data(), ew, 0);
   std::fill_n(sc.ering.data(), size_t(ew) * window, 0);
-  const bool interior = x0 - r - 1 >= 0 && x0 + tw + r < cols;
+  // Columns x0 - r - 1 .. x0 + tw + r: [lo, hi) lie inside the frame and are copied directly,
+  // the few outside are mirrored (BORDER_REFLECT_101).
+  const int c_first = x0 - r - 1;
+  const int lo = std::max(0, -c_first), hi = std::min(pw, cols - c_first);
   int loaded = 0, e_rows = 0;
   for (int yin = y0 - r - 1; yin <= y0 + th + r; ++yin) {
-    const uint8_t* src = frame.ptr<uint8_t>(Reflect101(yin, rows));
-    int32_t* __restrict dst = sc.in[loaded % 3].data();
-    if (interior) {
-      const uint8_t* __restrict s = src + (x0 - r - 1);
-      for (int i = 0; i < pw; ++i) dst[i] = s[i];
-    } else {
-      for (int i = 0; i < pw; ++i) dst[i] = src[Reflect101(x0 - r - 1 + i, cols)];
+    const int ry = Reflect101(yin, rows);
+    const uint8_t* src = frame.ptr<uint8_t>(ry);
+    if (prefetch_next) {
+      // The same rows of the next frame: the tile reads them on its next pass, by then from cache.
+      const uint8_t* nx = prefetch_next->ptr<uint8_t>(ry) + std::max(c_first, 0);
+      for (int i = 0; i < hi - lo; i += 64) __builtin_prefetch(nx + i, 0, 2);
     }
+    int32_t* __restrict dst = sc.in[loaded % 3].data();
+    {
+      const uint8_t* __restrict s = src + c_first;
+      for (int i = lo; i < hi; ++i) dst[i] = s[i];
+    }
+    for (int i = 0; i < lo; ++i) dst[i] = src[Reflect101(c_first + i, cols)];
+    for (int i = std::max(hi, lo); i < pw; ++i) dst[i] = src[Reflect101(c_first + i, cols)];
     ++loaded;
     if (loaded < 3) continue;
     EnergyRow(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(),
@@ -357,29 +414,27 @@ struct StateSink {
 
 // One frame k over one tile, updating state whose (0, 0) is the tile's top-left at (sx, sy).
 SFF_INLINE void FusedTileFrameImpl(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window,
-                                   TenengradScratch& sc, StatePlanes<int32_t, uint8_t>& st, int sx, int sy) {
-  TenengradTile(frame, x0, y0, tw, th, window, sc, StateSink{st, k, y0, tw, sx, sy});
+                                   TenengradScratch& sc, StatePlanes<int32_t, uint8_t>& st, int sx, int sy,
+                                   const cv::Mat* next) {
+  TenengradTile(frame, x0, y0, tw, th, window, sc, StateSink{st, k, y0, tw, sx, sy}, next);
 }
 
 __attribute__((target("avx2"))) void FusedTileFrameAvx2(const cv::Mat& frame, int k, int x0, int y0, int tw, int th,
                                                         int window, TenengradScratch& sc,
-                                                        StatePlanes<int32_t, uint8_t>& st, int sx, int sy) {
-  FusedTileFrameImpl(frame, k, x0, y0, tw, th, window, sc, st, sx, sy);
+                                                        StatePlanes<int32_t, uint8_t>& st, int sx, int sy,
+                                                        const cv::Mat* next) {
+  FusedTileFrameImpl(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
 }
 void FusedTileFramePortable(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window,
-                            TenengradScratch& sc, StatePlanes<int32_t, uint8_t>& st, int sx, int sy) {
-  FusedTileFrameImpl(frame, k, x0, y0, tw, th, window, sc, st, sx, sy);
-}
-
-bool HasAvx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
+                            TenengradScratch& sc, StatePlanes<int32_t, uint8_t>& st, int sx, int sy,
+                            const cv::Mat* next) {
+  FusedTileFrameImpl(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
 }
 
 void FusedTileFrame(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window, TenengradScratch& sc,
-                    StatePlanes<int32_t, uint8_t>& st, int sx, int sy) {
-  if (HasAvx2()) FusedTileFrameAvx2(frame, k, x0, y0, tw, th, window, sc, st, sx, sy);
-  else FusedTileFramePortable(frame, k, x0, y0, tw, th, window, sc, st, sx, sy);
+                    StatePlanes<int32_t, uint8_t>& st, int sx, int sy, const cv::Mat* next = nullptr) {
+  if (HasAvx2()) FusedTileFrameAvx2(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+  else FusedTileFramePortable(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
 }
 
 template <typename P>
@@ -426,8 +481,6 @@ size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std:
       zw[before + t] = z[m + t];
       fw[before + t] = ToFloat(st.after[t - 1][i]);
     }
-    const FocusPeak peak = InterpolatePeak(o.interpolation, zw, fw, before, after);
-
     FocusCurveSummary s;
     s.peak = best;
     s.mean = double(st.sum[i]) / n;
@@ -439,12 +492,19 @@ size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std:
     const float c = FocusConfidence(s);
     conf[x] = c;
     if (c >= o.min_confidence) {
-      depth[x] = float(peak.z_um);
+      // Only kept pixels are interpolated (the logarithms are the costly part).
+      double z_um;
+      if (o.interpolation == DepthInterpolation::kGaussian && before == 1 && after == 1) {
+        z_um = GaussianPeakZ(zw[0], zw[1], zw[2], fw[0], fw[1], fw[2]);
+      } else {
+        z_um = InterpolatePeak(o.interpolation, zw, fw, before, after).z_um;
+      }
+      depth[x] = float(z_um);
       ++valid;
     } else {
       depth[x] = kNaN;
     }
-    aif[x] = st.aif[i];
+    aif[x] = P(st.aif[i]);
   }
   return valid;
 }
@@ -628,7 +688,8 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
     const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kTileH;
     const int tw = std::min(kTileW, size.width - x0), th = std::min(kTileH, size.height - y0);
     for (size_t k = 0; k < frames.size(); ++k) {
-      FusedTileFrame(frames[k], int(k), x0, y0, tw, th, options.window_px, scratch[size_t(worker)], st, 0, 0);
+      FusedTileFrame(frames[k], int(k), x0, y0, tw, th, options.window_px, scratch[size_t(worker)], st, 0, 0,
+                     k + 1 < frames.size() ? &frames[k + 1] : nullptr);
     }
     size_t v = 0;
     for (int y = 0; y < th; ++y) v += FinishSpan(st, size_t(y) * st.width, tw, z_um, options, out, x0, y0 + y);

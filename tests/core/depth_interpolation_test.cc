@@ -27,6 +27,8 @@ TEST(DepthInterpolationTest, GaussianRecoversGaussianPeaksUniformSteps) {
       const auto f = Gaussian(z, mu, sigma, 1000.0);
       const FocusPeak p = InterpolateFocusCurve(DepthInterpolation::kGaussian, z, f);
       EXPECT_TRUE(p.interpolated);
+      const int m = int(std::max_element(f.begin(), f.end()) - f.begin());
+      EXPECT_EQ(GaussianPeakZ(z[m - 1], z[m], z[m + 1], f[m - 1], f[m], f[m + 1]), p.z_um);
       worst = std::max(worst, std::abs(p.z_um - mu) / dz);
       EXPECT_NEAR(p.sigma_um, sigma, 1e-6 * sigma);
       EXPECT_NEAR(p.height, 1000.0, 1e-6);  // eq. 3.34
