@@ -15,6 +15,8 @@
 #include <thread>
 #include <type_traits>
 
+#include <immintrin.h>
+
 #include <opencv2/imgproc.hpp>
 
 #include "core/depth_interpolation.h"
@@ -328,13 +330,16 @@ inline void UpdateRow(StatePlanes<T, P>& s, size_t off, int k, const T* f, const
 
 // Scratch of the fused Tenengrad kernel for one tile (one per worker thread).
 struct TenengradScratch {
-  std::vector<int32_t> in[3];  // three input rows, reflected, widened: width tw + 2R + 2
-  std::vector<int32_t> ering;  // the last `window` energy rows Gx^2 + Gy^2: width tw + 2R
+  std::vector<int16_t> in[3];   // three input rows, reflected, widened: width tw + 2R + 2
+  std::vector<int16_t> sv, dv;  // vertical [1 2 1] and [1 0 -1] of the three rows (AVX2 path)
+  std::vector<int32_t> ering;   // the last `window` energy rows Gx^2 + Gy^2: width tw + 2R
   std::vector<int32_t> colsum;  // vertical window sums of the energy
   std::vector<int32_t> focus;   // one output row
   void Reserve(int window) {
     const int r = window / 2, ew = kTileW + 2 * r;
     for (auto& v : in) v.resize(size_t(ew) + 2);
+    sv.resize(size_t(ew) + 2);
+    dv.resize(size_t(ew) + 2);
     ering.resize(size_t(ew) * window);
     colsum.resize(size_t(ew));
     focus.resize(size_t(kTileW));
@@ -342,11 +347,62 @@ struct TenengradScratch {
 };
 
 // Sobel energy of one row (eq. 3.13-3.14 before the window sum) and the running column sums.
-SFF_INLINE void EnergyRow(const int32_t* __restrict a, const int32_t* __restrict b, const int32_t* __restrict c,
+// a, b, c: input rows y-1, y, y+1; output x uses columns x .. x+2 (centre x+1).
+SFF_INLINE void EnergyRow(const int16_t* __restrict a, const int16_t* __restrict b, const int16_t* __restrict c,
                           int32_t* __restrict old_row, int32_t* __restrict colsum, int ew) {
   for (int x = 0; x < ew; ++x) {
     const int32_t gx = (a[x] + 2 * b[x] + c[x]) - (a[x + 2] + 2 * b[x + 2] + c[x + 2]);
     const int32_t gy = (a[x] - c[x]) + 2 * (a[x + 1] - c[x + 1]) + (a[x + 2] - c[x + 2]);
+    const int32_t e = gx * gx + gy * gy;
+    colsum[x] += e - old_row[x];
+    old_row[x] = e;
+  }
+}
+
+// The same with AVX2 in 16-bit lanes: |Gx|, |Gy| <= 1020 fit int16, and vpmaddwd of interleaved
+// (Gx, Gy) pairs gives Gx^2 + Gy^2 in int32 exactly.
+__attribute__((target("avx2"))) inline void EnergyRowAvx2(const int16_t* a, const int16_t* b, const int16_t* c,
+                                                          int16_t* sv, int16_t* dv, int32_t* old_row,
+                                                          int32_t* colsum, int ew) {
+  const int pw = ew + 2;
+  int i = 0;
+  for (; i + 16 <= pw; i += 16) {
+    const __m256i va = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a + i));
+    const __m256i vb = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(b + i));
+    const __m256i vc = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(c + i));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(sv + i),
+                        _mm256_add_epi16(_mm256_add_epi16(va, vc), _mm256_add_epi16(vb, vb)));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(dv + i), _mm256_sub_epi16(va, vc));
+  }
+  for (; i < pw; ++i) {
+    sv[i] = int16_t(a[i] + 2 * b[i] + c[i]);
+    dv[i] = int16_t(a[i] - c[i]);
+  }
+  int x = 0;
+  for (; x + 16 <= ew; x += 16) {
+    const __m256i gx = _mm256_sub_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(sv + x)),
+                                        _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sv + x + 2)));
+    const __m256i d1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x + 1));
+    const __m256i gy = _mm256_add_epi16(
+        _mm256_add_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x)),
+                         _mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x + 2))),
+        _mm256_add_epi16(d1, d1));
+    const __m256i lo = _mm256_unpacklo_epi16(gx, gy), hi = _mm256_unpackhi_epi16(gx, gy);
+    const __m256i elo = _mm256_madd_epi16(lo, lo), ehi = _mm256_madd_epi16(hi, hi);
+    // unpack works within 128-bit lanes: restore pixel order x .. x+7 and x+8 .. x+15.
+    const __m256i e0 = _mm256_permute2x128_si256(elo, ehi, 0x20);
+    const __m256i e1 = _mm256_permute2x128_si256(elo, ehi, 0x31);
+    __m256i* cs = reinterpret_cast<__m256i*>(colsum + x);
+    __m256i* od = reinterpret_cast<__m256i*>(old_row + x);
+    const __m256i o0 = _mm256_loadu_si256(od), o1 = _mm256_loadu_si256(od + 1);
+    _mm256_storeu_si256(cs, _mm256_add_epi32(_mm256_loadu_si256(cs), _mm256_sub_epi32(e0, o0)));
+    _mm256_storeu_si256(cs + 1, _mm256_add_epi32(_mm256_loadu_si256(cs + 1), _mm256_sub_epi32(e1, o1)));
+    _mm256_storeu_si256(od, e0);
+    _mm256_storeu_si256(od + 1, e1);
+  }
+  for (; x < ew; ++x) {
+    const int32_t gx = sv[x] - sv[x + 2];
+    const int32_t gy = dv[x] + 2 * dv[x + 1] + dv[x + 2];
     const int32_t e = gx * gx + gy * gy;
     colsum[x] += e - old_row[x];
     old_row[x] = e;
@@ -363,7 +419,7 @@ SFF_INLINE void WindowRow(const int32_t* __restrict colsum, int32_t* __restrict 
 
 // Tenengrad over the tile [x0, x0 + tw) x [y0, y0 + th) of an 8-bit frame, BORDER_REFLECT_101;
 // sink(y, focus_row, pixel_row) receives each output row (tw values).
-template <typename Sink>
+template <bool kAvx2, typename Sink>
 SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int th, int window,
                               TenengradScratch& sc, Sink&& sink, const cv::Mat* prefetch_next = nullptr) {
   const int r = window / 2, ew = tw + 2 * r, pw = ew + 2;
@@ -383,7 +439,7 @@ SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int 
       const uint8_t* nx = prefetch_next->ptr<uint8_t>(ry) + std::max(c_first, 0);
       for (int i = 0; i < hi - lo; i += 64) __builtin_prefetch(nx + i, 0, 2);
     }
-    int32_t* __restrict dst = sc.in[loaded % 3].data();
+    int16_t* __restrict dst = sc.in[loaded % 3].data();
     {
       const uint8_t* __restrict s = src + c_first;
       for (int i = lo; i < hi; ++i) dst[i] = s[i];
@@ -392,8 +448,13 @@ SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int 
     for (int i = std::max(hi, lo); i < pw; ++i) dst[i] = src[Reflect101(c_first + i, cols)];
     ++loaded;
     if (loaded < 3) continue;
-    EnergyRow(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(),
-              sc.ering.data() + size_t(e_rows % window) * ew, sc.colsum.data(), ew);
+    if constexpr (kAvx2) {
+      EnergyRowAvx2(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(),
+                    sc.sv.data(), sc.dv.data(), sc.ering.data() + size_t(e_rows % window) * ew, sc.colsum.data(), ew);
+    } else {
+      EnergyRow(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(),
+                sc.ering.data() + size_t(e_rows % window) * ew, sc.colsum.data(), ew);
+    }
     ++e_rows;
     if (e_rows < window) continue;
     const int y = y0 + e_rows - window;
@@ -413,22 +474,23 @@ struct StateSink {
 };
 
 // One frame k over one tile, updating state whose (0, 0) is the tile's top-left at (sx, sy).
+template <bool kAvx2>
 SFF_INLINE void FusedTileFrameImpl(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window,
                                    TenengradScratch& sc, StatePlanes<int32_t, uint8_t>& st, int sx, int sy,
                                    const cv::Mat* next) {
-  TenengradTile(frame, x0, y0, tw, th, window, sc, StateSink{st, k, y0, tw, sx, sy}, next);
+  TenengradTile<kAvx2>(frame, x0, y0, tw, th, window, sc, StateSink{st, k, y0, tw, sx, sy}, next);
 }
 
 __attribute__((target("avx2"))) void FusedTileFrameAvx2(const cv::Mat& frame, int k, int x0, int y0, int tw, int th,
                                                         int window, TenengradScratch& sc,
                                                         StatePlanes<int32_t, uint8_t>& st, int sx, int sy,
                                                         const cv::Mat* next) {
-  FusedTileFrameImpl(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+  FusedTileFrameImpl<true>(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
 }
 void FusedTileFramePortable(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window,
                             TenengradScratch& sc, StatePlanes<int32_t, uint8_t>& st, int sx, int sy,
                             const cv::Mat* next) {
-  FusedTileFrameImpl(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+  FusedTileFrameImpl<false>(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
 }
 
 void FusedTileFrame(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window, TenengradScratch& sc,
@@ -704,22 +766,42 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
   return r;
 }
 
-Status ComputeTenengradU8(const cv::Mat& frame, int window_px, cv::Mat* focus) {
-  if (frame.empty() || frame.type() != CV_8UC1) return Status::InvalidArgument("frame must be CV_8UC1");
-  if (window_px < 3 || window_px > 31 || window_px % 2 == 0) {
-    return Status::InvalidArgument("window_px " + std::to_string(window_px) + " must be odd and between 3 and 31");
-  }
-  cv::Mat out(frame.size(), CV_32SC1);
+namespace {
+
+struct CopySink {
+  cv::Mat* out;
+  int x0, tw;
+  SFF_INLINE void operator()(int y, const int32_t* f, const uint8_t*) { std::copy_n(f, tw, out->ptr<int32_t>(y) + x0); }
+};
+
+template <bool kAvx2>
+SFF_INLINE void TenengradMapImpl(const cv::Mat& frame, int window_px, cv::Mat* out) {
   TenengradScratch sc;
   sc.Reserve(window_px);
   for (int y0 = 0; y0 < frame.rows; y0 += kTileH) {
     for (int x0 = 0; x0 < frame.cols; x0 += kTileW) {
       const int tw = std::min(kTileW, frame.cols - x0), th = std::min(kTileH, frame.rows - y0);
-      TenengradTile(frame, x0, y0, tw, th, window_px, sc, [&](int y, const int32_t* f, const uint8_t*) {
-        std::copy_n(f, tw, out.ptr<int32_t>(y) + x0);
-      });
+      TenengradTile<kAvx2>(frame, x0, y0, tw, th, window_px, sc, CopySink{out, x0, tw});
     }
   }
+}
+__attribute__((target("avx2"))) void TenengradMapAvx2(const cv::Mat& frame, int window_px, cv::Mat* out) {
+  TenengradMapImpl<true>(frame, window_px, out);
+}
+void TenengradMapPortable(const cv::Mat& frame, int window_px, cv::Mat* out) {
+  TenengradMapImpl<false>(frame, window_px, out);
+}
+
+}  // namespace
+
+Status ComputeTenengradU8(const cv::Mat& frame, int window_px, cv::Mat* focus, bool use_simd) {
+  if (frame.empty() || frame.type() != CV_8UC1) return Status::InvalidArgument("frame must be CV_8UC1");
+  if (window_px < 3 || window_px > 31 || window_px % 2 == 0) {
+    return Status::InvalidArgument("window_px " + std::to_string(window_px) + " must be odd and between 3 and 31");
+  }
+  cv::Mat out(frame.size(), CV_32SC1);
+  if (use_simd && HasAvx2()) TenengradMapAvx2(frame, window_px, &out);
+  else TenengradMapPortable(frame, window_px, &out);
   *focus = out;
   return Status::Ok();
 }

@@ -206,8 +206,10 @@ TEST(SffEngineTest, FusedTenengradEqualsReferenceMeasure) {
   cv::Mat u8;
   img.convertTo(u8, CV_8U);
   for (int w : {3, 7, 15, 31}) {
-    cv::Mat fused, ref;
+    cv::Mat fused, portable, ref;
     ASSERT_TRUE(ComputeTenengradU8(u8, w, &fused).ok());
+    ASSERT_TRUE(ComputeTenengradU8(u8, w, &portable, /*use_simd=*/false).ok());
+    EXPECT_EQ(cv::countNonZero(fused != portable), 0) << "SIMD and portable kernels differ, window " << w;
     ASSERT_TRUE(ComputeFocusMeasure(u8, FocusMeasure::kTenengrad, w, &ref).ok());
     ASSERT_EQ(fused.type(), CV_32SC1);
     double worst = 0;
