@@ -31,10 +31,19 @@ struct DefocusModel {
   double SigmaPx(double defocus_um) const;
   // 0 = Gaussian, 1 = pillbox.
   double PillboxWeight(double sigma_px) const;
-  // The PSF at this sigma as a normalised 2D kernel (CV_32FC1, odd size): Gaussian and
-  // anti-aliased pillbox of equal sigma mixed by PillboxWeight(shape_sigma_px).
-  cv::Mat Kernel(double sigma_px, double shape_sigma_px) const;
+  // The PSF at this sigma as a normalised 2D kernel (CV_32FC1, odd size): Gaussian (cut at
+  // truncation_sigmas) and anti-aliased pillbox of equal sigma mixed by
+  // PillboxWeight(shape_sigma_px).
+  cv::Mat Kernel(double sigma_px, double shape_sigma_px, double truncation_sigmas = 3.0) const;
   cv::Mat Kernel(double sigma_px) const { return Kernel(sigma_px, sigma_px); }
+};
+
+// Which two ladder rungs each pixel mixes, and how: computed once per sigma map and shared by
+// both defocus passes of a frame.
+struct BlurPlan {
+  int first_rung = 0, last_rung = 0;  // rungs used by this map
+  cv::Mat rung;    // CV_8UC1: lower rung, relative to first_rung
+  cv::Mat weight;  // CV_32FC1: weight of the upper rung (0..1)
 };
 
 // Not thread-safe (keeps scratch buffers between calls); one per renderer.
@@ -42,9 +51,13 @@ class SpatiallyVaryingBlur {
  public:
   explicit SpatiallyVaryingBlur(const DefocusModel& model);
 
-  // dst(p) = (src * PSF(sigma_px(p)))(p), sigma_px CV_32FC1 of src's size, values clamped to
-  // the ladder [in_focus_sigma_px, max_sigma_px()]. src CV_32FC1. Border: reflected.
-  void Apply(const cv::Mat& src, const cv::Mat& sigma_px, cv::Mat* dst);
+  // Per pixel PSF sigma (camera px, CV_32FC1), clamped to [in_focus_sigma_px, max_sigma_px()].
+  // Mixing two rungs with weights keeps the pixel's PSF variance exact.
+  BlurPlan Plan(const cv::Mat& sigma_px) const;
+  // dst(p) = (src * PSF(sigma(p)))(p) for the plan's sigma map. src CV_32FC1 of the plan's size.
+  // Border: reflected.
+  void Apply(const cv::Mat& src, const BlurPlan& plan, cv::Mat* dst);
+  void Apply(const cv::Mat& src, const cv::Mat& sigma_px, cv::Mat* dst) { Apply(src, Plan(sigma_px), dst); }
 
   const std::vector<double>& ladder_sigma_px() const { return ladder_; }
   double max_sigma_px() const { return ladder_.back(); }
@@ -52,6 +65,8 @@ class SpatiallyVaryingBlur {
  private:
   // Blurs the padded source at ladder rung i into layers_[i] (full padded size).
   void ComputeLayer(int i);
+  // Rungs i0..i1 (all full resolution, Gaussian) as one incremental chain.
+  void ComputeFullResolutionChain(int i0, int i1);
 
   DefocusModel model_;
   std::vector<double> ladder_;  // PSF sigma of each rung, geometric
