@@ -128,6 +128,16 @@ TEST(SimulatedPhysicsTest, CutterSaturatesUnderUniformLight) {
   }
 }
 
+TEST(SimulatedPhysicsTest, CoinFieldSaturatesWhileItsReliefIsDim) {
+  auto rig = MakeRig("coin");
+  ASSERT_TRUE(rig);
+  ASSERT_TRUE(rig->camera().SetExposure(rig->scan_defaults().exposure_us).ok());
+  const cv::Mat truth = rig->simulation()->GroundTruthDepthUm();
+  const cv::Mat frame = CaptureAt(*rig, truth.at<float>(96, 128));  // disc top in focus
+  EXPECT_GT(cv::countNonZero(frame == 255) / static_cast<double>(frame.total()), 0.2);
+  EXPECT_LT(cv::mean(frame(cv::Rect(100, 80, 20, 20)))[0], 80.0);  // frosted relief
+}
+
 TEST(SimulatedPhysicsTest, LensNeedsProjectedTexture) {
   auto rig = MakeRig("lens");
   ASSERT_TRUE(rig);
