@@ -73,7 +73,8 @@ class SpatiallyVaryingBlur {
   std::vector<int> factor_;     // reduction factor (1, 2, 4, ...) of each rung
   cv::Mat padded_;              // source with a reflected border, size a multiple of kMaxFactor
   std::vector<cv::Mat> reduced_;  // padded_ reduced by 2^k (index k)
-  std::vector<cv::Mat> layers_;
+  std::vector<cv::Mat> layers_;     // rung images, reduced by layer_factor_
+  std::vector<int> layer_factor_;
   int border_ = 0;
 };
 

@@ -235,7 +235,7 @@ Specimen Coin(const Grid& g) {
   for (int r = 0; r < g.size.height; ++r) {
     for (int c = 0; c < g.size.width; ++c) {
       const float top = relief.at<float>(r, c) > 0.98f ? 1.0f : 0.0f;
-      s.reflectance.at<float>(r, c) = (1.0f - top) * (2.5f * specular.at<float>(r, c) + 0.02f) + top * 0.15f;
+      s.reflectance.at<float>(r, c) = (1.0f - top) * (2.5f * specular.at<float>(r, c) + 0.003f) + top * 0.15f;
       s.texture.at<float>(r, c) = top > 0 ? frosted.at<float>(r, c) : scratches.at<float>(r, c);
     }
   }
