@@ -3,6 +3,7 @@
 #include "devices/sim/simulated_rig.h"
 
 #include <cmath>
+#include <mutex>
 #include <random>
 
 #include "devices/sim/image_formation.h"
@@ -64,8 +65,10 @@ namespace {
 constexpr double kStageMinUm = 0.0;
 constexpr double kStageMaxUm = 25000.0;
 
-// State shared by the three simulated devices.
+// State shared by the three simulated devices. Every device call takes `mu`, so a specimen
+// switch from another thread (e.g. an RPC) cannot tear a frame being rendered.
 struct SimState {
+  mutable std::mutex mu;
   SimulatedRigOptions options;
   std::unique_ptr<ImageFormation> renderer;
   std::string specimen_name;
@@ -102,6 +105,7 @@ class SimulatedCamera : public Camera {
  public:
   explicit SimulatedCamera(SimState* s) : s_(s) {}
   DeviceInfo info() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
     return {"camera", "simulated",
             "SimCam " + std::to_string(s_->options.camera_size.width) + "x" +
                 std::to_string(s_->options.camera_size.height),
@@ -110,14 +114,19 @@ class SimulatedCamera : public Camera {
   cv::Size frame_size() const override { return s_->options.camera_size; }
   int bit_depth() const override { return s_->options.camera_bit_depth; }
   Status SetExposure(double exposure_us) override {
+    std::lock_guard<std::mutex> lock(s_->mu);
     if (!(exposure_us >= 1.0 && exposure_us <= 1e7)) {
       return Status::InvalidArgument("exposure_us must be in [1, 1e7], got " + std::to_string(exposure_us));
     }
     s_->exposure_us = exposure_us;
     return Status::Ok();
   }
-  double exposure_us() const override { return s_->exposure_us; }
+  double exposure_us() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->exposure_us;
+  }
   Status SetGain(double gain_db) override {
+    std::lock_guard<std::mutex> lock(s_->mu);
     if (!(gain_db >= 0.0 && gain_db <= 24.0)) {
       return Status::InvalidArgument("gain_db must be in [0, 24], got " + std::to_string(gain_db));
     }
@@ -125,6 +134,7 @@ class SimulatedCamera : public Camera {
     return Status::Ok();
   }
   StatusOr<cv::Mat> Capture() override {
+    std::lock_guard<std::mutex> lock(s_->mu);
     const uint64_t noise_seed = MixSeed(s_->options.seed, ++s_->frames);
     return s_->renderer->Render(s_->pattern, s_->stage_z_um, s_->exposure_us, s_->gain_db, noise_seed);
   }
@@ -144,6 +154,7 @@ class SimulatedProjector : public Projector {
   }
   cv::Size resolution() const override { return s_->options.projector_size; }
   Status Show(const cv::Mat& pattern) override {
+    std::lock_guard<std::mutex> lock(s_->mu);
     if (pattern.type() != CV_8UC1 || pattern.size() != s_->options.projector_size) {
       return Status::InvalidArgument("pattern must be CV_8UC1 " + std::to_string(s_->options.projector_size.width) +
                                      "x" + std::to_string(s_->options.projector_size.height) + ", got " +
@@ -166,6 +177,7 @@ class SimulatedStage : public Stage {
   double min_z_um() const override { return kStageMinUm; }
   double max_z_um() const override { return kStageMaxUm; }
   Status Home() override {
+    std::lock_guard<std::mutex> lock(s_->mu);
     s_->stage_z_um = 0.0;
     return Status::Ok();
   }
@@ -173,12 +185,16 @@ class SimulatedStage : public Stage {
     if (!(z_um >= kStageMinUm && z_um <= kStageMaxUm)) {
       return Status::OutOfRange("z_um " + std::to_string(z_um) + " outside stage travel [0, 25000]");
     }
+    std::lock_guard<std::mutex> lock(s_->mu);
     const double r = s_->options.stage_repeatability_um;
     std::uniform_real_distribution<double> err(-r, r);
     s_->stage_z_um = z_um + (r > 0.0 ? err(s_->stage_rng) : 0.0);
     return Status::Ok();
   }
-  StatusOr<double> position_um() override { return s_->stage_z_um; }
+  StatusOr<double> position_um() override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->stage_z_um;
+  }
 
  private:
   SimState* s_;
@@ -193,14 +209,29 @@ class SimulatedRig : public Rig, public SimulationControl {
   Projector& projector() override { return projector_; }
   Stage& stage() override { return stage_; }
   double pixel_size_um() const override { return s_->options.pixel_size_um; }
-  ScanDefaults scan_defaults() const override { return ScanDefaultsFor(s_->z_range_um, s_->default_exposure_us); }
+  ScanDefaults scan_defaults() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return ScanDefaultsFor(s_->z_range_um, s_->default_exposure_us);
+  }
   SimulationControl* simulation() override { return this; }
 
   std::vector<std::string> specimen_names() const override { return BuiltinSpecimenNames(); }
-  std::string specimen() const override { return s_->specimen_name; }
-  Status SetSpecimen(const std::string& name) override { return s_->LoadSpecimen(name); }
-  cv::Mat GroundTruthDepthUm() const override { return s_->renderer->specimen().height_um.clone(); }
-  std::pair<double, double> SpecimenZRangeUm() const override { return s_->z_range_um; }
+  std::string specimen() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->specimen_name;
+  }
+  Status SetSpecimen(const std::string& name) override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->LoadSpecimen(name);
+  }
+  cv::Mat GroundTruthDepthUm() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->renderer->specimen().height_um.clone();
+  }
+  std::pair<double, double> SpecimenZRangeUm() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->z_range_um;
+  }
 
  private:
   std::unique_ptr<SimState> s_;

@@ -32,7 +32,9 @@ struct SimulatedRigOptions {
   Status Validate() const;
 };
 
-// Thread-compatible: the server's job worker is its only user at a time.
+// The server's job worker is meant to be its only user at a time; still, every device and
+// SimulationControl call takes one internal mutex, so e.g. SetSpecimen from an RPC thread never
+// tears a frame being rendered (it waits for it).
 // The camera starts at the specimen's default exposure (scan_defaults().exposure_us), the
 // projector shows uniform grey 128, the stage is homed at z = 0. Stage travel: 0 .. 25000 um.
 // SimulationControl::SetSpecimen also resets the camera exposure to the new default.
