@@ -50,6 +50,15 @@ StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptio
   return f;
 }
 
+StatusOr<std::unique_ptr<ImageFormation>> CreateSimulatedRenderer(const SimulatedRigOptions& options) {
+  INSPECT_ASSIGN_OR_RETURN(ImageFormationOptions f, ImageFormationOptionsFor(options));
+  INSPECT_ASSIGN_OR_RETURN(
+      Specimen s, MakeSpecimen(options.specimen, SpecimenGrid{options.camera_size, options.pixel_size_um, options.seed}));
+  return ImageFormation::Create(f, std::move(s));
+}
+
+uint64_t SimulatedFrameNoiseSeed(uint64_t seed, uint64_t frame_number) { return MixSeed(seed, frame_number); }
+
 ScanDefaults ScanDefaultsFor(std::pair<double, double> z_range_um, double exposure_us) {
   ScanDefaults d;
   d.z_step_um = 5.0;
@@ -135,7 +144,7 @@ class SimulatedCamera : public Camera {
   }
   StatusOr<cv::Mat> Capture() override {
     std::lock_guard<std::mutex> lock(s_->mu);
-    const uint64_t noise_seed = MixSeed(s_->options.seed, ++s_->frames);
+    const uint64_t noise_seed = SimulatedFrameNoiseSeed(s_->options.seed, ++s_->frames);
     return s_->renderer->Render(s_->pattern, s_->stage_z_um, s_->exposure_us, s_->gain_db, noise_seed);
   }
 

@@ -44,6 +44,12 @@ StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& opt
 // elsewhere, e.g. over GigE Vision: build an ImageFormation from them and MakeSpecimen).
 StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptions& options);
 
+// The simulated rig's renderer on its own, with the same options, specimen and seed as
+// CreateSimulatedRig(options): Render(pattern, z, exposure, gain, SimulatedFrameNoiseSeed(seed,
+// n)) returns exactly the rig's n-th captured frame (n from 1), without any device state.
+StatusOr<std::unique_ptr<ImageFormation>> CreateSimulatedRenderer(const SimulatedRigOptions& options);
+uint64_t SimulatedFrameNoiseSeed(uint64_t seed, uint64_t frame_number);
+
 // Scan defaults for a specimen z range: the range with 4 steps of margin each side, 5 um steps.
 ScanDefaults ScanDefaultsFor(std::pair<double, double> z_range_um, double exposure_us);
 

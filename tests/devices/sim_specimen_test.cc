@@ -201,6 +201,27 @@ TEST(SimulatedRigBehaviourTest, SeededFramesAreRepeatable) {
   EXPECT_GT(cv::countNonZero(*fa != *fa2), 100);
 }
 
+TEST(SimulatedRigBehaviourTest, RendererAloneReproducesTheRigsFrames) {
+  SimulatedRigOptions o;
+  o.camera_size = {96, 64};
+  o.specimen = "cutter";
+  o.stage_repeatability_um = 0.0;
+  auto rig = CreateSimulatedRig(o);
+  auto renderer = CreateSimulatedRenderer(o);
+  ASSERT_TRUE(rig.ok() && renderer.ok());
+  cv::Mat pattern(o.projector_size, CV_8UC1);
+  cv::randu(pattern, 0, 256);
+  ASSERT_TRUE((*rig)->projector().Show(pattern).ok());
+  ASSERT_TRUE((*rig)->stage().MoveTo(230.0).ok());
+  const double exposure = (*rig)->camera().exposure_us();
+  for (uint64_t n = 1; n <= 2; ++n) {
+    auto from_rig = (*rig)->camera().Capture();
+    auto alone = (*renderer)->Render(pattern, 230.0, exposure, 0.0, SimulatedFrameNoiseSeed(o.seed, n));
+    ASSERT_TRUE(from_rig.ok() && alone.ok());
+    EXPECT_EQ(cv::countNonZero(*from_rig != *alone), 0) << "frame " << n;
+  }
+}
+
 TEST(SimulatedRigBehaviourTest, StageRepeatabilityAndTravel) {
   SimulatedRigOptions o;
   o.camera_size = {32, 32};
