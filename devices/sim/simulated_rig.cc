@@ -64,7 +64,9 @@ ScanDefaults ScanDefaultsFor(std::pair<double, double> z_range_um, double exposu
   d.z_step_um = 5.0;
   const double margin = 4.0 * d.z_step_um;
   d.z_start_um = std::max(0.0, std::floor(z_range_um.first - margin));
-  d.z_end_um = std::ceil(z_range_um.second + margin);
+  // The end lies on the start + k * step grid, so every frame of the scan is a whole step.
+  const double steps = std::ceil((z_range_um.second + margin - d.z_start_um) / d.z_step_um - 1e-9);
+  d.z_end_um = d.z_start_um + std::max(2.0, steps) * d.z_step_um;
   d.exposure_us = exposure_us;
   return d;
 }

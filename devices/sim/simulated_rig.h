@@ -50,7 +50,8 @@ StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptio
 StatusOr<std::unique_ptr<ImageFormation>> CreateSimulatedRenderer(const SimulatedRigOptions& options);
 uint64_t SimulatedFrameNoiseSeed(uint64_t seed, uint64_t frame_number);
 
-// Scan defaults for a specimen z range: the range with 4 steps of margin each side, 5 um steps.
+// Scan defaults for a specimen z range: the range with 4 steps of margin each side, 5 um steps,
+// z_end_um = z_start_um + k * z_step_um (at least 3 frames).
 ScanDefaults ScanDefaultsFor(std::pair<double, double> z_range_um, double exposure_us);
 
 }  // namespace inspection

@@ -178,7 +178,7 @@ TEST_F(SceneFileTest, RigSwitchesToAUserSceneAtRunTime) {
   EXPECT_FLOAT_EQ(sim->GroundTruthDepthUm().at<float>(0, 63), 213.0f);
   const ScanDefaults d = (*rig)->scan_defaults();
   EXPECT_DOUBLE_EQ(d.z_start_um, 130.0);
-  EXPECT_DOUBLE_EQ(d.z_end_um, 233.0);
+  EXPECT_DOUBLE_EQ(d.z_end_um, 235.0);  // 213 + 20 rounded up to the 5 um grid from 130
   // A failed switch keeps the current specimen.
   EXPECT_FALSE(sim->SetSpecimen("nothing").ok());
   EXPECT_EQ(sim->specimen(), "file:" + path);
