@@ -108,6 +108,11 @@ void SpatiallyVaryingBlur::ComputeLayer(int i) {
   while ((1 << k) < factor_[i] && k + 1 < static_cast<int>(reduced_.size())) ++k;
   const int f = 1 << k;
   const double sigma_low = f == 1 ? sigma : ResidualSigma(sigma, f);
+  layer_factor_[i] = f;
+  if (f == 1) {  // Gaussian at full resolution (separable)
+    GaussianBlurTruncated(padded_, &layers_[i], sigma);
+    return;
+  }
   cv::Mat low;
   if (model_.PillboxWeight(sigma) < kGaussianOnlyWeight) {
     GaussianBlurTruncated(reduced_[k], &low, sigma_low);
@@ -116,21 +121,6 @@ void SpatiallyVaryingBlur::ComputeLayer(int i) {
                  0.0, cv::BORDER_REFLECT);
   }
   layers_[i] = low;  // kept reduced; enlarged row by row while mixing
-  layer_factor_[i] = f;
-}
-
-void SpatiallyVaryingBlur::ComputeFullResolutionChain(int i0, int i1) {
-  // Gaussian rungs at full resolution, each from the previous one: only the variance
-  // difference is added, so the kernels stay short.
-  double previous_sigma = 0.0;
-  const cv::Mat* previous = &padded_;
-  for (int i = i0; i <= i1; ++i) {
-    const double step = std::sqrt(ladder_[i] * ladder_[i] - previous_sigma * previous_sigma);
-    GaussianBlurTruncated(*previous, &layers_[i], step);
-    layer_factor_[i] = 1;
-    previous = &layers_[i];
-    previous_sigma = ladder_[i];
-  }
 }
 
 BlurPlan SpatiallyVaryingBlur::Plan(const cv::Mat& sigma_px) const {
@@ -191,19 +181,12 @@ void SpatiallyVaryingBlur::Apply(const cv::Mat& src, const BlurPlan& plan, cv::M
     reduced_.push_back(half);
   }
 
-  // Task 0: the chain of full-resolution Gaussian rungs; then one task per reduced rung.
-  int chain_end = i0 - 1;
-  while (chain_end + 1 <= i1 && factor_[chain_end + 1] == 1) ++chain_end;
-  const int first_reduced = chain_end + 1;
-  cv::parallel_for_(cv::Range(0, 1 + i1 - first_reduced + 1), [&](const cv::Range& r) {
-    for (int t = r.start; t < r.end; ++t) {
-      if (t == 0) {
-        if (chain_end >= i0) ComputeFullResolutionChain(i0, chain_end);
-      } else {
-        ComputeLayer(first_reduced + t - 1);
-      }
-    }
-  });
+  // One task per rung, all independent (full-resolution rungs blur the source directly), handed
+  // out one at a time so two threads share the expensive full-resolution rungs.
+  const int tasks = i1 - i0 + 1;
+  cv::parallel_for_(cv::Range(0, tasks), [&](const cv::Range& r) {
+    for (int t = r.start; t < r.end; ++t) ComputeLayer(i0 + t);
+  }, tasks);
 
   // Bilinear enlargement of reduced rungs (same sampling as cv::resize INTER_LINEAR), done per
   // row into small buffers so no full-size copy of a reduced rung is ever stored.

@@ -63,10 +63,8 @@ class SpatiallyVaryingBlur {
   double max_sigma_px() const { return ladder_.back(); }
 
  private:
-  // Blurs the padded source at ladder rung i into layers_[i] (full padded size).
+  // Blurs the padded source at ladder rung i into layers_[i] (reduced by layer_factor_[i]).
   void ComputeLayer(int i);
-  // Rungs i0..i1 (all full resolution, Gaussian) as one incremental chain.
-  void ComputeFullResolutionChain(int i0, int i1);
 
   DefocusModel model_;
   std::vector<double> ladder_;  // PSF sigma of each rung, geometric
