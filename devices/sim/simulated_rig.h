@@ -6,6 +6,8 @@
 //   camera -> defocus by |height - z| -> reflectance R and texture (eq. 5.2) -> defocus again
 //   -> exposure (eq. 5.3) -> camera response, quantisation, saturation, noise (eq. 5.4).
 // Depth convention: a surface point of height h_um is in focus when the stage is at z_um = h_um.
+// Specimens (devices/sim/specimen.h): plane, skew5, skew10, step1um, wedge, chamfer, cutter,
+// lens, mirror, coin, or a user scene "file:/path/scene.json". Overview: devices/sim/README.md.
 #pragma once
 
 #include <cstdint>
