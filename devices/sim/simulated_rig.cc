@@ -91,6 +91,7 @@ struct SimState {
   double gain_db = 0.0;
   uint64_t frames = 0;
   std::mt19937_64 stage_rng;
+  SimulatedFaults faults;
 
   Status LoadSpecimen(const std::string& name) {
     SpecimenGrid grid{options.camera_size, options.pixel_size_um, options.seed};
@@ -117,15 +118,18 @@ class SimulatedCamera : public Camera {
   explicit SimulatedCamera(SimState* s) : s_(s) {}
   DeviceInfo info() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
+    const bool up = !s_->faults.camera_unplugged;
     return {"camera", "simulated",
             "SimCam " + std::to_string(s_->options.camera_size.width) + "x" +
                 std::to_string(s_->options.camera_size.height),
-            "SIM-" + std::to_string(s_->options.seed), true, "specimen " + s_->specimen_name};
+            "SIM-" + std::to_string(s_->options.seed), up,
+            up ? "specimen " + s_->specimen_name : "simulated fault: unplugged"};
   }
   cv::Size frame_size() const override { return s_->options.camera_size; }
   int bit_depth() const override { return s_->options.camera_bit_depth; }
   Status SetExposure(double exposure_us) override {
     std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.camera_unplugged) return Unplugged();
     if (!(exposure_us >= 1.0 && exposure_us <= 1e7)) {
       return Status::InvalidArgument("exposure_us must be in [1, 1e7], got " + std::to_string(exposure_us));
     }
@@ -138,6 +142,7 @@ class SimulatedCamera : public Camera {
   }
   Status SetGain(double gain_db) override {
     std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.camera_unplugged) return Unplugged();
     if (!(gain_db >= 0.0 && gain_db <= 24.0)) {
       return Status::InvalidArgument("gain_db must be in [0, 24], got " + std::to_string(gain_db));
     }
@@ -146,11 +151,17 @@ class SimulatedCamera : public Camera {
   }
   StatusOr<cv::Mat> Capture() override {
     std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.camera_unplugged) return Unplugged();
+    if (s_->faults.camera_frame_timeouts > 0) {
+      --s_->faults.camera_frame_timeouts;
+      return Status::DeadlineExceeded("simulated camera: frame timeout (simulated fault)");
+    }
     const uint64_t noise_seed = SimulatedFrameNoiseSeed(s_->options.seed, ++s_->frames);
     return s_->renderer->Render(s_->pattern, s_->stage_z_um, s_->exposure_us, s_->gain_db, noise_seed);
   }
 
  private:
+  static Status Unplugged() { return Status::Unavailable("simulated camera is unplugged (simulated fault)"); }
   SimState* s_;
 };
 
@@ -158,14 +169,18 @@ class SimulatedProjector : public Projector {
  public:
   explicit SimulatedProjector(SimState* s) : s_(s) {}
   DeviceInfo info() const override {
+    const bool up = !s_->faults.projector_unplugged;
     return {"projector", "simulated",
             "SimProjector " + std::to_string(s_->options.projector_size.width) + "x" +
                 std::to_string(s_->options.projector_size.height),
-            "SIM-" + std::to_string(s_->options.seed), true, ""};
+            "SIM-" + std::to_string(s_->options.seed), up, up ? "" : "simulated fault: unplugged"};
   }
   cv::Size resolution() const override { return s_->options.projector_size; }
   Status Show(const cv::Mat& pattern) override {
     std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.projector_unplugged) {
+      return Status::Unavailable("simulated projector is unplugged (simulated fault)");
+    }
     if (pattern.type() != CV_8UC1 || pattern.size() != s_->options.projector_size) {
       return Status::InvalidArgument("pattern must be CV_8UC1 " + std::to_string(s_->options.projector_size.width) +
                                      "x" + std::to_string(s_->options.projector_size.height) + ", got " +
@@ -183,12 +198,16 @@ class SimulatedStage : public Stage {
  public:
   explicit SimulatedStage(SimState* s) : s_(s) {}
   DeviceInfo info() const override {
-    return {"stage", "simulated", "SimStage z", "SIM-" + std::to_string(s_->options.seed), true, ""};
+    std::lock_guard<std::mutex> lock(s_->mu);
+    const bool up = !s_->faults.stage_unplugged;
+    return {"stage", "simulated", "SimStage z", "SIM-" + std::to_string(s_->options.seed), up,
+            up ? "" : "simulated fault: unplugged"};
   }
   double min_z_um() const override { return kStageMinUm; }
   double max_z_um() const override { return kStageMaxUm; }
   Status Home() override {
     std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.stage_unplugged) return Unplugged();
     s_->stage_z_um = 0.0;
     return Status::Ok();
   }
@@ -197,6 +216,11 @@ class SimulatedStage : public Stage {
       return Status::OutOfRange("z_um " + std::to_string(z_um) + " outside stage travel [0, 25000]");
     }
     std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.stage_unplugged) return Unplugged();
+    if (s_->faults.stage_move_timeouts > 0) {
+      --s_->faults.stage_move_timeouts;
+      return Status::DeadlineExceeded("simulated stage: move timeout (simulated fault)");
+    }
     const double r = s_->options.stage_repeatability_um;
     std::uniform_real_distribution<double> err(-r, r);
     s_->stage_z_um = z_um + (r > 0.0 ? err(s_->stage_rng) : 0.0);
@@ -204,10 +228,12 @@ class SimulatedStage : public Stage {
   }
   StatusOr<double> position_um() override {
     std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.stage_unplugged) return Unplugged();
     return s_->stage_z_um;
   }
 
  private:
+  static Status Unplugged() { return Status::Unavailable("simulated stage is unplugged (simulated fault)"); }
   SimState* s_;
 };
 
@@ -235,6 +261,11 @@ class SimulatedRig : public Rig, public SimulationControl {
     std::lock_guard<std::mutex> lock(s_->mu);
     return s_->LoadSpecimen(name);
   }
+  void SetFaults(const SimulatedFaults& faults) {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    s_->faults = faults;
+  }
+
   cv::Mat GroundTruthDepthUm() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
     return s_->renderer->specimen().height_um.clone();
@@ -252,6 +283,16 @@ class SimulatedRig : public Rig, public SimulationControl {
 };
 
 }  // namespace
+
+Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults) {
+  auto* sim = dynamic_cast<SimulatedRig*>(&rig);
+  if (sim == nullptr) return Status::InvalidArgument("rig: not a simulated rig");
+  if (faults.camera_frame_timeouts < 0 || faults.stage_move_timeouts < 0) {
+    return Status::InvalidArgument("faults: timeout counts must be >= 0");
+  }
+  sim->SetFaults(faults);
+  return Status::Ok();
+}
 
 StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& options) {
   INSPECT_RETURN_IF_ERROR(options.Validate());

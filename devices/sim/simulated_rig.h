@@ -42,6 +42,19 @@ struct SimulatedRigOptions {
 // SimulationControl::SetSpecimen also resets the camera exposure to the new default.
 StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& options);
 
+// Simulation-only fault injection, for tests of error handling (thesis rig failures: a camera
+// unplugged, a frame lost, a stage stuck). Faults hold until replaced by another call
+// (SetSimulatedFaults(rig, {}) = everything plugged back in).
+struct SimulatedFaults {
+  bool camera_unplugged = false;     // camera calls -> UNAVAILABLE, info().connected = false
+  bool projector_unplugged = false;  // Show -> UNAVAILABLE
+  bool stage_unplugged = false;      // MoveTo/Home/position_um -> UNAVAILABLE
+  int camera_frame_timeouts = 0;     // the next N captures -> DEADLINE_EXCEEDED
+  int stage_move_timeouts = 0;       // the next N moves -> DEADLINE_EXCEEDED (stage stays put)
+};
+// INVALID_ARGUMENT when rig is not a simulated rig.
+Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults);
+
 // The renderer settings the simulated rig uses for these options (for serving the same frames
 // elsewhere, e.g. over GigE Vision: build an ImageFormation from them and MakeSpecimen).
 StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptions& options);

@@ -266,6 +266,46 @@ TEST(SimulatedRigBehaviourTest, TwelveBitCameraAndDeviceChecks) {
   EXPECT_EQ((*rig)->pixel_size_um(), 0.74);
 }
 
+TEST(SimulatedRigBehaviourTest, InjectedFaultsReachTheCaller) {
+  SimulatedRigOptions o;
+  o.camera_size = {32, 32};
+  auto created = CreateSimulatedRig(o);
+  ASSERT_TRUE(created.ok());
+  Rig& rig = **created;
+  SimulatedFaults f;
+  f.camera_unplugged = true;
+  ASSERT_TRUE(SetSimulatedFaults(rig, f).ok());
+  EXPECT_EQ(rig.camera().Capture().status().code(), StatusCode::kUnavailable);
+  EXPECT_FALSE(rig.camera().info().connected);
+  const Status check = rig.CheckDevices();
+  EXPECT_EQ(check.code(), StatusCode::kUnavailable);
+  EXPECT_NE(check.message().find("camera"), std::string::npos);
+  EXPECT_EQ(rig.Reset().code(), StatusCode::kUnavailable);  // still unplugged
+  // Plugged back in: Reset succeeds and frames flow again.
+  ASSERT_TRUE(SetSimulatedFaults(rig, {}).ok());
+  EXPECT_TRUE(rig.Reset().ok());
+  EXPECT_TRUE(rig.camera().Capture().ok());
+  // Two lost frames, then normal.
+  f = {};
+  f.camera_frame_timeouts = 2;
+  f.stage_move_timeouts = 1;
+  ASSERT_TRUE(SetSimulatedFaults(rig, f).ok());
+  EXPECT_EQ(rig.camera().Capture().status().code(), StatusCode::kDeadlineExceeded);
+  EXPECT_EQ(rig.camera().Capture().status().code(), StatusCode::kDeadlineExceeded);
+  EXPECT_TRUE(rig.camera().Capture().ok());
+  ASSERT_TRUE(rig.stage().MoveTo(100.0).code() == StatusCode::kDeadlineExceeded);
+  EXPECT_NEAR(*rig.stage().position_um(), 0.0, 1e-12);  // did not move
+  EXPECT_TRUE(rig.stage().MoveTo(100.0).ok());
+  f = {};
+  f.stage_unplugged = true;
+  f.projector_unplugged = true;
+  ASSERT_TRUE(SetSimulatedFaults(rig, f).ok());
+  EXPECT_EQ(rig.stage().MoveTo(10.0).code(), StatusCode::kUnavailable);
+  EXPECT_EQ(rig.projector().ShowUniform(10).code(), StatusCode::kUnavailable);
+  f.camera_frame_timeouts = -1;
+  EXPECT_EQ(SetSimulatedFaults(rig, f).code(), StatusCode::kInvalidArgument);
+}
+
 TEST(SimulatedRigOptionsTest, ValidateNamesTheField) {
   struct Case {
     std::function<void(SimulatedRigOptions&)> change;
