@@ -14,6 +14,15 @@
 namespace inspection {
 namespace {
 
+// Standard SFF of the thesis (STD): Tenengrad 7x7, three-point Gaussian interpolation.
+SffOptions TenengradGaussian() {
+  SffOptions o;
+  o.focus_measure = FocusMeasure::kTenengrad;
+  o.window_px = 7;
+  o.interpolation = DepthInterpolation::kGaussian;
+  return o;
+}
+
 std::unique_ptr<Rig> MakeRig(const std::string& specimen, cv::Size size = {256, 192}, bool noise = true) {
   SimulatedRigOptions o;
   o.specimen = specimen;
@@ -55,7 +64,7 @@ DepthResult ScanSff(Rig& rig, const cv::Mat& pattern) {
   const ScanDefaults d = rig.scan_defaults();
   EXPECT_TRUE(rig.projector().Show(pattern).ok());
   EXPECT_TRUE(rig.camera().SetExposure(d.exposure_us).ok());
-  auto engine = SffEngine::Create(SffOptions{}, rig.camera().frame_size(), CV_8UC1);
+  auto engine = SffEngine::Create(TenengradGaussian(), rig.camera().frame_size(), CV_8UC1);
   EXPECT_TRUE(engine.ok());
   for (double z = d.z_start_um; z <= d.z_end_um + 1e-9; z += d.z_step_um) {
     EXPECT_TRUE((*engine)->PushFrame(CaptureAt(rig, z), z).ok());
