@@ -147,8 +147,12 @@ TEST(SimulatedPhysicsTest, CoinFieldSaturatesWhileItsReliefIsDim) {
   EXPECT_LT(cv::mean(frame(cv::Rect(100, 80, 20, 20)))[0], 80.0);  // frosted relief
 }
 
-TEST(SimulatedPhysicsTest, LensNeedsProjectedTexture) {
-  auto rig = MakeRig("lens");
+// Textureless specimens (thesis 6.2.1: HF-LENS, HF-MIRROR): uniform light gives no depth,
+// a projected 2x2-projector-pixel checkerboard (6.8 camera px, fits the 7x7 window) does.
+class TexturelessTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(TexturelessTest, NeedsProjectedTexture) {
+  auto rig = MakeRig(GetParam());
   ASSERT_TRUE(rig);
   const cv::Mat truth = rig->simulation()->GroundTruthDepthUm();
   const double step = rig->scan_defaults().z_step_um;
@@ -157,10 +161,13 @@ TEST(SimulatedPhysicsTest, LensNeedsProjectedTexture) {
   const DepthResult hf_result = ScanSff(*rig, Checkerboard(rig->projector().resolution(), 2));
   const double std_reliable = ReliableFraction(std_result.depth_um, truth, 0.5 * step);
   const double hf_reliable = ReliableFraction(hf_result.depth_um, truth, 0.5 * step);
-  std::printf("lens: depth within half a step: uniform %.3f, checkerboard %.3f\n", std_reliable, hf_reliable);
+  std::printf("%s: depth within half a step: uniform %.3f, checkerboard %.3f\n", GetParam().c_str(), std_reliable,
+              hf_reliable);
   EXPECT_LT(std_reliable, 0.4);
   EXPECT_GT(hf_reliable, 0.95);
 }
+
+INSTANTIATE_TEST_SUITE_P(LensAndMirror, TexturelessTest, ::testing::Values("lens", "mirror"));
 
 TEST(SimulatedPhysicsTest, MirrorMappingSeenByTheCameraMatchesTheGeometry) {
   auto rig = MakeRig("mirror", {256, 192}, /*noise=*/false);
