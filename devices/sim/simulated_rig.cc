@@ -2,6 +2,7 @@
 // plus the simulation-only control (specimen choice, ground truth).
 #include "devices/sim/simulated_rig.h"
 
+#include <algorithm>
 #include <cmath>
 #include <mutex>
 #include <random>
@@ -106,8 +107,9 @@ struct SimState {
     }
     specimen_name = name;
     z_range_um = {lo, hi};
-    // Whole microseconds, like a real camera's exposure register.
-    default_exposure_us = std::max(1.0, std::round(renderer->ExposureForMeanGrey(128, 128.0)));
+    // Whole microseconds, like a real camera's exposure register, within the camera's range
+    // (a black user scene would otherwise ask for an endless exposure).
+    default_exposure_us = std::clamp(std::round(renderer->ExposureForMeanGrey(128, 128.0)), 1.0, 1e7);
     exposure_us = default_exposure_us;
     return Status::Ok();
   }
