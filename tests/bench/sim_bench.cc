@@ -77,6 +77,24 @@ void BM_RenderFarDefocus(benchmark::State& state) {
 }
 BENCHMARK(BM_RenderFarDefocus)->Args({1024, 768})->Args({1600, 1200})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
 
+// A 60-frame simulated scan through the rig's devices (move, capture) over skew10.
+void BM_Scan60Frames(benchmark::State& state) {
+  SimulatedRigOptions o;
+  o.camera_size = SizeArg(state);
+  o.specimen = "skew10";
+  auto rig = std::move(CreateSimulatedRig(o)).value();
+  const auto range = rig->simulation()->SpecimenZRangeUm();
+  const double step = (range.second - range.first + 40.0) / 59.0;
+  for (auto _ : state) {
+    for (int i = 0; i < 60; ++i) {
+      benchmark::DoNotOptimize(rig->stage().MoveTo(range.first - 20.0 + i * step).ok());
+      benchmark::DoNotOptimize(rig->camera().Capture().ok());
+    }
+  }
+}
+BENCHMARK(BM_Scan60Frames)->Args({1024, 768})->Unit(benchmark::kSecond)->Iterations(1)->MeasureProcessCPUTime()
+    ->UseRealTime();
+
 void BM_BaselineGaussian5x5(benchmark::State& state) {
   cv::Mat src(SizeArg(state), CV_32FC1), dst;
   cv::randu(src, 0.0, 1.0);
