@@ -148,7 +148,16 @@ Status ParseCamera(Section s, RigConfig* c) {
   INSPECT_RETURN_IF_ERROR(s.Number("frame_timeout_ms", &o.frame_timeout_ms));
   INSPECT_RETURN_IF_ERROR(s.Int("n_buffers", &o.n_buffers));
   INSPECT_RETURN_IF_ERROR(s.Int("packet_size", &o.packet_size));
+  INSPECT_ASSIGN_OR_RETURN(Section region, s.Object("region"));
+  INSPECT_RETURN_IF_ERROR(region.Int("x", &o.region_x));
+  INSPECT_RETURN_IF_ERROR(region.Int("y", &o.region_y));
+  INSPECT_RETURN_IF_ERROR(region.Int("width", &o.region_width));
+  INSPECT_RETURN_IF_ERROR(region.Int("height", &o.region_height));
+  INSPECT_RETURN_IF_ERROR(region.NoUnknownKeys());
   INSPECT_RETURN_IF_ERROR(s.NoUnknownKeys());
+  if (o.region_x < 0 || o.region_y < 0 || o.region_width < 0 || o.region_height < 0) {
+    return ConfigError(region.key("x/y/width/height"), "must be >= 0");
+  }
   if (!AravisPixelFormatBits(o.pixel_format).ok()) {
     return ConfigError(s.key("pixel_format"), "'" + o.pixel_format + "' is not supported (Mono8, Mono10, Mono12, Mono16)");
   }

@@ -38,7 +38,10 @@ AravisCamera::AravisCamera(AravisCameraOptions options) : options_(std::move(opt
   bits_ = AravisPixelFormatBits(options_.pixel_format).ok() ? *AravisPixelFormatBits(options_.pixel_format) : 8;
 }
 
-AravisCamera::~AravisCamera() { Disconnect("closed"); }
+AravisCamera::~AravisCamera() {
+  Disconnect("closed");
+  if (reaper_.joinable()) reaper_.join();
+}
 
 void AravisCamera::Disconnect(const std::string& reason) {
   if (h_ && h_->camera && !h_->control_lost.load()) {
@@ -51,13 +54,21 @@ void AravisCamera::Disconnect(const std::string& reason) {
 }
 
 Status AravisCamera::Lost(const std::string& what) {
-  Disconnect(what);
+  // Releasing stream and device on a dead link costs several GVCP timeouts (~10 s): do it on a
+  // reaper thread so the failing call returns now; Connect() and the destructor join it.
+  if (reaper_.joinable()) reaper_.join();
+  if (h_) {
+    h_->control_lost.store(true);
+    reaper_ = std::thread([h = std::move(h_)]() mutable { h.reset(); });
+  }
+  last_error_ = what;
   return Status::Unavailable("camera (aravis " + (device_id_.empty() ? options_.device_id : device_id_) +
                              ") is gone: " + what);
 }
 
 Status AravisCamera::Connect() {
   Disconnect("reconnecting");
+  if (reaper_.joinable()) reaper_.join();
   INSPECT_RETURN_IF_ERROR(options_.Validate());
   auto fail = [this](const std::string& m) {
     Disconnect(m);
@@ -102,8 +113,36 @@ Status AravisCamera::Connect() {
     h->lost_handler = g_signal_connect(arv_camera_get_device(h->camera), "control-lost",
                                        G_CALLBACK(OnControlLost), &h->control_lost);
   }
+  {
+    // An unsupported pixel format is a configuration error, not an absent camera.
+    guint n_formats = 0;
+    const char** formats = arv_camera_dup_available_pixel_formats_as_strings(h->camera, &n_formats, &e);
+    g_clear_error(&e);
+    bool supported = formats == nullptr;  // cannot tell: let the camera decide below
+    std::string available;
+    for (guint i = 0; formats && i < n_formats; ++i) {
+      if (!formats[i]) continue;
+      supported = supported || options_.pixel_format == formats[i];
+      available += (available.empty() ? "" : ", ") + std::string(formats[i]);
+    }
+    g_free(formats);
+    if (!supported) {
+      Disconnect("pixel format " + options_.pixel_format + " not supported");
+      return Status::FailedPrecondition("camera (aravis " + id + "): pixel_format " + options_.pixel_format +
+                                        " is not supported (available: " + available + ")");
+    }
+  }
   arv_camera_set_pixel_format_from_string(h->camera, options_.pixel_format.c_str(), &e);
   if (e) return fail("pixel_format " + options_.pixel_format + ": " + TakeError(e));
+  if (options_.region_width > 0 && options_.region_height > 0) {
+    arv_camera_set_region(h->camera, options_.region_x, options_.region_y, options_.region_width,
+                          options_.region_height, &e);
+    if (e) {
+      Disconnect("region rejected");
+      return Status::FailedPrecondition("camera (aravis " + id + "): region " + std::to_string(options_.region_width) +
+                                        "x" + std::to_string(options_.region_height) + ": " + TakeError(e));
+    }
+  }
   arv_camera_set_exposure_time(h->camera, options_.exposure_us, &e);
   if (e) return fail("exposure_us: " + TakeError(e));
   if (arv_camera_is_gain_available(h->camera, nullptr)) {

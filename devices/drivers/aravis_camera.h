@@ -6,6 +6,7 @@
 
 #include <memory>
 #include <string>
+#include <thread>
 
 #include "devices/camera.h"
 
@@ -20,6 +21,11 @@ struct AravisCameraOptions {
   double frame_timeout_ms = 2000.0;  // trigger -> complete frame; DEADLINE_EXCEEDED after it
   int n_buffers = 4;
   int packet_size = 0;    // GigE packet size in bytes; 0 = negotiate (arv_camera_gv_auto_packet_size)
+  // Sensor region of interest; width/height 0 keep the camera's current region.
+  int region_x = 0;
+  int region_y = 0;
+  int region_width = 0;
+  int region_height = 0;
 
   Status Validate() const;  // INVALID_ARGUMENT naming the field
 };
@@ -33,7 +39,9 @@ StatusOr<int> AravisPixelFormatBits(const std::string& pixel_format);
 // next Capture returns UNAVAILABLE (the trigger or a control read fails, or the frame does not
 // arrive and the camera no longer answers its control channel); a frame that does not arrive
 // while the camera still answers is DEADLINE_EXCEEDED. After UNAVAILABLE, info().connected is
-// false until Connect() succeeds again.
+// false until Connect() succeeds again. Detecting a vanished GigE camera takes one GVCP
+// command timeout (~2.5 s with Aravis's 5 x 500 ms retries); releasing the dead handles
+// (~10 s more) happens in the background and Connect() waits for it.
 class AravisCamera : public Camera {
  public:
   explicit AravisCamera(AravisCameraOptions options);
@@ -56,6 +64,7 @@ class AravisCamera : public Camera {
 
   AravisCameraOptions options_;
   std::unique_ptr<Handles> h_;
+  std::thread reaper_;  // releases the handles of a lost camera
   std::string model_, serial_, device_id_;
   cv::Size size_;
   int bits_ = 8;

@@ -18,6 +18,9 @@ Status AravisCameraOptions::Validate() const {
   if (!(frame_timeout_ms > 0.0)) return Status::InvalidArgument("frame_timeout_ms must be > 0");
   if (n_buffers < 1) return Status::InvalidArgument("n_buffers must be >= 1");
   if (packet_size < 0) return Status::InvalidArgument("packet_size must be >= 0");
+  if (region_x < 0 || region_y < 0 || region_width < 0 || region_height < 0) {
+    return Status::InvalidArgument("region_x/region_y/region_width/region_height must be >= 0");
+  }
   return Status::Ok();
 }
 
