@@ -166,7 +166,12 @@ StatusOr<std::unique_ptr<UsbTransport>> OpenLibusbTransport(const UsbDeviceSelec
     return s;
   };
   if (ep_in == 0 || ep_out == 0) return close_all(Status::Unavailable(desc + ": no bulk IN/OUT endpoints on interface " + std::to_string(sel.interface_number)));
-  libusb_set_auto_detach_kernel_driver(h, 1);
+  // Thorlabs controllers bind to the kernel's ftdi_sio (ttyUSB) driver by default.
+  if (libusb_kernel_driver_active(h, sel.interface_number) == 1) {
+    if (int rc = libusb_detach_kernel_driver(h, sel.interface_number); rc < 0) {
+      return close_all(FromLibusb(rc, desc + ": detaching ftdi_sio"));
+    }
+  }
   if (int rc = libusb_claim_interface(h, sel.interface_number); rc < 0) {
     return close_all(FromLibusb(rc, desc + ": claiming interface"));
   }
