@@ -4,6 +4,8 @@
 // rig, captured through the driver and reconstructed with SffEngine against ground truth.
 #include "devices/drivers/aravis_camera.h"
 
+#if INSPECT_HAVE_DRIVERS  // needs Aravis (INSPECT_BUILD_DRIVERS=ON)
+
 #include <arv.h>
 #include <fcntl.h>
 #include <signal.h>
@@ -23,6 +25,7 @@
 #include <gtest/gtest.h>
 
 #include "core/sff_engine.h"
+#include "devices/rig_config.h"
 #include "devices/sim/simulated_rig.h"
 
 extern char** environ;
@@ -171,6 +174,49 @@ TEST_F(GigeLoopbackTest, OpensBySerialAndHonoursPixelFormat) {
   EXPECT_TRUE(hasty.info().connected);
 }
 
+// Rig level: a degraded start without the camera, the camera appearing, a reset picking it up,
+// the camera vanishing mid-scan and a reset reconnecting it again.
+TEST_F(GigeLoopbackTest, RigResetReconnectsTheCamera) {
+  if (!FakeProgramPresent()) GTEST_SKIP() << "arv-fake-gv-camera-0.8 not installed";
+  StatusOr<RigConfig> config = ParseRigConfig(R"({
+    "name": "loopback", "pixel_size_um": 1.0,
+    "camera": {"driver": "aravis", "device_id": "Aravis-Fake-DRVRIG", "frame_timeout_ms": 1000,
+               "region": {"width": 32, "height": 24}},
+    "stage": {"driver": "apt-usb", "serial": "27999998"},
+    "projector": {"driver": "none", "width": 32, "height": 24}})");
+  ASSERT_TRUE(config.ok()) << config.status().ToString();
+  StatusOr<std::unique_ptr<Rig>> created = CreateRig(*config, RigStartOptions{.allow_degraded = true});
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  Rig& rig = **created;
+  EXPECT_FALSE(rig.camera().info().connected);
+  EXPECT_THAT(rig.CheckDevices().message(), ::testing::HasSubstr("camera (aravis"));
+
+  auto reset_until_camera = [&rig] {
+    const Clock::time_point deadline = Clock::now() + std::chrono::seconds(30);
+    Status s;
+    do {
+      s = rig.Reset();  // the stage stays absent: UNAVAILABLE naming it
+    } while (!rig.camera().info().connected && Clock::now() < deadline);
+    return s;
+  };
+  StartFakeCamera("DRVRIG");
+  Status reset = reset_until_camera();
+  ASSERT_TRUE(rig.camera().info().connected) << reset.ToString();
+  EXPECT_EQ(reset.code(), StatusCode::kUnavailable);
+  EXPECT_THAT(reset.message(), ::testing::HasSubstr("27999998"));
+  ASSERT_TRUE(rig.camera().Capture().ok());
+
+  StopFakeCamera();
+  EXPECT_EQ(rig.camera().Capture().status().code(), StatusCode::kUnavailable);
+  EXPECT_THAT(rig.CheckDevices().message(), ::testing::HasSubstr("camera (aravis"));
+  StartFakeCamera("DRVRIG");
+  reset_until_camera();
+  ASSERT_TRUE(rig.camera().info().connected);
+  StatusOr<cv::Mat> frame = rig.camera().Capture();
+  ASSERT_TRUE(frame.ok()) << frame.status().ToString();
+  EXPECT_EQ(frame->size(), cv::Size(32, 24));
+}
+
 TEST_F(GigeLoopbackTest, AbsentCameraIsUnavailable) {
   AravisCameraOptions o = FakeOptions("NOSUCHCAM");
   AravisCamera camera(o);
@@ -273,3 +319,5 @@ TEST_F(GigeLoopbackTest, ServesSimulatedRigFramesOverGigeAndReconstructsDepth) {
 
 }  // namespace
 }  // namespace inspection
+
+#endif  // INSPECT_HAVE_DRIVERS
