@@ -204,4 +204,16 @@ StatusOr<double> AptStage::position_um() {
   return UmFromCounts(counts);
 }
 
+StatusOr<apt::MotorStatus> AptStage::QueryStatus() {
+  INSPECT_RETURN_IF_ERROR(CheckConnected());
+  INSPECT_RETURN_IF_ERROR(Fail(Send(apt::ReqDcStatusUpdate())));
+  StatusOr<apt::Message> reply =
+      WaitFor(apt::kMotGetDcStatusUpdate, options_.line.control_timeout_ms, "GET_DCSTATUSUPDATE");
+  if (!reply.ok()) return Fail(reply.status());
+  INSPECT_ASSIGN_OR_RETURN(apt::MotorStatus st, apt::ParseMotorStatus(*reply));
+  homed_ = homed_ || (st.status_bits & apt::kStatusHomed) != 0;
+  last_position_counts_ = st.position_counts;
+  return st;
+}
+
 }  // namespace inspection

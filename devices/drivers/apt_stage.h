@@ -54,6 +54,9 @@ class AptStage : public Stage {
   Status Home() override;
   Status MoveTo(double z_um) override;
   StatusOr<double> position_um() override;
+  // Status bits and position as the controller reports them (REQ/GET_DCSTATUSUPDATE; DC servo
+  // controllers KDC101/TDC001).
+  StatusOr<apt::MotorStatus> QueryStatus();
 
   int32_t CountsFromUm(double z_um) const;
   double UmFromCounts(int32_t counts) const;

@@ -82,6 +82,9 @@ struct FakeController {
         Queue(Reply(apt::kMotMoveCompleted, Status14(position, 0x80000400)));
         break;
       }
+      case apt::kMotReqDcStatusUpdate:
+        Queue(Reply(apt::kMotGetDcStatusUpdate, Status14(position, 0x80000400 | 0x10)));
+        break;
       case apt::kMotReqPosCounter: {
         Bytes d = {0x01, 0x00};
         for (int i = 0; i < 4; ++i) d.push_back(static_cast<uint8_t>((static_cast<uint32_t>(position) >> (8 * i)) & 0xFF));
@@ -214,6 +217,22 @@ TEST_F(AptStageTest, MoveAbsoluteSendsEncoderCountsAndAcknowledgesCompletion) {
   ASSERT_TRUE(z.ok()) << z.status().ToString();
   EXPECT_THAT(controller_->written, ::testing::ElementsAre(Bytes{0x11, 0x04, 0x01, 0x00, 0x50, 0x01}));
   EXPECT_NEAR(*z, 34555 * 1000.0 / 34554.96, 1e-9);
+}
+
+TEST_F(AptStageTest, StatusRequestReportsBitsAndIsAcknowledged) {
+  auto stage = Make();
+  ASSERT_TRUE(stage->Connect().ok());
+  ASSERT_TRUE(stage->MoveTo(250.0).ok());
+  EXPECT_FALSE(stage->homed());
+  controller_->written.clear();
+  StatusOr<apt::MotorStatus> st = stage->QueryStatus();
+  ASSERT_TRUE(st.ok()) << st.status().ToString();
+  EXPECT_THAT(controller_->written, ::testing::ElementsAre(Bytes{0x90, 0x04, 0x01, 0x00, 0x50, 0x01},    // REQ_DCSTATUSUPDATE
+                                                           Bytes{0x92, 0x04, 0x00, 0x00, 0x50, 0x01}));  // ACK
+  EXPECT_EQ(st->channel, 1);
+  EXPECT_EQ(st->position_counts, stage->CountsFromUm(250.0));
+  EXPECT_EQ(st->status_bits, 0x80000410u);  // enabled, homed, moving forward
+  EXPECT_TRUE(stage->homed());
 }
 
 TEST_F(AptStageTest, MtsStageUsesItsOwnScale) {
