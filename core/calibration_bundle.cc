@@ -339,14 +339,16 @@ StatusOr<CalibrationBundle> CalibrationBundle::Load(const fs::path& dir) {
       INSPECT_ASSIGN_OR_RETURN(r.kernel, ReadFloatTiff(dir / "integral_psf.tiff", {}));
       b.integral_psf = std::move(r);
     }
-    for (const json& r : j.value("reports", json::array())) {
+    const json reports_json = j.value("reports", json::array());
+    for (const json& r : reports_json) {
       CalibrationStepReport rep;
       INSPECT_ASSIGN_OR_RETURN(rep.step, ParseCalibrationStep(r.at("step").get<std::string>()));
       rep.duration_s = r.value("duration_s", 0.0);
       rep.finished_utc = r.value("finished_utc", "");
       rep.frames_captured = r.value("frames_captured", 0);
       rep.note = r.value("note", "");
-      for (const auto& [k, v] : r.value("figures", json::object()).items()) rep.figures[k] = NumFrom(v);
+      const json figures = r.value("figures", json::object());
+      for (const auto& [k, v] : figures.items()) rep.figures[k] = NumFrom(v);
       b.SetReport(std::move(rep));
     }
   } catch (const json::exception& e) {

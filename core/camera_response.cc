@@ -184,6 +184,9 @@ StatusOr<CameraResponse> SolveCameraResponse(const std::vector<std::vector<int>>
   // crf is monotonic by physics (thesis 3.2.1); noise in the barely weighted extremes can make
   // the fit dip by a fraction of a percent. A running maximum restores an invertible curve.
   for (int k = 1; k < levels; ++k) r.log_exposure[k] = std::max(r.log_exposure[k], r.log_exposure[k - 1]);
+  // The gauge row is one equation among many; make it exact (a shift leaves eq. 4.4 unchanged).
+  const double offset = r.log_exposure[levels / 2];
+  for (double& v : r.log_exposure) v -= offset;
   return r;
 }
 
