@@ -259,7 +259,7 @@ StatusOr<CalibrationBundle> CalibrationBundle::Load(const fs::path& dir) {
     b.camera_bit_depth = j.value("camera_bit_depth", 8);
     if (j.contains("camera_response")) {
       const json& c = j.at("camera_response");
-      CameraResponse r;
+      CameraResponseFunction r;
       r.levels = c.at("levels").get<int>();
       r.log_exposure = c.at("log_exposure").get<std::vector<double>>();
       r.smoothness_lambda = c.value("smoothness_lambda", 0.0);
@@ -270,7 +270,7 @@ StatusOr<CalibrationBundle> CalibrationBundle::Load(const fs::path& dir) {
     }
     if (j.contains("projector_response")) {
       const json& p = j.at("projector_response");
-      ProjectorResponse r;
+      ProjectorResponseFunction r;
       r.relative_irradiance = p.at("relative_irradiance").get<std::vector<double>>();
       r.measured_levels = p.value("measured_levels", std::vector<int>{});
       r.exposure_min_us = p.value("exposure_min_us", 0.0);

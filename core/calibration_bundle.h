@@ -70,8 +70,8 @@ struct CalibrationBundle {
   cv::Size projector_size;
   int camera_bit_depth = 8;
 
-  std::optional<CameraResponse> camera_response;
-  std::optional<ProjectorResponse> projector_response;
+  std::optional<CameraResponseFunction> camera_response;
+  std::optional<ProjectorResponseFunction> projector_response;
   std::optional<GeometricCalibration> geometry;
   std::optional<PsfCalibration> psf;
   std::optional<ScatterMatrix> scatter;

@@ -12,7 +12,7 @@
 
 namespace inspection {
 
-Status CameraResponse::Validate() const {
+Status CameraResponseFunction::Validate() const {
   if (levels < 2) return Status::InvalidArgument("camera_response.levels must be >= 2");
   if (static_cast<int>(log_exposure.size()) != levels) {
     return Status::InvalidArgument("camera_response.log_exposure has " +
@@ -32,7 +32,7 @@ Status CameraResponse::Validate() const {
   return Status::Ok();
 }
 
-double CameraResponse::LogExposure(double z) const {
+double CameraResponseFunction::LogExposure(double z) const {
   if (log_exposure.empty()) return 0.0;
   z = std::clamp(z, 0.0, static_cast<double>(levels - 1));
   const int z0 = std::min(static_cast<int>(z), levels - 2);
@@ -40,7 +40,7 @@ double CameraResponse::LogExposure(double z) const {
   return (1.0 - t) * log_exposure[z0] + t * log_exposure[z0 + 1];
 }
 
-double CameraResponse::GreyForLogExposure(double x) const {
+double CameraResponseFunction::GreyForLogExposure(double x) const {
   if (log_exposure.empty()) return 0.0;
   if (x <= log_exposure.front()) return 0.0;
   if (x >= log_exposure.back()) return levels - 1;
@@ -52,7 +52,7 @@ double CameraResponse::GreyForLogExposure(double x) const {
   return d > 0 ? z0 + (x - log_exposure[z0]) / d : z0;
 }
 
-cv::Mat CameraResponse::Radiance(const cv::Mat& z, double exposure_us) const {
+cv::Mat CameraResponseFunction::Radiance(const cv::Mat& z, double exposure_us) const {
   // Lookup table exp(crf(z)) / dt, then one pass over the image.
   std::vector<float> lut(levels);
   for (int i = 0; i < levels; ++i) lut[i] = static_cast<float>(std::exp(log_exposure[i]) / exposure_us);
@@ -84,7 +84,7 @@ Status CameraResponseOptions::Validate() const {
   return Status::Ok();
 }
 
-StatusOr<CameraResponse> SolveCameraResponse(const std::vector<std::vector<int>>& z_in,
+StatusOr<CameraResponseFunction> SolveCameraResponse(const std::vector<std::vector<int>>& z_in,
                                              const std::vector<double>& exposure_us,
                                              const CameraResponseOptions& options) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
@@ -169,7 +169,7 @@ StatusOr<CameraResponse> SolveCameraResponse(const std::vector<std::vector<int>>
     return Status::Internal("camera response: CHOLMOD solve failed");
   }
 
-  CameraResponse r;
+  CameraResponseFunction r;
   r.levels = levels;
   r.smoothness_lambda = options.smoothness_lambda;
   r.sample_pixel_count = n;
@@ -217,7 +217,7 @@ Status CheckSeries(const std::vector<cv::Mat>& images, const std::vector<double>
 
 }  // namespace
 
-StatusOr<CameraResponse> EstimateCameraResponse(const std::vector<cv::Mat>& images,
+StatusOr<CameraResponseFunction> EstimateCameraResponse(const std::vector<cv::Mat>& images,
                                                 const std::vector<double>& exposure_us,
                                                 const CameraResponseOptions& options) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
@@ -271,7 +271,7 @@ StatusOr<CameraResponse> EstimateCameraResponse(const std::vector<cv::Mat>& imag
 
 StatusOr<cv::Mat> MergeRadiance(const std::vector<cv::Mat>& images,
                                 const std::vector<double>& exposure_us,
-                                const CameraResponse& response) {
+                                const CameraResponseFunction& response) {
   INSPECT_RETURN_IF_ERROR(CheckSeries(images, exposure_us));
   INSPECT_RETURN_IF_ERROR(response.Validate());
   const int levels = response.levels;

@@ -2,7 +2,7 @@
 // (Debevec and Malik; thesis 3.2.1 eq. 3.38-3.42 and 4.3.1 eq. 4.3-4.5), and its use: radiance
 // images (eq. 4.5), HDR merge (eq. 3.44) and the inverse mapping exposure -> grey value (eq. 5.4).
 //
-// The model (CameraResponse) is plain data; EstimateCameraResponse is the estimator. A stored
+// The model (CameraResponseFunction) is plain data; EstimateCameraResponse is the estimator. A stored
 // model can be loaded and checked (Validate) without the images it came from.
 #pragma once
 
@@ -17,7 +17,7 @@ namespace inspection {
 // crf sampled at every grey level 0..levels-1, in natural-log exposure units (ln(E * dt_us)),
 // with the gauge crf(levels / 2) = 0 (thesis eq. 3.40; the same gauge as OpenCV's
 // CalibrateDebevec). Exposure times are in microseconds throughout.
-struct CameraResponse {
+struct CameraResponseFunction {
   int levels = 256;                  // 2^bit_depth of the camera, 256 or 4096
   std::vector<double> log_exposure;  // crf(z), size levels, non-decreasing
   double smoothness_lambda = 0.0;    // lambda used in the fit (see CameraResponseOptions)
@@ -54,14 +54,14 @@ struct CameraResponseOptions {
 // Solves eq. 4.4 for given samples. z[i][j] is the grey value of sample pixel i in image j;
 // exposure_us[j] the exposure of image j. Weighted least squares, sparse normal equations
 // (CHOLMOD), gauge crf(levels/2) = 0.
-StatusOr<CameraResponse> SolveCameraResponse(const std::vector<std::vector<int>>& z,
+StatusOr<CameraResponseFunction> SolveCameraResponse(const std::vector<std::vector<int>>& z,
                                              const std::vector<double>& exposure_us,
                                              const CameraResponseOptions& options);
 
 // Picks sample pixels whose grey values in the middle image of the series spread evenly over
 // the grey range (thesis 3.2.1), then solves eq. 4.4. images: same size, CV_8UC1 or CV_16UC1,
 // of a static scene; exposure_us strictly positive.
-StatusOr<CameraResponse> EstimateCameraResponse(const std::vector<cv::Mat>& images,
+StatusOr<CameraResponseFunction> EstimateCameraResponse(const std::vector<cv::Mat>& images,
                                                 const std::vector<double>& exposure_us,
                                                 const CameraResponseOptions& options);
 
@@ -69,6 +69,6 @@ StatusOr<CameraResponse> EstimateCameraResponse(const std::vector<cv::Mat>& imag
 // not the log). Pixels with zero total weight get the estimate from the least-saturated frame.
 StatusOr<cv::Mat> MergeRadiance(const std::vector<cv::Mat>& images,
                                 const std::vector<double>& exposure_us,
-                                const CameraResponse& response);
+                                const CameraResponseFunction& response);
 
 }  // namespace inspection

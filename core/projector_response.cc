@@ -9,7 +9,7 @@
 
 namespace inspection {
 
-Status ProjectorResponse::Validate() const {
+Status ProjectorResponseFunction::Validate() const {
   if (relative_irradiance.size() != 256) {
     return Status::InvalidArgument("projector_response.relative_irradiance must have 256 entries");
   }
@@ -30,14 +30,14 @@ Status ProjectorResponse::Validate() const {
   return Status::Ok();
 }
 
-double ProjectorResponse::Irradiance(double grey) const {
+double ProjectorResponseFunction::Irradiance(double grey) const {
   grey = std::clamp(grey, 0.0, 255.0);
   const int g0 = std::min(static_cast<int>(grey), 254);
   const double t = grey - g0;
   return (1 - t) * relative_irradiance[g0] + t * relative_irradiance[g0 + 1];
 }
 
-double ProjectorResponse::GreyForIrradiance(double e) const {
+double ProjectorResponseFunction::GreyForIrradiance(double e) const {
   if (e <= relative_irradiance.front()) return 0.0;
   if (e >= relative_irradiance.back()) return 255.0;
   const auto it = std::upper_bound(relative_irradiance.begin(), relative_irradiance.end(), e);
@@ -47,7 +47,7 @@ double ProjectorResponse::GreyForIrradiance(double e) const {
   return d > 0 ? g0 + (e - relative_irradiance[g0]) / d : g0;
 }
 
-cv::Mat ProjectorResponse::IrradianceImage(const cv::Mat& pattern) const {
+cv::Mat ProjectorResponseFunction::IrradianceImage(const cv::Mat& pattern) const {
   cv::Mat out(pattern.size(), CV_32FC1);
   for (int y = 0; y < pattern.rows; ++y) {
     const uint8_t* p = pattern.ptr<uint8_t>(y);
@@ -62,8 +62,8 @@ double ProjectorCalibrationExposureUs(int grey, double exposure_min_us, double e
   return std::exp(a + (b - a) / 255.0 * grey);
 }
 
-StatusOr<ProjectorResponse> EstimateProjectorResponse(const std::vector<ProjectorResponseCapture>& captures,
-                                                      const CameraResponse& camera_response,
+StatusOr<ProjectorResponseFunction> EstimateProjectorResponse(const std::vector<ProjectorResponseCapture>& captures,
+                                                      const CameraResponseFunction& camera_response,
                                                       const ProjectorResponseOptions& options) {
   INSPECT_RETURN_IF_ERROR(camera_response.Validate());
   std::map<int, const ProjectorResponseCapture*> by_level;
@@ -96,7 +96,7 @@ StatusOr<ProjectorResponse> EstimateProjectorResponse(const std::vector<Projecto
   cv::Mat white_z;
   white.image(roi).convertTo(white_z, CV_32S);
 
-  ProjectorResponse out;
+  ProjectorResponseFunction out;
   std::vector<std::pair<int, double>> points;
   double cv_sum = 0;
   int cv_count = 0;

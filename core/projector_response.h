@@ -14,7 +14,7 @@
 namespace inspection {
 
 // Plain data. relative_irradiance[i] = mean(E_c,i / E_c,255) (eq. 4.9), for i = 0..255.
-struct ProjectorResponse {
+struct ProjectorResponseFunction {
   std::vector<double> relative_irradiance;  // size 256, non-decreasing, last entry 1
   std::vector<int> measured_levels;         // grey levels actually projected; others interpolated
   double exposure_min_us = 0.0;             // dt_min and dt_max of eq. 4.8
@@ -56,8 +56,8 @@ struct ProjectorResponseOptions {
 
 // captures must contain grey 255 and at least one other level; levels are sorted and missing
 // levels are linearly interpolated. Errors name the capture.
-StatusOr<ProjectorResponse> EstimateProjectorResponse(const std::vector<ProjectorResponseCapture>& captures,
-                                                      const CameraResponse& camera_response,
+StatusOr<ProjectorResponseFunction> EstimateProjectorResponse(const std::vector<ProjectorResponseCapture>& captures,
+                                                      const CameraResponseFunction& camera_response,
                                                       const ProjectorResponseOptions& options);
 
 }  // namespace inspection

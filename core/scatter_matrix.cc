@@ -145,8 +145,8 @@ StatusOr<ScatterMatrix> BuildScatterMatrix(const std::vector<ScatterCapture>& ca
   return s;
 }
 
-StatusOr<ScatterPrediction> PredictAndCompare(const ScatterMatrix& scatter, const ProjectorResponse& prf,
-                                              const CameraResponse& crf, const cv::Mat& pattern,
+StatusOr<ScatterPrediction> PredictAndCompare(const ScatterMatrix& scatter, const ProjectorResponseFunction& prf,
+                                              const CameraResponseFunction& crf, const cv::Mat& pattern,
                                               double exposure_us, const cv::Mat& captured, const cv::Mat& mask) {
   if (pattern.type() != CV_8UC1 || pattern.size() != scatter.projector_size) {
     return Status::InvalidArgument("pattern must be CV_8UC1 of the projector size");

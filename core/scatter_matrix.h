@@ -35,7 +35,7 @@ struct ScatterMatrix {
   // nnz / (rows * cols), the thesis's density figure (0.00065 % there).
   double Density() const;
   // Predicted camera radiance for a relative projector irradiance image (CV_32FC1 of
-  // projector_size, e.g. ProjectorResponse::IrradianceImage): e + A (e_p - prf(0)).
+  // projector_size, e.g. ProjectorResponseFunction::IrradianceImage): e + A (e_p - prf(0)).
   StatusOr<cv::Mat> PredictRadiance(const cv::Mat& projector_irradiance) const;
 };
 
@@ -72,8 +72,8 @@ struct ScatterPrediction {
 
 // Predicts the camera image of `pattern` (CV_8UC1 projector image) captured at exposure_us and
 // compares it with `captured` over `mask` (CV_8UC1, non-zero = compared; empty = all).
-StatusOr<ScatterPrediction> PredictAndCompare(const ScatterMatrix& scatter, const ProjectorResponse& prf,
-                                              const CameraResponse& crf, const cv::Mat& pattern,
+StatusOr<ScatterPrediction> PredictAndCompare(const ScatterMatrix& scatter, const ProjectorResponseFunction& prf,
+                                              const CameraResponseFunction& crf, const cv::Mat& pattern,
                                               double exposure_us, const cv::Mat& captured,
                                               const cv::Mat& mask);
 

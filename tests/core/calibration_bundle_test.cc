@@ -29,12 +29,12 @@ class CalibrationBundleTest : public ::testing::Test {
     b.rig = "synthetic";
     b.camera_size = {8, 6};
     b.projector_size = {4, 3};
-    CameraResponse crf;
+    CameraResponseFunction crf;
     for (int z = 0; z < 256; ++z) crf.log_exposure.push_back(0.01 * (z - 128) + 1e-3 * std::sin(z));
     for (int z = 1; z < 256; ++z) crf.log_exposure[z] = std::max(crf.log_exposure[z], crf.log_exposure[z - 1]);
     crf.fit_rms_residual = 0.0123;
     b.camera_response = crf;
-    ProjectorResponse prf;
+    ProjectorResponseFunction prf;
     for (int i = 0; i < 256; ++i) prf.relative_irradiance.push_back(std::pow(i / 255.0, 2.2));
     prf.measured_levels = {0, 128, 255};
     b.projector_response = prf;

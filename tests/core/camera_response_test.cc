@@ -138,7 +138,7 @@ TEST(CameraResponseTest, RejectsBadInput) {
   EXPECT_EQ(SolveCameraResponse({{1, 2}}, {1.0}, o).status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(SolveCameraResponse({{1, 2}, {3, 300}}, {1.0, 2.0}, o).status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(SolveCameraResponse({{1, 2}, {3, 4}}, {1.0, -2.0}, o).status().code(), StatusCode::kInvalidArgument);
-  CameraResponse bad;
+  CameraResponseFunction bad;
   bad.log_exposure.assign(256, 0.0);
   bad.log_exposure[10] = -1;
   EXPECT_FALSE(bad.Validate().ok());

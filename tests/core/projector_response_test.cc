@@ -9,9 +9,9 @@
 namespace inspection {
 namespace {
 
-// Camera: Z = 255 (X / 2e4)^(1/2.2); crf in the gauge of CameraResponse (exact, no fit).
-CameraResponse GammaCrf() {
-  CameraResponse c;
+// Camera: Z = 255 (X / 2e4)^(1/2.2); crf in the gauge of CameraResponseFunction (exact, no fit).
+CameraResponseFunction GammaCrf() {
+  CameraResponseFunction c;
   for (int z = 0; z < 256; ++z) c.log_exposure.push_back(std::log(2e4) + 2.2 * std::log(std::max(z, 1) / 255.0));
   return c;
 }

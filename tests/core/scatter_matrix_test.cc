@@ -15,15 +15,15 @@ namespace {
 using testing_synthetic::SyntheticRig;
 
 // Linear camera at exposure 1 us: radiance == grey.
-CameraResponse LinearCamera() {
-  CameraResponse c;
+CameraResponseFunction LinearCamera() {
+  CameraResponseFunction c;
   c.levels = 256;
   for (int z = 0; z < 256; ++z) c.log_exposure.push_back(std::log(std::max(z, 1) * 1.0) - (z == 0 ? 1.0 : 0.0));
   return c;
 }
 
-ProjectorResponse LinearProjector() {
-  ProjectorResponse p;
+ProjectorResponseFunction LinearProjector() {
+  ProjectorResponseFunction p;
   for (int i = 0; i < 256; ++i) p.relative_irradiance.push_back(i / 255.0);
   return p;
 }
@@ -48,7 +48,7 @@ struct Built {
 };
 
 Built BuildFromRig(const SyntheticRig& rig, int spacing, int radius, std::mt19937& rng) {
-  const CameraResponse crf = LinearCamera();
+  const CameraResponseFunction crf = LinearCamera();
   const GeometricCalibration g = TrueGeometry(rig);
   const cv::Mat black = crf.Radiance(rig.Capture(cv::Mat::zeros(rig.projector, CV_8UC1), 0.5, rng), 1.0);
   std::vector<ScatterCapture> caps;
