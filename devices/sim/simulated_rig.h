@@ -14,6 +14,7 @@
 
 #include "core/status.h"
 #include "devices/rig.h"
+#include "devices/sim/image_formation.h"
 
 namespace inspection {
 
@@ -32,6 +33,16 @@ struct SimulatedRigOptions {
 };
 
 // Thread-compatible: the server's job worker is its only user at a time.
+// The camera starts at the specimen's default exposure (scan_defaults().exposure_us), the
+// projector shows uniform grey 128, the stage is homed at z = 0. Stage travel: 0 .. 25000 um.
+// SimulationControl::SetSpecimen also resets the camera exposure to the new default.
 StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& options);
+
+// The renderer settings the simulated rig uses for these options (for serving the same frames
+// elsewhere, e.g. over GigE Vision: build an ImageFormation from them and MakeSpecimen).
+StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptions& options);
+
+// Scan defaults for a specimen z range: the range with 4 steps of margin each side, 5 um steps.
+ScanDefaults ScanDefaultsFor(std::pair<double, double> z_range_um, double exposure_us);
 
 }  // namespace inspection
