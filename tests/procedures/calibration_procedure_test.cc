@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 
 #include <gtest/gtest.h>
@@ -140,6 +141,136 @@ TEST_F(CalibrationProcedureTest, PsfGrowsWithDefocusAndScatterPredictsTheCamera)
   EXPECT_GT(rep->figures.at("density"), 0.0);
   const IntegralPsf& ipsf = *bundle_->integral_psf;
   EXPECT_LT(ipsf.restored_rms_error, 0.8 * ipsf.integral_rms_error);
+}
+
+}  // namespace
+}  // namespace inspection
+
+namespace inspection {
+namespace {
+
+// Bytewise equality (NaN entries of LUTs compare equal to themselves).
+bool SameBytes(const cv::Mat& a, const cv::Mat& b) {
+  return a.size() == b.size() && a.type() == b.type() && a.isContinuous() && b.isContinuous() &&
+         std::memcmp(a.data, b.data, a.total() * a.elemSize()) == 0;
+}
+
+TEST(CalibrationProcedureStepsTest, SingleStepCarriesOverPreviousModels) {
+  auto rig = CreateSimulatedRig(SmallRig());
+  ASSERT_TRUE(rig.ok());
+  std::atomic<bool> cancel{false};
+  CalibrationOptions o = FastOptions();
+  o.steps = {CalibrationStep::kCameraResponse, CalibrationStep::kGeometry};
+  auto first = RunCalibration(**rig, o, nullptr, nullptr, cancel);
+  ASSERT_TRUE(first.ok()) << first.status().ToString();
+  EXPECT_FALSE(first->HasModel(CalibrationStep::kProjectorResponse));
+
+  // The scatter matrix alone needs a projector response: refused before any frame.
+  o.steps = {CalibrationStep::kScatterMatrix};
+  int progress_calls = 0;
+  auto refused = RunCalibration(**rig, o, &*first, [&](const CalibrationProgress&) { ++progress_calls; }, cancel);
+  EXPECT_EQ(refused.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(refused.status().message().find("projector_response"), std::string::npos);
+  EXPECT_EQ(progress_calls, 0);
+
+  // Projector response alone on top of the first bundle: everything else carried over intact.
+  o.steps = {CalibrationStep::kProjectorResponse};
+  std::vector<std::string> steps_seen;
+  auto second = RunCalibration(**rig, o, &*first,
+                               [&](const CalibrationProgress& p) { steps_seen.push_back(p.step); }, cancel);
+  ASSERT_TRUE(second.ok()) << second.status().ToString();
+  EXPECT_TRUE(second->HasModel(CalibrationStep::kProjectorResponse));
+  EXPECT_EQ(second->camera_response->log_exposure, first->camera_response->log_exposure);
+  EXPECT_TRUE(SameBytes(second->geometry->projector_to_camera, first->geometry->projector_to_camera))
+      << "geometry must be carried over unchanged";
+  ASSERT_NE(second->Report(CalibrationStep::kGeometry), nullptr);
+  EXPECT_EQ(second->Report(CalibrationStep::kGeometry)->finished_utc,
+            first->Report(CalibrationStep::kGeometry)->finished_utc);
+  for (const auto& s : steps_seen) EXPECT_EQ(s, "projector_response");
+  // The rig is left as found: previous specimen, uniform projector.
+  EXPECT_EQ((*rig)->simulation()->specimen(), SmallRig().specimen);
+
+  // Save and load the real bundle.
+  const auto dir = std::filesystem::temp_directory_path() / ("calib_proc_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  ASSERT_TRUE(second->Save(dir).ok());
+  auto loaded = CalibrationBundle::Load(dir);
+  ASSERT_TRUE(loaded.ok()) << loaded.status().ToString();
+  EXPECT_EQ(loaded->projector_response->relative_irradiance, second->projector_response->relative_irradiance);
+  EXPECT_TRUE(SameBytes(loaded->geometry->camera_to_projector, second->geometry->camera_to_projector));
+  std::filesystem::remove_all(dir);
+}
+
+TEST(CalibrationProcedureStepsTest, CancellationStopsBetweenFrames) {
+  auto rig = CreateSimulatedRig(SmallRig());
+  ASSERT_TRUE(rig.ok());
+  std::atomic<bool> cancel{false};
+  CalibrationOptions o = FastOptions();
+  o.steps = {CalibrationStep::kGeometry};
+  int items_after_cancel = 0;
+  auto r = RunCalibration(**rig, o, nullptr,
+                          [&](const CalibrationProgress& p) {
+                            if (cancel.load()) ++items_after_cancel;
+                            if (p.item == 5) cancel.store(true);
+                          },
+                          cancel);
+  EXPECT_EQ(r.status().code(), StatusCode::kCancelled);
+  EXPECT_EQ(items_after_cancel, 0);
+}
+
+TEST(CalibrationProcedureStepsTest, RejectsMismatchedPreviousBundleAndBadOptions) {
+  auto rig = CreateSimulatedRig(SmallRig());
+  ASSERT_TRUE(rig.ok());
+  std::atomic<bool> cancel{false};
+  CalibrationBundle other;
+  other.camera_size = {640, 480};
+  other.projector_size = {96, 72};
+  CalibrationOptions o = FastOptions();
+  o.steps = {CalibrationStep::kIntegralPsf};
+  EXPECT_EQ(RunCalibration(**rig, o, &other, nullptr, cancel).status().code(), StatusCode::kFailedPrecondition);
+  o.geometry_grid_spacing_px = 1;
+  auto bad = RunCalibration(**rig, o, nullptr, nullptr, cancel);
+  EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.status().message().find("geometry_grid_spacing_px"), std::string::npos);
+}
+
+// Manual measurement, not part of the suite: the full-size rig (1024x768 camera, 1280x720
+// projector) with default options. Run with
+//   procedures_tests --gtest_also_run_disabled_tests --gtest_filter='*FullSize*'
+TEST(CalibrationProcedureStepsTest, DISABLED_FullSizeTimings) {
+  auto rig = CreateSimulatedRig(SimulatedRigOptions{});
+  ASSERT_TRUE(rig.ok());
+  std::atomic<bool> cancel{false};
+  auto b = RunCalibration(**rig, CalibrationOptions{}, nullptr, nullptr, cancel);
+  ASSERT_TRUE(b.ok()) << b.status().ToString();
+  std::printf("%s", b->Summary().c_str());
+  const ImageFormationOptions f = ImageFormationOptionsFor(SimulatedRigOptions{}).value();
+  const ProjectorCameraGeometry truth(f.geometry, f.camera_size, f.projector_size);
+  double sum = 0, worst = 0;
+  int n = 0;
+  for (int v = 0; v < f.projector_size.height; ++v)
+    for (int u = 0; u < f.projector_size.width; ++u) {
+      const cv::Vec2f c = b->geometry->projector_to_camera.at<cv::Vec2f>(v, u);
+      if (!std::isfinite(c[0])) continue;
+      const double e = cv::norm(cv::Point2d(c[0], c[1]) - truth.ProjectorToCamera({double(u), double(v)}));
+      sum += e;
+      worst = std::max(worst, e);
+      ++n;
+    }
+  std::printf("LUT vs truth: mean %.3f px, max %.3f px over %d entries\n", sum / n, worst, n);
+  const double t128 = std::log(f.camera.RelativeExposureForGrey(128));
+  double crf_worst = 0, prf_worst = 0;
+  for (int z = 16; z <= 240; ++z)
+    crf_worst = std::max(crf_worst, std::abs(b->camera_response->log_exposure[z] -
+                                             (std::log(f.camera.RelativeExposureForGrey(z)) - t128)));
+  for (int i = 0; i < 256; ++i)
+    prf_worst = std::max(prf_worst, std::abs(b->projector_response->relative_irradiance[i] -
+                                             f.projector.Irradiance(i) / f.projector.Irradiance(255)));
+  std::printf("crf worst %.4f ln (z 16..240), prf worst %.4f\n", crf_worst, prf_worst);
+  const auto dir = std::filesystem::temp_directory_path() / "calib_full_size";
+  std::filesystem::remove_all(dir);
+  ASSERT_TRUE(b->Save(dir).ok());
+  std::printf("saved to %s\n", dir.c_str());
 }
 
 }  // namespace
