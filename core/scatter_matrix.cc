@@ -57,92 +57,110 @@ Status ScatterMatrixOptions::Validate() const {
   return Status::Ok();
 }
 
-StatusOr<ScatterMatrix> BuildScatterMatrix(const std::vector<ScatterCapture>& captures,
-                                           const GeometricCalibration& geometry, const cv::Mat& black_radiance,
-                                           const ScatterMatrixOptions& options) {
+StatusOr<ScatterMatrixBuilder> ScatterMatrixBuilder::Create(const GeometricCalibration& geometry,
+                                                            const cv::Mat& black_radiance,
+                                                            const ScatterMatrixOptions& options) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
   if (geometry.projector_to_camera.type() != CV_32FC2 ||
       geometry.projector_to_camera.size() != geometry.projector_size) {
     return Status::InvalidArgument("scatter: geometry has no projector_to_camera LUT");
   }
-  const cv::Size cam = geometry.camera_size, proj = geometry.projector_size;
-  if (black_radiance.type() != CV_32FC1 || black_radiance.size() != cam) {
+  if (black_radiance.type() != CV_32FC1 || black_radiance.size() != geometry.camera_size) {
     return Status::InvalidArgument("scatter: black_radiance must be CV_32FC1 of the camera size");
   }
-  const int r = options.patch_radius_px;
-  const int cols = proj.area();
-  // Per column: where its entries start in the pool and how many there are.
-  std::vector<int64_t> start(cols, 0);
-  std::vector<int> count(cols, 0);
-  std::vector<int> pool_rows;
-  std::vector<float> pool_vals;
-  pool_rows.reserve(static_cast<size_t>(cols) * 16);
-  pool_vals.reserve(static_cast<size_t>(cols) * 16);
-  const float inv = static_cast<float>(1.0 / (options.dot_irradiance - options.projector_black_irradiance));
-  for (size_t k = 0; k < captures.size(); ++k) {
-    const ScatterCapture& c = captures[k];
-    if (c.radiance.type() != CV_32FC1 || c.radiance.size() != cam) {
-      return Status::InvalidArgument("scatter: captures[" + std::to_string(k) + "].radiance must be CV_32FC1 of the camera size");
-    }
-    for (int v = c.offset_y; v < proj.height; v += options.grid_spacing_px)
-      for (int u = c.offset_x; u < proj.width; u += options.grid_spacing_px) {
-        const cv::Vec2f p = geometry.projector_to_camera.at<cv::Vec2f>(v, u);
-        if (!std::isfinite(p[0]) || !std::isfinite(p[1])) continue;
-        const int cx = static_cast<int>(std::lround(p[0])), cy = static_cast<int>(std::lround(p[1]));
-        const int x0 = std::max(0, cx - r), x1 = std::min(cam.width - 1, cx + r);
-        const int y0 = std::max(0, cy - r), y1 = std::min(cam.height - 1, cy + r);
-        if (x0 > x1 || y0 > y1) continue;
-        float peak = 0;
-        for (int y = y0; y <= y1; ++y) {
-          const float* row = c.radiance.ptr<float>(y);
-          for (int x = x0; x <= x1; ++x) peak = std::max(peak, row[x]);
-        }
-        if (!(peak > 0)) continue;
-        const float t = static_cast<float>(options.relative_threshold) * peak;
-        const int col = v * proj.width + u;
-        if (count[col] != 0) {
-          return Status::InvalidArgument("scatter: projector pixel (" + std::to_string(u) + ", " +
-                                         std::to_string(v) + ") lit in two captures");
-        }
-        start[col] = static_cast<int64_t>(pool_rows.size());
-        for (int y = y0; y <= y1; ++y) {
-          const float* row = c.radiance.ptr<float>(y);
-          for (int x = x0; x <= x1; ++x) {
-            if (row[x] > t) {
-              pool_rows.push_back(y * cam.width + x);
-              pool_vals.push_back(row[x] * inv);
-            }
+  ScatterMatrixBuilder b;
+  b.geometry_ = &geometry;
+  b.black_radiance_ = black_radiance.clone();
+  b.options_ = options;
+  const int cols = geometry.projector_size.area();
+  b.start_.assign(cols, 0);
+  b.count_.assign(cols, 0);
+  return b;
+}
+
+Status ScatterMatrixBuilder::Add(const ScatterCapture& c) {
+  const cv::Size cam = geometry_->camera_size, proj = geometry_->projector_size;
+  if (c.radiance.type() != CV_32FC1 || c.radiance.size() != cam) {
+    return Status::InvalidArgument("scatter: capture radiance must be CV_32FC1 of the camera size");
+  }
+  const int r = options_.patch_radius_px;
+  const float inv = static_cast<float>(1.0 / (options_.dot_irradiance - options_.projector_black_irradiance));
+  for (int v = c.offset_y; v < proj.height; v += options_.grid_spacing_px)
+    for (int u = c.offset_x; u < proj.width; u += options_.grid_spacing_px) {
+      const cv::Vec2f p = geometry_->projector_to_camera.at<cv::Vec2f>(v, u);
+      if (!std::isfinite(p[0]) || !std::isfinite(p[1])) continue;
+      const int cx = static_cast<int>(std::lround(p[0])), cy = static_cast<int>(std::lround(p[1]));
+      const int x0 = std::max(0, cx - r), x1 = std::min(cam.width - 1, cx + r);
+      const int y0 = std::max(0, cy - r), y1 = std::min(cam.height - 1, cy + r);
+      if (x0 > x1 || y0 > y1) continue;
+      float peak = 0;
+      for (int y = y0; y <= y1; ++y) {
+        const float* row = c.radiance.ptr<float>(y);
+        for (int x = x0; x <= x1; ++x) peak = std::max(peak, row[x]);
+      }
+      if (!(peak > 0)) continue;
+      const float t = static_cast<float>(options_.relative_threshold) * peak;
+      const int col = v * proj.width + u;
+      if (count_[col] != 0) {
+        return Status::InvalidArgument("scatter: projector pixel (" + std::to_string(u) + ", " + std::to_string(v) +
+                                       ") lit in two captures");
+      }
+      start_[col] = static_cast<int64_t>(pool_rows_.size());
+      for (int y = y0; y <= y1; ++y) {
+        const float* row = c.radiance.ptr<float>(y);
+        for (int x = x0; x <= x1; ++x) {
+          if (row[x] > t) {
+            pool_rows_.push_back(y * cam.width + x);
+            pool_vals_.push_back(row[x] * inv);
           }
         }
-        count[col] = static_cast<int>(pool_rows.size() - start[col]);
       }
-  }
-  if (pool_rows.size() >= static_cast<size_t>(INT32_MAX)) {
+      count_[col] = static_cast<int>(pool_rows_.size() - start_[col]);
+    }
+  if (pool_rows_.size() >= static_cast<size_t>(INT32_MAX)) {
     return Status::ResourceExhausted("scatter: more than 2^31 non-zeros");
   }
+  return Status::Ok();
+}
+
+StatusOr<ScatterMatrix> ScatterMatrixBuilder::Finish() {
+  if (!geometry_) return Status::FailedPrecondition("scatter: builder already finished");
+  const cv::Size cam = geometry_->camera_size, proj = geometry_->projector_size;
+  const int cols = proj.area();
   ScatterMatrix s;
   s.camera_size = cam;
   s.projector_size = proj;
-  s.patch_radius_px = r;
-  s.grid_spacing_px = options.grid_spacing_px;
-  s.projector_black_irradiance = options.projector_black_irradiance;
-  s.black_radiance = black_radiance.clone();
+  s.patch_radius_px = options_.patch_radius_px;
+  s.grid_spacing_px = options_.grid_spacing_px;
+  s.projector_black_irradiance = options_.projector_black_irradiance;
+  s.black_radiance = black_radiance_;
   s.a.resize(cam.area(), cols);
-  s.a.resizeNonZeros(static_cast<Eigen::Index>(pool_rows.size()));
+  s.a.resizeNonZeros(static_cast<Eigen::Index>(pool_rows_.size()));
   int* outer = s.a.outerIndexPtr();
   int* inner = s.a.innerIndexPtr();
   float* vals = s.a.valuePtr();
   int64_t pos = 0;
   for (int col = 0; col < cols; ++col) {
     outer[col] = static_cast<int>(pos);
-    if (count[col] > 0) {
-      std::memcpy(inner + pos, pool_rows.data() + start[col], sizeof(int) * count[col]);
-      std::memcpy(vals + pos, pool_vals.data() + start[col], sizeof(float) * count[col]);
-      pos += count[col];
+    if (count_[col] > 0) {
+      std::memcpy(inner + pos, pool_rows_.data() + start_[col], sizeof(int) * count_[col]);
+      std::memcpy(vals + pos, pool_vals_.data() + start_[col], sizeof(float) * count_[col]);
+      pos += count_[col];
     }
   }
   outer[cols] = static_cast<int>(pos);
+  *this = ScatterMatrixBuilder();
   return s;
+}
+
+StatusOr<ScatterMatrix> BuildScatterMatrix(const std::vector<ScatterCapture>& captures,
+                                           const GeometricCalibration& geometry, const cv::Mat& black_radiance,
+                                           const ScatterMatrixOptions& options) {
+  INSPECT_ASSIGN_OR_RETURN(ScatterMatrixBuilder b, ScatterMatrixBuilder::Create(geometry, black_radiance, options));
+  for (size_t k = 0; k < captures.size(); ++k) {
+    INSPECT_RETURN_IF_ERROR(b.Add(captures[k]).WithContext("captures[" + std::to_string(k) + "]: "));
+  }
+  return b.Finish();
 }
 
 StatusOr<ScatterPrediction> PredictAndCompare(const ScatterMatrix& scatter, const ProjectorResponseFunction& prf,

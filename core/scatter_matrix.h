@@ -56,6 +56,30 @@ struct ScatterMatrixOptions {
   Status Validate() const;
 };
 
+// Incremental construction: Add() cuts the patches out of one capture right away, so only the
+// non-zeros are kept between captures (a full-size run would otherwise hold spacing^2 float
+// frames). Not thread-safe.
+class ScatterMatrixBuilder {
+ public:
+  // geometry must outlive the builder.
+  static StatusOr<ScatterMatrixBuilder> Create(const GeometricCalibration& geometry, const cv::Mat& black_radiance,
+                                               const ScatterMatrixOptions& options);
+  // One dot grid capture; INVALID_ARGUMENT if a projector pixel was already added.
+  Status Add(const ScatterCapture& capture);
+  // Assembles the CSC matrix; the builder is empty afterwards.
+  StatusOr<ScatterMatrix> Finish();
+
+ private:
+  ScatterMatrixBuilder() = default;
+  const GeometricCalibration* geometry_ = nullptr;
+  cv::Mat black_radiance_;
+  ScatterMatrixOptions options_;
+  std::vector<int64_t> start_;
+  std::vector<int> count_;
+  std::vector<int> pool_rows_;
+  std::vector<float> pool_vals_;
+};
+
 // Cuts each lit projector pixel's patch around geometry.projector_to_camera and stores it as
 // its column. Projector pixels without a LUT entry get empty columns.
 StatusOr<ScatterMatrix> BuildScatterMatrix(const std::vector<ScatterCapture>& captures,

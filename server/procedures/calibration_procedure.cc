@@ -418,25 +418,25 @@ Status RunScatter(Session& s, Targeting& t, const CalibrationOptions& o, Calibra
                                                      s.rig().camera().exposure_us()));
   INSPECT_ASSIGN_OR_RETURN(cv::Mat black, s.Capture(cv::Mat::zeros(ps, CV_8UC1), dt));
   const cv::Mat black_radiance = crf.Radiance(black, dt);
-  std::vector<ScatterCapture> caps;
-  caps.reserve(sp * sp);
-  for (int oy = 0; oy < sp; ++oy)
-    for (int ox = 0; ox < sp; ++ox) {
-      INSPECT_ASSIGN_OR_RETURN(cv::Mat f, s.Capture(MakeDotGridPattern(ps, sp, ox, oy), dt));
-      caps.push_back({ox, oy, crf.Radiance(f, dt) - black_radiance});
-      s.Item("dot grid " + std::to_string(caps.size()) + "/" + std::to_string(sp * sp));
-    }
   ScatterMatrixOptions so;
   so.grid_spacing_px = sp;
   so.patch_radius_px = radius;
   so.relative_threshold = o.scatter_relative_threshold;
   so.dot_irradiance = prf.relative_irradiance[255];
   so.projector_black_irradiance = prf.relative_irradiance[0];
+  INSPECT_ASSIGN_OR_RETURN(ScatterMatrixBuilder builder, ScatterMatrixBuilder::Create(g, black_radiance, so));
+  double build_s = 0;
+  for (int oy = 0; oy < sp; ++oy)
+    for (int ox = 0; ox < sp; ++ox) {
+      INSPECT_ASSIGN_OR_RETURN(cv::Mat f, s.Capture(MakeDotGridPattern(ps, sp, ox, oy), dt));
+      const auto t0 = Clock::now();
+      INSPECT_RETURN_IF_ERROR(builder.Add({ox, oy, crf.Radiance(f, dt) - black_radiance}));
+      build_s += std::chrono::duration<double>(Clock::now() - t0).count();
+      s.Item("dot grid " + std::to_string(oy * sp + ox + 1) + "/" + std::to_string(sp * sp));
+    }
   const auto t0 = Clock::now();
-  INSPECT_ASSIGN_OR_RETURN(ScatterMatrix sm, BuildScatterMatrix(caps, g, black_radiance, so));
-  rep.figures["build_seconds"] = std::chrono::duration<double>(Clock::now() - t0).count();
-  caps.clear();
-  caps.shrink_to_fit();
+  INSPECT_ASSIGN_OR_RETURN(ScatterMatrix sm, builder.Finish());
+  rep.figures["build_seconds"] = build_s + std::chrono::duration<double>(Clock::now() - t0).count();
 
   // Model error (thesis Fig. 4.21): a random block pattern, captured and predicted.
   std::mt19937 rng(static_cast<uint32_t>(o.scatter_test_seed));
