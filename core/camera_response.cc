@@ -142,8 +142,12 @@ StatusOr<CameraResponseFunction> SolveCameraResponse(const std::vector<std::vect
   trip.emplace_back(row, levels / 2, 1.0);
   rhs.push_back(0.0);
   ++row;
+  // lambda is defined on the 8-bit scale. With L levels, crf'' per level shrinks as (256/L)^2,
+  // the weights grow as L/256 and there are L/256 times more smoothness rows, so the row weight
+  // lambda (L/256)^1.5 keeps the balance of eq. 4.4 independent of the bit depth.
+  const double lambda = options.smoothness_lambda * std::pow(levels / 256.0, 1.5);
   for (int zz = 1; zz < levels - 1; ++zz) {
-    const double w = options.smoothness_lambda * DebevecWeight(zz, levels);
+    const double w = lambda * DebevecWeight(zz, levels);
     trip.emplace_back(row, zz - 1, w);
     trip.emplace_back(row, zz, -2 * w);
     trip.emplace_back(row, zz + 1, w);

@@ -43,6 +43,7 @@ double DebevecWeight(int z, int levels);
 struct CameraResponseOptions {
   // Row weight of the smoothness equations, as in Debevec's gsolve and OpenCV: the penalty is
   // lambda^2 * sum (w(z) crf''(z))^2, so sigma of eq. 4.4 equals lambda^2. Default 10.
+  // Defined for 256 levels; deeper cameras use lambda * (levels / 256)^1.5 (see the solver).
   double smoothness_lambda = 10.0;
   int levels = 256;
   // Number of sample pixels N picked from the images (thesis 3.2.1: 50 suffice for 8 bit).

@@ -587,7 +587,7 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
   for (int i = 0; i < count; ++i) {
     const CalibrationStep step = steps[i];
     const int sp_geo = options.geometry_grid_spacing_px, sp_sc = options.scatter_grid_spacing_px;
-    const int items[] = {options.crf_exposure_count, 255 / options.prf_level_step + 2,
+    const int items[] = {options.crf_exposure_count, (255 + options.prf_level_step - 1) / options.prf_level_step + 1,
                          1 + static_cast<int>(MakeGrayCodePatterns(proj, options.gray_code_finest_stripe_px).size()) +
                              sp_geo * sp_geo,
                          static_cast<int>(options.psf_defocus_um.size()), sp_sc * sp_sc + 1,

@@ -234,6 +234,34 @@ TEST(CalibrationProcedureStepsTest, RejectsMismatchedPreviousBundleAndBadOptions
   EXPECT_NE(bad.status().message().find("geometry_grid_spacing_px"), std::string::npos);
 }
 
+TEST(CalibrationProcedureStepsTest, TwelveBitCameraResponsesMatchSimulator) {
+  SimulatedRigOptions ro = SmallRig();
+  ro.camera_bit_depth = 12;
+  auto rig = CreateSimulatedRig(ro);
+  ASSERT_TRUE(rig.ok());
+  std::atomic<bool> cancel{false};
+  CalibrationOptions o = FastOptions();
+  o.steps = {CalibrationStep::kCameraResponse, CalibrationStep::kProjectorResponse};
+  auto b = RunCalibration(**rig, o, nullptr, nullptr, cancel);
+  ASSERT_TRUE(b.ok()) << b.status().ToString();
+  ASSERT_EQ(b->camera_response->levels, 4096);
+  const ImageFormationOptions f = ImageFormationOptionsFor(ro).value();
+  const double t_mid = std::log(f.camera.RelativeExposureForGrey(2048));
+  double worst = 0;
+  for (int z = 256; z <= 3840; ++z) {
+    worst = std::max(worst, std::abs(b->camera_response->log_exposure[z] -
+                                     (std::log(f.camera.RelativeExposureForGrey(z)) - t_mid)));
+  }
+  std::printf("12-bit crf worst |error| z 256..3840: %.4f ln\n", worst);
+  EXPECT_LT(worst, 0.05);
+  double prf_worst = 0;
+  for (int i = 0; i < 256; ++i) {
+    prf_worst = std::max(prf_worst, std::abs(b->projector_response->relative_irradiance[i] -
+                                             f.projector.Irradiance(i) / f.projector.Irradiance(255)));
+  }
+  EXPECT_LT(prf_worst, 0.02);
+}
+
 // Manual measurement, not part of the suite: the full-size rig (1024x768 camera, 1280x720
 // projector) with default options. Run with
 //   procedures_tests --gtest_also_run_disabled_tests --gtest_filter='*FullSize*'
