@@ -39,4 +39,15 @@ Status WriteDepthPly(const std::filesystem::path& path, const cv::Mat& depth_um,
 // converted to metres as the format wants), md5checksum.hex.
 Status WriteDepthX3p(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
 
+// Scale and offset chosen by WriteDepthPng16 for a map (value 1 = the smallest finite depth,
+// 65535 = the largest); also what its tEXt chunk and sidecar record.
+struct DepthPng16Scaling {
+  double scale_um = 1.0;
+  double offset_um = 0.0;
+};
+DepthPng16Scaling ChooseDepthPng16Scaling(const cv::Mat& depth_um);
+
+// MD5 (RFC 1321) of a byte buffer as 32 lower-case hex digits, as x3p records it.
+std::string Md5Hex(const void* data, size_t size);
+
 }  // namespace inspection

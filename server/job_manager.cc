@@ -247,10 +247,11 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
                                    " is not supported by this server");
   }
   const ScanDefaults defaults = rig_->rig().scan_defaults();
-  const bool default_range = req.z_start_um() == 0.0 && req.z_end_um() == 0.0 && req.z_step_um() == 0.0;
+  // Range unset (both ends zero) = the rig's default range; step zero = the rig's default step.
+  const bool default_range = req.z_start_um() == 0.0 && req.z_end_um() == 0.0;
   const double z0 = default_range ? defaults.z_start_um : req.z_start_um();
   const double z1 = default_range ? defaults.z_end_um : req.z_end_um();
-  const double dz = default_range ? defaults.z_step_um : req.z_step_um();
+  const double dz = req.z_step_um() == 0.0 ? defaults.z_step_um : req.z_step_um();
   if (req.exposure_us() < 0) return Status::InvalidArgument("exposure_us must be >= 0 (0 = rig default)");
   const double exposure = req.exposure_us() > 0 ? req.exposure_us() : defaults.exposure_us;
   INSPECT_ASSIGN_OR_RETURN(ScanPlan plan, MakeScanPlan(z0, z1, dz, exposure, rig_->rig().stage()));
@@ -492,16 +493,18 @@ void JobManager::RigWorker() {
       rig_queue_.pop_front();
       running_rig_ = r;
     }
+    Status status;
     {
       auto rig_lock = rig_->Acquire();
-      if (r->job_.kind() == v1::JOB_KIND_SCAN) {
-        RunScan(r);
-      } else {
-        RunCalibrate(r);
-      }
+      status = r->job_.kind() == v1::JOB_KIND_SCAN ? RunScan(r) : RunCalibrate(r);
     }
-    std::lock_guard<std::mutex> lock(mu_);
-    running_rig_.reset();
+    // The rig is free before the terminal event goes out: a client that sees the job end can
+    // use the rig (reset, calibrate, change specimen) at once.
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      running_rig_.reset();
+    }
+    Finish(r, status);
   }
 }
 
@@ -550,10 +553,9 @@ Status JobManager::PublishArtifacts(const RecordPtr& r, const fs::path& tmp_dir,
   return Status::Ok();
 }
 
-void JobManager::RunScan(const RecordPtr& r) {
+Status JobManager::RunScan(const RecordPtr& r) {
   if (r->cancel_requested) {
-    Finish(r, Status::Cancelled("cancelled before it started"));
-    return;
+    return Status::Cancelled("cancelled before it started");
   }
   const std::string job_id = r->Snapshot().job_id();
   {
@@ -581,7 +583,7 @@ void JobManager::RunScan(const RecordPtr& r) {
     RemoveAll(tmp_stack);
     RemoveAll(tmp_artifacts);
     rig_->ReportJobStatus(s);
-    Finish(r, s);
+    return s;
   };
 
   auto on_frame = [&](const ScanFrameEvent& f) {
@@ -603,10 +605,8 @@ void JobManager::RunScan(const RecordPtr& r) {
   };
   auto outcome = inspection::RunScan(rig_->rig(), plan, tmp_stack, on_frame, r->cancel_requested);
   if (!outcome.ok()) {
-    fail(outcome.status());
-    return;
+    return fail(outcome.status());
   }
-  rig_->ReportJobStatus(Status::Ok());
   Emit(r, [&](v1::JobEvent& e) {
     e.set_phase(v1::JOB_PHASE_STORING);
     e.set_progress(0.92);
@@ -619,28 +619,24 @@ void JobManager::RunScan(const RecordPtr& r) {
   meta.description = "depth (um) of scan " + job_id;
   auto files = WriteDepthArtifacts(outcome->depth, tmp_artifacts, meta, ToExportKinds(r->extra_exports_));
   if (!files.ok()) {
-    fail(files.status());
-    return;
+    return fail(files.status());
   }
   std::vector<std::pair<v1::ArtifactKind, fs::path>> published;
   for (const auto& f : *files) published.push_back({ToArtifactKind(f.kind), f.path});
   if (!outcome->ground_truth_um.empty()) {
     fs::copy_file(tmp_stack / kGroundTruthDepthName, tmp_artifacts / kGroundTruthDepthName, ec);
     if (ec) {
-      fail(Status::Internal("cannot copy ground truth: " + ec.message()));
-      return;
+      return fail(Status::Internal("cannot copy ground truth: " + ec.message()));
     }
     published.push_back({v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF, tmp_artifacts / kGroundTruthDepthName});
   }
   Status zs = ZipFolder(tmp_stack, tmp_artifacts / "stack.zip");
   if (!zs.ok()) {
-    fail(zs);
-    return;
+    return fail(zs);
   }
   published.push_back({v1::ARTIFACT_KIND_STACK_ZIP, tmp_artifacts / "stack.zip"});
   if (r->cancel_requested) {  // last point at which a cancel still wins
-    fail(Status::Cancelled("scan cancelled while storing"));
-    return;
+    return fail(Status::Cancelled("scan cancelled while storing"));
   }
 
   v1::JobResult result;
@@ -651,20 +647,19 @@ void JobManager::RunScan(const RecordPtr& r) {
   result.mutable_depth()->set_engine_seconds(outcome->engine_finish_seconds);
   fs::rename(tmp_stack, ScanDir(job_id), ec);
   if (ec) {
-    fail(Status::Internal("cannot store the scan: " + ec.message()));
-    return;
+    return fail(Status::Internal("cannot store the scan: " + ec.message()));
   }
   Status ps = PublishArtifacts(r, tmp_artifacts, published, &result);
   if (!ps.ok()) {
     RemoveAll(ScanDir(job_id));
-    fail(ps);
-    return;
+    return fail(ps);
   }
   {
     std::lock_guard<std::mutex> lock(r->mu_);
     *r->job_.mutable_result() = result;
   }
-  Finish(r, Status::Ok());
+  rig_->ReportJobStatus(Status::Ok());
+  return Status::Ok();
 }
 
 void JobManager::RunReconstruct(const RecordPtr& r) {
@@ -739,10 +734,9 @@ void JobManager::RunReconstruct(const RecordPtr& r) {
   Finish(r, result.ok() ? Status::Ok() : result.status());
 }
 
-void JobManager::RunCalibrate(const RecordPtr& r) {
+Status JobManager::RunCalibrate(const RecordPtr& r) {
   if (r->cancel_requested) {
-    Finish(r, Status::Cancelled("cancelled before it started"));
-    return;
+    return Status::Cancelled("cancelled before it started");
   }
   {
     std::lock_guard<std::mutex> lock(r->mu_);
@@ -772,7 +766,7 @@ void JobManager::RunCalibrate(const RecordPtr& r) {
     r->job_.mutable_result()->set_calibration_id(cal->calibration_id());
     *r->job_.mutable_result()->mutable_calibration() = cal->summary();
   }
-  Finish(r, cal.ok() ? Status::Ok() : cal.status());
+  return cal.ok() ? Status::Ok() : cal.status();
 }
 
 }  // namespace inspection

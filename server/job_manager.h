@@ -115,8 +115,9 @@ class JobManager {
   void Finish(const RecordPtr& r, const Status& status);
   void RigWorker();
   void ReconstructWorker();
-  void RunScan(const RecordPtr& r);
-  void RunCalibrate(const RecordPtr& r);
+  // Rig jobs return their final status; the rig worker finishes the job after releasing the rig.
+  Status RunScan(const RecordPtr& r);
+  Status RunCalibrate(const RecordPtr& r);
   void RunReconstruct(const RecordPtr& r);
   // Moves a finished result into the store: artifacts get ids, sizes and sha256.
   Status PublishArtifacts(const RecordPtr& r, const std::filesystem::path& tmp_dir,

@@ -2,6 +2,7 @@
 #include "core/depth_export.h"
 
 #include <tiffio.h>
+#include <zip.h>
 
 #include <cmath>
 #include <cstring>
@@ -9,6 +10,10 @@
 #include <fstream>
 #include <limits>
 #include <random>
+#include <map>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
 
 #include <unistd.h>
 
@@ -228,6 +233,199 @@ TEST_F(DepthExportTest, PreviewOfAllNanOrSmallMapsStillRenders) {
   cv::Mat flat(8, 8, CV_32F, cv::Scalar(5.f));
   ASSERT_TRUE(WriteDepthPreviewPng(p, flat).ok());
   EXPECT_EQ(cv::imread(p.string(), cv::IMREAD_UNCHANGED).at<cv::Vec3b>(3, 3), Viridis(0));
+}
+
+TEST(Md5Test, Rfc1321TestSuite) {
+  auto md5 = [](const std::string& s) { return Md5Hex(s.data(), s.size()); };
+  EXPECT_EQ(md5(""), "d41d8cd98f00b204e9800998ecf8427e");
+  EXPECT_EQ(md5("a"), "0cc175b9c0f1b6a831c399e269772661");
+  EXPECT_EQ(md5("abc"), "900150983cd24fb0d6963f7d28e17f72");
+  EXPECT_EQ(md5("message digest"), "f96b697d7cb7938d525a2f31aaf161d0");
+  EXPECT_EQ(md5("abcdefghijklmnopqrstuvwxyz"), "c3fcd3d76192e4007dfb496cca67e13b");
+  EXPECT_EQ(md5("12345678901234567890123456789012345678901234567890123456789012345678901234567890"),
+            "57edf4a22be3c955ac49da2e2107b67a");
+}
+
+std::string ReadAll(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+TEST_F(DepthExportTest, Png16RoundTripsWithinHalfAStepAndRecordsScale) {
+  const cv::Mat d = SampleDepth();
+  DepthExportMeta meta;
+  meta.pixel_size_um = 0.5;
+  const fs::path p = dir_ / "depth16.png";
+  ASSERT_TRUE(WriteDepthPng16(p, d, meta).ok());
+  const cv::Mat q = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(q.type(), CV_16UC1);
+  const DepthPng16Scaling sc = ChooseDepthPng16Scaling(d);
+  // Sidecar and tEXt chunk carry the same scale and offset.
+  const auto side = nlohmann::json::parse(ReadAll(fs::path(p.string() + ".json")));
+  EXPECT_DOUBLE_EQ(side["scale_um"].get<double>(), sc.scale_um);
+  EXPECT_DOUBLE_EQ(side["offset_um"].get<double>(), sc.offset_um);
+  EXPECT_EQ(side["nan_value"].get<int>(), 0);
+  const std::string bytes = ReadAll(p);
+  const size_t at = bytes.find("tEXtinspection-depth");
+  ASSERT_NE(at, std::string::npos);
+  const size_t len = (uint8_t(bytes[at - 4]) << 24) | (uint8_t(bytes[at - 3]) << 16) | (uint8_t(bytes[at - 2]) << 8) |
+                     uint8_t(bytes[at - 1]);
+  const auto text = nlohmann::json::parse(bytes.substr(at + 4 + 17, len - 17));
+  EXPECT_DOUBLE_EQ(text["scale_um"].get<double>(), sc.scale_um);
+  double lo, hi;
+  cv::minMaxLoc(d, &lo, &hi, nullptr, nullptr, d == d);
+  EXPECT_NEAR(sc.scale_um, (hi - lo) / 65534.0, 1e-12);
+  for (int y = 0; y < d.rows; ++y)
+    for (int x = 0; x < d.cols; ++x) {
+      const float v = d.at<float>(y, x);
+      const uint16_t u = q.at<uint16_t>(y, x);
+      if (std::isnan(v)) {
+        EXPECT_EQ(u, 0);
+      } else {
+        ASSERT_GE(u, 1);
+        EXPECT_NEAR(u * sc.scale_um + sc.offset_um, v, 0.5 * sc.scale_um + 1e-9);
+      }
+    }
+  EXPECT_EQ(q.at<uint16_t>(0, 0), 1);  // the minimum
+}
+
+TEST_F(DepthExportTest, PlySkipsNanAndScalesXY) {
+  cv::Mat d(2, 3, CV_32F);
+  d.at<float>(0, 0) = 1.5f;
+  d.at<float>(0, 1) = kNaN;
+  d.at<float>(0, 2) = 2.5f;
+  d.at<float>(1, 0) = -3.f;
+  d.at<float>(1, 1) = 4.f;
+  d.at<float>(1, 2) = kNaN;
+  DepthExportMeta meta;
+  meta.pixel_size_um = 2.0;
+  const fs::path p = dir_ / "cloud.ply";
+  ASSERT_TRUE(WriteDepthPly(p, d, meta).ok());
+  const std::string bytes = ReadAll(p);
+  const std::string end = "end_header\n";
+  const size_t body = bytes.find(end);
+  ASSERT_NE(body, std::string::npos);
+  const std::string header = bytes.substr(0, body);
+  EXPECT_EQ(header.rfind("ply\nformat binary_little_endian 1.0\n", 0), 0u);
+  EXPECT_NE(header.find("element vertex 4\n"), std::string::npos);
+  ASSERT_EQ(bytes.size() - body - end.size(), 4 * 3 * sizeof(float));
+  std::vector<float> v(12);
+  std::memcpy(v.data(), bytes.data() + body + end.size(), 12 * sizeof(float));
+  const std::vector<float> expected{0, 0, 1.5f, 4, 0, 2.5f, 0, 2, -3, 2, 2, 4};
+  EXPECT_EQ(v, expected);
+  EXPECT_EQ(WriteDepthPly(dir_ / "no.ply", d, {}).code(), StatusCode::kInvalidArgument);  // no pixel size
+  EXPECT_FALSE(fs::exists(dir_ / "no.ply"));
+}
+
+struct ZipEntries {
+  std::vector<std::string> names;
+  std::map<std::string, std::string> data;
+};
+
+ZipEntries ReadZip(const fs::path& p) {
+  ZipEntries z;
+  int err = 0;
+  zip_t* za = zip_open(p.c_str(), ZIP_RDONLY, &err);
+  EXPECT_NE(za, nullptr) << "libzip error " << err;
+  if (!za) return z;
+  const zip_int64_t n = zip_get_num_entries(za, 0);
+  for (zip_int64_t i = 0; i < n; ++i) {
+    zip_stat_t st;
+    zip_stat_index(za, i, 0, &st);
+    z.names.push_back(st.name);
+    std::string buf(st.size, '\0');
+    zip_file_t* f = zip_fopen_index(za, i, 0);
+    if (f) {
+      if (st.size) EXPECT_EQ(zip_fread(f, buf.data(), st.size), zip_int64_t(st.size));
+      zip_fclose(f);
+    }
+    z.data[st.name] = buf;
+  }
+  zip_close(za);
+  return z;
+}
+
+std::string Between(const std::string& s, const std::string& open, const std::string& close) {
+  const size_t a = s.find(open);
+  if (a == std::string::npos) return "";
+  const size_t b = s.find(close, a + open.size());
+  return s.substr(a + open.size(), b - a - open.size());
+}
+
+TEST_F(DepthExportTest, X3pHasIsoLayoutAndValidChecksums) {
+  const cv::Mat d = SampleDepth();  // 13 x 7, two NaN
+  DepthExportMeta meta;
+  meta.pixel_size_um = 0.74;
+  meta.description = "tilted <plane> & bump";
+  const fs::path p = dir_ / "surface.x3p";
+  ASSERT_TRUE(WriteDepthX3p(p, d, meta).ok());
+  EXPECT_FALSE(fs::exists(p.string() + ".tmp"));
+  const ZipEntries z = ReadZip(p);
+  ASSERT_TRUE(z.data.count("main.xml"));
+  ASSERT_TRUE(z.data.count("bindata/data.bin"));
+  ASSERT_TRUE(z.data.count("md5checksum.hex"));
+  EXPECT_EQ(z.names.front(), "bindata/");
+  const std::string& xml = z.data.at("main.xml");
+  const std::string& bin = z.data.at("bindata/data.bin");
+  // md5checksum.hex holds the md5 of main.xml (md5sum format); the xml the md5 of the data.
+  EXPECT_EQ(z.data.at("md5checksum.hex"), Md5Hex(xml.data(), xml.size()) + " *main.xml\n");
+  EXPECT_EQ(Between(xml, "<MD5ChecksumPointData>", "</MD5ChecksumPointData>"), Md5Hex(bin.data(), bin.size()));
+  EXPECT_EQ(Between(xml, "<PointDataLink>", "</PointDataLink>"), "bindata/data.bin");
+  EXPECT_EQ(Between(xml, "<SizeX>", "</SizeX>"), "13");
+  EXPECT_EQ(Between(xml, "<SizeY>", "</SizeY>"), "7");
+  EXPECT_EQ(Between(xml, "<SizeZ>", "</SizeZ>"), "1");
+  EXPECT_EQ(Between(xml, "<FeatureType>", "</FeatureType>"), "SUR");
+  EXPECT_NEAR(std::stod(Between(Between(xml, "<CX>", "</CX>"), "<Increment>", "</Increment>")), 0.74e-6, 1e-18);
+  EXPECT_EQ(Between(Between(xml, "<CZ>", "</CZ>"), "<AxisType>", "</AxisType>"), "A");
+  EXPECT_EQ(Between(xml, "<Comment>", "</Comment>"), "tilted &lt;plane&gt; &amp; bump");
+  EXPECT_NE(xml.find("xmlns:p=\"http://www.opengps.eu/2008/ISO5436_2\""), std::string::npos);
+  // float64 metres, x fastest, NaN kept.
+  ASSERT_EQ(bin.size(), size_t(13 * 7 * 8));
+  std::vector<double> v(13 * 7);
+  std::memcpy(v.data(), bin.data(), bin.size());
+  for (int y = 0; y < 7; ++y)
+    for (int x = 0; x < 13; ++x) {
+      const float um = d.at<float>(y, x);
+      const double m = v[size_t(y) * 13 + x];
+      if (std::isnan(um)) EXPECT_TRUE(std::isnan(m));
+      else EXPECT_DOUBLE_EQ(m, double(um) * 1e-6);
+    }
+}
+
+TEST_F(DepthExportTest, X3pOpensInGwyddion) {
+  // Gwyddion's thumbnailer loads the file with its x3p reader and renders the height field. A
+  // ramp along x must come out as a brightness ramp along x.
+  if (std::system("command -v gwyddion-thumbnailer > /dev/null 2>&1") != 0) {
+    GTEST_SKIP() << "gwyddion-thumbnailer not installed (Debian package gwyddion)";
+  }
+  cv::Mat d(64, 96, CV_32F);
+  for (int y = 0; y < d.rows; ++y)
+    for (int x = 0; x < d.cols; ++x) d.at<float>(y, x) = 10.f + 0.5f * x;
+  DepthExportMeta meta;
+  meta.pixel_size_um = 1.0;
+  const fs::path p = dir_ / "ramp.x3p", png = dir_ / "ramp.png";
+  ASSERT_TRUE(WriteDepthX3p(p, d, meta).ok());
+  const std::string cmd = "gwyddion-thumbnailer gnome2 96 '" + p.string() + "' '" + png.string() + "' > /dev/null 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  const cv::Mat thumb = cv::imread(png.string(), cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(thumb.empty());
+  EXPECT_EQ(thumb.cols, 96);
+  EXPECT_EQ(thumb.rows, 64);
+  const int r = thumb.rows / 2;
+  EXPECT_LT(thumb.at<uint8_t>(r, 2) + 100, thumb.at<uint8_t>(r, thumb.cols - 3));  // dark left, bright right
+  for (int x = 1; x < thumb.cols; ++x) EXPECT_GE(thumb.at<uint8_t>(r, x) + 2, thumb.at<uint8_t>(r, x - 1));
+}
+
+TEST_F(DepthExportTest, X3pRejectsBadInputAndLeavesNothing) {
+  const fs::path p = dir_ / "bad.x3p";
+  EXPECT_EQ(WriteDepthX3p(p, SampleDepth(), {}).code(), StatusCode::kInvalidArgument);  // pixel size 0
+  EXPECT_EQ(WriteDepthX3p(p, cv::Mat(3, 3, CV_64F), {1.0, ""}).code(), StatusCode::kInvalidArgument);
+  EXPECT_FALSE(WriteDepthX3p(dir_ / "nodir" / "a.x3p", SampleDepth(), {1.0, ""}).ok());
+  EXPECT_FALSE(fs::exists(p));
+  EXPECT_FALSE(fs::exists(p.string() + ".tmp"));
+  EXPECT_FALSE(fs::exists(dir_ / "nodir"));
 }
 
 }  // namespace

@@ -30,10 +30,11 @@ struct RigControl {
     released = true;
     cv.notify_all();
   }
-  // Blocks until a capture is being held.
-  void WaitUntilHolding() {
+  // Blocks until a capture is being held; false if none is within the deadline (a test bug,
+  // not a timing assumption: the deadline only keeps a broken test from hanging).
+  [[nodiscard]] bool WaitUntilHolding() {
     std::unique_lock<std::mutex> l(mu);
-    cv.wait(l, [&] { return holding; });
+    return cv.wait_for(l, std::chrono::seconds(60), [&] { return holding; });
   }
 };
 
