@@ -428,7 +428,12 @@ TEST_F(CliTest, CancelledJobExits5) {
   EXPECT_EQ(r.exit_code, 5);
   EXPECT_EQ(r.err.rfind("inspectctl: CANCELLED: ", 0), 0u) << r.err;
   EXPECT_FALSE(fs::exists(work_ / "never" / "depth.tiff"));
-  EXPECT_EQ(Run({"watch", job_id}).exit_code, 5);
+  r = Run({"--json", "watch", job_id});
+  EXPECT_EQ(r.exit_code, 5);
+  const json result = JsonLines(r.out).back();
+  EXPECT_EQ(result["job"]["state"], "JOB_STATE_CANCELLED");
+  EXPECT_EQ(result["error"]["code"], "CANCELLED");
+  EXPECT_EQ(result["exit_code"], 5);
 }
 
 TEST_F(CliTest, StatusJobsAndSpecimenAsJson) {
