@@ -395,7 +395,7 @@ TEST_F(CliTest, CtrlCStopsFollowingButTheJobRunsOnAndWatchFetchesIt) {
   std::string first;
   ASSERT_TRUE(p->ReadLine(&first));  // an event line: the CLI knows the job id now
   const std::string job_id = first.substr(0, first.find(' '));
-  control_->WaitUntilHolding();
+  ASSERT_TRUE(control_->WaitUntilHolding());
   p->Signal(SIGINT);
   CliResult r = p->Finish();
   EXPECT_EQ(r.exit_code, 130);
@@ -418,7 +418,7 @@ TEST_F(CliTest, CancelledJobExits5) {
   control_->hold_at_frame = 2;
   StartServer();
   auto scan = Start({"scan", "--out", (work_ / "never").string()});
-  control_->WaitUntilHolding();
+  ASSERT_TRUE(control_->WaitUntilHolding());
   const std::string job_id = NewestJobId();
   CliResult c = Run({"--json", "cancel", job_id});
   EXPECT_EQ(c.exit_code, 0) << c.err;
