@@ -87,7 +87,7 @@ std::string TimeText(const google::protobuf::Timestamp& t) {
   return google::protobuf::util::TimeUtil::ToString(whole);
 }
 
-// Enum names without their prefix, lowercase: JOB_STATE_SUCCEEDED -> "succeeded".
+// Enum names without their prefix: JOB_STATE_SUCCEEDED -> "SUCCEEDED" (Lower() for lists).
 std::string Short(const std::string& enum_name, const std::string& prefix) {
   std::string s = enum_name.rfind(prefix, 0) == 0 ? enum_name.substr(prefix.size()) : enum_name;
   return s;
