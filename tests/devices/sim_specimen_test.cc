@@ -317,6 +317,7 @@ TEST(SimulatedRigOptionsTest, ValidateNamesTheField) {
            {[](SimulatedRigOptions& o) { o.projector_size = {0, 720}; }, "projector_size"},
            {[](SimulatedRigOptions& o) { o.pixel_size_um = 0; }, "pixel_size_um"},
            {[](SimulatedRigOptions& o) { o.stage_repeatability_um = -1; }, "stage_repeatability_um"},
+           {[](SimulatedRigOptions& o) { o.numerical_aperture = 1.2; }, "numerical_aperture"},
            {[](SimulatedRigOptions& o) { o.read_noise_dn = 100; }, "read_noise_dn"},
            {[](SimulatedRigOptions& o) { o.specimen = ""; }, "specimen"},
        }) {
