@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <thread>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
@@ -220,6 +221,26 @@ TEST(SimulatedRigBehaviourTest, RendererAloneReproducesTheRigsFrames) {
     ASSERT_TRUE(from_rig.ok() && alone.ok());
     EXPECT_EQ(cv::countNonZero(*from_rig != *alone), 0) << "frame " << n;
   }
+}
+
+TEST(SimulatedRigBehaviourTest, SpecimenSwitchWhileCapturingFromAnotherThread) {
+  SimulatedRigOptions o;
+  o.camera_size = {64, 48};
+  auto rig = CreateSimulatedRig(o);
+  ASSERT_TRUE(rig.ok());
+  int captured = 0;
+  std::thread worker([&] {
+    for (int i = 0; i < 20; ++i) {
+      auto frame = (*rig)->camera().Capture();
+      if (frame.ok() && frame->size() == cv::Size(64, 48)) ++captured;
+    }
+  });
+  int switched = 0;
+  for (const std::string name : {"plane", "cutter", "lens", "skew10"}) switched += (*rig)->simulation()->SetSpecimen(name).ok();
+  worker.join();
+  EXPECT_EQ(captured, 20);
+  EXPECT_EQ(switched, 4);
+  EXPECT_EQ((*rig)->simulation()->specimen(), "skew10");
 }
 
 TEST(SimulatedRigBehaviourTest, StageRepeatabilityAndTravel) {
