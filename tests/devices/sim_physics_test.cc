@@ -103,6 +103,19 @@ TEST(SimulatedPhysicsTest, InFocusFrameIsSharpestAndBlurGrowsWithDefocus) {
   EXPECT_LT(GradientEnergy(CaptureAt(*rig, h + 10.0)), 0.2 * GradientEnergy(CaptureAt(*rig, h)));
 }
 
+TEST(SimulatedPhysicsTest, HigherApertureHasShallowerDepthOfField) {
+  auto relative_sharpness = [](double na) {
+    SimulatedRigOptions o;
+    o.specimen = "plane";
+    o.camera_size = {128, 96};
+    o.numerical_aperture = na;
+    auto rig = CreateSimulatedRig(o);
+    EXPECT_TRUE(rig.ok());
+    return GradientEnergy(CaptureAt(**rig, 205.0)) / GradientEnergy(CaptureAt(**rig, 200.0));
+  };
+  EXPECT_LT(relative_sharpness(0.6), 0.5 * relative_sharpness(0.3));
+}
+
 TEST(SimulatedPhysicsTest, ProjectedCheckerboardIsSharpOnlyWhereInFocus) {
   // The lens has no texture of its own; its height varies across x (apex at the centre).
   auto rig = MakeRig("lens", {512, 96}, /*noise=*/false);
