@@ -31,10 +31,19 @@ struct DefocusModel {
   double SigmaPx(double defocus_um) const;
   // 0 = Gaussian, 1 = pillbox.
   double PillboxWeight(double sigma_px) const;
-  // The PSF at this sigma as a normalised 2D kernel (CV_32FC1, odd size): Gaussian and
-  // anti-aliased pillbox of equal sigma mixed by PillboxWeight(shape_sigma_px).
-  cv::Mat Kernel(double sigma_px, double shape_sigma_px) const;
+  // The PSF at this sigma as a normalised 2D kernel (CV_32FC1, odd size): Gaussian (cut at
+  // truncation_sigmas) and anti-aliased pillbox of equal sigma mixed by
+  // PillboxWeight(shape_sigma_px).
+  cv::Mat Kernel(double sigma_px, double shape_sigma_px, double truncation_sigmas = 3.0) const;
   cv::Mat Kernel(double sigma_px) const { return Kernel(sigma_px, sigma_px); }
+};
+
+// Which two ladder rungs each pixel mixes, and how: computed once per sigma map and shared by
+// both defocus passes of a frame.
+struct BlurPlan {
+  int first_rung = 0, last_rung = 0;  // rungs used by this map
+  cv::Mat rung;    // CV_8UC1: lower rung, relative to first_rung
+  cv::Mat weight;  // CV_32FC1: weight of the upper rung (0..1)
 };
 
 // Not thread-safe (keeps scratch buffers between calls); one per renderer.
@@ -42,15 +51,19 @@ class SpatiallyVaryingBlur {
  public:
   explicit SpatiallyVaryingBlur(const DefocusModel& model);
 
-  // dst(p) = (src * PSF(sigma_px(p)))(p), sigma_px CV_32FC1 of src's size, values clamped to
-  // the ladder [in_focus_sigma_px, max_sigma_px()]. src CV_32FC1. Border: reflected.
-  void Apply(const cv::Mat& src, const cv::Mat& sigma_px, cv::Mat* dst);
+  // Per pixel PSF sigma (camera px, CV_32FC1), clamped to [in_focus_sigma_px, max_sigma_px()].
+  // Mixing two rungs with weights keeps the pixel's PSF variance exact.
+  BlurPlan Plan(const cv::Mat& sigma_px) const;
+  // dst(p) = (src * PSF(sigma(p)))(p) for the plan's sigma map. src CV_32FC1 of the plan's size.
+  // Border: reflected.
+  void Apply(const cv::Mat& src, const BlurPlan& plan, cv::Mat* dst);
+  void Apply(const cv::Mat& src, const cv::Mat& sigma_px, cv::Mat* dst) { Apply(src, Plan(sigma_px), dst); }
 
   const std::vector<double>& ladder_sigma_px() const { return ladder_; }
   double max_sigma_px() const { return ladder_.back(); }
 
  private:
-  // Blurs the padded source at ladder rung i into layers_[i] (full padded size).
+  // Blurs the padded source at ladder rung i into layers_[i] (reduced by layer_factor_[i]).
   void ComputeLayer(int i);
 
   DefocusModel model_;
@@ -58,7 +71,8 @@ class SpatiallyVaryingBlur {
   std::vector<int> factor_;     // reduction factor (1, 2, 4, ...) of each rung
   cv::Mat padded_;              // source with a reflected border, size a multiple of kMaxFactor
   std::vector<cv::Mat> reduced_;  // padded_ reduced by 2^k (index k)
-  std::vector<cv::Mat> layers_;
+  std::vector<cv::Mat> layers_;     // rung images, reduced by layer_factor_
+  std::vector<int> layer_factor_;
   int border_ = 0;
 };
 

@@ -30,6 +30,21 @@ ImageFormation::ImageFormation(const ImageFormationOptions& options)
       prf_table_(options.projector.Table()),
       blur_(options.defocus) {
   geometry_.BuildSamplingMaps(&map_x_, &map_y_);
+  // Only the part of the projector the camera sees goes through the prf each frame.
+  double x0, x1, y0, y1;
+  cv::minMaxLoc(map_x_, &x0, &x1);
+  cv::minMaxLoc(map_y_, &y0, &y1);
+  const cv::Rect full(cv::Point(0, 0), options_.projector_size);
+  projector_roi_ = cv::Rect(cv::Point(static_cast<int>(std::floor(x0)) - 1, static_cast<int>(std::floor(y0)) - 1),
+                            cv::Point(static_cast<int>(std::ceil(x1)) + 2, static_cast<int>(std::ceil(y1)) + 2)) &
+                   full;
+  if (projector_roi_.empty()) projector_roi_ = full;
+  map_x_ -= projector_roi_.x;
+  map_y_ -= projector_roi_.y;
+  // Fixed-point maps (1/32 px): remap runs about twice as fast.
+  cv::convertMaps(map_x_, map_y_, fixed_map_xy_, fixed_map_frac_, CV_16SC2);
+  map_x_.release();
+  map_y_.release();
 }
 
 StatusOr<std::unique_ptr<ImageFormation>> ImageFormation::Create(const ImageFormationOptions& options,
@@ -52,20 +67,34 @@ Status ImageFormation::SetSpecimen(Specimen specimen) {
 }
 
 cv::Mat ImageFormation::ProjectorIrradianceOnCamera(const cv::Mat& pattern) const {
-  cv::Mat irradiance(pattern.size(), CV_32FC1);
-  for (int r = 0; r < pattern.rows; ++r) {
-    const uint8_t* p = pattern.ptr<uint8_t>(r);
-    float* e = irradiance.ptr<float>(r);
-    for (int c = 0; c < pattern.cols; ++c) e[c] = prf_table_[p[c]];
-  }
   cv::Mat on_camera;
-  // Outside the projector's image there is no light.
-  cv::remap(irradiance, on_camera, map_x_, map_y_, cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0));
+  ProjectorIrradianceInto(pattern, &on_camera);
   return on_camera;
 }
 
+void ImageFormation::ProjectorIrradianceInto(const cv::Mat& pattern, cv::Mat* on_camera) const {
+  CV_Assert(pattern.type() == CV_8UC1 && pattern.size() == options_.projector_size);
+  const cv::Mat seen = pattern(projector_roi_);
+  cv::Mat irradiance(seen.size(), CV_32FC1);  // eq. 5.1
+  for (int r = 0; r < seen.rows; ++r) {
+    const uint8_t* p = seen.ptr<uint8_t>(r);
+    float* e = irradiance.ptr<float>(r);
+    for (int c = 0; c < seen.cols; ++c) e[c] = prf_table_[p[c]];
+  }
+  // Outside the projector's image there is no light.
+  cv::remap(irradiance, *on_camera, fixed_map_xy_, fixed_map_frac_, cv::INTER_LINEAR, cv::BORDER_CONSTANT,
+            cv::Scalar(0));
+}
+
 cv::Mat ImageFormation::DefocusSigmaPx(double z_um) const {
-  cv::Mat sigma(options_.camera_size, CV_32FC1);
+  cv::Mat sigma;
+  DefocusSigmaInto(z_um, &sigma);
+  return sigma;
+}
+
+void ImageFormation::DefocusSigmaInto(double z_um, cv::Mat* sigma_out) const {
+  sigma_out->create(options_.camera_size, CV_32FC1);
+  cv::Mat& sigma = *sigma_out;
   const DefocusModel& d = options_.defocus;
   const float s0sq = static_cast<float>(d.in_focus_sigma_px * d.in_focus_sigma_px);
   const float k = static_cast<float>(0.5 * d.blur_radius_px_per_um);
@@ -80,24 +109,27 @@ cv::Mat ImageFormation::DefocusSigmaPx(double z_um) const {
       }
     }
   });
-  return sigma;
 }
 
 cv::Mat ImageFormation::CameraIrradiance(const cv::Mat& pattern, double z_um) {
-  scratch_sigma_ = DefocusSigmaPx(z_um);
-  scratch_ep_ = ProjectorIrradianceOnCamera(pattern);
+  return CameraIrradianceScratch(pattern, z_um).clone();
+}
+
+const cv::Mat& ImageFormation::CameraIrradianceScratch(const cv::Mat& pattern, double z_um) {
+  DefocusSigmaInto(z_um, &scratch_sigma_);
+  ProjectorIrradianceInto(pattern, &scratch_ep_);
   // Defocus of the projected pattern on the surface. A uniform irradiance stays uniform.
   double lo = 0, hi = 0;
   cv::minMaxLoc(scratch_ep_, &lo, &hi);
   const cv::Mat* ep = &scratch_ep_;
-  if (hi - lo > 1e-7 * std::max(hi, 1e-12)) {
-    blur_.Apply(scratch_ep_, scratch_sigma_, &scratch_ep_blurred_);
+  const BlurPlan plan = blur_.Plan(scratch_sigma_);
+  if (hi - lo > 1e-5 * std::max(hi, 1e-12)) {  // float rounding of the mapping: ~1e-7
+    blur_.Apply(scratch_ep_, plan, &scratch_ep_blurred_);
     ep = &scratch_ep_blurred_;
   }
   cv::multiply(*ep, surface_, scratch_es_);                 // eq. 5.2
-  cv::Mat ec;
-  blur_.Apply(scratch_es_, scratch_sigma_, &ec);            // defocus on the way back
-  return ec;
+  blur_.Apply(scratch_es_, plan, &scratch_ec_);             // defocus on the way back
+  return scratch_ec_;
 }
 
 StatusOr<cv::Mat> ImageFormation::Render(const cv::Mat& pattern, double z_um, double exposure_us, double gain_db,
@@ -110,7 +142,7 @@ StatusOr<cv::Mat> ImageFormation::Render(const cv::Mat& pattern, double z_um, do
   if (!std::isfinite(z_um)) return Status::InvalidArgument("z_um must be finite");
   if (!(exposure_us > 0.0 && exposure_us <= 1e8)) return Status::InvalidArgument("exposure_us must be in (0, 1e8]");
   if (!(gain_db >= 0.0 && gain_db <= 48.0)) return Status::InvalidArgument("gain_db must be in [0, 48]");
-  const cv::Mat ec = CameraIrradiance(pattern, z_um);
+  const cv::Mat& ec = CameraIrradianceScratch(pattern, z_um);
   return ExposeAndDigitise(ec, exposure_us, gain_db, options_.camera, noise_seed);
 }
 

@@ -63,11 +63,16 @@ class ImageFormation {
 
  private:
   ImageFormation(const ImageFormationOptions& options);
+  void ProjectorIrradianceInto(const cv::Mat& pattern, cv::Mat* on_camera) const;
+  void DefocusSigmaInto(double z_um, cv::Mat* sigma) const;
+  const cv::Mat& CameraIrradianceScratch(const cv::Mat& pattern, double z_um);
 
   ImageFormationOptions options_;
   ProjectorCameraGeometry geometry_;
   std::array<float, 256> prf_table_;
-  cv::Mat map_x_, map_y_;
+  cv::Rect projector_roi_;  // projector pixels the camera sees
+  cv::Mat map_x_, map_y_;   // camera -> projector_roi_ coordinates (released once converted)
+  cv::Mat fixed_map_xy_, fixed_map_frac_;  // the same as fixed-point remap maps
   Specimen specimen_;
   cv::Mat surface_;  // reflectance * texture
   SpatiallyVaryingBlur blur_;
