@@ -97,6 +97,10 @@ constexpr int kMaxJ = 4;
 // halo overhead (window - 1 extra rows and columns) below 10 % for the 7 x 7 window.
 constexpr int kTileW = 256;
 constexpr int kTileH = 64;
+// Batch path: 256 x 32 tiles, frames in chunks of 8 whose focus rows are kept (256 x 32 x 8 x 4 B
+// = 256 KB) so that each state row is updated for 8 frames while it sits in L1.
+constexpr int kBatchTileH = 32;
+constexpr int kFrameChunk = 8;
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 int Reflect101(int p, int len) {
@@ -499,6 +503,25 @@ void FusedTileFrame(const cv::Mat& frame, int k, int x0, int y0, int tw, int th,
   else FusedTileFramePortable(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
 }
 
+// Sink of the batch path: keeps the focus row of frame slot `slot` for the later state update.
+struct VolumeSink {
+  int32_t* vol;
+  int slot, y0, tw;
+  SFF_INLINE void operator()(int y, const int32_t* f, const uint8_t*) {
+    std::copy_n(f, tw, vol + (size_t(slot) * kBatchTileH + size_t(y - y0)) * kTileW);
+  }
+};
+
+__attribute__((target("avx2"))) void FocusRowsToVolumeAvx2(const cv::Mat& frame, int slot, int x0, int y0, int tw,
+                                                           int th, int window, TenengradScratch& sc, int32_t* vol,
+                                                           const cv::Mat* next) {
+  TenengradTile<true>(frame, x0, y0, tw, th, window, sc, VolumeSink{vol, slot, y0, tw}, next);
+}
+void FocusRowsToVolumePortable(const cv::Mat& frame, int slot, int x0, int y0, int tw, int th, int window,
+                               TenengradScratch& sc, int32_t* vol, const cv::Mat* next) {
+  TenengradTile<false>(frame, x0, y0, tw, th, window, sc, VolumeSink{vol, slot, y0, tw}, next);
+}
+
 template <typename P>
 __attribute__((target("avx2"))) void UpdateRowsAvx2(StatePlanes<float, P>& st, int k, const cv::Mat& focus,
                                                     const cv::Mat& frame, int y_begin, int y_end) {
@@ -731,7 +754,7 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
   // interpolates the tile; the same kernels as PushFrame, so the result is bit-identical.
   const int threads = ResolveThreads(options.threads);
   const int j = options.interpolation == DepthInterpolation::kLineFit ? options.linefit_half_width : 1;
-  const int tiles_x = (size.width + kTileW - 1) / kTileW, tiles_y = (size.height + kTileH - 1) / kTileH;
+  const int tiles_x = (size.width + kTileW - 1) / kTileW, tiles_y = (size.height + kBatchTileH - 1) / kBatchTileH;
   const int n_tiles = tiles_x * tiles_y;
   Outputs out;
   out.depth.create(size, CV_32F);
@@ -740,18 +763,36 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
   const int workers = std::max(1, std::min(threads, n_tiles));
   std::vector<StatePlanes<int32_t, uint8_t>> states(static_cast<size_t>(workers));
   std::vector<TenengradScratch> scratch(static_cast<size_t>(workers));
+  std::vector<std::vector<int32_t>> volumes(static_cast<size_t>(workers));
   for (int w = 0; w < workers; ++w) {
-    states[size_t(w)].Allocate(kTileW, kTileH, j);
+    states[size_t(w)].Allocate(kTileW, kBatchTileH, j);
     scratch[size_t(w)].Reserve(options.window_px);
+    volumes[size_t(w)].resize(size_t(kTileW) * kBatchTileH * kFrameChunk);
   }
+  const bool avx2 = HasAvx2();
+  const int n = int(frames.size());
   std::atomic<size_t> valid{0};
   ParallelFor(n_tiles, workers, [&](int t, int worker) {
     auto& st = states[size_t(worker)];
-    const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kTileH;
-    const int tw = std::min(kTileW, size.width - x0), th = std::min(kTileH, size.height - y0);
-    for (size_t k = 0; k < frames.size(); ++k) {
-      FusedTileFrame(frames[k], int(k), x0, y0, tw, th, options.window_px, scratch[size_t(worker)], st, 0, 0,
-                     k + 1 < frames.size() ? &frames[k + 1] : nullptr);
+    int32_t* vol = volumes[size_t(worker)].data();
+    const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kBatchTileH;
+    const int tw = std::min(kTileW, size.width - x0), th = std::min(kBatchTileH, size.height - y0);
+    for (int k0 = 0; k0 < n; k0 += kFrameChunk) {
+      const int k1 = std::min(n, k0 + kFrameChunk);
+      for (int k = k0; k < k1; ++k) {
+        const cv::Mat* next = k + 1 < n ? &frames[size_t(k) + 1] : nullptr;
+        if (avx2) FocusRowsToVolumeAvx2(frames[size_t(k)], k - k0, x0, y0, tw, th, options.window_px,
+                                        scratch[size_t(worker)], vol, next);
+        else FocusRowsToVolumePortable(frames[size_t(k)], k - k0, x0, y0, tw, th, options.window_px,
+                                       scratch[size_t(worker)], vol, next);
+      }
+      // Each state row stays in L1 while the chunk's frames update it, in frame order.
+      for (int y = 0; y < th; ++y) {
+        for (int k = k0; k < k1; ++k) {
+          UpdateRow(st, size_t(y) * st.width, k, vol + (size_t(k - k0) * kBatchTileH + size_t(y)) * kTileW,
+                    frames[size_t(k)].ptr<uint8_t>(y0 + y) + x0, tw);
+        }
+      }
     }
     size_t v = 0;
     for (int y = 0; y < th; ++y) v += FinishSpan(st, size_t(y) * st.width, tw, z_um, options, out, x0, y0 + y);
