@@ -134,6 +134,11 @@ void ParallelFor(int n_tasks, int threads, F&& fn) {
   for (auto& t : pool) t.join();
 }
 
+bool HasAvx2() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
 inline float ToFloat(int32_t v) { return float(v); }
 inline float ToFloat(float v) { return v; }
 
@@ -143,6 +148,7 @@ inline float ToFloat(float v) { return v; }
 template <typename T, typename P>
 struct StatePlanes {
   int width = 0, height = 0, j = 1;
+  bool simd = true;  // AVX2 row kernels (when the CPU has AVX2) or the portable ones
   std::vector<T> best;
   std::vector<int32_t> idx;
   std::vector<T> before[kMaxJ], after[kMaxJ], ring[kMaxJ];  // F(m-1-i), F(m+1+i), F(k-1-i)
@@ -152,7 +158,8 @@ struct StatePlanes {
   std::vector<float> sum, curv_all, curv_excl;
   std::vector<int32_t> aif;  // 32-bit lanes like the rest, so one vectorised loop updates all
 
-  void Allocate(int w, int h, int jj) {
+  void Allocate(int w, int h, int jj, bool use_simd) {
+    simd = use_simd && HasAvx2();
     width = w;
     height = h;
     j = jj;
@@ -194,11 +201,6 @@ SFF_INLINE void InitRow(StatePlanes<T, P>& s, size_t off, const T* __restrict f,
     std::fill_n(s.ring[i].data() + off, n, T(0));
     if (i == 0) std::copy_n(f, n, s.ring[0].data() + off);
   }
-}
-
-bool HasAvx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
 }
 
 // Row kernels of the state update, compiled twice: for AVX2 and portable (the ISA is chosen at
@@ -273,9 +275,9 @@ SFF_DEFINE_ROW_KERNELS(portable, __attribute__((noinline)))
 
 // Curve statistics of frame k >= 1, before the maximum is updated: sum, second differences.
 template <typename T>
-void CurveStats(int k, const T* f, const T* best, const int32_t* idx, const T* last, const T* last2, float* sum,
-                float* curv_all, float* curv_excl, int n) {
-  if (HasAvx2()) avx2::StatsRow(n, k, f, best, idx, last, last2, sum, curv_all, curv_excl);
+void CurveStats(bool simd, int k, const T* f, const T* best, const int32_t* idx, const T* last, const T* last2,
+                float* sum, float* curv_all, float* curv_excl, int n) {
+  if (simd) avx2::StatsRow(n, k, f, best, idx, last, last2, sum, curv_all, curv_excl);
   else portable::StatsRow(n, k, f, best, idx, last, last2, sum, curv_all, curv_excl);
 }
 
@@ -283,7 +285,7 @@ void CurveStats(int k, const T* f, const T* best, const int32_t* idx, const T* l
 template <typename T, typename P>
 void UpdateRowGeneral(StatePlanes<T, P>& s, size_t off, int k, const T* f, const P* pix, int n) {
   const int J = s.j;
-  CurveStats(k, f, s.best.data() + off, s.idx.data() + off, s.ring[0].data() + off, s.last2.data() + off,
+  CurveStats(s.simd, k, f, s.best.data() + off, s.idx.data() + off, s.ring[0].data() + off, s.last2.data() + off,
              s.sum.data() + off, s.curv_all.data() + off, s.curv_excl.data() + off, n);
   for (int x = 0; x < n; ++x) {
     const size_t i = off + x;
@@ -316,7 +318,7 @@ inline void UpdateRow(StatePlanes<T, P>& s, size_t off, int k, const T* f, const
   } else if (s.j == 1) {
     // The hot path (maximum and Gaussian interpolation).
     const float curv_scale = k >= 2 ? 1.f : 0.f;
-    if (HasAvx2()) {
+    if (s.simd) {
       avx2::UpdateRowJ1<T, P>(n, k, curv_scale, f, pix, s.best.data() + off, s.idx.data() + off,
                               s.before[0].data() + off, s.after[0].data() + off, s.ring[0].data() + off,
                               s.last2.data() + off, s.aif.data() + off, s.sum.data() + off, s.curv_all.data() + off,
@@ -499,7 +501,7 @@ void FusedTileFramePortable(const cv::Mat& frame, int k, int x0, int y0, int tw,
 
 void FusedTileFrame(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window, TenengradScratch& sc,
                     StatePlanes<int32_t, uint8_t>& st, int sx, int sy, const cv::Mat* next = nullptr) {
-  if (HasAvx2()) FusedTileFrameAvx2(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+  if (st.simd) FusedTileFrameAvx2(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
   else FusedTileFramePortable(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
 }
 
@@ -616,7 +618,7 @@ class Engine final : public SffEngine {
 
   Engine(const SffOptions& o, cv::Size size, int type) : options_(o), size_(size), type_(type) {
     const int j = o.interpolation == DepthInterpolation::kLineFit ? o.linefit_half_width : 1;
-    state_.Allocate(size.width, size.height, j);
+    state_.Allocate(size.width, size.height, j, o.use_simd);
     threads_ = ResolveThreads(o.threads);
     if constexpr (kFused) {
       scratch_.resize(size_t(threads_));
@@ -651,7 +653,7 @@ class Engine final : public SffEngine {
       const int bands = std::min(size_.height, threads_ * 4);
       ParallelFor(bands, threads_, [&](int b, int) {
         const int y_begin = size_.height * b / bands, y_end = size_.height * (b + 1) / bands;
-        if (HasAvx2()) UpdateRowsAvx2(state_, k, focus, frame, y_begin, y_end);
+        if (state_.simd) UpdateRowsAvx2(state_, k, focus, frame, y_begin, y_end);
         else UpdateRowsPortable(state_, k, focus, frame, y_begin, y_end);
       });
     }
@@ -765,11 +767,11 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
   std::vector<TenengradScratch> scratch(static_cast<size_t>(workers));
   std::vector<std::vector<int32_t>> volumes(static_cast<size_t>(workers));
   for (int w = 0; w < workers; ++w) {
-    states[size_t(w)].Allocate(kTileW, kBatchTileH, j);
+    states[size_t(w)].Allocate(kTileW, kBatchTileH, j, options.use_simd);
     scratch[size_t(w)].Reserve(options.window_px);
     volumes[size_t(w)].resize(size_t(kTileW) * kBatchTileH * kFrameChunk);
   }
-  const bool avx2 = HasAvx2();
+  const bool avx2 = options.use_simd && HasAvx2();
   const int n = int(frames.size());
   std::atomic<size_t> valid{0};
   ParallelFor(n_tiles, workers, [&](int t, int worker) {

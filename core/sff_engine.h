@@ -52,6 +52,9 @@ struct SffOptions {
   double min_confidence = 0.4;
   // Worker threads for the per-frame pass; 0 = all hardware threads.
   int threads = 0;
+  // AVX2 kernels when the CPU has them (chosen at run time); false forces the portable kernels.
+  // Both give bit-identical results.
+  bool use_simd = true;
 
   // INVALID_ARGUMENT naming the field when out of range.
   Status Validate() const;

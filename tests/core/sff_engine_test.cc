@@ -190,6 +190,24 @@ TEST(SffEngineTest, StreamingAndBatchAreBitIdentical) {
   }
 }
 
+TEST(SffEngineTest, PortableKernelsGiveTheSameResult) {
+  const auto s = TiltedPlaneStack(cv::Size(270, 80), UniformZ(10, 0.0, 1.0), 3.0, 0.02, 0.03);
+  for (FocusMeasure m : {FocusMeasure::kTenengrad, FocusMeasure::kSumModifiedLaplacian}) {
+    SffOptions o;
+    o.focus_measure = m;
+    o.use_simd = false;
+    const DepthResult portable = Streamed(o, s.frames, s.z_um);
+    auto portable_batch = SffEngine::ReconstructInMemory(o, s.frames, s.z_um);
+    o.use_simd = true;
+    const DepthResult simd = Streamed(o, s.frames, s.z_um);
+    ASSERT_TRUE(portable_batch.ok());
+    EXPECT_TRUE(BitIdentical(portable.depth_um, simd.depth_um)) << FocusMeasureName(m);
+    EXPECT_TRUE(BitIdentical(portable.confidence, simd.confidence)) << FocusMeasureName(m);
+    EXPECT_TRUE(BitIdentical(portable.all_in_focus, simd.all_in_focus)) << FocusMeasureName(m);
+    EXPECT_TRUE(BitIdentical(portable_batch->depth_um, simd.depth_um)) << FocusMeasureName(m);
+  }
+}
+
 TEST(SffEngineTest, BatchFallsBackToStreamingForOtherMeasuresAnd16Bit) {
   const auto s = TiltedPlaneStack(cv::Size(64, 48), UniformZ(9, 0.0, 1.0), 3.0, 0.03, 0.02, CV_16U);
   SffOptions o;
