@@ -443,7 +443,7 @@ SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int 
     if (prefetch_next) {
       // The same rows of the next frame: the tile reads them on its next pass, by then from cache.
       const uint8_t* nx = prefetch_next->ptr<uint8_t>(ry) + std::max(c_first, 0);
-      for (int i = 0; i < hi - lo; i += 64) __builtin_prefetch(nx + i, 0, 2);
+      for (int i = 0; i < hi - lo; i += 64) __builtin_prefetch(nx + i, 0, 3);
     }
     int16_t* __restrict dst = sc.in[loaded % 3].data();
     {
