@@ -223,7 +223,8 @@ SFF_INLINE void InitRow(StatePlanes<T, P>& s, size_t off, const T* __restrict f,
     const int32_t km1 = k - 1, km2 = k - 2;                                                                   \
     for (int x = 0; x < n; ++x) {                                                                             \
       const T v = f[x];                                                                                       \
-      const float t = ToFloat(T(v - 2 * last[x] + last2[x]));                                                 \
+      /* In float: for wide windows 2 F overflows int32. */                                                   \
+      const float t = (ToFloat(v) - ToFloat(last[x])) - (ToFloat(last[x]) - ToFloat(last2[x]));               \
       const float t2 = t * t;                                                                                 \
       const uint32_t mgt = uint32_t(-int32_t(v > best[x]));                                                   \
       const int32_t id = idx[x];                                                                              \
@@ -247,7 +248,7 @@ SFF_INLINE void InitRow(StatePlanes<T, P>& s, size_t off, const T* __restrict f,
     for (int x = 0; x < n; ++x) {                                                                             \
       const T v = f[x], b = best[x], l = last[x], l2 = last2[x];                                              \
       const int32_t id = idx[x];                                                                              \
-      const float t = ToFloat(T(v - 2 * l + l2));                                                             \
+      const float t = (ToFloat(v) - ToFloat(l)) - (ToFloat(l) - ToFloat(l2)); /* float: 2 F overflows int32 */ \
       const float t2 = curv_scale * (t * t);                                                                  \
       const uint32_t mgt = uint32_t(-int32_t(v > b));                                                         \
       const uint32_t mnear = uint32_t(-int32_t((id == km1) | (id == km2)));                                   \
@@ -503,6 +504,62 @@ void FusedTileFrame(const cv::Mat& frame, int k, int x0, int y0, int tw, int th,
                     StatePlanes<int32_t, uint8_t>& st, int sx, int sy, const cv::Mat* next = nullptr) {
   if (st.simd) FusedTileFrameAvx2(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
   else FusedTileFramePortable(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+}
+
+__attribute__((target("avx2"))) inline __m256i ld(const int32_t* p) {
+  return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+}
+__attribute__((target("avx2"))) inline void st(int32_t* p, __m256i v) {
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(p), v);
+}
+
+// Batch path, one neighbour each side, AVX2: the state of 8 pixels stays in registers while the
+// frames k_begin .. k_end-1 of a chunk update it; per pixel exactly the operations of
+// UpdateRowJ1 in the same order, so the result is bit-identical. n8: a multiple of 8.
+__attribute__((target("avx2"))) void UpdateChunkAvx2(int n8, int k_begin, int k_end, int slot0,
+                                                     const int32_t* vol_row, size_t slot_stride,
+                                                     const uint8_t* const* pix_rows, int32_t* best, int32_t* idx,
+                                                     int32_t* prev, int32_t* next, int32_t* last, int32_t* last2,
+                                                     int32_t* aif, float* sum, float* curv_all, float* curv_excl) {
+  const __m256i zero = _mm256_setzero_si256();
+  for (int x = 0; x < n8; x += 8) {
+    __m256i b = ld(best + x), id = ld(idx + x), pv = ld(prev + x), nx = ld(next + x);
+    __m256i l = ld(last + x), l2 = ld(last2 + x), a = ld(aif + x);
+    __m256 sm = _mm256_loadu_ps(sum + x), ca = _mm256_loadu_ps(curv_all + x), ce = _mm256_loadu_ps(curv_excl + x);
+    for (int k = k_begin; k < k_end; ++k) {
+      const int slot = k - slot0;
+      const __m256i v = ld(vol_row + size_t(slot) * slot_stride + x);
+      const __m256i p =
+          _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(pix_rows[slot] + x)));
+      const __m256 fv = _mm256_cvtepi32_ps(v), fl = _mm256_cvtepi32_ps(l), fl2 = _mm256_cvtepi32_ps(l2);
+      const __m256 t = _mm256_sub_ps(_mm256_sub_ps(fv, fl), _mm256_sub_ps(fl, fl2));
+      const __m256 t2 = _mm256_mul_ps(_mm256_set1_ps(k >= 2 ? 1.f : 0.f), _mm256_mul_ps(t, t));
+      const __m256i gt = _mm256_cmpgt_epi32(v, b);
+      const __m256i was = _mm256_cmpeq_epi32(id, _mm256_set1_epi32(k - 1));
+      const __m256i near = _mm256_or_si256(was, _mm256_cmpeq_epi32(id, _mm256_set1_epi32(k - 2)));
+      const __m256 kept = _mm256_add_ps(ce, _mm256_and_ps(t2, _mm256_castsi256_ps(near)));
+      sm = _mm256_add_ps(sm, fv);
+      ca = _mm256_add_ps(ca, t2);
+      ce = _mm256_blendv_ps(kept, t2, _mm256_castsi256_ps(gt));
+      nx = _mm256_blendv_epi8(_mm256_blendv_epi8(nx, v, was), zero, gt);
+      pv = _mm256_blendv_epi8(pv, l, gt);
+      b = _mm256_blendv_epi8(b, v, gt);
+      id = _mm256_blendv_epi8(id, _mm256_set1_epi32(k), gt);
+      a = _mm256_blendv_epi8(a, p, gt);
+      l2 = l;
+      l = v;
+    }
+    st(best + x, b);
+    st(idx + x, id);
+    st(prev + x, pv);
+    st(next + x, nx);
+    st(last + x, l);
+    st(last2 + x, l2);
+    st(aif + x, a);
+    _mm256_storeu_ps(sum + x, sm);
+    _mm256_storeu_ps(curv_all + x, ca);
+    _mm256_storeu_ps(curv_excl + x, ce);
+  }
 }
 
 // Sink of the batch path: keeps the focus row of frame slot `slot` for the later state update.
@@ -788,11 +845,32 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
         else FocusRowsToVolumePortable(frames[size_t(k)], k - k0, x0, y0, tw, th, options.window_px,
                                        scratch[size_t(worker)], vol, next);
       }
-      // Each state row stays in L1 while the chunk's frames update it, in frame order.
+      // Each state row stays in L1 (AVX2: in registers) while the chunk's frames update it, in
+      // frame order.
+      const size_t slot_stride = size_t(kBatchTileH) * kTileW;
       for (int y = 0; y < th; ++y) {
-        for (int k = k0; k < k1; ++k) {
-          UpdateRow(st, size_t(y) * st.width, k, vol + (size_t(k - k0) * kBatchTileH + size_t(y)) * kTileW,
-                    frames[size_t(k)].ptr<uint8_t>(y0 + y) + x0, tw);
+        const size_t off = size_t(y) * st.width;
+        const int32_t* vol_row = vol + size_t(y) * kTileW;
+        const uint8_t* pix_rows[kFrameChunk];
+        for (int k = k0; k < k1; ++k) pix_rows[k - k0] = frames[size_t(k)].ptr<uint8_t>(y0 + y) + x0;
+        int k_begin = k0;
+        if (st.simd && st.j == 1) {
+          if (k0 == 0) {  // frame 0 initialises the state
+            UpdateRow(st, off, 0, vol_row, pix_rows[0], tw);
+            k_begin = 1;
+          }
+          const int n8 = tw & ~7;
+          UpdateChunkAvx2(n8, k_begin, k1, k0, vol_row, slot_stride, pix_rows, st.best.data() + off,
+                          st.idx.data() + off, st.before[0].data() + off, st.after[0].data() + off,
+                          st.ring[0].data() + off, st.last2.data() + off, st.aif.data() + off, st.sum.data() + off,
+                          st.curv_all.data() + off, st.curv_excl.data() + off);
+          for (int k = k_begin; k < k1 && n8 < tw; ++k) {
+            UpdateRow(st, off + n8, k, vol_row + size_t(k - k0) * slot_stride + n8, pix_rows[k - k0] + n8, tw - n8);
+          }
+        } else {
+          for (int k = k0; k < k1; ++k) {
+            UpdateRow(st, off, k, vol_row + size_t(k - k0) * slot_stride, pix_rows[k - k0], tw);
+          }
         }
       }
     }
