@@ -32,10 +32,11 @@ inline double GaussianPeakZ(double z1, double z2, double z3, double f1, double f
   const double u1 = z1 - z2, u3 = z3 - z2;
   const double a = std::log(f2 / f1), b = std::log(f2 / f3);
   const double den = a * u3 - b * u1;
-  if (!(std::abs(den) > 0.0) || !std::isfinite(den)) return z2;
+  // sigma^2 = u1 u3 (u1 - u3) / (2 den) must be positive: den must have the sign of u1 u3 (u1 - u3).
+  const double num_var = u1 * u3 * (u1 - u3);
+  if (!(den * num_var > 0.0) || !std::isfinite(den)) return z2;
   const double mu = (a * u3 * u3 - b * u1 * u1) / (2.0 * den);
-  const double var = u1 * u3 * (u1 - u3) / (2.0 * den);
-  if (!std::isfinite(mu) || !(var > 0.0) || mu < std::min(u1, u3) || mu > std::max(u1, u3)) return z2;
+  if (!(mu >= std::min(u1, u3) && mu <= std::max(u1, u3))) return z2;  // also rejects NaN
   return z2 + mu;
 }
 
@@ -84,8 +85,8 @@ inline float FocusConfidence(const FocusCurveSummary& s) {
   double sigma =
       s.curvature_count > 0 ? std::sqrt(std::max(s.curvature_sq_sum, 0.0) / (6.0 * s.curvature_count)) : 0.0;
   sigma = std::max(sigma, 1e-3 * s.peak);
-  const double snr = prominence / sigma;
-  double c = std::clamp(1.0 - kConfidenceSnrZero / snr, 0.0, 1.0);
+  // 1 - kConfidenceSnrZero / snr with snr = prominence / sigma, in one division.
+  double c = std::clamp(1.0 - kConfidenceSnrZero * sigma / prominence, 0.0, 1.0);
   if (s.peak_at_end) c *= 0.5;
   return float(c);
 }

@@ -465,8 +465,11 @@ SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int 
     ++e_rows;
     if (e_rows < window) continue;
     const int y = y0 + e_rows - window;
-    WindowRow(sc.colsum.data(), sc.focus.data(), tw, window);
-    sink(y, sc.focus.data(), frame.ptr<uint8_t>(y) + x0);
+    // A sink with Dest(y) receives the focus row in place (no copy).
+    int32_t* focus_row = sc.focus.data();
+    if constexpr (requires { sink.Dest(y); }) focus_row = sink.Dest(y);
+    WindowRow(sc.colsum.data(), focus_row, tw, window);
+    sink(y, focus_row, frame.ptr<uint8_t>(y) + x0);
   }
 }
 
@@ -566,9 +569,8 @@ __attribute__((target("avx2"))) void UpdateChunkAvx2(int n8, int k_begin, int k_
 struct VolumeSink {
   int32_t* vol;
   int slot, y0, tw;
-  SFF_INLINE void operator()(int y, const int32_t* f, const uint8_t*) {
-    std::copy_n(f, tw, vol + (size_t(slot) * kBatchTileH + size_t(y - y0)) * kTileW);
-  }
+  SFF_INLINE int32_t* Dest(int y) { return vol + (size_t(slot) * kBatchTileH + size_t(y - y0)) * kTileW; }
+  SFF_INLINE void operator()(int, const int32_t*, const uint8_t*) {}  // already in place
 };
 
 __attribute__((target("avx2"))) void FocusRowsToVolumeAvx2(const cv::Mat& frame, int slot, int x0, int y0, int tw,
