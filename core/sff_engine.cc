@@ -341,6 +341,7 @@ struct TenengradScratch {
   std::vector<int16_t> sv, dv;  // vertical [1 2 1] and [1 0 -1] of the three rows (AVX2 path)
   std::vector<int32_t> ering;   // the last `window` energy rows Gx^2 + Gy^2: width tw + 2R
   std::vector<int32_t> colsum;  // vertical window sums of the energy
+  std::vector<int32_t> pairs;   // horizontal pair sums of colsum
   std::vector<int32_t> focus;   // one output row
   void Reserve(int window) {
     const int r = window / 2, ew = kTileW + 2 * r;
@@ -349,6 +350,7 @@ struct TenengradScratch {
     dv.resize(size_t(ew) + 2);
     ering.resize(size_t(ew) * window);
     colsum.resize(size_t(ew));
+    pairs.resize(size_t(ew));
     focus.resize(size_t(kTileW));
   }
 };
@@ -416,11 +418,17 @@ __attribute__((target("avx2"))) inline void EnergyRowAvx2(const int16_t* a, cons
   }
 }
 
-SFF_INLINE void WindowRow(const int32_t* __restrict colsum, int32_t* __restrict out, int tw, int window) {
-  for (int x = 0; x < tw; ++x) out[x] = colsum[x];
-  for (int i = 1; i < window; ++i) {
-    const int32_t* __restrict c = colsum + i;
-    for (int x = 0; x < tw; ++x) out[x] += c[x];
+// Horizontal window sum of the column sums: out[x] = sum of colsum[x .. x + window - 1]. Built
+// from pair sums p[x] = colsum[x] + colsum[x + 1]: (window + 1) / 2 passes instead of window.
+SFF_INLINE void WindowRow(const int32_t* __restrict colsum, int32_t* __restrict pairs, int32_t* __restrict out,
+                          int tw, int window) {
+  const int np = tw + window - 2;
+  for (int x = 0; x < np; ++x) pairs[x] = colsum[x] + colsum[x + 1];
+  const int32_t* __restrict last = colsum + window - 1;
+  for (int x = 0; x < tw; ++x) out[x] = pairs[x] + last[x];
+  for (int i = 2; i + 1 < window; i += 2) {
+    const int32_t* __restrict p = pairs + i;
+    for (int x = 0; x < tw; ++x) out[x] += p[x];
   }
 }
 
@@ -468,7 +476,7 @@ SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int 
     // A sink with Dest(y) receives the focus row in place (no copy).
     int32_t* focus_row = sc.focus.data();
     if constexpr (requires { sink.Dest(y); }) focus_row = sink.Dest(y);
-    WindowRow(sc.colsum.data(), focus_row, tw, window);
+    WindowRow(sc.colsum.data(), sc.pairs.data(), focus_row, tw, window);
     sink(y, focus_row, frame.ptr<uint8_t>(y) + x0);
   }
 }
