@@ -611,8 +611,8 @@ struct Outputs {
 // Interpolation and confidence for the state pixels of one row span; writes the outputs at
 // (ox, oy). Returns the number of pixels with finite depth.
 template <typename T, typename P>
-size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std::vector<double>& z,
-                  const SffOptions& o, Outputs& out, int ox, int oy) {
+size_t FinishSpanScalar(const StatePlanes<T, P>& st, size_t off, int x_begin, int count, const std::vector<double>& z,
+                        const SffOptions& o, Outputs& out, int ox, int oy) {
   const int n = int(z.size());
   const int J = st.j;
   float* depth = out.depth.ptr<float>(oy) + ox;
@@ -620,7 +620,7 @@ size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std:
   P* aif = out.aif.ptr<P>(oy) + ox;
   size_t valid = 0;
   double zw[2 * kMaxJ + 1], fw[2 * kMaxJ + 1];
-  for (int x = 0; x < count; ++x) {
+  for (int x = x_begin; x < count; ++x) {
     const size_t i = off + x;
     const int m = st.idx[i];
     const int before = std::min(J, m), after = std::min(J, n - 1 - m);
@@ -661,6 +661,205 @@ size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std:
     aif[x] = P(st.aif[i]);
   }
   return valid;
+}
+
+// Natural logarithm of positive, finite floats: exponent and mantissa in [sqrt(1/2), sqrt(2)),
+// log(m) = 2 atanh(s), s = (m - 1) / (m + 1), |s| < 0.172, series to s^9 (relative error < 1e-7).
+__attribute__((target("avx2"))) inline __m256 LogPositiveAvx2(__m256 x) {
+  const __m256i bits = _mm256_castps_si256(x);
+  __m256i e = _mm256_sub_epi32(_mm256_srli_epi32(bits, 23), _mm256_set1_epi32(127));
+  __m256 m = _mm256_castsi256_ps(_mm256_or_si256(_mm256_and_si256(bits, _mm256_set1_epi32(0x007fffff)),
+                                                 _mm256_set1_epi32(0x3f800000)));  // [1, 2)
+  const __m256 big = _mm256_cmp_ps(m, _mm256_set1_ps(1.41421356f), _CMP_GT_OQ);
+  m = _mm256_blendv_ps(m, _mm256_mul_ps(m, _mm256_set1_ps(0.5f)), big);
+  e = _mm256_sub_epi32(e, _mm256_castps_si256(big));  // big lanes are -1: e + 1
+  const __m256 one = _mm256_set1_ps(1.f);
+  const __m256 sv = _mm256_div_ps(_mm256_sub_ps(m, one), _mm256_add_ps(m, one));
+  const __m256 s2 = _mm256_mul_ps(sv, sv);
+  __m256 poly = _mm256_set1_ps(1.f / 9.f);
+  poly = _mm256_add_ps(_mm256_mul_ps(poly, s2), _mm256_set1_ps(1.f / 7.f));
+  poly = _mm256_add_ps(_mm256_mul_ps(poly, s2), _mm256_set1_ps(1.f / 5.f));
+  poly = _mm256_add_ps(_mm256_mul_ps(poly, s2), _mm256_set1_ps(1.f / 3.f));
+  poly = _mm256_add_ps(_mm256_mul_ps(poly, s2), one);
+  const __m256 log_m = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(2.f), sv), poly);
+  return _mm256_add_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(e), _mm256_set1_ps(0.69314718056f)), log_m);
+}
+
+// FinishSpanScalar for 8 pixels at a time in float (fused path, one neighbour each side, maximum
+// or Gaussian): the confidence of FocusConfidence and the Gaussian position of GaussianPeakZ.
+// Returns the number of kept pixels among the first n8 (a multiple of 8).
+__attribute__((target("avx2"))) size_t FinishSpanAvx2(const StatePlanes<int32_t, uint8_t>& st, size_t off, int n8,
+                                                      const float* zf, int n, bool gaussian, float min_confidence,
+                                                      float* depth, float* conf, uint8_t* aif) {
+  size_t valid = 0;
+  const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);
+  const __m256i izero = _mm256_setzero_si256();
+  const __m256i last_frame = _mm256_set1_epi32(n - 1);
+  const __m256 inv_n = _mm256_set1_ps(1.f / float(n));
+  const __m256 nan = _mm256_set1_ps(std::numeric_limits<float>::quiet_NaN());
+  for (int x = 0; x < n8; x += 8) {
+    const size_t i = off + size_t(x);
+    const __m256i m = ld(st.idx.data() + i);
+    const __m256 best = _mm256_cvtepi32_ps(ld(st.best.data() + i));
+    const __m256 f1 = _mm256_cvtepi32_ps(ld(st.before[0].data() + i));
+    const __m256 f3 = _mm256_cvtepi32_ps(ld(st.after[0].data() + i));
+    // Confidence: prominence over the noise level of the second differences away from the peak.
+    const __m256 mean = _mm256_mul_ps(_mm256_loadu_ps(st.sum.data() + i), inv_n);
+    const __m256 prominence = _mm256_sub_ps(best, mean);
+    const __m256i hi = _mm256_min_epi32(last_frame, _mm256_add_epi32(m, _mm256_set1_epi32(2)));
+    const __m256i lo = _mm256_max_epi32(_mm256_set1_epi32(2), m);
+    const __m256i excluded = _mm256_max_epi32(izero, _mm256_add_epi32(_mm256_sub_epi32(hi, lo), _mm256_set1_epi32(1)));
+    const __m256i count = _mm256_sub_epi32(_mm256_set1_epi32(std::max(0, n - 2)), excluded);
+    const __m256 sq = _mm256_max_ps(zero, _mm256_sub_ps(_mm256_loadu_ps(st.curv_all.data() + i),
+                                                        _mm256_loadu_ps(st.curv_excl.data() + i)));
+    const __m256 countf = _mm256_cvtepi32_ps(count);
+    __m256 sigma = _mm256_sqrt_ps(_mm256_div_ps(sq, _mm256_mul_ps(_mm256_set1_ps(6.f), _mm256_max_ps(countf, one))));
+    sigma = _mm256_and_ps(sigma, _mm256_cmp_ps(countf, zero, _CMP_GT_OQ));
+    sigma = _mm256_max_ps(sigma, _mm256_mul_ps(_mm256_set1_ps(1e-3f), best));
+    __m256 c = _mm256_sub_ps(one, _mm256_div_ps(_mm256_mul_ps(_mm256_set1_ps(float(kConfidenceSnrZero)), sigma),
+                                                _mm256_max_ps(prominence, _mm256_set1_ps(1e-30f))));
+    c = _mm256_min_ps(one, _mm256_max_ps(zero, c));
+    const __m256 has_peak = _mm256_and_ps(_mm256_cmp_ps(prominence, zero, _CMP_GT_OQ),
+                                          _mm256_cmp_ps(best, zero, _CMP_GT_OQ));
+    c = _mm256_and_ps(c, has_peak);
+    const __m256i at_end = _mm256_or_si256(_mm256_cmpeq_epi32(m, izero), _mm256_cmpeq_epi32(m, last_frame));
+    c = _mm256_blendv_ps(c, _mm256_mul_ps(c, _mm256_set1_ps(0.5f)), _mm256_castsi256_ps(at_end));
+    _mm256_storeu_ps(conf + x, c);
+    // Depth: the frame's z, moved to the Gaussian's peak where the fit is valid.
+    const __m256 z2 = _mm256_i32gather_ps(zf, m, 4);
+    __m256 z_um = z2;
+    if (gaussian) {
+      const __m256i mm1 = _mm256_max_epi32(izero, _mm256_sub_epi32(m, _mm256_set1_epi32(1)));
+      const __m256i mp1 = _mm256_min_epi32(last_frame, _mm256_add_epi32(m, _mm256_set1_epi32(1)));
+      const __m256 u1 = _mm256_sub_ps(_mm256_i32gather_ps(zf, mm1, 4), z2);
+      const __m256 u3 = _mm256_sub_ps(_mm256_i32gather_ps(zf, mp1, 4), z2);
+      const __m256 ok_f = _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(f1, zero, _CMP_GT_OQ),
+                                                      _mm256_cmp_ps(f3, zero, _CMP_GT_OQ)),
+                                        _mm256_andnot_ps(_mm256_castsi256_ps(at_end),
+                                                         _mm256_cmp_ps(best, zero, _CMP_GT_OQ)));
+      // Logs only of positive finite ratios (others are masked out below).
+      const __m256 safe1 = _mm256_blendv_ps(one, f1, ok_f), safe3 = _mm256_blendv_ps(one, f3, ok_f);
+      const __m256 safe2 = _mm256_blendv_ps(one, best, ok_f);
+      const __m256 a = LogPositiveAvx2(_mm256_div_ps(safe2, safe1));
+      const __m256 b = LogPositiveAvx2(_mm256_div_ps(safe2, safe3));
+      const __m256 den = _mm256_sub_ps(_mm256_mul_ps(a, u3), _mm256_mul_ps(b, u1));
+      const __m256 num_var = _mm256_mul_ps(_mm256_mul_ps(u1, u3), _mm256_sub_ps(u1, u3));
+      const __m256 mu = _mm256_div_ps(
+          _mm256_sub_ps(_mm256_mul_ps(a, _mm256_mul_ps(u3, u3)), _mm256_mul_ps(b, _mm256_mul_ps(u1, u1))),
+          _mm256_mul_ps(_mm256_set1_ps(2.f), den));
+      const __m256 in_range = _mm256_and_ps(_mm256_cmp_ps(mu, _mm256_min_ps(u1, u3), _CMP_GE_OQ),
+                                            _mm256_cmp_ps(mu, _mm256_max_ps(u1, u3), _CMP_LE_OQ));
+      const __m256 ok = _mm256_and_ps(_mm256_and_ps(ok_f, in_range),
+                                      _mm256_cmp_ps(_mm256_mul_ps(den, num_var), zero, _CMP_GT_OQ));
+      z_um = _mm256_add_ps(z2, _mm256_and_ps(mu, ok));
+    }
+    const __m256 keep = _mm256_cmp_ps(c, _mm256_set1_ps(min_confidence), _CMP_GE_OQ);
+    _mm256_storeu_ps(depth + x, _mm256_blendv_ps(nan, z_um, keep));
+    valid += size_t(__builtin_popcount(unsigned(_mm256_movemask_ps(keep))));
+    // All-in-focus: 8 int32 grey values to bytes.
+    alignas(32) int32_t a8[8];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(a8), ld(st.aif.data() + i));
+    for (int j = 0; j < 8; ++j) aif[x + j] = uint8_t(a8[j]);
+  }
+  return valid;
+}
+
+// Scalar twin of LogPositiveAvx2: the same float operations in the same order (bit-identical).
+inline float LogPositiveScalar(float x) {
+  const uint32_t bits = std::bit_cast<uint32_t>(x);
+  int32_t e = int32_t(bits >> 23) - 127;
+  float m = std::bit_cast<float>((bits & 0x007fffffu) | 0x3f800000u);
+  if (m > 1.41421356f) {
+    m = m * 0.5f;
+    e += 1;
+  }
+  const float sv = (m - 1.f) / (m + 1.f);
+  const float s2 = sv * sv;
+  float poly = 1.f / 9.f;
+  poly = poly * s2 + 1.f / 7.f;
+  poly = poly * s2 + 1.f / 5.f;
+  poly = poly * s2 + 1.f / 3.f;
+  poly = poly * s2 + 1.f;
+  const float log_m = (2.f * sv) * poly;
+  return float(e) * 0.69314718056f + log_m;
+}
+
+// Scalar twin of FinishSpanAvx2 for pixels x_begin .. count-1 (the tail after the AVX2 blocks,
+// or everything without AVX2): bit-identical per pixel.
+size_t FinishSpanFloatScalar(const StatePlanes<int32_t, uint8_t>& st, size_t off, int x_begin, int count,
+                             const float* zf, int n, bool gaussian, float min_confidence, float* depth, float* conf,
+                             uint8_t* aif) {
+  auto maxps = [](float a, float b) { return a > b ? a : b; };  // _mm256_max_ps(a, b)
+  auto minps = [](float a, float b) { return a < b ? a : b; };  // _mm256_min_ps(a, b)
+  size_t valid = 0;
+  const float inv_n = 1.f / float(n);
+  for (int x = x_begin; x < count; ++x) {
+    const size_t i = off + size_t(x);
+    const int32_t m = st.idx[i];
+    const float best = float(st.best[i]), f1 = float(st.before[0][i]), f3 = float(st.after[0][i]);
+    const float mean = st.sum[i] * inv_n;
+    const float prominence = best - mean;
+    const int32_t hi = std::min(n - 1, m + 2), lo = std::max(2, m);
+    const int32_t excluded = std::max(0, hi - lo + 1);
+    const int32_t count_t = std::max(0, n - 2) - excluded;
+    const float sq = maxps(0.f, st.curv_all[i] - st.curv_excl[i]);
+    const float countf = float(count_t);
+    float sigma = std::sqrt(sq / (6.f * maxps(countf, 1.f)));
+    if (!(countf > 0.f)) sigma = 0.f;
+    sigma = maxps(sigma, 1e-3f * best);
+    float c = 1.f - (float(kConfidenceSnrZero) * sigma) / maxps(prominence, 1e-30f);
+    c = minps(1.f, maxps(0.f, c));
+    if (!(prominence > 0.f && best > 0.f)) c = 0.f;
+    const bool at_end = m == 0 || m == n - 1;
+    if (at_end) c = c * 0.5f;
+    conf[x] = c;
+    const float z2 = zf[m];
+    float z_um = z2;
+    if (gaussian) {
+      const float u1 = zf[std::max(0, m - 1)] - z2, u3 = zf[std::min(n - 1, m + 1)] - z2;
+      const bool ok_f = f1 > 0.f && f3 > 0.f && !at_end && best > 0.f;
+      if (ok_f) {
+        const float a = LogPositiveScalar(best / f1), b = LogPositiveScalar(best / f3);
+        const float den = a * u3 - b * u1;
+        const float num_var = (u1 * u3) * (u1 - u3);
+        if (den * num_var > 0.f) {
+          const float mu = (a * (u3 * u3) - b * (u1 * u1)) / (2.f * den);
+          if (mu >= minps(u1, u3) && mu <= maxps(u1, u3)) z_um = z2 + mu;
+        }
+      }
+      if (z_um == z2) z_um = z2 + 0.f;  // as the vector path adds a masked +0
+    }
+    const bool keep = c >= min_confidence;
+    depth[x] = keep ? z_um : std::numeric_limits<float>::quiet_NaN();
+    valid += keep;
+    aif[x] = uint8_t(st.aif[i]);
+  }
+  return valid;
+}
+
+template <typename T, typename P>
+size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std::vector<double>& z,
+                  const SffOptions& o, Outputs& out, int ox, int oy) {
+  if constexpr (std::is_same_v<T, int32_t> && std::is_same_v<P, uint8_t>) {
+    // Fused path with one neighbour each side: float arithmetic, AVX2 blocks of 8 and a scalar
+    // twin for the rest (or all of it without AVX2), bit-identical either way.
+    if (st.j == 1 && o.interpolation != DepthInterpolation::kLineFit) {
+      std::vector<float> zf(z.begin(), z.end());
+      const int n8 = st.simd ? (count & ~7) : 0;
+      const bool gaussian = o.interpolation == DepthInterpolation::kGaussian;
+      float* depth = out.depth.ptr<float>(oy) + ox;
+      float* conf = out.confidence.ptr<float>(oy) + ox;
+      uint8_t* aif = out.aif.ptr<uint8_t>(oy) + ox;
+      const int n = int(z.size());
+      size_t valid = 0;
+      if (n8 > 0) {
+        valid = FinishSpanAvx2(st, off, n8, zf.data(), n, gaussian, float(o.min_confidence), depth, conf, aif);
+      }
+      return valid + FinishSpanFloatScalar(st, off, n8, count, zf.data(), n, gaussian, float(o.min_confidence),
+                                           depth, conf, aif);
+    }
+  }
+  return FinishSpanScalar(st, off, 0, count, z, o, out, ox, oy);
 }
 
 Status CheckFrame(const cv::Mat& frame, int k, cv::Size size, int type) {
