@@ -93,12 +93,13 @@ Status SffOptions::Validate() const {
 namespace {
 
 constexpr int kMaxJ = 4;
-// Tile of the fused kernel: 256 x 64 pixels keep the state (~25 bytes per pixel) in L2 and the
-// halo overhead (window - 1 extra rows and columns) below 10 % for the 7 x 7 window.
+// Tile of the fused kernel in PushFrame: 256 x 64 pixels; the halo (window + 1 extra rows and
+// columns of input) stays near 10 % for the 7 x 7 window.
 constexpr int kTileW = 256;
 constexpr int kTileH = 64;
-// Batch path: 256 x 32 tiles, frames in chunks of 8 whose focus rows are kept (256 x 32 x 8 x 4 B
-// = 256 KB) so that each state row is updated for 8 frames while it sits in L1.
+// Batch path: 256 x 32 tiles (state ~40 bytes per pixel = 330 KB, in L2), frames in chunks of 8
+// whose focus rows are kept (256 x 32 x 8 x 4 B = 256 KB) so that each state row is updated for 8
+// frames while it sits in registers / L1.
 constexpr int kBatchTileH = 32;
 constexpr int kFrameChunk = 8;
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
