@@ -534,8 +534,8 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
                                            const std::atomic<bool>& cancel) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
   std::set<CalibrationStep> wanted(options.steps.begin(), options.steps.end());
-  if (wanted.empty()) wanted = {AllCalibrationSteps().begin(), AllCalibrationSteps().end()};
   const std::vector<CalibrationStep> all = AllCalibrationSteps();
+  if (wanted.empty()) wanted = std::set<CalibrationStep>(all.begin(), all.end());
   std::vector<CalibrationStep> steps;
   for (CalibrationStep s : all)
     if (wanted.count(s)) steps.push_back(s);
