@@ -20,7 +20,11 @@ struct DepthExportMeta {
 // float32 single-channel TIFF, values in µm, NaN where no depth. Pixel size stored as resolution.
 Status WriteDepthTiff(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
 // Reads back a float32 TIFF written by WriteDepthTiff (or ground_truth_depth.tiff).
+// Also reads float32 (or float64, converted) TIFFs written by cv::imwrite, striped or tiled.
 StatusOr<cv::Mat> ReadDepthTiff(const std::filesystem::path& path);
+// As above; when meta is not null it receives the pixel size (from the resolution tags,
+// 0 if absent) and the ImageDescription.
+StatusOr<cv::Mat> ReadDepthTiff(const std::filesystem::path& path, DepthExportMeta* meta);
 // float32 TIFF of confidence values in [0, 1].
 Status WriteConfidenceTiff(const std::filesystem::path& path, const cv::Mat& confidence, const DepthExportMeta& meta);
 // 8-bit colour PNG: depth through a perceptual colour map, NaN in black, with a scale bar
@@ -34,5 +38,16 @@ Status WriteDepthPly(const std::filesystem::path& path, const cv::Mat& depth_um,
 // ISO 25178-72 x3p: zip holding main.xml (with md5 of bindata), bindata/data.bin (float64 µm
 // converted to metres as the format wants), md5checksum.hex.
 Status WriteDepthX3p(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
+
+// Scale and offset chosen by WriteDepthPng16 for a map (value 1 = the smallest finite depth,
+// 65535 = the largest); also what its tEXt chunk and sidecar record.
+struct DepthPng16Scaling {
+  double scale_um = 1.0;
+  double offset_um = 0.0;
+};
+DepthPng16Scaling ChooseDepthPng16Scaling(const cv::Mat& depth_um);
+
+// MD5 (RFC 1321) of a byte buffer as 32 lower-case hex digits, as x3p records it.
+std::string Md5Hex(const void* data, size_t size);
 
 }  // namespace inspection

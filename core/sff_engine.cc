@@ -1,12 +1,29 @@
-// First streaming SFF: Tenengrad (eq. 3.14) + three-point Gaussian interpolation (eq. 3.30-3.34),
-// generalised to non-uniform z steps. Per-pixel state: best focus value, its neighbours, the
-// running mean of the focus curve (for confidence) and the all-in-focus grey value.
+// Streaming shape from focus (thesis 3.1): per-frame focus measure (3.1.3), running per-pixel
+// maximum with its neighbours, depth interpolation and confidence at the end (3.1.4).
+// Per-pixel state is O(pixels): best focus value, its frame index, j values before and after it,
+// the last j values, the curve's sum and squared steps (for the confidence) and the all-in-focus
+// grey value. 8-bit Tenengrad runs through a fused integer kernel (Sobel, squares, window sum and
+// state update in one pass over a cache-sized tile, AVX2 selected at run time); every other
+// measure goes through core/focus_measure.h and the same state update.
 #include "core/sff_engine.h"
 
+#include <algorithm>
+#include <atomic>
+#include <bit>
 #include <cmath>
 #include <limits>
+#include <thread>
+#include <type_traits>
+
+#include <immintrin.h>
 
 #include <opencv2/imgproc.hpp>
+
+#include "core/depth_interpolation.h"
+#include "core/focus_measure.h"
+#include "core/stack.h"
+
+#define SFF_INLINE inline __attribute__((always_inline))
 
 namespace inspection {
 
@@ -57,135 +74,588 @@ Status SffOptions::Validate() const {
     return Status::InvalidArgument("min_confidence must be between 0 and 1");
   }
   if (threads < 0) return Status::InvalidArgument("threads must be >= 0");
+  if (linefit_half_width < 1 || linefit_half_width > 4) {
+    return Status::InvalidArgument("linefit_half_width " + std::to_string(linefit_half_width) + " must be 1..4");
+  }
+  switch (focus_measure) {
+    case FocusMeasure::kModifiedLaplacian: case FocusMeasure::kSumModifiedLaplacian: case FocusMeasure::kTenengrad:
+    case FocusMeasure::kGreyLevelVariance: case FocusMeasure::kHelmliMean: case FocusMeasure::kChebyshevMoments:
+    case FocusMeasure::kGreyLevelLocalVariance: break;
+    default: return Status::InvalidArgument("focus_measure is unknown");
+  }
+  switch (interpolation) {
+    case DepthInterpolation::kMaximum: case DepthInterpolation::kLineFit: case DepthInterpolation::kGaussian: break;
+    default: return Status::InvalidArgument("interpolation is unknown");
+  }
   return Status::Ok();
 }
 
 namespace {
 
-class TenengradGaussianEngine final : public SffEngine {
+constexpr int kMaxJ = 4;
+// Tile of the fused kernel: 256 x 64 pixels keep the state (~25 bytes per pixel) in L2 and the
+// halo overhead (window - 1 extra rows and columns) below 10 % for the 7 x 7 window.
+constexpr int kTileW = 256;
+constexpr int kTileH = 64;
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+int Reflect101(int p, int len) {
+  if (len == 1) return 0;
+  while (p < 0 || p >= len) p = p < 0 ? -p : 2 * len - 2 - p;
+  return p;
+}
+
+int ResolveThreads(int threads) {
+  if (threads > 0) return threads;
+  return std::max(1u, std::thread::hardware_concurrency());
+}
+
+// Runs fn(task, worker) for task = 0..n_tasks-1 on up to `threads` threads (the caller's included).
+template <typename F>
+void ParallelFor(int n_tasks, int threads, F&& fn) {
+  threads = std::max(1, std::min(threads, n_tasks));
+  std::atomic<int> next{0};
+  auto worker = [&](int id) {
+    for (int i = next.fetch_add(1); i < n_tasks; i = next.fetch_add(1)) fn(i, id);
+  };
+  std::vector<std::thread> pool;
+  for (int t = 1; t < threads; ++t) {
+    try {
+      pool.emplace_back(worker, t);
+    } catch (const std::system_error&) {
+      break;  // fewer threads; the tasks are shared out dynamically anyway
+    }
+  }
+  worker(0);
+  for (auto& t : pool) t.join();
+}
+
+inline float ToFloat(int32_t v) { return float(v); }
+inline float ToFloat(float v) { return v; }
+
+// Per-pixel state as planes (structure of arrays), so the update loops vectorise.
+// T: focus value type (int32_t exact for the fused 8-bit Tenengrad, float otherwise).
+// P: pixel type of the frames (all-in-focus image).
+template <typename T, typename P>
+struct StatePlanes {
+  int width = 0, height = 0, j = 1;
+  std::vector<T> best;
+  std::vector<int32_t> idx;
+  std::vector<T> before[kMaxJ], after[kMaxJ], ring[kMaxJ];  // F(m-1-i), F(m+1+i), F(k-1-i)
+  std::vector<T> last2;                                      // F(k-2)
+  // Sum of F; sum of squared second differences t_k = F_k - 2 F_(k-1) + F_(k-2) over the curve,
+  // and over the (up to three) t_k that involve the current maximum (excluded at the end).
+  std::vector<float> sum, curv_all, curv_excl;
+  std::vector<int32_t> aif;  // 32-bit lanes like the rest, so one vectorised loop updates all
+
+  void Allocate(int w, int h, int jj) {
+    width = w;
+    height = h;
+    j = jj;
+    const size_t n = size_t(w) * h;
+    best.assign(n, T(0));
+    idx.assign(n, 0);
+    for (int i = 0; i < jj; ++i) {
+      before[i].assign(n, T(0));
+      after[i].assign(n, T(0));
+      ring[i].assign(n, T(0));
+    }
+    last2.assign(n, T(0));
+    sum.assign(n, 0.f);
+    curv_all.assign(n, 0.f);
+    curv_excl.assign(n, 0.f);
+    aif.assign(n, 0);
+  }
+};
+
+// First frame: the maximum is frame 0.
+template <typename T, typename P>
+SFF_INLINE void InitRow(StatePlanes<T, P>& s, size_t off, const T* __restrict f, const P* __restrict pix, int n) {
+  T* __restrict best = s.best.data() + off;
+  int32_t* __restrict idx = s.idx.data() + off;
+  float* __restrict sum = s.sum.data() + off;
+  int32_t* __restrict aif = s.aif.data() + off;
+  for (int x = 0; x < n; ++x) {
+    best[x] = f[x];
+    idx[x] = 0;
+    sum[x] = ToFloat(f[x]);
+    aif[x] = pix[x];
+  }
+  std::fill_n(s.curv_all.data() + off, n, 0.f);
+  std::fill_n(s.curv_excl.data() + off, n, 0.f);
+  std::fill_n(s.last2.data() + off, n, T(0));
+  for (int i = 0; i < s.j; ++i) {
+    std::fill_n(s.before[i].data() + off, n, T(0));
+    std::fill_n(s.after[i].data() + off, n, T(0));
+    std::fill_n(s.ring[i].data() + off, n, T(0));
+    if (i == 0) std::copy_n(f, n, s.ring[0].data() + off);
+  }
+}
+
+bool HasAvx2() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
+// Row kernels of the state update, compiled twice: for AVX2 and portable (the ISA is chosen at
+// run time). Each is a separate non-inlined function with restrict pointers and lanes of one
+// width, the form in which GCC vectorises them; masks are built with integer bit operations
+// because GCC does not if-convert an integer comparison selecting a float.
+#define SFF_DEFINE_ROW_KERNELS(NS, ...)                                                                       \
+  namespace NS {                                                                                              \
+  /* Sum of F and, for k >= 2, t_k = F_k - 2 F_(k-1) + F_(k-2) (exact in T for int32), whose square */   \
+  /* goes to curv_all and, when t_k involves the maximum (m is k-2, k-1 or k: new max), to curv_excl. */      \
+  template <typename T>                                                                                       \
+  __VA_ARGS__ void StatsRow(int n, int k, const T* __restrict f, const T* __restrict best,                   \
+                            const int32_t* __restrict idx, const T* __restrict last,                          \
+                            const T* __restrict last2, float* __restrict sum, float* __restrict curv_all,     \
+                            float* __restrict curv_excl) {                                                    \
+    if (k < 2) {                                                                                              \
+      for (int x = 0; x < n; ++x) sum[x] += ToFloat(f[x]);                                                    \
+      return;                                                                                                 \
+    }                                                                                                         \
+    const int32_t km1 = k - 1, km2 = k - 2;                                                                   \
+    for (int x = 0; x < n; ++x) {                                                                             \
+      const T v = f[x];                                                                                       \
+      const float t = ToFloat(T(v - 2 * last[x] + last2[x]));                                                 \
+      const float t2 = t * t;                                                                                 \
+      const uint32_t mgt = uint32_t(-int32_t(v > best[x]));                                                   \
+      const int32_t id = idx[x];                                                                              \
+      const uint32_t mnear = uint32_t(-int32_t((id == km1) | (id == km2)));                                   \
+      const uint32_t tb = std::bit_cast<uint32_t>(t2);                                                        \
+      const float kept = curv_excl[x] + std::bit_cast<float>(tb & mnear);                                     \
+      sum[x] += ToFloat(v);                                                                                   \
+      curv_all[x] += t2;                                                                                      \
+      curv_excl[x] = std::bit_cast<float>((tb & mgt) | (std::bit_cast<uint32_t>(kept) & ~mgt));              \
+    }                                                                                                         \
+  }                                                                                                           \
+  /* Frame k >= 1, one neighbour each side: statistics and maximum tracking in one pass. For k == 1 */  \
+  /* t_k does not exist: curv_scale = 0 makes it contribute nothing. */                                     \
+  template <typename T, typename P>                                                                           \
+  __VA_ARGS__ void UpdateRowJ1(int n, int k, float curv_scale, const T* __restrict f,                        \
+                               const P* __restrict pix, T* __restrict best, int32_t* __restrict idx,          \
+                               T* __restrict prev, T* __restrict next, T* __restrict last,                    \
+                               T* __restrict last2, int32_t* __restrict aif, float* __restrict sum,           \
+                               float* __restrict curv_all, float* __restrict curv_excl) {                     \
+    const int32_t kk = k, km1 = k - 1, km2 = k - 2;                                                           \
+    for (int x = 0; x < n; ++x) {                                                                             \
+      const T v = f[x], b = best[x], l = last[x], l2 = last2[x];                                              \
+      const int32_t id = idx[x];                                                                              \
+      const float t = ToFloat(T(v - 2 * l + l2));                                                             \
+      const float t2 = curv_scale * (t * t);                                                                  \
+      const uint32_t mgt = uint32_t(-int32_t(v > b));                                                         \
+      const uint32_t mnear = uint32_t(-int32_t((id == km1) | (id == km2)));                                   \
+      const uint32_t tb = std::bit_cast<uint32_t>(t2);                                                        \
+      const float kept = curv_excl[x] + std::bit_cast<float>(tb & mnear);                                     \
+      sum[x] += ToFloat(v);                                                                                   \
+      curv_all[x] += t2;                                                                                      \
+      curv_excl[x] = std::bit_cast<float>((tb & mgt) | (std::bit_cast<uint32_t>(kept) & ~mgt));              \
+      const bool gt = v > b;                                                                                  \
+      const T nx = next[x], pv = prev[x];                                                                     \
+      const int32_t a = aif[x], p = pix[x];                                                                   \
+      next[x] = gt ? T(0) : (id == km1 ? v : nx);                                                             \
+      prev[x] = gt ? l : pv;                                                                                  \
+      best[x] = gt ? v : b;                                                                                   \
+      idx[x] = gt ? kk : id;                                                                                  \
+      aif[x] = gt ? p : a;                                                                                    \
+      last2[x] = l;                                                                                           \
+      last[x] = v;                                                                                            \
+    }                                                                                                         \
+  }                                                                                                           \
+  }  // namespace NS
+
+SFF_DEFINE_ROW_KERNELS(avx2, __attribute__((target("avx2"), noinline)))
+SFF_DEFINE_ROW_KERNELS(portable, __attribute__((noinline)))
+
+// Curve statistics of frame k >= 1, before the maximum is updated: sum, second differences.
+template <typename T>
+void CurveStats(int k, const T* f, const T* best, const int32_t* idx, const T* last, const T* last2, float* sum,
+                float* curv_all, float* curv_excl, int n) {
+  if (HasAvx2()) avx2::StatsRow(n, k, f, best, idx, last, last2, sum, curv_all, curv_excl);
+  else portable::StatsRow(n, k, f, best, idx, last, last2, sum, curv_all, curv_excl);
+}
+
+// Frame k >= 1, general j (line fit).
+template <typename T, typename P>
+void UpdateRowGeneral(StatePlanes<T, P>& s, size_t off, int k, const T* f, const P* pix, int n) {
+  const int J = s.j;
+  CurveStats(k, f, s.best.data() + off, s.idx.data() + off, s.ring[0].data() + off, s.last2.data() + off,
+             s.sum.data() + off, s.curv_all.data() + off, s.curv_excl.data() + off, n);
+  for (int x = 0; x < n; ++x) {
+    const size_t i = off + x;
+    const T v = f[x];
+    const bool gt = v > s.best[i];
+    const int dist = k - int(s.idx[i]);
+    for (int j = 0; j < J; ++j) {
+      if (gt) {
+        s.before[j][i] = s.ring[j][i];
+        s.after[j][i] = T(0);
+      } else if (dist == j + 1) {
+        s.after[j][i] = v;
+      }
+    }
+    if (gt) {
+      s.best[i] = v;
+      s.idx[i] = k;
+      s.aif[i] = pix[x];
+    }
+    s.last2[i] = s.ring[0][i];
+    for (int j = J - 1; j > 0; --j) s.ring[j][i] = s.ring[j - 1][i];
+    s.ring[0][i] = v;
+  }
+}
+
+template <typename T, typename P>
+inline void UpdateRow(StatePlanes<T, P>& s, size_t off, int k, const T* f, const P* pix, int n) {
+  if (k == 0) {
+    InitRow(s, off, f, pix, n);
+  } else if (s.j == 1) {
+    // The hot path (maximum and Gaussian interpolation).
+    const float curv_scale = k >= 2 ? 1.f : 0.f;
+    if (HasAvx2()) {
+      avx2::UpdateRowJ1<T, P>(n, k, curv_scale, f, pix, s.best.data() + off, s.idx.data() + off,
+                              s.before[0].data() + off, s.after[0].data() + off, s.ring[0].data() + off,
+                              s.last2.data() + off, s.aif.data() + off, s.sum.data() + off, s.curv_all.data() + off,
+                              s.curv_excl.data() + off);
+    } else {
+      portable::UpdateRowJ1<T, P>(n, k, curv_scale, f, pix, s.best.data() + off, s.idx.data() + off,
+                                  s.before[0].data() + off, s.after[0].data() + off, s.ring[0].data() + off,
+                                  s.last2.data() + off, s.aif.data() + off, s.sum.data() + off,
+                                  s.curv_all.data() + off, s.curv_excl.data() + off);
+    }
+  } else {
+    UpdateRowGeneral(s, off, k, f, pix, n);
+  }
+}
+
+// Scratch of the fused Tenengrad kernel for one tile (one per worker thread).
+struct TenengradScratch {
+  std::vector<int16_t> in[3];   // three input rows, reflected, widened: width tw + 2R + 2
+  std::vector<int16_t> sv, dv;  // vertical [1 2 1] and [1 0 -1] of the three rows (AVX2 path)
+  std::vector<int32_t> ering;   // the last `window` energy rows Gx^2 + Gy^2: width tw + 2R
+  std::vector<int32_t> colsum;  // vertical window sums of the energy
+  std::vector<int32_t> focus;   // one output row
+  void Reserve(int window) {
+    const int r = window / 2, ew = kTileW + 2 * r;
+    for (auto& v : in) v.resize(size_t(ew) + 2);
+    sv.resize(size_t(ew) + 2);
+    dv.resize(size_t(ew) + 2);
+    ering.resize(size_t(ew) * window);
+    colsum.resize(size_t(ew));
+    focus.resize(size_t(kTileW));
+  }
+};
+
+// Sobel energy of one row (eq. 3.13-3.14 before the window sum) and the running column sums.
+// a, b, c: input rows y-1, y, y+1; output x uses columns x .. x+2 (centre x+1).
+SFF_INLINE void EnergyRow(const int16_t* __restrict a, const int16_t* __restrict b, const int16_t* __restrict c,
+                          int32_t* __restrict old_row, int32_t* __restrict colsum, int ew) {
+  for (int x = 0; x < ew; ++x) {
+    const int32_t gx = (a[x] + 2 * b[x] + c[x]) - (a[x + 2] + 2 * b[x + 2] + c[x + 2]);
+    const int32_t gy = (a[x] - c[x]) + 2 * (a[x + 1] - c[x + 1]) + (a[x + 2] - c[x + 2]);
+    const int32_t e = gx * gx + gy * gy;
+    colsum[x] += e - old_row[x];
+    old_row[x] = e;
+  }
+}
+
+// The same with AVX2 in 16-bit lanes: |Gx|, |Gy| <= 1020 fit int16, and vpmaddwd of interleaved
+// (Gx, Gy) pairs gives Gx^2 + Gy^2 in int32 exactly.
+__attribute__((target("avx2"))) inline void EnergyRowAvx2(const int16_t* a, const int16_t* b, const int16_t* c,
+                                                          int16_t* sv, int16_t* dv, int32_t* old_row,
+                                                          int32_t* colsum, int ew) {
+  const int pw = ew + 2;
+  int i = 0;
+  for (; i + 16 <= pw; i += 16) {
+    const __m256i va = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a + i));
+    const __m256i vb = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(b + i));
+    const __m256i vc = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(c + i));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(sv + i),
+                        _mm256_add_epi16(_mm256_add_epi16(va, vc), _mm256_add_epi16(vb, vb)));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(dv + i), _mm256_sub_epi16(va, vc));
+  }
+  for (; i < pw; ++i) {
+    sv[i] = int16_t(a[i] + 2 * b[i] + c[i]);
+    dv[i] = int16_t(a[i] - c[i]);
+  }
+  int x = 0;
+  for (; x + 16 <= ew; x += 16) {
+    const __m256i gx = _mm256_sub_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(sv + x)),
+                                        _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sv + x + 2)));
+    const __m256i d1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x + 1));
+    const __m256i gy = _mm256_add_epi16(
+        _mm256_add_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x)),
+                         _mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x + 2))),
+        _mm256_add_epi16(d1, d1));
+    const __m256i lo = _mm256_unpacklo_epi16(gx, gy), hi = _mm256_unpackhi_epi16(gx, gy);
+    const __m256i elo = _mm256_madd_epi16(lo, lo), ehi = _mm256_madd_epi16(hi, hi);
+    // unpack works within 128-bit lanes: restore pixel order x .. x+7 and x+8 .. x+15.
+    const __m256i e0 = _mm256_permute2x128_si256(elo, ehi, 0x20);
+    const __m256i e1 = _mm256_permute2x128_si256(elo, ehi, 0x31);
+    __m256i* cs = reinterpret_cast<__m256i*>(colsum + x);
+    __m256i* od = reinterpret_cast<__m256i*>(old_row + x);
+    const __m256i o0 = _mm256_loadu_si256(od), o1 = _mm256_loadu_si256(od + 1);
+    _mm256_storeu_si256(cs, _mm256_add_epi32(_mm256_loadu_si256(cs), _mm256_sub_epi32(e0, o0)));
+    _mm256_storeu_si256(cs + 1, _mm256_add_epi32(_mm256_loadu_si256(cs + 1), _mm256_sub_epi32(e1, o1)));
+    _mm256_storeu_si256(od, e0);
+    _mm256_storeu_si256(od + 1, e1);
+  }
+  for (; x < ew; ++x) {
+    const int32_t gx = sv[x] - sv[x + 2];
+    const int32_t gy = dv[x] + 2 * dv[x + 1] + dv[x + 2];
+    const int32_t e = gx * gx + gy * gy;
+    colsum[x] += e - old_row[x];
+    old_row[x] = e;
+  }
+}
+
+SFF_INLINE void WindowRow(const int32_t* __restrict colsum, int32_t* __restrict out, int tw, int window) {
+  for (int x = 0; x < tw; ++x) out[x] = colsum[x];
+  for (int i = 1; i < window; ++i) {
+    const int32_t* __restrict c = colsum + i;
+    for (int x = 0; x < tw; ++x) out[x] += c[x];
+  }
+}
+
+// Tenengrad over the tile [x0, x0 + tw) x [y0, y0 + th) of an 8-bit frame, BORDER_REFLECT_101;
+// sink(y, focus_row, pixel_row) receives each output row (tw values).
+template <bool kAvx2, typename Sink>
+SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int th, int window,
+                              TenengradScratch& sc, Sink&& sink, const cv::Mat* prefetch_next = nullptr) {
+  const int r = window / 2, ew = tw + 2 * r, pw = ew + 2;
+  const int rows = frame.rows, cols = frame.cols;
+  std::fill_n(sc.colsum.data(), ew, 0);
+  std::fill_n(sc.ering.data(), size_t(ew) * window, 0);
+  // Columns x0 - r - 1 .. x0 + tw + r: [lo, hi) lie inside the frame and are copied directly,
+  // the few outside are mirrored (BORDER_REFLECT_101).
+  const int c_first = x0 - r - 1;
+  const int lo = std::max(0, -c_first), hi = std::min(pw, cols - c_first);
+  int loaded = 0, e_rows = 0;
+  for (int yin = y0 - r - 1; yin <= y0 + th + r; ++yin) {
+    const int ry = Reflect101(yin, rows);
+    const uint8_t* src = frame.ptr<uint8_t>(ry);
+    if (prefetch_next) {
+      // The same rows of the next frame: the tile reads them on its next pass, by then from cache.
+      const uint8_t* nx = prefetch_next->ptr<uint8_t>(ry) + std::max(c_first, 0);
+      for (int i = 0; i < hi - lo; i += 64) __builtin_prefetch(nx + i, 0, 2);
+    }
+    int16_t* __restrict dst = sc.in[loaded % 3].data();
+    {
+      const uint8_t* __restrict s = src + c_first;
+      for (int i = lo; i < hi; ++i) dst[i] = s[i];
+    }
+    for (int i = 0; i < lo; ++i) dst[i] = src[Reflect101(c_first + i, cols)];
+    for (int i = std::max(hi, lo); i < pw; ++i) dst[i] = src[Reflect101(c_first + i, cols)];
+    ++loaded;
+    if (loaded < 3) continue;
+    if constexpr (kAvx2) {
+      EnergyRowAvx2(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(),
+                    sc.sv.data(), sc.dv.data(), sc.ering.data() + size_t(e_rows % window) * ew, sc.colsum.data(), ew);
+    } else {
+      EnergyRow(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(),
+                sc.ering.data() + size_t(e_rows % window) * ew, sc.colsum.data(), ew);
+    }
+    ++e_rows;
+    if (e_rows < window) continue;
+    const int y = y0 + e_rows - window;
+    WindowRow(sc.colsum.data(), sc.focus.data(), tw, window);
+    sink(y, sc.focus.data(), frame.ptr<uint8_t>(y) + x0);
+  }
+}
+
+// Sink of the fused kernel: updates the state of the tile row (a functor rather than a lambda so
+// that it is always inlined into the AVX2 clone).
+struct StateSink {
+  StatePlanes<int32_t, uint8_t>& st;
+  int k, y0, tw, sx, sy;
+  SFF_INLINE void operator()(int y, const int32_t* f, const uint8_t* pix) {
+    UpdateRow(st, size_t(y - y0 + sy) * st.width + sx, k, f, pix, tw);
+  }
+};
+
+// One frame k over one tile, updating state whose (0, 0) is the tile's top-left at (sx, sy).
+template <bool kAvx2>
+SFF_INLINE void FusedTileFrameImpl(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window,
+                                   TenengradScratch& sc, StatePlanes<int32_t, uint8_t>& st, int sx, int sy,
+                                   const cv::Mat* next) {
+  TenengradTile<kAvx2>(frame, x0, y0, tw, th, window, sc, StateSink{st, k, y0, tw, sx, sy}, next);
+}
+
+__attribute__((target("avx2"))) void FusedTileFrameAvx2(const cv::Mat& frame, int k, int x0, int y0, int tw, int th,
+                                                        int window, TenengradScratch& sc,
+                                                        StatePlanes<int32_t, uint8_t>& st, int sx, int sy,
+                                                        const cv::Mat* next) {
+  FusedTileFrameImpl<true>(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+}
+void FusedTileFramePortable(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window,
+                            TenengradScratch& sc, StatePlanes<int32_t, uint8_t>& st, int sx, int sy,
+                            const cv::Mat* next) {
+  FusedTileFrameImpl<false>(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+}
+
+void FusedTileFrame(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window, TenengradScratch& sc,
+                    StatePlanes<int32_t, uint8_t>& st, int sx, int sy, const cv::Mat* next = nullptr) {
+  if (HasAvx2()) FusedTileFrameAvx2(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+  else FusedTileFramePortable(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+}
+
+template <typename P>
+__attribute__((target("avx2"))) void UpdateRowsAvx2(StatePlanes<float, P>& st, int k, const cv::Mat& focus,
+                                                    const cv::Mat& frame, int y_begin, int y_end) {
+  for (int y = y_begin; y < y_end; ++y)
+    UpdateRow(st, size_t(y) * st.width, k, focus.ptr<float>(y), frame.ptr<P>(y), st.width);
+}
+template <typename P>
+void UpdateRowsPortable(StatePlanes<float, P>& st, int k, const cv::Mat& focus, const cv::Mat& frame, int y_begin,
+                        int y_end) {
+  for (int y = y_begin; y < y_end; ++y)
+    UpdateRow(st, size_t(y) * st.width, k, focus.ptr<float>(y), frame.ptr<P>(y), st.width);
+}
+
+struct Outputs {
+  cv::Mat depth, confidence, aif;
+};
+
+// Interpolation and confidence for the state pixels of one row span; writes the outputs at
+// (ox, oy). Returns the number of pixels with finite depth.
+template <typename T, typename P>
+size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std::vector<double>& z,
+                  const SffOptions& o, Outputs& out, int ox, int oy) {
+  const int n = int(z.size());
+  const int J = st.j;
+  float* depth = out.depth.ptr<float>(oy) + ox;
+  float* conf = out.confidence.ptr<float>(oy) + ox;
+  P* aif = out.aif.ptr<P>(oy) + ox;
+  size_t valid = 0;
+  double zw[2 * kMaxJ + 1], fw[2 * kMaxJ + 1];
+  for (int x = 0; x < count; ++x) {
+    const size_t i = off + x;
+    const int m = st.idx[i];
+    const int before = std::min(J, m), after = std::min(J, n - 1 - m);
+    const double best = ToFloat(st.best[i]);
+    zw[before] = z[m];
+    fw[before] = best;
+    for (int t = 1; t <= before; ++t) {
+      zw[before - t] = z[m - t];
+      fw[before - t] = ToFloat(st.before[t - 1][i]);
+    }
+    for (int t = 1; t <= after; ++t) {
+      zw[before + t] = z[m + t];
+      fw[before + t] = ToFloat(st.after[t - 1][i]);
+    }
+    FocusCurveSummary s;
+    s.peak = best;
+    s.mean = double(st.sum[i]) / n;
+    // Second differences t_k, k = 2..n-1; those with m in {k-2, k-1, k} involve the maximum.
+    const int excluded = std::max(0, std::min(n - 1, m + 2) - std::max(2, m) + 1);
+    s.curvature_sq_sum = double(st.curv_all[i]) - double(st.curv_excl[i]);
+    s.curvature_count = std::max(0, n - 2) - excluded;
+    s.peak_at_end = m == 0 || m == n - 1;
+    const float c = FocusConfidence(s);
+    conf[x] = c;
+    if (c >= o.min_confidence) {
+      // Only kept pixels are interpolated (the logarithms are the costly part).
+      double z_um;
+      if (o.interpolation == DepthInterpolation::kGaussian && before == 1 && after == 1) {
+        z_um = GaussianPeakZ(zw[0], zw[1], zw[2], fw[0], fw[1], fw[2]);
+      } else {
+        z_um = InterpolatePeak(o.interpolation, zw, fw, before, after).z_um;
+      }
+      depth[x] = float(z_um);
+      ++valid;
+    } else {
+      depth[x] = kNaN;
+    }
+    aif[x] = P(st.aif[i]);
+  }
+  return valid;
+}
+
+Status CheckFrame(const cv::Mat& frame, int k, cv::Size size, int type) {
+  if (frame.empty()) return Status::InvalidArgument("frame " + std::to_string(k) + ": empty image");
+  if (frame.size() != size) {
+    return Status::InvalidArgument("frame " + std::to_string(k) + ": size " + std::to_string(frame.cols) + "x" +
+                                   std::to_string(frame.rows) + " differs from the stack's " +
+                                   std::to_string(size.width) + "x" + std::to_string(size.height));
+  }
+  if (frame.type() != type) {
+    return Status::InvalidArgument("frame " + std::to_string(k) + ": pixel type " + std::to_string(frame.type()) +
+                                   " differs from the stack's " + std::to_string(type) +
+                                   " (bit depth or channels mismatch)");
+  }
+  return Status::Ok();
+}
+
+template <typename T, typename P>
+class Engine final : public SffEngine {
  public:
-  TenengradGaussianEngine(const SffOptions& o, cv::Size size, int type) : options_(o), size_(size), type_(type) {
-    best_.create(size, CV_32F);
-    best_.setTo(-1.f);
-    prev_.create(size, CV_32F);
-    prev_.setTo(0.f);
-    next_.create(size, CV_32F);
-    next_.setTo(-1.f);
-    last_.create(size, CV_32F);
-    last_.setTo(0.f);
-    sum_.create(size, CV_32F);
-    sum_.setTo(0.f);
-    index_.create(size, CV_16U);
-    index_.setTo(0);
-    aif_.create(size, type);
-    aif_.setTo(0);
+  static constexpr bool kFused = std::is_same_v<T, int32_t>;
+
+  Engine(const SffOptions& o, cv::Size size, int type) : options_(o), size_(size), type_(type) {
+    const int j = o.interpolation == DepthInterpolation::kLineFit ? o.linefit_half_width : 1;
+    state_.Allocate(size.width, size.height, j);
+    threads_ = ResolveThreads(o.threads);
+    if constexpr (kFused) {
+      scratch_.resize(size_t(threads_));
+      for (auto& s : scratch_) s.Reserve(o.window_px);
+    }
   }
 
   Status PushFrame(const cv::Mat& frame, double z_um) override {
     const int k = int(z_.size());
     if (finished_) return Status::FailedPrecondition("engine already finished");
-    if (frame.size() != size_) {
-      return Status::InvalidArgument("frame " + std::to_string(k) + ": size " + std::to_string(frame.cols) + "x" +
-                                     std::to_string(frame.rows) + " differs from the stack's " +
-                                     std::to_string(size_.width) + "x" + std::to_string(size_.height));
-    }
-    if (frame.type() != type_) {
-      return Status::InvalidArgument("frame " + std::to_string(k) + ": pixel type differs from frame 0");
-    }
+    INSPECT_RETURN_IF_ERROR(CheckFrame(frame, k, size_, type_));
     if (!std::isfinite(z_um)) return Status::InvalidArgument("frame " + std::to_string(k) + ": z_um is not finite");
     if (k >= 1) {
       const double dz = z_um - z_.back();
       if (dz == 0.0 || (k >= 2 && (dz > 0) != (z_[1] > z_[0]))) {
         return Status::InvalidArgument("frame " + std::to_string(k) + ": z_um " + std::to_string(z_um) +
-                                       " is not strictly monotonic");
+                                       (dz == 0.0 ? " duplicates the previous frame's" : " is not strictly monotonic"));
       }
     }
-    if (k >= 65535) return Status::ResourceExhausted("more than 65535 frames");
+    if (k >= 65535) return Status::ResourceExhausted("frame " + std::to_string(k) + ": more than 65535 frames");
+    if constexpr (kFused) {
+      const int tiles_x = (size_.width + kTileW - 1) / kTileW, tiles_y = (size_.height + kTileH - 1) / kTileH;
+      ParallelFor(tiles_x * tiles_y, threads_, [&](int t, int worker) {
+        const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kTileH;
+        const int tw = std::min(kTileW, size_.width - x0), th = std::min(kTileH, size_.height - y0);
+        FusedTileFrame(frame, k, x0, y0, tw, th, options_.window_px, scratch_[size_t(worker)], state_, x0, y0);
+      });
+    } else {
+      cv::Mat focus;
+      INSPECT_RETURN_IF_ERROR(ComputeFocusMeasure(frame, options_.focus_measure, options_.window_px, &focus)
+                                  .WithContext("frame " + std::to_string(k) + ": "));
+      const int bands = std::min(size_.height, threads_ * 4);
+      ParallelFor(bands, threads_, [&](int b, int) {
+        const int y_begin = size_.height * b / bands, y_end = size_.height * (b + 1) / bands;
+        if (HasAvx2()) UpdateRowsAvx2(state_, k, focus, frame, y_begin, y_end);
+        else UpdateRowsPortable(state_, k, focus, frame, y_begin, y_end);
+      });
+    }
     z_.push_back(z_um);
-
-    cv::Mat f32, gx, gy, fm;
-    frame.convertTo(f32, CV_32F, frame.depth() == CV_16U ? 1.0 / 257.0 : 1.0);
-    cv::Sobel(f32, gx, CV_32F, 1, 0, 3, 1, 0, cv::BORDER_REFLECT101);
-    cv::Sobel(f32, gy, CV_32F, 0, 1, 3, 1, 0, cv::BORDER_REFLECT101);
-    fm = gx.mul(gx) + gy.mul(gy);
-    cv::boxFilter(fm, fm, CV_32F, cv::Size(options_.window_px, options_.window_px), cv::Point(-1, -1),
-                  /*normalize=*/true, cv::BORDER_REFLECT101);
-
-    for (int y = 0; y < size_.height; ++y) {
-      const float* f = fm.ptr<float>(y);
-      float* best = best_.ptr<float>(y);
-      float* prev = prev_.ptr<float>(y);
-      float* next = next_.ptr<float>(y);
-      float* last = last_.ptr<float>(y);
-      float* sum = sum_.ptr<float>(y);
-      uint16_t* idx = index_.ptr<uint16_t>(y);
-      for (int x = 0; x < size_.width; ++x) {
-        const float v = f[x];
-        if (v > best[x]) {
-          prev[x] = last[x];
-          best[x] = v;
-          next[x] = -1.f;
-          idx[x] = uint16_t(k);
-          if (type_ == CV_8UC1) aif_.ptr<uint8_t>(y)[x] = frame.ptr<uint8_t>(y)[x];
-          else aif_.ptr<uint16_t>(y)[x] = frame.ptr<uint16_t>(y)[x];
-        } else if (int(idx[x]) == k - 1) {
-          next[x] = v;
-        }
-        last[x] = v;
-        sum[x] += v;
-      }
-    }
     return Status::Ok();
   }
 
   StatusOr<DepthResult> Finish() override {
     const int n = int(z_.size());
+    if (finished_) return Status::FailedPrecondition("engine already finished");
     if (n < 3) return Status::InvalidArgument("stack has " + std::to_string(n) + " frames; at least 3 are needed");
     finished_ = true;
+    Outputs out;
+    out.depth.create(size_, CV_32F);
+    out.confidence.create(size_, CV_32F);
+    out.aif.create(size_, type_);
+    std::atomic<size_t> valid{0};
+    ParallelFor(size_.height, threads_, [&](int y, int) {
+      valid += FinishSpan(state_, size_t(y) * size_.width, size_.width, z_, options_, out, 0, y);
+    });
     DepthResult r;
+    r.depth_um = out.depth;
+    r.confidence = out.confidence;
+    r.all_in_focus = out.aif;
     r.frame_count = n;
-    r.depth_um.create(size_, CV_32F);
-    r.confidence.create(size_, CV_32F);
-    r.all_in_focus = aif_;
-    size_t valid = 0;
-    const float nan = std::numeric_limits<float>::quiet_NaN();
-    for (int y = 0; y < size_.height; ++y) {
-      const float* best = best_.ptr<float>(y);
-      const float* prev = prev_.ptr<float>(y);
-      const float* next = next_.ptr<float>(y);
-      const float* sum = sum_.ptr<float>(y);
-      const uint16_t* idx = index_.ptr<uint16_t>(y);
-      float* depth = r.depth_um.ptr<float>(y);
-      float* conf = r.confidence.ptr<float>(y);
-      for (int x = 0; x < size_.width; ++x) {
-        const int m = idx[x];
-        double z = z_[m];
-        const float mean = sum[x] / float(n);
-        float c = best[x] > 0 ? (best[x] - mean) / best[x] : 0.f;
-        if (options_.interpolation == DepthInterpolation::kGaussian && m > 0 && m < n - 1 && prev[x] > 0 &&
-            next[x] > 0) {
-          const double l1 = std::log(double(prev[x])), l2 = std::log(double(best[x])), l3 = std::log(double(next[x]));
-          const double z1 = z_[m - 1], z2 = z_[m], z3 = z_[m + 1];
-          const double a = (z2 - z1) * (l2 - l3), b = (z2 - z3) * (l2 - l1);
-          const double den = a - b;
-          if (den != 0.0) {
-            const double num = (z2 - z1) * a - (z2 - z3) * b;
-            const double zp = z2 - 0.5 * num / den;
-            if (std::isfinite(zp) && std::abs(zp - z2) <= std::max(std::abs(z3 - z2), std::abs(z2 - z1))) z = zp;
-          }
-        } else if (m == 0 || m == n - 1) {
-          c *= 0.5f;  // the peak lies at or beyond the end of the stack
-        }
-        conf[x] = std::clamp(c, 0.f, 1.f);
-        if (conf[x] >= options_.min_confidence) {
-          depth[x] = float(z);
-          ++valid;
-        } else {
-          depth[x] = nan;
-        }
-      }
-    }
-    r.valid_fraction = double(valid) / double(size_.area());
+    r.valid_fraction = double(valid.load()) / double(size_.area());
+    state_ = {};  // release the O(pixels) state
     return r;
   }
 
@@ -195,25 +665,161 @@ class TenengradGaussianEngine final : public SffEngine {
   SffOptions options_;
   cv::Size size_;
   int type_;
+  int threads_ = 1;
   bool finished_ = false;
   std::vector<double> z_;
-  cv::Mat best_, prev_, next_, last_, sum_, index_, aif_;
+  StatePlanes<T, P> state_;
+  std::vector<TenengradScratch> scratch_;
 };
 
-}  // namespace
-
-StatusOr<std::unique_ptr<SffEngine>> SffEngine::Create(const SffOptions& options, cv::Size frame_size,
-                                                       int frame_type) {
+Status CheckCreate(const SffOptions& options, cv::Size frame_size, int frame_type) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
   if (frame_size.width < 3 || frame_size.height < 3) return Status::InvalidArgument("frame size must be at least 3x3");
   if (frame_type != CV_8UC1 && frame_type != CV_16UC1) {
     return Status::InvalidArgument("frames must be 8- or 16-bit single-channel");
   }
-  if (options.focus_measure != FocusMeasure::kTenengrad) {
-    return Status::Unimplemented(std::string("focus_measure ") + FocusMeasureName(options.focus_measure) +
-                                 " is not available in this build");
+  return Status::Ok();
+}
+
+bool UseFused(const SffOptions& o, int frame_type) {
+  return frame_type == CV_8UC1 && o.focus_measure == FocusMeasure::kTenengrad;
+}
+
+}  // namespace
+
+StatusOr<std::unique_ptr<SffEngine>> SffEngine::Create(const SffOptions& options, cv::Size frame_size,
+                                                       int frame_type) {
+  INSPECT_RETURN_IF_ERROR(CheckCreate(options, frame_size, frame_type));
+  if (UseFused(options, frame_type)) {
+    return std::unique_ptr<SffEngine>(new Engine<int32_t, uint8_t>(options, frame_size, frame_type));
   }
-  return std::unique_ptr<SffEngine>(new TenengradGaussianEngine(options, frame_size, frame_type));
+  if (frame_type == CV_8UC1) return std::unique_ptr<SffEngine>(new Engine<float, uint8_t>(options, frame_size, frame_type));
+  return std::unique_ptr<SffEngine>(new Engine<float, uint16_t>(options, frame_size, frame_type));
+}
+
+StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, const std::vector<cv::Mat>& frames,
+                                                     const std::vector<double>& z_um) {
+  INSPECT_RETURN_IF_ERROR(options.Validate());
+  if (frames.size() < 3) {
+    return Status::InvalidArgument("stack has " + std::to_string(frames.size()) + " frames; at least 3 are needed");
+  }
+  if (z_um.size() != frames.size()) {
+    return Status::InvalidArgument("z_um has " + std::to_string(z_um.size()) + " values for " +
+                                   std::to_string(frames.size()) + " frames");
+  }
+  if (frames[0].empty()) return Status::InvalidArgument("frame 0: empty image");
+  const cv::Size size = frames[0].size();
+  const int type = frames[0].type();
+  if (type != CV_8UC1 && type != CV_16UC1) {
+    return Status::InvalidArgument("frame 0: frames must be 8- or 16-bit single-channel");
+  }
+  for (size_t k = 0; k < frames.size(); ++k) INSPECT_RETURN_IF_ERROR(CheckFrame(frames[k], int(k), size, type));
+  for (size_t k = 0; k < z_um.size(); ++k) {
+    if (!std::isfinite(z_um[k])) return Status::InvalidArgument("frame " + std::to_string(k) + ": z_um is not finite");
+  }
+  INSPECT_RETURN_IF_ERROR(CheckMonotonicZ(z_um));
+  INSPECT_RETURN_IF_ERROR(CheckCreate(options, size, type));
+  if (frames.size() >= 65535) return Status::ResourceExhausted("more than 65535 frames");
+
+  if (!UseFused(options, type)) {
+    INSPECT_ASSIGN_OR_RETURN(auto engine, Create(options, size, type));
+    for (size_t k = 0; k < frames.size(); ++k) INSPECT_RETURN_IF_ERROR(engine->PushFrame(frames[k], z_um[k]));
+    return engine->Finish();
+  }
+
+  // Tiles across all frames: each worker keeps one tile's state, runs every frame over it, then
+  // interpolates the tile; the same kernels as PushFrame, so the result is bit-identical.
+  const int threads = ResolveThreads(options.threads);
+  const int j = options.interpolation == DepthInterpolation::kLineFit ? options.linefit_half_width : 1;
+  const int tiles_x = (size.width + kTileW - 1) / kTileW, tiles_y = (size.height + kTileH - 1) / kTileH;
+  const int n_tiles = tiles_x * tiles_y;
+  Outputs out;
+  out.depth.create(size, CV_32F);
+  out.confidence.create(size, CV_32F);
+  out.aif.create(size, type);
+  const int workers = std::max(1, std::min(threads, n_tiles));
+  std::vector<StatePlanes<int32_t, uint8_t>> states(static_cast<size_t>(workers));
+  std::vector<TenengradScratch> scratch(static_cast<size_t>(workers));
+  for (int w = 0; w < workers; ++w) {
+    states[size_t(w)].Allocate(kTileW, kTileH, j);
+    scratch[size_t(w)].Reserve(options.window_px);
+  }
+  std::atomic<size_t> valid{0};
+  ParallelFor(n_tiles, workers, [&](int t, int worker) {
+    auto& st = states[size_t(worker)];
+    const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kTileH;
+    const int tw = std::min(kTileW, size.width - x0), th = std::min(kTileH, size.height - y0);
+    for (size_t k = 0; k < frames.size(); ++k) {
+      FusedTileFrame(frames[k], int(k), x0, y0, tw, th, options.window_px, scratch[size_t(worker)], st, 0, 0,
+                     k + 1 < frames.size() ? &frames[k + 1] : nullptr);
+    }
+    size_t v = 0;
+    for (int y = 0; y < th; ++y) v += FinishSpan(st, size_t(y) * st.width, tw, z_um, options, out, x0, y0 + y);
+    valid += v;
+  });
+  DepthResult r;
+  r.depth_um = out.depth;
+  r.confidence = out.confidence;
+  r.all_in_focus = out.aif;
+  r.frame_count = int(frames.size());
+  r.valid_fraction = double(valid.load()) / double(size.area());
+  return r;
+}
+
+namespace {
+
+struct CopySink {
+  cv::Mat* out;
+  int x0, tw;
+  SFF_INLINE void operator()(int y, const int32_t* f, const uint8_t*) { std::copy_n(f, tw, out->ptr<int32_t>(y) + x0); }
+};
+
+template <bool kAvx2>
+SFF_INLINE void TenengradMapImpl(const cv::Mat& frame, int window_px, cv::Mat* out) {
+  TenengradScratch sc;
+  sc.Reserve(window_px);
+  for (int y0 = 0; y0 < frame.rows; y0 += kTileH) {
+    for (int x0 = 0; x0 < frame.cols; x0 += kTileW) {
+      const int tw = std::min(kTileW, frame.cols - x0), th = std::min(kTileH, frame.rows - y0);
+      TenengradTile<kAvx2>(frame, x0, y0, tw, th, window_px, sc, CopySink{out, x0, tw});
+    }
+  }
+}
+__attribute__((target("avx2"))) void TenengradMapAvx2(const cv::Mat& frame, int window_px, cv::Mat* out) {
+  TenengradMapImpl<true>(frame, window_px, out);
+}
+void TenengradMapPortable(const cv::Mat& frame, int window_px, cv::Mat* out) {
+  TenengradMapImpl<false>(frame, window_px, out);
+}
+
+}  // namespace
+
+Status ComputeTenengradU8(const cv::Mat& frame, int window_px, cv::Mat* focus, bool use_simd) {
+  if (frame.empty() || frame.type() != CV_8UC1) return Status::InvalidArgument("frame must be CV_8UC1");
+  if (window_px < 3 || window_px > 31 || window_px % 2 == 0) {
+    return Status::InvalidArgument("window_px " + std::to_string(window_px) + " must be odd and between 3 and 31");
+  }
+  cv::Mat out(frame.size(), CV_32SC1);
+  if (use_simd && HasAvx2()) TenengradMapAvx2(frame, window_px, &out);
+  else TenengradMapPortable(frame, window_px, &out);
+  *focus = out;
+  return Status::Ok();
+}
+
+StatusOr<DepthResult> ReconstructStack(const std::filesystem::path& dir, const SffOptions& options) {
+  INSPECT_RETURN_IF_ERROR(options.Validate());
+  INSPECT_ASSIGN_OR_RETURN(StackManifest manifest, ReadStackManifest(dir));
+  std::unique_ptr<SffEngine> engine;
+  for (size_t k = 0; k < manifest.frames.size(); ++k) {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, LoadStackFrame(dir, manifest, k));
+    if (!engine) {
+      INSPECT_ASSIGN_OR_RETURN(engine, SffEngine::Create(options, frame.size(), frame.type()));
+    }
+    Status st = engine->PushFrame(frame, manifest.frames[k].z_um);
+    if (!st.ok()) return st.WithContext(manifest.frames[k].file + ": ");
+  }
+  if (!engine) return Status::InvalidArgument("stack.json: frames is empty");
+  return engine->Finish();
 }
 
 }  // namespace inspection

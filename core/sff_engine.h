@@ -4,8 +4,10 @@
 // the last frame arrives. Scans and Reconstruct both run through it.
 #pragma once
 
+#include <filesystem>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -14,8 +16,9 @@
 namespace inspection {
 
 // Focus measure operators of thesis 3.1.3.
+// Exact definitions and border handling: core/focus_measure.h.
 enum class FocusMeasure {
-  kModifiedLaplacian,      // ML, eq. 3.8-3.11, summed over the window (thesis SML, eq. 3.12)
+  kModifiedLaplacian,      // ML: |Ixx| + |Iyy| (masks of eq. 3.11, unsquared eq. 3.8) summed over the window
   kSumModifiedLaplacian,   // SML, eq. 3.12
   kTenengrad,              // eq. 3.14
   kGreyLevelVariance,      // eq. 3.15
@@ -40,8 +43,13 @@ struct SffOptions {
   FocusMeasure focus_measure = FocusMeasure::kTenengrad;
   int window_px = 7;  // odd, 3..31: side of the square summation window U of eq. 3.12/3.14
   DepthInterpolation interpolation = DepthInterpolation::kGaussian;
-  // Pixels whose confidence (0..1, see DepthResult) is below this get NaN depth.
-  double min_confidence = 0.05;
+  // Line fit only: samples j on each side of the maximum in DS1/DS2 (eq. 3.25-3.26), 1..4.
+  int linefit_half_width = 2;
+  // Pixels whose confidence (0..1, see FocusConfidence in core/depth_interpolation.h) is below
+  // this get NaN depth. The default keeps > 99 % of a textured specimen scanned through its
+  // focus with >= ~20 frames and rejects > 99 % of textureless (grey + noise) pixels
+  // (tests/core/sff_engine_test.cc); with fewer frames the noise level is less certain.
+  double min_confidence = 0.4;
   // Worker threads for the per-frame pass; 0 = all hardware threads.
   int threads = 0;
 
@@ -71,6 +79,17 @@ class SffEngine {
   // Needs >= 3 frames. After Finish the engine cannot take more frames.
   virtual StatusOr<DepthResult> Finish() = 0;
   virtual int frames_pushed() const = 0;
+
+  // Batch path for a stack already in memory: same result as pushing the frames one by one
+  // (bit-identical), but processes cache-sized tiles across all frames on options.threads
+  // threads, so the per-pixel state never leaves the cache. frames: >= 3, all CV_8UC1 or all
+  // CV_16UC1 of one size; z_um: one per frame, strictly monotonic.
+  static StatusOr<DepthResult> ReconstructInMemory(const SffOptions& options, const std::vector<cv::Mat>& frames,
+                                                   const std::vector<double>& z_um);
 };
+
+// Reconstructs a stack folder (core/stack.h) by decoding and pushing its frames one at a time,
+// so memory stays O(pixels). Errors name the frame or the manifest field.
+StatusOr<DepthResult> ReconstructStack(const std::filesystem::path& dir, const SffOptions& options);
 
 }  // namespace inspection

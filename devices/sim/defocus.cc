@@ -99,6 +99,7 @@ SpatiallyVaryingBlur::SpatiallyVaryingBlur(const DefocusModel& model) : model_(m
     factor_.push_back(f);
   }
   layers_.resize(ladder_.size());
+  layer_factor_.assign(ladder_.size(), 1);
 }
 
 void SpatiallyVaryingBlur::ComputeLayer(int i) {
@@ -107,6 +108,11 @@ void SpatiallyVaryingBlur::ComputeLayer(int i) {
   while ((1 << k) < factor_[i] && k + 1 < static_cast<int>(reduced_.size())) ++k;
   const int f = 1 << k;
   const double sigma_low = f == 1 ? sigma : ResidualSigma(sigma, f);
+  layer_factor_[i] = f;
+  if (f == 1) {  // Gaussian at full resolution (separable)
+    GaussianBlurTruncated(padded_, &layers_[i], sigma);
+    return;
+  }
   cv::Mat low;
   if (model_.PillboxWeight(sigma) < kGaussianOnlyWeight) {
     GaussianBlurTruncated(reduced_[k], &low, sigma_low);
@@ -114,24 +120,7 @@ void SpatiallyVaryingBlur::ComputeLayer(int i) {
     cv::filter2D(reduced_[k], low, CV_32F, model_.Kernel(sigma_low, sigma, kGaussianTruncation), cv::Point(-1, -1),
                  0.0, cv::BORDER_REFLECT);
   }
-  if (f == 1) {
-    layers_[i] = low;
-  } else {
-    cv::resize(low, layers_[i], padded_.size(), 0, 0, cv::INTER_LINEAR);
-  }
-}
-
-void SpatiallyVaryingBlur::ComputeFullResolutionChain(int i0, int i1) {
-  // Gaussian rungs at full resolution, each from the previous one: only the variance
-  // difference is added, so the kernels stay short.
-  double previous_sigma = 0.0;
-  const cv::Mat* previous = &padded_;
-  for (int i = i0; i <= i1; ++i) {
-    const double step = std::sqrt(ladder_[i] * ladder_[i] - previous_sigma * previous_sigma);
-    GaussianBlurTruncated(*previous, &layers_[i], step);
-    previous = &layers_[i];
-    previous_sigma = ladder_[i];
-  }
+  layers_[i] = low;  // kept reduced; enlarged row by row while mixing
 }
 
 BlurPlan SpatiallyVaryingBlur::Plan(const cv::Mat& sigma_px) const {
@@ -192,30 +181,79 @@ void SpatiallyVaryingBlur::Apply(const cv::Mat& src, const BlurPlan& plan, cv::M
     reduced_.push_back(half);
   }
 
-  // Task 0: the chain of full-resolution Gaussian rungs; then one task per reduced rung.
-  int chain_end = i0 - 1;
-  while (chain_end + 1 <= i1 && factor_[chain_end + 1] == 1) ++chain_end;
-  const int first_reduced = chain_end + 1;
-  cv::parallel_for_(cv::Range(0, 1 + i1 - first_reduced + 1), [&](const cv::Range& r) {
-    for (int t = r.start; t < r.end; ++t) {
-      if (t == 0) {
-        if (chain_end >= i0) ComputeFullResolutionChain(i0, chain_end);
-      } else {
-        ComputeLayer(first_reduced + t - 1);
-      }
-    }
-  });
+  // One task per rung, all independent (full-resolution rungs blur the source directly), handed
+  // out one at a time so two threads share the expensive full-resolution rungs.
+  const int tasks = i1 - i0 + 1;
+  cv::parallel_for_(cv::Range(0, tasks), [&](const cv::Range& r) {
+    for (int t = r.start; t < r.end; ++t) ComputeLayer(i0 + t);
+  }, tasks);
 
+  // Bilinear enlargement of reduced rungs (same sampling as cv::resize INTER_LINEAR), done per
+  // row into small buffers so no full-size copy of a reduced rung is ever stored.
+  const int m = i1 - i0 + 1;
+  struct Taps {
+    std::vector<int> x0;
+    std::vector<float> wx;
+  };
+  std::vector<Taps> taps(m);
+  for (int j = 0; j < m; ++j) {
+    const int f = layer_factor_[i0 + j];
+    if (f == 1) continue;
+    const int low_w = layers_[i0 + j].cols;
+    taps[j].x0.resize(src.cols);
+    taps[j].wx.resize(src.cols);
+    for (int x = 0; x < src.cols; ++x) {
+      const float sx = (x + 0.5f) / f - 0.5f;
+      int x0 = static_cast<int>(std::floor(sx));
+      float w = sx - x0;
+      if (x0 < 0) x0 = 0, w = 0.0f;
+      if (x0 >= low_w - 1) x0 = low_w - 1, w = 0.0f;
+      taps[j].x0[x] = x0;
+      taps[j].wx[x] = w;
+    }
+  }
   // Per pixel: mix the plan's two rungs. Runs of equal rung are long, so the inner loop is a
   // plain vectorisable lerp.
-  const int m = i1 - i0 + 1;
   dst->create(src.size(), CV_32FC1);
   cv::parallel_for_(cv::Range(0, src.rows), [&](const cv::Range& r) {
     std::vector<const float*> rows(m + 1);
+    std::vector<std::vector<float>> enlarged(m);
     for (int y = r.start; y < r.end; ++y) {
-      for (int j = 0; j < m; ++j) rows[j] = layers_[i0 + j].ptr<float>(y);
-      rows[m] = rows[m - 1];
       const uint8_t* rung = plan.rung.ptr<uint8_t>(y);
+      int lo = m - 1, hi = 0;
+      for (int x = 0; x < src.cols; ++x) {
+        lo = std::min<int>(lo, rung[x]);
+        hi = std::max<int>(hi, rung[x]);
+      }
+      hi = std::min(hi + 1, m - 1);
+      for (int j = lo; j <= hi; ++j) {
+        const cv::Mat& layer = layers_[i0 + j];
+        const int f = layer_factor_[i0 + j];
+        if (f == 1) {
+          rows[j] = layer.ptr<float>(y);
+          continue;
+        }
+        const float sy = (y + 0.5f) / f - 0.5f;
+        int y0 = static_cast<int>(std::floor(sy));
+        float wy = sy - y0;
+        if (y0 < 0) y0 = 0, wy = 0.0f;
+        if (y0 >= layer.rows - 1) y0 = layer.rows - 1, wy = 0.0f;
+        const float* r0 = layer.ptr<float>(y0);
+        const float* r1 = layer.ptr<float>(std::min(y0 + 1, layer.rows - 1));
+        std::vector<float>& out = enlarged[j];
+        out.resize(src.cols);
+        const int* x0 = taps[j].x0.data();
+        const float* wx = taps[j].wx.data();
+        const int last = layer.cols - 1;
+        for (int x = 0; x < src.cols; ++x) {
+          const int a = x0[x], b = std::min(a + 1, last);
+          const float top = r0[a] + wx[x] * (r0[b] - r0[a]);
+          const float bottom = r1[a] + wx[x] * (r1[b] - r1[a]);
+          out[x] = top + wy * (bottom - top);
+        }
+        rows[j] = out.data();
+      }
+      rows[m] = rows[m - 1];
       const float* w = plan.weight.ptr<float>(y);
       float* d = dst->ptr<float>(y);
       int x = 0;

@@ -63,17 +63,16 @@ class SpatiallyVaryingBlur {
   double max_sigma_px() const { return ladder_.back(); }
 
  private:
-  // Blurs the padded source at ladder rung i into layers_[i] (full padded size).
+  // Blurs the padded source at ladder rung i into layers_[i] (reduced by layer_factor_[i]).
   void ComputeLayer(int i);
-  // Rungs i0..i1 (all full resolution, Gaussian) as one incremental chain.
-  void ComputeFullResolutionChain(int i0, int i1);
 
   DefocusModel model_;
   std::vector<double> ladder_;  // PSF sigma of each rung, geometric
   std::vector<int> factor_;     // reduction factor (1, 2, 4, ...) of each rung
   cv::Mat padded_;              // source with a reflected border, size a multiple of kMaxFactor
   std::vector<cv::Mat> reduced_;  // padded_ reduced by 2^k (index k)
-  std::vector<cv::Mat> layers_;
+  std::vector<cv::Mat> layers_;     // rung images, reduced by layer_factor_
+  std::vector<int> layer_factor_;
   int border_ = 0;
 };
 

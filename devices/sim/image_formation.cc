@@ -43,6 +43,8 @@ ImageFormation::ImageFormation(const ImageFormationOptions& options)
   map_y_ -= projector_roi_.y;
   // Fixed-point maps (1/32 px): remap runs about twice as fast.
   cv::convertMaps(map_x_, map_y_, fixed_map_xy_, fixed_map_frac_, CV_16SC2);
+  map_x_.release();
+  map_y_.release();
 }
 
 StatusOr<std::unique_ptr<ImageFormation>> ImageFormation::Create(const ImageFormationOptions& options,

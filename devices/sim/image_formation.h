@@ -71,8 +71,8 @@ class ImageFormation {
   ProjectorCameraGeometry geometry_;
   std::array<float, 256> prf_table_;
   cv::Rect projector_roi_;  // projector pixels the camera sees
-  cv::Mat map_x_, map_y_;   // camera -> projector_roi_ coordinates
-  cv::Mat fixed_map_xy_, fixed_map_frac_;
+  cv::Mat map_x_, map_y_;   // camera -> projector_roi_ coordinates (released once converted)
+  cv::Mat fixed_map_xy_, fixed_map_frac_;  // the same as fixed-point remap maps
   Specimen specimen_;
   cv::Mat surface_;  // reflectance * texture
   SpatiallyVaryingBlur blur_;

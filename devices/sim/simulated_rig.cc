@@ -2,7 +2,9 @@
 // plus the simulation-only control (specimen choice, ground truth).
 #include "devices/sim/simulated_rig.h"
 
+#include <algorithm>
 #include <cmath>
+#include <mutex>
 #include <random>
 
 #include "devices/sim/image_formation.h"
@@ -49,12 +51,23 @@ StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptio
   return f;
 }
 
+StatusOr<std::unique_ptr<ImageFormation>> CreateSimulatedRenderer(const SimulatedRigOptions& options) {
+  INSPECT_ASSIGN_OR_RETURN(ImageFormationOptions f, ImageFormationOptionsFor(options));
+  INSPECT_ASSIGN_OR_RETURN(
+      Specimen s, MakeSpecimen(options.specimen, SpecimenGrid{options.camera_size, options.pixel_size_um, options.seed}));
+  return ImageFormation::Create(f, std::move(s));
+}
+
+uint64_t SimulatedFrameNoiseSeed(uint64_t seed, uint64_t frame_number) { return MixSeed(seed, frame_number); }
+
 ScanDefaults ScanDefaultsFor(std::pair<double, double> z_range_um, double exposure_us) {
   ScanDefaults d;
   d.z_step_um = 5.0;
   const double margin = 4.0 * d.z_step_um;
   d.z_start_um = std::max(0.0, std::floor(z_range_um.first - margin));
-  d.z_end_um = std::ceil(z_range_um.second + margin);
+  // The end lies on the start + k * step grid, so every frame of the scan is a whole step.
+  const double steps = std::ceil((z_range_um.second + margin - d.z_start_um) / d.z_step_um - 1e-9);
+  d.z_end_um = d.z_start_um + std::max(2.0, steps) * d.z_step_um;
   d.exposure_us = exposure_us;
   return d;
 }
@@ -64,8 +77,10 @@ namespace {
 constexpr double kStageMinUm = 0.0;
 constexpr double kStageMaxUm = 25000.0;
 
-// State shared by the three simulated devices.
+// State shared by the three simulated devices. Every device call takes `mu`, so a specimen
+// switch from another thread (e.g. an RPC) cannot tear a frame being rendered.
 struct SimState {
+  mutable std::mutex mu;
   SimulatedRigOptions options;
   std::unique_ptr<ImageFormation> renderer;
   std::string specimen_name;
@@ -77,6 +92,7 @@ struct SimState {
   double gain_db = 0.0;
   uint64_t frames = 0;
   std::mt19937_64 stage_rng;
+  SimulatedFaults faults;
 
   Status LoadSpecimen(const std::string& name) {
     SpecimenGrid grid{options.camera_size, options.pixel_size_um, options.seed};
@@ -91,8 +107,9 @@ struct SimState {
     }
     specimen_name = name;
     z_range_um = {lo, hi};
-    // Whole microseconds, like a real camera's exposure register.
-    default_exposure_us = std::max(1.0, std::round(renderer->ExposureForMeanGrey(128, 128.0)));
+    // Whole microseconds, like a real camera's exposure register, within the camera's range
+    // (a black user scene would otherwise ask for an endless exposure).
+    default_exposure_us = std::clamp(std::round(renderer->ExposureForMeanGrey(128, 128.0)), 1.0, 1e7);
     exposure_us = default_exposure_us;
     return Status::Ok();
   }
@@ -102,22 +119,32 @@ class SimulatedCamera : public Camera {
  public:
   explicit SimulatedCamera(SimState* s) : s_(s) {}
   DeviceInfo info() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    const bool up = !s_->faults.camera_unplugged;
     return {"camera", "simulated",
             "SimCam " + std::to_string(s_->options.camera_size.width) + "x" +
                 std::to_string(s_->options.camera_size.height),
-            "SIM-" + std::to_string(s_->options.seed), true, "specimen " + s_->specimen_name};
+            "SIM-" + std::to_string(s_->options.seed), up,
+            up ? "specimen " + s_->specimen_name : "simulated fault: unplugged"};
   }
   cv::Size frame_size() const override { return s_->options.camera_size; }
   int bit_depth() const override { return s_->options.camera_bit_depth; }
   Status SetExposure(double exposure_us) override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.camera_unplugged) return Unplugged();
     if (!(exposure_us >= 1.0 && exposure_us <= 1e7)) {
       return Status::InvalidArgument("exposure_us must be in [1, 1e7], got " + std::to_string(exposure_us));
     }
     s_->exposure_us = exposure_us;
     return Status::Ok();
   }
-  double exposure_us() const override { return s_->exposure_us; }
+  double exposure_us() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->exposure_us;
+  }
   Status SetGain(double gain_db) override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.camera_unplugged) return Unplugged();
     if (!(gain_db >= 0.0 && gain_db <= 24.0)) {
       return Status::InvalidArgument("gain_db must be in [0, 24], got " + std::to_string(gain_db));
     }
@@ -125,11 +152,18 @@ class SimulatedCamera : public Camera {
     return Status::Ok();
   }
   StatusOr<cv::Mat> Capture() override {
-    const uint64_t noise_seed = MixSeed(s_->options.seed, ++s_->frames);
+    std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.camera_unplugged) return Unplugged();
+    if (s_->faults.camera_frame_timeouts > 0) {
+      --s_->faults.camera_frame_timeouts;
+      return Status::DeadlineExceeded("simulated camera: frame timeout (simulated fault)");
+    }
+    const uint64_t noise_seed = SimulatedFrameNoiseSeed(s_->options.seed, ++s_->frames);
     return s_->renderer->Render(s_->pattern, s_->stage_z_um, s_->exposure_us, s_->gain_db, noise_seed);
   }
 
  private:
+  static Status Unplugged() { return Status::Unavailable("simulated camera is unplugged (simulated fault)"); }
   SimState* s_;
 };
 
@@ -137,13 +171,18 @@ class SimulatedProjector : public Projector {
  public:
   explicit SimulatedProjector(SimState* s) : s_(s) {}
   DeviceInfo info() const override {
+    const bool up = !s_->faults.projector_unplugged;
     return {"projector", "simulated",
             "SimProjector " + std::to_string(s_->options.projector_size.width) + "x" +
                 std::to_string(s_->options.projector_size.height),
-            "SIM-" + std::to_string(s_->options.seed), true, ""};
+            "SIM-" + std::to_string(s_->options.seed), up, up ? "" : "simulated fault: unplugged"};
   }
   cv::Size resolution() const override { return s_->options.projector_size; }
   Status Show(const cv::Mat& pattern) override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.projector_unplugged) {
+      return Status::Unavailable("simulated projector is unplugged (simulated fault)");
+    }
     if (pattern.type() != CV_8UC1 || pattern.size() != s_->options.projector_size) {
       return Status::InvalidArgument("pattern must be CV_8UC1 " + std::to_string(s_->options.projector_size.width) +
                                      "x" + std::to_string(s_->options.projector_size.height) + ", got " +
@@ -161,11 +200,16 @@ class SimulatedStage : public Stage {
  public:
   explicit SimulatedStage(SimState* s) : s_(s) {}
   DeviceInfo info() const override {
-    return {"stage", "simulated", "SimStage z", "SIM-" + std::to_string(s_->options.seed), true, ""};
+    std::lock_guard<std::mutex> lock(s_->mu);
+    const bool up = !s_->faults.stage_unplugged;
+    return {"stage", "simulated", "SimStage z", "SIM-" + std::to_string(s_->options.seed), up,
+            up ? "" : "simulated fault: unplugged"};
   }
   double min_z_um() const override { return kStageMinUm; }
   double max_z_um() const override { return kStageMaxUm; }
   Status Home() override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.stage_unplugged) return Unplugged();
     s_->stage_z_um = 0.0;
     return Status::Ok();
   }
@@ -173,14 +217,25 @@ class SimulatedStage : public Stage {
     if (!(z_um >= kStageMinUm && z_um <= kStageMaxUm)) {
       return Status::OutOfRange("z_um " + std::to_string(z_um) + " outside stage travel [0, 25000]");
     }
+    std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.stage_unplugged) return Unplugged();
+    if (s_->faults.stage_move_timeouts > 0) {
+      --s_->faults.stage_move_timeouts;
+      return Status::DeadlineExceeded("simulated stage: move timeout (simulated fault)");
+    }
     const double r = s_->options.stage_repeatability_um;
     std::uniform_real_distribution<double> err(-r, r);
     s_->stage_z_um = z_um + (r > 0.0 ? err(s_->stage_rng) : 0.0);
     return Status::Ok();
   }
-  StatusOr<double> position_um() override { return s_->stage_z_um; }
+  StatusOr<double> position_um() override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    if (s_->faults.stage_unplugged) return Unplugged();
+    return s_->stage_z_um;
+  }
 
  private:
+  static Status Unplugged() { return Status::Unavailable("simulated stage is unplugged (simulated fault)"); }
   SimState* s_;
 };
 
@@ -193,14 +248,34 @@ class SimulatedRig : public Rig, public SimulationControl {
   Projector& projector() override { return projector_; }
   Stage& stage() override { return stage_; }
   double pixel_size_um() const override { return s_->options.pixel_size_um; }
-  ScanDefaults scan_defaults() const override { return ScanDefaultsFor(s_->z_range_um, s_->default_exposure_us); }
+  ScanDefaults scan_defaults() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return ScanDefaultsFor(s_->z_range_um, s_->default_exposure_us);
+  }
   SimulationControl* simulation() override { return this; }
 
   std::vector<std::string> specimen_names() const override { return BuiltinSpecimenNames(); }
-  std::string specimen() const override { return s_->specimen_name; }
-  Status SetSpecimen(const std::string& name) override { return s_->LoadSpecimen(name); }
-  cv::Mat GroundTruthDepthUm() const override { return s_->renderer->specimen().height_um.clone(); }
-  std::pair<double, double> SpecimenZRangeUm() const override { return s_->z_range_um; }
+  std::string specimen() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->specimen_name;
+  }
+  Status SetSpecimen(const std::string& name) override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->LoadSpecimen(name);
+  }
+  void SetFaults(const SimulatedFaults& faults) {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    s_->faults = faults;
+  }
+
+  cv::Mat GroundTruthDepthUm() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->renderer->specimen().height_um.clone();
+  }
+  std::pair<double, double> SpecimenZRangeUm() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->z_range_um;
+  }
 
  private:
   std::unique_ptr<SimState> s_;
@@ -210,6 +285,16 @@ class SimulatedRig : public Rig, public SimulationControl {
 };
 
 }  // namespace
+
+Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults) {
+  auto* sim = dynamic_cast<SimulatedRig*>(&rig);
+  if (sim == nullptr) return Status::InvalidArgument("rig: not a simulated rig");
+  if (faults.camera_frame_timeouts < 0 || faults.stage_move_timeouts < 0) {
+    return Status::InvalidArgument("faults: timeout counts must be >= 0");
+  }
+  sim->SetFaults(faults);
+  return Status::Ok();
+}
 
 StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& options) {
   INSPECT_RETURN_IF_ERROR(options.Validate());

@@ -6,6 +6,8 @@
 //   camera -> defocus by |height - z| -> reflectance R and texture (eq. 5.2) -> defocus again
 //   -> exposure (eq. 5.3) -> camera response, quantisation, saturation, noise (eq. 5.4).
 // Depth convention: a surface point of height h_um is in focus when the stage is at z_um = h_um.
+// Specimens (devices/sim/specimen.h): plane, skew5, skew10, step1um, wedge, chamfer, cutter,
+// lens, mirror, coin, or a user scene "file:/path/scene.json". Overview: devices/sim/README.md.
 #pragma once
 
 #include <cstdint>
@@ -32,17 +34,39 @@ struct SimulatedRigOptions {
   Status Validate() const;
 };
 
-// Thread-compatible: the server's job worker is its only user at a time.
+// The server's job worker is meant to be its only user at a time; still, every device and
+// SimulationControl call takes one internal mutex, so e.g. SetSpecimen from an RPC thread never
+// tears a frame being rendered (it waits for it).
 // The camera starts at the specimen's default exposure (scan_defaults().exposure_us), the
 // projector shows uniform grey 128, the stage is homed at z = 0. Stage travel: 0 .. 25000 um.
 // SimulationControl::SetSpecimen also resets the camera exposure to the new default.
 StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& options);
 
+// Simulation-only fault injection, for tests of error handling (thesis rig failures: a camera
+// unplugged, a frame lost, a stage stuck). Faults hold until replaced by another call
+// (SetSimulatedFaults(rig, {}) = everything plugged back in).
+struct SimulatedFaults {
+  bool camera_unplugged = false;     // camera calls -> UNAVAILABLE, info().connected = false
+  bool projector_unplugged = false;  // Show -> UNAVAILABLE
+  bool stage_unplugged = false;      // MoveTo/Home/position_um -> UNAVAILABLE
+  int camera_frame_timeouts = 0;     // the next N captures -> DEADLINE_EXCEEDED
+  int stage_move_timeouts = 0;       // the next N moves -> DEADLINE_EXCEEDED (stage stays put)
+};
+// INVALID_ARGUMENT when rig is not a simulated rig.
+Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults);
+
 // The renderer settings the simulated rig uses for these options (for serving the same frames
 // elsewhere, e.g. over GigE Vision: build an ImageFormation from them and MakeSpecimen).
 StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptions& options);
 
-// Scan defaults for a specimen z range: the range with 4 steps of margin each side, 5 um steps.
+// The simulated rig's renderer on its own, with the same options, specimen and seed as
+// CreateSimulatedRig(options): Render(pattern, z, exposure, gain, SimulatedFrameNoiseSeed(seed,
+// n)) returns exactly the rig's n-th captured frame (n from 1), without any device state.
+StatusOr<std::unique_ptr<ImageFormation>> CreateSimulatedRenderer(const SimulatedRigOptions& options);
+uint64_t SimulatedFrameNoiseSeed(uint64_t seed, uint64_t frame_number);
+
+// Scan defaults for a specimen z range: the range with 4 steps of margin each side, 5 um steps,
+// z_end_um = z_start_um + k * z_step_um (at least 3 frames).
 ScanDefaults ScanDefaultsFor(std::pair<double, double> z_range_um, double exposure_us);
 
 }  // namespace inspection

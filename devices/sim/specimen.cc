@@ -212,17 +212,19 @@ Specimen Mirror(const Grid& g) {
 Specimen Coin(const Grid& g) {
   Specimen s;
   s.name = "coin";
-  // Proof-like coin region: mirror field, frosted raised relief (a ring and two bars) with
-  // sloped flanks. Relief height 20 um on a field tilted 0.5 degrees.
+  // Proof-like coin region: a mirror-polished field (specular, ~17x the relief, only faint
+  // scratches) and a frosted raised relief (diffuse, textured, dim) covering a little over half
+  // of the view: a large disc, a bar across and a bar down, with sloped (dark) flanks. Relief
+  // 20 um high on a field tilted 0.5 degrees. Uniform light either saturates the field or
+  // underexposes the relief, and the field has almost no texture.
   const double m = std::min(g.width_um(), g.height_um());
-  const double ring_r = 0.3 * m, ring_w = 0.09 * m, bar_w = 0.07 * m, flank = 0.02 * m;
+  const double disc_r = 0.42 * m, bar_w = 0.12 * m, flank = 0.02 * m;
   const double relief_um = 20.0, tilt = std::tan(0.5 * kDeg), hw = g.width_um() / 2.0;
   cv::Mat relief = Fill(g, [&](double x, double y) {
-    const double d_ring = std::abs(std::hypot(x, y) - ring_r) - ring_w / 2.0;
-    const double d_bar1 = std::abs(y - 0.05 * m) - bar_w / 2.0;   // horizontal bar
-    const double d_bar2 = std::abs(x + 0.1 * m) - bar_w / 2.0;    // vertical bar
-    const double d = std::min({d_ring, std::max(d_bar1, std::abs(x) - 0.45 * g.width_um()),
-                               std::max(d_bar2, std::abs(y) - 0.4 * m)});
+    const double d_disc = std::hypot(x + 0.05 * m, y) - disc_r;
+    const double d_bar1 = std::max(std::abs(y - 0.1 * m) - bar_w / 2.0, std::abs(x) - 0.45 * g.width_um());
+    const double d_bar2 = std::max(std::abs(x - 0.3 * g.width_um()) - bar_w / 2.0, std::abs(y) - 0.45 * g.height_um());
+    const double d = std::min({d_disc, d_bar1, d_bar2});
     return static_cast<float>(1.0 - SmoothStep(-flank / 2.0, flank / 2.0, d));
   });
   s.height_um = Fill(g, [&](double x, double) { return kBaseHeightUm + (x + hw) * tilt; }) + relief_um * relief;
@@ -233,8 +235,7 @@ Specimen Coin(const Grid& g) {
   for (int r = 0; r < g.size.height; ++r) {
     for (int c = 0; c < g.size.width; ++c) {
       const float top = relief.at<float>(r, c) > 0.98f ? 1.0f : 0.0f;
-      // Field: polished (specular, weak scratches). Relief top: frosted (diffuse, textured).
-      s.reflectance.at<float>(r, c) = (1.0f - top) * (2.5f * specular.at<float>(r, c) + 0.02f) + top * 0.15f;
+      s.reflectance.at<float>(r, c) = (1.0f - top) * (2.5f * specular.at<float>(r, c) + 0.003f) + top * 0.15f;
       s.texture.at<float>(r, c) = top > 0 ? frosted.at<float>(r, c) : scratches.at<float>(r, c);
     }
   }

@@ -14,6 +14,15 @@
 namespace inspection {
 namespace {
 
+// Standard SFF of the thesis (STD): Tenengrad 7x7, three-point Gaussian interpolation.
+SffOptions TenengradGaussian() {
+  SffOptions o;
+  o.focus_measure = FocusMeasure::kTenengrad;
+  o.window_px = 7;
+  o.interpolation = DepthInterpolation::kGaussian;
+  return o;
+}
+
 std::unique_ptr<Rig> MakeRig(const std::string& specimen, cv::Size size = {256, 192}, bool noise = true) {
   SimulatedRigOptions o;
   o.specimen = specimen;
@@ -55,7 +64,7 @@ DepthResult ScanSff(Rig& rig, const cv::Mat& pattern) {
   const ScanDefaults d = rig.scan_defaults();
   EXPECT_TRUE(rig.projector().Show(pattern).ok());
   EXPECT_TRUE(rig.camera().SetExposure(d.exposure_us).ok());
-  auto engine = SffEngine::Create(SffOptions{}, rig.camera().frame_size(), CV_8UC1);
+  auto engine = SffEngine::Create(TenengradGaussian(), rig.camera().frame_size(), CV_8UC1);
   EXPECT_TRUE(engine.ok());
   for (double z = d.z_start_um; z <= d.z_end_um + 1e-9; z += d.z_step_um) {
     EXPECT_TRUE((*engine)->PushFrame(CaptureAt(rig, z), z).ok());
@@ -128,8 +137,22 @@ TEST(SimulatedPhysicsTest, CutterSaturatesUnderUniformLight) {
   }
 }
 
-TEST(SimulatedPhysicsTest, LensNeedsProjectedTexture) {
-  auto rig = MakeRig("lens");
+TEST(SimulatedPhysicsTest, CoinFieldSaturatesWhileItsReliefIsDim) {
+  auto rig = MakeRig("coin");
+  ASSERT_TRUE(rig);
+  ASSERT_TRUE(rig->camera().SetExposure(rig->scan_defaults().exposure_us).ok());
+  const cv::Mat truth = rig->simulation()->GroundTruthDepthUm();
+  const cv::Mat frame = CaptureAt(*rig, truth.at<float>(96, 128));  // disc top in focus
+  EXPECT_GT(cv::countNonZero(frame == 255) / static_cast<double>(frame.total()), 0.2);
+  EXPECT_LT(cv::mean(frame(cv::Rect(100, 80, 20, 20)))[0], 80.0);  // frosted relief
+}
+
+// Textureless specimens (thesis 6.2.1: HF-LENS, HF-MIRROR): uniform light gives no depth,
+// a projected 2x2-projector-pixel checkerboard (6.8 camera px, fits the 7x7 window) does.
+class TexturelessTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(TexturelessTest, NeedsProjectedTexture) {
+  auto rig = MakeRig(GetParam());
   ASSERT_TRUE(rig);
   const cv::Mat truth = rig->simulation()->GroundTruthDepthUm();
   const double step = rig->scan_defaults().z_step_um;
@@ -138,10 +161,13 @@ TEST(SimulatedPhysicsTest, LensNeedsProjectedTexture) {
   const DepthResult hf_result = ScanSff(*rig, Checkerboard(rig->projector().resolution(), 2));
   const double std_reliable = ReliableFraction(std_result.depth_um, truth, 0.5 * step);
   const double hf_reliable = ReliableFraction(hf_result.depth_um, truth, 0.5 * step);
-  std::printf("lens: depth within half a step: uniform %.3f, checkerboard %.3f\n", std_reliable, hf_reliable);
+  std::printf("%s: depth within half a step: uniform %.3f, checkerboard %.3f\n", GetParam().c_str(), std_reliable,
+              hf_reliable);
   EXPECT_LT(std_reliable, 0.4);
   EXPECT_GT(hf_reliable, 0.95);
 }
+
+INSTANTIATE_TEST_SUITE_P(LensAndMirror, TexturelessTest, ::testing::Values("lens", "mirror"));
 
 TEST(SimulatedPhysicsTest, MirrorMappingSeenByTheCameraMatchesTheGeometry) {
   auto rig = MakeRig("mirror", {256, 192}, /*noise=*/false);

@@ -11,6 +11,15 @@
 namespace inspection {
 namespace {
 
+// Standard SFF of the thesis (STD): Tenengrad 7x7, three-point Gaussian interpolation.
+SffOptions TenengradGaussian() {
+  SffOptions o;
+  o.focus_measure = FocusMeasure::kTenengrad;
+  o.window_px = 7;
+  o.interpolation = DepthInterpolation::kGaussian;
+  return o;
+}
+
 SimulatedRigOptions SmallOptions(const std::string& specimen) {
   SimulatedRigOptions o;
   o.specimen = specimen;
@@ -30,7 +39,7 @@ struct ScanResult {
 };
 
 ScanResult Scan(Rig& rig, const ScanDefaults& d) {
-  auto engine = SffEngine::Create(SffOptions{}, rig.camera().frame_size(),
+  auto engine = SffEngine::Create(TenengradGaussian(), rig.camera().frame_size(),
                                   rig.camera().bit_depth() == 8 ? CV_8UC1 : CV_16UC1);
   EXPECT_TRUE(engine.ok());
   ScanResult r;

@@ -178,7 +178,7 @@ TEST_F(SceneFileTest, RigSwitchesToAUserSceneAtRunTime) {
   EXPECT_FLOAT_EQ(sim->GroundTruthDepthUm().at<float>(0, 63), 213.0f);
   const ScanDefaults d = (*rig)->scan_defaults();
   EXPECT_DOUBLE_EQ(d.z_start_um, 130.0);
-  EXPECT_DOUBLE_EQ(d.z_end_um, 233.0);
+  EXPECT_DOUBLE_EQ(d.z_end_um, 235.0);  // 213 + 20 rounded up to the 5 um grid from 130
   // A failed switch keeps the current specimen.
   EXPECT_FALSE(sim->SetSpecimen("nothing").ok());
   EXPECT_EQ(sim->specimen(), "file:" + path);
@@ -199,6 +199,27 @@ TEST(SimulatedRigBehaviourTest, SeededFramesAreRepeatable) {
   // The next frame has fresh noise.
   auto fa2 = (*a)->camera().Capture();
   EXPECT_GT(cv::countNonZero(*fa != *fa2), 100);
+}
+
+TEST(SimulatedRigBehaviourTest, RendererAloneReproducesTheRigsFrames) {
+  SimulatedRigOptions o;
+  o.camera_size = {96, 64};
+  o.specimen = "cutter";
+  o.stage_repeatability_um = 0.0;
+  auto rig = CreateSimulatedRig(o);
+  auto renderer = CreateSimulatedRenderer(o);
+  ASSERT_TRUE(rig.ok() && renderer.ok());
+  cv::Mat pattern(o.projector_size, CV_8UC1);
+  cv::randu(pattern, 0, 256);
+  ASSERT_TRUE((*rig)->projector().Show(pattern).ok());
+  ASSERT_TRUE((*rig)->stage().MoveTo(230.0).ok());
+  const double exposure = (*rig)->camera().exposure_us();
+  for (uint64_t n = 1; n <= 2; ++n) {
+    auto from_rig = (*rig)->camera().Capture();
+    auto alone = (*renderer)->Render(pattern, 230.0, exposure, 0.0, SimulatedFrameNoiseSeed(o.seed, n));
+    ASSERT_TRUE(from_rig.ok() && alone.ok());
+    EXPECT_EQ(cv::countNonZero(*from_rig != *alone), 0) << "frame " << n;
+  }
 }
 
 TEST(SimulatedRigBehaviourTest, StageRepeatabilityAndTravel) {
@@ -243,6 +264,46 @@ TEST(SimulatedRigBehaviourTest, TwelveBitCameraAndDeviceChecks) {
   EXPECT_EQ((*rig)->projector().Show(cv::Mat(10, 10, CV_8UC1)).code(), StatusCode::kInvalidArgument);
   EXPECT_EQ((*rig)->camera().SetExposure(0.0).code(), StatusCode::kInvalidArgument);
   EXPECT_EQ((*rig)->pixel_size_um(), 0.74);
+}
+
+TEST(SimulatedRigBehaviourTest, InjectedFaultsReachTheCaller) {
+  SimulatedRigOptions o;
+  o.camera_size = {32, 32};
+  auto created = CreateSimulatedRig(o);
+  ASSERT_TRUE(created.ok());
+  Rig& rig = **created;
+  SimulatedFaults f;
+  f.camera_unplugged = true;
+  ASSERT_TRUE(SetSimulatedFaults(rig, f).ok());
+  EXPECT_EQ(rig.camera().Capture().status().code(), StatusCode::kUnavailable);
+  EXPECT_FALSE(rig.camera().info().connected);
+  const Status check = rig.CheckDevices();
+  EXPECT_EQ(check.code(), StatusCode::kUnavailable);
+  EXPECT_NE(check.message().find("camera"), std::string::npos);
+  EXPECT_EQ(rig.Reset().code(), StatusCode::kUnavailable);  // still unplugged
+  // Plugged back in: Reset succeeds and frames flow again.
+  ASSERT_TRUE(SetSimulatedFaults(rig, {}).ok());
+  EXPECT_TRUE(rig.Reset().ok());
+  EXPECT_TRUE(rig.camera().Capture().ok());
+  // Two lost frames, then normal.
+  f = {};
+  f.camera_frame_timeouts = 2;
+  f.stage_move_timeouts = 1;
+  ASSERT_TRUE(SetSimulatedFaults(rig, f).ok());
+  EXPECT_EQ(rig.camera().Capture().status().code(), StatusCode::kDeadlineExceeded);
+  EXPECT_EQ(rig.camera().Capture().status().code(), StatusCode::kDeadlineExceeded);
+  EXPECT_TRUE(rig.camera().Capture().ok());
+  ASSERT_TRUE(rig.stage().MoveTo(100.0).code() == StatusCode::kDeadlineExceeded);
+  EXPECT_NEAR(*rig.stage().position_um(), 0.0, 1e-12);  // did not move
+  EXPECT_TRUE(rig.stage().MoveTo(100.0).ok());
+  f = {};
+  f.stage_unplugged = true;
+  f.projector_unplugged = true;
+  ASSERT_TRUE(SetSimulatedFaults(rig, f).ok());
+  EXPECT_EQ(rig.stage().MoveTo(10.0).code(), StatusCode::kUnavailable);
+  EXPECT_EQ(rig.projector().ShowUniform(10).code(), StatusCode::kUnavailable);
+  f.camera_frame_timeouts = -1;
+  EXPECT_EQ(SetSimulatedFaults(rig, f).code(), StatusCode::kInvalidArgument);
 }
 
 TEST(SimulatedRigOptionsTest, ValidateNamesTheField) {

@@ -1,0 +1,71 @@
+// Depth interpolation of thesis 3.1.4: where along z one pixel's focus curve F(z) peaks, from
+// the samples around its discrete maximum (maximum eq. 3.23-3.24, Malik & Choi line fit
+// eq. 3.25-3.29, three-point Gaussian eq. 3.30-3.34), all for non-uniform z steps; and how far
+// the peak can be trusted (confidence in [0, 1]).
+#pragma once
+
+#include <vector>
+
+#include "core/sff_engine.h"
+
+namespace inspection {
+
+struct FocusPeak {
+  double z_um = 0.0;      // interpolated peak position
+  double sigma_um = 0.0;  // Gaussian: standard deviation sigma_F (eq. 3.33); 0 for other methods
+  double height = 0.0;    // Gaussian: F_max of eq. 3.34; otherwise the sampled maximum
+  bool interpolated = false;  // false when the method fell back to the discrete maximum
+};
+
+// Three-point Gaussian through (z1, f1), (z2, f2), (z3, f3) with z1 < z2 < z3 or z1 > z2 > z3 and
+// f2 the sampled maximum. Generalises eq. 3.32-3.33 to unequal steps: with u = z - z2,
+// a = ln f2 - ln f1, b = ln f2 - ln f3:
+//   mu = (a u3^2 - b u1^2) / (2 (a u3 - b u1)),  sigma^2 = u1 u3 (u1 - u3) / (2 (a u3 - b u1)),
+// which for u1 = -dz, u3 = dz reduces to the thesis' equations. Falls back to z2 when a value is
+// not positive or the denominator vanishes.
+FocusPeak GaussianPeak(double z1, double z2, double z3, double f1, double f2, double f3);
+// The same peak position without sigma and height (the engine's per-pixel hot path).
+double GaussianPeakZ(double z1, double z2, double z3, double f1, double f2, double f3);
+
+// Malik & Choi line fit (eq. 3.25-3.29). z/f hold the samples m - before .. m + after around the
+// maximum at position `before` (so count = before + after + 1). DS1 = the `before` samples and
+// the maximum, DS2 = the maximum and the `after` samples; a least-squares line through each,
+// intersecting at d_i. d_c is the sample of DS1 u DS2 other than d_max closest to d_i (taking
+// d_max itself would make eq. 3.29 return d_max unchanged); the result is w1 d_c + w2 d_max.
+// Needs before >= 1 and after >= 1, otherwise returns the maximum.
+FocusPeak LineFitPeak(const double* z, const double* f, int before, int after);
+
+// Dispatches on the method; z/f/before/after as for LineFitPeak. kMaximum returns z[before];
+// kGaussian uses the direct neighbours of the maximum.
+FocusPeak InterpolatePeak(DepthInterpolation method, const double* z, const double* f, int before, int after);
+
+// Whole-curve convenience (tests, offline use): finds the first discrete maximum of f and
+// interpolates with up to `linefit_half_width` samples on each side.
+FocusPeak InterpolateFocusCurve(DepthInterpolation method, const std::vector<double>& z_um,
+                                const std::vector<double>& f, int linefit_half_width = 2);
+
+// What the streaming engine knows about a pixel's focus curve at the end of a stack, all from
+// O(1) state: the peak, the mean, and the curve's roughness from its second differences.
+struct FocusCurveSummary {
+  double peak = 0.0;              // F_max, the sampled maximum
+  double mean = 0.0;              // mean of F over all frames
+  // Sum of t_k^2, t_k = F_k - 2 F_(k-1) + F_(k-2), over the k whose t_k does not involve the
+  // maximum (m not in {k-2, k-1, k}), and how many terms that is.
+  double curvature_sq_sum = 0.0;
+  int curvature_count = 0;
+  bool peak_at_end = false;       // the maximum is on the first or last frame
+};
+
+// Confidence in [0, 1] that the peak is real focus rather than noise ("the peak against the
+// curve's residual"). A focused, textured pixel has a smooth curve whose peak stands far above
+// its mean; a textureless pixel has a curve of independent noise whose maximum is only a few
+// noise levels above the mean. The noise level comes from the curve's second differences away
+// from the peak, which cancel the smooth flanks of a real peak but not noise (var t = 6 var F):
+// sigma = sqrt(curvature_sq_sum / (6 curvature_count)), floored at 1e-3 F_max. With the peak's
+// signal-to-noise ratio s = (F_max - mean) / sigma:
+//   confidence = clamp(1 - kConfidenceSnrZero / s, 0, 1),
+// halved when the peak is on the first or last frame (the true peak may lie outside the stack).
+inline constexpr double kConfidenceSnrZero = 4.0;
+float FocusConfidence(const FocusCurveSummary& s);
+
+}  // namespace inspection

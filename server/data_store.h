@@ -1,0 +1,81 @@
+// DataStore: the server's durable state under --data-dir, so scans, jobs and their results
+// survive a restart. Metadata lives in SQLite (inspection.db, WAL); bulk data in folders:
+//   scans/<scan_id>/         stack folders (core/stack.h format)
+//   artifacts/<job_id>/      result files of a succeeded job
+//   calibrations/<id>/       calibration bundles
+//   uploads/, tmp/           work areas, emptied at start-up
+// Thread-safe: one connection guarded by a mutex (writes are small; bulk I/O is outside).
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/status.h"
+#include "inspection/v1/inspection.pb.h"
+
+struct sqlite3;
+
+namespace inspection {
+
+namespace v1 = ::inspection::v1;
+
+struct StoredArtifact {
+  v1::Artifact artifact;
+  std::string job_id;
+  std::filesystem::path path;
+};
+
+class DataStore {
+ public:
+  static StatusOr<std::unique_ptr<DataStore>> Open(const std::filesystem::path& data_dir);
+  ~DataStore();
+
+  const std::filesystem::path& data_dir() const { return data_dir_; }
+  std::filesystem::path scans_dir() const { return data_dir_ / "scans"; }
+  std::filesystem::path artifacts_dir() const { return data_dir_ / "artifacts"; }
+  std::filesystem::path calibrations_dir() const { return data_dir_ / "calibrations"; }
+  std::filesystem::path uploads_dir() const { return data_dir_ / "uploads"; }
+  std::filesystem::path tmp_dir() const { return data_dir_ / "tmp"; }
+
+  // Inserts or replaces the job row (the Job message is the whole record).
+  Status PutJob(const v1::Job& job);
+  StatusOr<v1::Job> GetJob(const std::string& job_id);
+  // Job id of an earlier job of this kind with this request id, if any.
+  std::optional<std::string> FindJobByRequestId(v1::JobKind kind, const std::string& request_id);
+  // Newest first; kind/state UNSPECIFIED = any. `before_ns` pages (0 = from newest).
+  StatusOr<std::vector<v1::Job>> ListJobs(v1::JobKind kind, v1::JobState state, int limit, int64_t before_create_ns);
+  // Jobs that were queued or running when the server stopped.
+  StatusOr<std::vector<v1::Job>> UnfinishedJobs();
+
+  Status AppendEvent(const v1::JobEvent& event);
+  StatusOr<std::vector<v1::JobEvent>> Events(const std::string& job_id);
+
+  Status PutArtifact(const StoredArtifact& artifact);
+  StatusOr<StoredArtifact> GetArtifact(const std::string& artifact_id);
+
+  Status PutCalibration(const v1::Calibration& calibration);
+  StatusOr<v1::Calibration> GetCalibration(const std::string& calibration_id);
+  StatusOr<std::vector<v1::Calibration>> ListCalibrations();
+  // True if a stored scan refers to this calibration (then it must never be overwritten).
+  bool CalibrationInUse(const std::string& calibration_id);
+
+  Status SetSetting(const std::string& key, const std::string& value);
+  std::string GetSetting(const std::string& key);
+
+ private:
+  explicit DataStore(std::filesystem::path dir) : data_dir_(std::move(dir)) {}
+  Status Exec(const char* sql);
+
+  std::filesystem::path data_dir_;
+  std::mutex mu_;
+  sqlite3* db_ = nullptr;
+};
+
+// Random id with a readable prefix, e.g. "job-5f3a9c0e1b2d4e6f".
+std::string NewId(const std::string& prefix);
+
+}  // namespace inspection

@@ -1,0 +1,68 @@
+// InspectionServer: the whole service in one object - data store, rig controller, job manager,
+// gRPC services, health and reflection - as inspectd runs it and as the end-to-end tests start
+// it on loopback.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include <grpcpp/grpcpp.h>
+
+#include "core/status.h"
+#include "devices/rig.h"
+#include "devices/sim/simulated_rig.h"
+#include "server/data_store.h"
+#include "server/inspection_service.h"
+#include "server/job_manager.h"
+#include "server/rig_controller.h"
+
+namespace inspection {
+
+struct ServerOptions {
+  std::string listen_address = "127.0.0.1:50051";  // port 0 picks a free port (see port())
+  std::filesystem::path data_dir = "./inspection-data";
+  int rig_queue_capacity = 4;
+  bool reflection = true;
+  std::string tls_cert_file;  // PEM; with tls_key_file enables TLS
+  std::string tls_key_file;
+  std::string auth_token;     // empty = no authentication
+  SimulatedRigOptions simulation;  // used when no rig is given to Start
+};
+
+// Health service names: "" is SERVING while the process runs; this one is SERVING only while
+// the rig can take jobs (not in Error or Initializing).
+inline constexpr const char* kRigHealthService = "inspection.v1.InspectionService";
+
+class InspectionServer {
+ public:
+  // rig: the rig to drive (nullptr = the simulated rig from options.simulation). rig_startup:
+  // why the rig started degraded, if it did.
+  static StatusOr<std::unique_ptr<InspectionServer>> Start(const ServerOptions& options,
+                                                           std::unique_ptr<Rig> rig = nullptr,
+                                                           Status rig_startup = Status::Ok());
+  ~InspectionServer();
+
+  int port() const { return port_; }
+  std::string address() const;  // host:port actually bound
+  // Stops accepting calls, cancels jobs, waits for the workers.
+  void Shutdown();
+  void Wait();
+
+  JobManager& jobs() { return *jobs_; }
+  RigController& rig() { return *rig_; }
+
+ private:
+  InspectionServer() = default;
+
+  ServerOptions options_;
+  std::unique_ptr<DataStore> store_;
+  std::unique_ptr<RigController> rig_;
+  std::unique_ptr<JobManager> jobs_;
+  std::unique_ptr<InspectionServiceImpl> service_;
+  std::unique_ptr<SimulationServiceImpl> sim_service_;
+  std::unique_ptr<grpc::Server> server_;
+  int port_ = 0;
+  bool shut_down_ = false;
+};
+
+}  // namespace inspection

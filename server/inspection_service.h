@@ -1,0 +1,66 @@
+// gRPC handlers of inspection.v1.InspectionService and SimulationService. Thin: they validate
+// requests, hand work to the JobManager and stream a JobRecord's events. Every error leaves as
+// a gRPC status built by ToGrpcStatus; no exception crosses this boundary.
+#pragma once
+
+#include <string>
+
+#include "inspection/v1/inspection.grpc.pb.h"
+#include "server/data_store.h"
+#include "server/job_manager.h"
+#include "server/rig_controller.h"
+
+namespace inspection {
+
+struct ServiceOptions {
+  std::string server_version;
+  std::string auth_token;  // when set, every call needs "authorization: Bearer <token>"
+  int64_t max_upload_bytes = int64_t(2) << 30;
+};
+
+class InspectionServiceImpl final : public v1::InspectionService::Service {
+ public:
+  InspectionServiceImpl(const ServiceOptions& options, DataStore* store, JobManager* jobs, RigController* rig)
+      : options_(options), store_(store), jobs_(jobs), rig_(rig) {}
+
+  grpc::Status GetRigStatus(grpc::ServerContext*, const v1::GetRigStatusRequest*, v1::RigStatus*) override;
+  grpc::Status Calibrate(grpc::ServerContext*, const v1::CalibrateRequest*, grpc::ServerWriter<v1::JobEvent>*) override;
+  grpc::Status Scan(grpc::ServerContext*, const v1::ScanRequest*, grpc::ServerWriter<v1::JobEvent>*) override;
+  grpc::Status Reconstruct(grpc::ServerContext*,
+                           grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructRequest>*) override;
+  grpc::Status WatchJob(grpc::ServerContext*, const v1::WatchJobRequest*, grpc::ServerWriter<v1::JobEvent>*) override;
+  grpc::Status GetJob(grpc::ServerContext*, const v1::GetJobRequest*, v1::Job*) override;
+  grpc::Status ListJobs(grpc::ServerContext*, const v1::ListJobsRequest*, v1::ListJobsResponse*) override;
+  grpc::Status CancelJob(grpc::ServerContext*, const v1::CancelJobRequest*, v1::Job*) override;
+  grpc::Status DownloadArtifact(grpc::ServerContext*, const v1::DownloadArtifactRequest*,
+                                grpc::ServerWriter<v1::ArtifactChunk>*) override;
+  grpc::Status ResetRig(grpc::ServerContext*, const v1::ResetRigRequest*, v1::RigStatus*) override;
+  grpc::Status GetCalibration(grpc::ServerContext*, const v1::GetCalibrationRequest*, v1::Calibration*) override;
+  grpc::Status ListCalibrations(grpc::ServerContext*, const v1::ListCalibrationsRequest*,
+                                v1::ListCalibrationsResponse*) override;
+
+ private:
+  grpc::Status CheckAuth(grpc::ServerContext* ctx) const;
+  void FillRigStatus(v1::RigStatus* status);
+
+  ServiceOptions options_;
+  DataStore* store_;
+  JobManager* jobs_;
+  RigController* rig_;
+};
+
+class SimulationServiceImpl final : public v1::SimulationService::Service {
+ public:
+  SimulationServiceImpl(const ServiceOptions& options, RigController* rig) : options_(options), rig_(rig) {}
+  grpc::Status ListSpecimens(grpc::ServerContext*, const v1::ListSpecimensRequest*, v1::ListSpecimensResponse*) override;
+  grpc::Status SetSpecimen(grpc::ServerContext*, const v1::SetSpecimenRequest*, v1::ListSpecimensResponse*) override;
+
+ private:
+  ServiceOptions options_;
+  RigController* rig_;
+};
+
+// Shared by both services: constant-time bearer token check.
+grpc::Status CheckBearerToken(grpc::ServerContext* ctx, const std::string& token);
+
+}  // namespace inspection

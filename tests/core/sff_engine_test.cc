@@ -1,0 +1,362 @@
+// SFF engine against simulated ground truth: tilted-plane accuracy per measure and
+// interpolation, coverage on texture vs rejection of textureless stacks, streaming vs batch
+// agreement, 8/16 bit, non-uniform and descending z, and bad input.
+#include "core/sff_engine.h"
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+#include <unistd.h>
+
+#include "core/focus_measure.h"
+#include "core/stack.h"
+#include "tests/core/sff_synthetic.h"
+
+namespace inspection {
+namespace {
+
+using testing::CompareDepth;
+using testing::SyntheticStack;
+using testing::TiltedPlaneStack;
+using testing::UniformZ;
+
+DepthResult Streamed(const SffOptions& o, const std::vector<cv::Mat>& frames, const std::vector<double>& z) {
+  auto engine = SffEngine::Create(o, frames[0].size(), frames[0].type());
+  EXPECT_TRUE(engine.ok()) << engine.status().ToString();
+  for (size_t k = 0; k < frames.size(); ++k) {
+    Status st = (*engine)->PushFrame(frames[k], z[k]);
+    EXPECT_TRUE(st.ok()) << st.ToString();
+  }
+  EXPECT_EQ((*engine)->frames_pushed(), int(frames.size()));
+  auto r = (*engine)->Finish();
+  EXPECT_TRUE(r.ok()) << r.status().ToString();
+  return std::move(r).value();
+}
+
+bool BitIdentical(const cv::Mat& a, const cv::Mat& b) {
+  if (a.size() != b.size() || a.type() != b.type()) return false;
+  for (int y = 0; y < a.rows; ++y)
+    if (std::memcmp(a.ptr(y), b.ptr(y), a.cols * a.elemSize()) != 0) return false;
+  return true;
+}
+
+// 21 frames, 1 µm apart; the plane rises from 5 to ~15 µm, so every pixel's peak is inside.
+class TiltedPlane : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    stack_ = new SyntheticStack(TiltedPlaneStack(cv::Size(120, 90), UniformZ(21, 0.0, 1.0), 5.0, 0.06, 0.035));
+  }
+  static void TearDownTestSuite() {
+    delete stack_;
+    stack_ = nullptr;
+  }
+  static SyntheticStack* stack_;
+};
+SyntheticStack* TiltedPlane::stack_ = nullptr;
+
+TEST_F(TiltedPlane, TenengradGaussianIsAccurateAndCoversTheTexture) {
+  SffOptions o;  // defaults: Tenengrad 7x7, Gaussian, default min_confidence
+  const DepthResult r = Streamed(o, stack_->frames, stack_->z_um);
+  const auto e = CompareDepth(r.depth_um, stack_->height_um);
+  std::printf("[figures] tenengrad7+gaussian tilted plane: RMSE %.4f step, max %.3f step, coverage %.4f\n",
+              e.rmse_um, e.max_abs_um, r.valid_fraction);
+  EXPECT_LT(e.rmse_um, 0.25);  // z step is 1 µm
+  EXPECT_GT(r.valid_fraction, 0.99);
+  EXPECT_EQ(r.frame_count, 21);
+  EXPECT_EQ(r.all_in_focus.type(), CV_8UC1);
+  EXPECT_EQ(r.confidence.type(), CV_32FC1);
+  double cmin, cmax;
+  cv::minMaxLoc(r.confidence, &cmin, &cmax);
+  EXPECT_GE(cmin, 0.0);
+  EXPECT_LE(cmax, 1.0);
+}
+
+TEST_F(TiltedPlane, GaussianBeatsMaximumAndLineFitIsInBetween) {
+  SffOptions o;
+  o.interpolation = DepthInterpolation::kMaximum;
+  const auto e_max = CompareDepth(Streamed(o, stack_->frames, stack_->z_um).depth_um, stack_->height_um);
+  o.interpolation = DepthInterpolation::kLineFit;
+  const auto e_line = CompareDepth(Streamed(o, stack_->frames, stack_->z_um).depth_um, stack_->height_um);
+  o.interpolation = DepthInterpolation::kGaussian;
+  const auto e_gauss = CompareDepth(Streamed(o, stack_->frames, stack_->z_um).depth_um, stack_->height_um);
+  std::printf("[figures] RMSE (steps) maximum %.4f, linefit %.4f, gaussian %.4f\n", e_max.rmse_um, e_line.rmse_um,
+              e_gauss.rmse_um);
+  // The maximum is quantised to the step: RMSE of a uniform offset is 1/sqrt(12) = 0.289.
+  EXPECT_NEAR(e_max.rmse_um, 0.289, 0.05);
+  EXPECT_LT(e_gauss.rmse_um, e_max.rmse_um * 0.6);
+  EXPECT_LT(e_line.rmse_um, e_max.rmse_um);
+}
+
+TEST_F(TiltedPlane, EveryFocusMeasureFindsThePlane) {
+  for (FocusMeasure m : {FocusMeasure::kModifiedLaplacian, FocusMeasure::kSumModifiedLaplacian,
+                         FocusMeasure::kTenengrad, FocusMeasure::kGreyLevelVariance, FocusMeasure::kHelmliMean,
+                         FocusMeasure::kChebyshevMoments, FocusMeasure::kGreyLevelLocalVariance}) {
+    SffOptions o;
+    o.focus_measure = m;
+    o.window_px = 5;
+    const DepthResult r = Streamed(o, stack_->frames, stack_->z_um);
+    const auto e = CompareDepth(r.depth_um, stack_->height_um);
+    std::printf("[figures] %-12s 5x5 gaussian: RMSE %.4f step, coverage %.4f\n", FocusMeasureName(m), e.rmse_um,
+                r.valid_fraction);
+    EXPECT_LT(e.rmse_um, 0.4) << FocusMeasureName(m);
+    EXPECT_GT(r.valid_fraction, 0.95) << FocusMeasureName(m);
+  }
+}
+
+TEST_F(TiltedPlane, AllInFocusComesFromTheSharpestFrame) {
+  const DepthResult r = Streamed(SffOptions{}, stack_->frames, stack_->z_um);
+  // Against the sharp texture: about as close as an oracle that takes every pixel from the frame
+  // nearest to the true height, and far closer than any single frame of the stack.
+  cv::Mat aif, oracle(aif.size(), CV_32F);
+  r.all_in_focus.convertTo(aif, CV_32F);
+  oracle.create(aif.size(), CV_32F);
+  for (int y = 0; y < aif.rows; ++y)
+    for (int x = 0; x < aif.cols; ++x) {
+      const int k = std::clamp(int(std::lround(stack_->height_um.at<float>(y, x))), 0, 20);  // z_k = k µm
+      oracle.at<float>(y, x) = stack_->frames[size_t(k)].at<uint8_t>(y, x);
+    }
+  auto rms = [&](const cv::Mat& m) { return cv::norm(m, stack_->texture, cv::NORM_L2) / std::sqrt(double(m.total())); };
+  const double err_aif = rms(aif), err_oracle = rms(oracle);
+  double best_frame = 1e9;
+  for (const auto& f : stack_->frames) {
+    cv::Mat f32;
+    f.convertTo(f32, CV_32F);
+    best_frame = std::min(best_frame, rms(f32));
+  }
+  std::printf("[figures] all-in-focus RMS grey error %.2f, oracle %.2f, best single frame %.2f\n", err_aif,
+              err_oracle, best_frame);
+  EXPECT_LT(err_aif, 1.1 * err_oracle);
+  EXPECT_LT(err_aif, 0.6 * best_frame);
+}
+
+TEST(SffEngineTest, TexturelessStackIsRejected) {
+  const auto frames = testing::TexturelessStack(cv::Size(100, 80), 21, 2.0);
+  const DepthResult r = Streamed(SffOptions{}, frames, UniformZ(21, 0.0, 1.0));
+  std::printf("[figures] textureless (grey 128 + noise sigma 2): coverage %.4f\n", r.valid_fraction);
+  EXPECT_LT(r.valid_fraction, 0.01);
+  // Pure constant: every focus value is 0, confidence 0 everywhere.
+  std::vector<cv::Mat> flat(5, cv::Mat(20, 20, CV_8U, cv::Scalar(90)));
+  const DepthResult rf = Streamed(SffOptions{}, flat, UniformZ(5, 0.0, 2.0));
+  EXPECT_EQ(rf.valid_fraction, 0.0);
+  EXPECT_EQ(cv::countNonZero(rf.confidence), 0);
+}
+
+TEST(SffEngineTest, TexturedAndTexturelessHalvesInOneImage) {
+  // Left half textured plane, right half flat grey + noise: depth on the left, NaN on the right.
+  const auto s = TiltedPlaneStack(cv::Size(100, 60), UniformZ(21, 0.0, 1.0), 8.0, 0.02, 0.02);
+  const auto flat = testing::TexturelessStack(cv::Size(100, 60), 21, 2.0, 9);
+  std::vector<cv::Mat> frames;
+  for (size_t k = 0; k < s.frames.size(); ++k) {
+    cv::Mat f = s.frames[k].clone();
+    flat[k](cv::Rect(50, 0, 50, 60)).copyTo(f(cv::Rect(50, 0, 50, 60)));
+    frames.push_back(f);
+  }
+  const DepthResult r = Streamed(SffOptions{}, frames, s.z_um);
+  // Away from the seam (the 7x7 window straddles it).
+  const double left = cv::countNonZero(r.depth_um(cv::Rect(0, 0, 44, 60)) == r.depth_um(cv::Rect(0, 0, 44, 60)));
+  const double right = cv::countNonZero(r.depth_um(cv::Rect(56, 0, 44, 60)) == r.depth_um(cv::Rect(56, 0, 44, 60)));
+  std::printf("[figures] mixed image: textured half coverage %.4f, textureless half %.4f\n", left / (44 * 60),
+              right / (44 * 60));
+  EXPECT_GT(left / (44 * 60), 0.99);
+  EXPECT_LT(right / (44 * 60), 0.02);
+}
+
+TEST(SffEngineTest, StreamingAndBatchAreBitIdentical) {
+  // 300x150 spans several 256x64 tiles with partial ones at the right and bottom edges.
+  const auto s = TiltedPlaneStack(cv::Size(300, 150), UniformZ(12, 0.0, 1.5), 4.0, 0.02, 0.03);
+  for (DepthInterpolation interp : {DepthInterpolation::kMaximum, DepthInterpolation::kGaussian,
+                                    DepthInterpolation::kLineFit}) {
+    for (int window : {3, 7, 31}) {
+      SffOptions o;
+      o.interpolation = interp;
+      o.window_px = window;
+      o.threads = 1;
+      const DepthResult streamed = Streamed(o, s.frames, s.z_um);
+      o.threads = 2;
+      const DepthResult streamed2 = Streamed(o, s.frames, s.z_um);
+      auto batch = SffEngine::ReconstructInMemory(o, s.frames, s.z_um);
+      ASSERT_TRUE(batch.ok()) << batch.status().ToString();
+      const std::string what = std::string(DepthInterpolationName(interp)) + " w" + std::to_string(window);
+      EXPECT_TRUE(BitIdentical(streamed.depth_um, batch->depth_um)) << what;
+      EXPECT_TRUE(BitIdentical(streamed.confidence, batch->confidence)) << what;
+      EXPECT_TRUE(BitIdentical(streamed.all_in_focus, batch->all_in_focus)) << what;
+      EXPECT_TRUE(BitIdentical(streamed.depth_um, streamed2.depth_um)) << what;
+      EXPECT_EQ(streamed.valid_fraction, batch->valid_fraction) << what;
+    }
+  }
+}
+
+TEST(SffEngineTest, BatchFallsBackToStreamingForOtherMeasuresAnd16Bit) {
+  const auto s = TiltedPlaneStack(cv::Size(64, 48), UniformZ(9, 0.0, 1.0), 3.0, 0.03, 0.02, CV_16U);
+  SffOptions o;
+  o.focus_measure = FocusMeasure::kSumModifiedLaplacian;
+  const DepthResult streamed = Streamed(o, s.frames, s.z_um);
+  auto batch = SffEngine::ReconstructInMemory(o, s.frames, s.z_um);
+  ASSERT_TRUE(batch.ok());
+  EXPECT_TRUE(BitIdentical(streamed.depth_um, batch->depth_um));
+  EXPECT_EQ(batch->all_in_focus.type(), CV_16UC1);
+}
+
+TEST(SffEngineTest, FusedTenengradEqualsReferenceMeasure) {
+  cv::Mat img = testing::RandomTexture(cv::Size(290, 70), 4);
+  cv::Mat u8;
+  img.convertTo(u8, CV_8U);
+  for (int w : {3, 7, 15, 31}) {
+    cv::Mat fused, portable, ref;
+    ASSERT_TRUE(ComputeTenengradU8(u8, w, &fused).ok());
+    ASSERT_TRUE(ComputeTenengradU8(u8, w, &portable, /*use_simd=*/false).ok());
+    EXPECT_EQ(cv::countNonZero(fused != portable), 0) << "SIMD and portable kernels differ, window " << w;
+    ASSERT_TRUE(ComputeFocusMeasure(u8, FocusMeasure::kTenengrad, w, &ref).ok());
+    ASSERT_EQ(fused.type(), CV_32SC1);
+    double worst = 0;
+    for (int y = 0; y < u8.rows; ++y)
+      for (int x = 0; x < u8.cols; ++x) {
+        const double a = fused.at<int32_t>(y, x), b = ref.at<float>(y, x);
+        worst = std::max(worst, std::abs(a - b) / std::max(1.0, a));
+      }
+    EXPECT_LT(worst, 1e-5) << "window " << w;  // float rounding of the reference only
+  }
+  // Full-contrast 0/255 blocks with the largest window: large sums, still exact (no overflow;
+  // the bound is 31 * 31 * (2 * 1020^2) < 2^31).
+  cv::Mat cb(40, 40, CV_8U);
+  for (int y = 0; y < 40; ++y)
+    for (int x = 0; x < 40; ++x) cb.at<uint8_t>(y, x) = ((x / 2 + y / 2) & 1) ? 255 : 0;
+  cv::Mat fused, ref;
+  ASSERT_TRUE(ComputeTenengradU8(cb, 31, &fused).ok());
+  ASSERT_TRUE(ComputeFocusMeasure(cb, FocusMeasure::kTenengrad, 31, &ref).ok());
+  double lo, hi;
+  cv::minMaxLoc(fused, &lo, &hi);
+  EXPECT_GE(lo, 0);
+  EXPECT_GT(hi, 5e8);
+  EXPECT_NEAR(fused.at<int32_t>(20, 20), ref.at<float>(20, 20), 1e-6 * hi);
+}
+
+TEST(SffEngineTest, SixteenBitAndEightBitAgree) {
+  const auto s8 = TiltedPlaneStack(cv::Size(80, 60), UniformZ(15, 0.0, 1.0), 4.0, 0.05, 0.05, CV_8U);
+  const auto s16 = TiltedPlaneStack(cv::Size(80, 60), UniformZ(15, 0.0, 1.0), 4.0, 0.05, 0.05, CV_16U);
+  const DepthResult r8 = Streamed(SffOptions{}, s8.frames, s8.z_um);
+  const DepthResult r16 = Streamed(SffOptions{}, s16.frames, s16.z_um);
+  const auto e8 = CompareDepth(r8.depth_um, s8.height_um), e16 = CompareDepth(r16.depth_um, s16.height_um);
+  std::printf("[figures] 8-bit RMSE %.4f step, 16-bit RMSE %.4f step\n", e8.rmse_um, e16.rmse_um);
+  EXPECT_LT(e8.rmse_um, 0.25);
+  EXPECT_LT(e16.rmse_um, 0.25);
+  EXPECT_GT(r16.valid_fraction, 0.99);
+  EXPECT_EQ(r16.all_in_focus.type(), CV_16UC1);
+}
+
+TEST(SffEngineTest, NonUniformAndDescendingZ) {
+  // Steps alternate 0.7 and 1.3 µm; then the same stack acquired top-down.
+  std::vector<double> z;
+  for (int k = 0; k < 21; ++k) z.push_back(k + (k % 2 ? -0.3 : 0.0));
+  const auto s = TiltedPlaneStack(cv::Size(90, 70), z, 5.0, 0.08, 0.05);
+  const DepthResult up = Streamed(SffOptions{}, s.frames, s.z_um);
+  const auto e = CompareDepth(up.depth_um, s.height_um);
+  std::printf("[figures] non-uniform z (0.7/1.3 µm steps): RMSE %.4f µm, coverage %.4f\n", e.rmse_um,
+              up.valid_fraction);
+  EXPECT_LT(e.rmse_um, 0.25);
+  std::vector<cv::Mat> frames_down(s.frames.rbegin(), s.frames.rend());
+  std::vector<double> z_down(s.z_um.rbegin(), s.z_um.rend());
+  const DepthResult down = Streamed(SffOptions{}, frames_down, z_down);
+  cv::Mat diff;
+  cv::absdiff(up.depth_um, down.depth_um, diff);
+  double worst;
+  cv::minMaxLoc(diff, nullptr, &worst, nullptr, nullptr, (up.depth_um == up.depth_um) & (down.depth_um == down.depth_um));
+  EXPECT_LT(worst, 1e-4);
+}
+
+TEST(SffEngineTest, PeakOutsideTheStackHasLowConfidence) {
+  // The plane lies 1.5-3 µm beyond the last frame: the curves rise monotonically, the maximum is
+  // the last frame, and the depth is at best a bound. Confidence is halved there.
+  const auto s = TiltedPlaneStack(cv::Size(60, 40), UniformZ(10, 0.0, 1.0), 10.5, 0.015, 0.015);
+  const DepthResult r = Streamed(SffOptions{}, s.frames, s.z_um);
+  double cmax;
+  cv::minMaxLoc(r.confidence, nullptr, &cmax);
+  EXPECT_LE(cmax, 0.5);
+  EXPECT_GT(cmax, 0.3);  // the texture itself is clear
+}
+
+TEST(SffEngineTest, RejectsBadInput) {
+  const cv::Size size(16, 12);
+  SffOptions o;
+  for (int w : {2, 4, 1, 33}) {
+    o.window_px = w;
+    auto e = SffEngine::Create(o, size, CV_8UC1);
+    EXPECT_EQ(e.status().code(), StatusCode::kInvalidArgument) << w;
+    EXPECT_NE(e.status().message().find("window_px"), std::string::npos);
+  }
+  o = SffOptions{};
+  o.min_confidence = 1.5;
+  EXPECT_NE(SffEngine::Create(o, size, CV_8UC1).status().message().find("min_confidence"), std::string::npos);
+  o = SffOptions{};
+  EXPECT_EQ(SffEngine::Create(o, size, CV_8UC3).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(SffEngine::Create(o, size, CV_32FC1).status().code(), StatusCode::kInvalidArgument);
+
+  auto engine = std::move(SffEngine::Create(o, size, CV_8UC1).value());
+  const cv::Mat f(size, CV_8U, cv::Scalar(3));
+  ASSERT_TRUE(engine->PushFrame(f, 0.0).ok());
+  ASSERT_TRUE(engine->PushFrame(f, 1.0).ok());
+  auto early = engine->Finish();
+  EXPECT_EQ(early.status().code(), StatusCode::kInvalidArgument);  // fewer than 3 frames
+  EXPECT_NE(early.status().message().find("at least 3"), std::string::npos);
+
+  auto expect_frame_error = [](const Status& st, const std::string& what) {
+    EXPECT_EQ(st.code(), StatusCode::kInvalidArgument) << st.ToString();
+    EXPECT_NE(st.message().find(what), std::string::npos) << st.ToString();
+  };
+  engine = std::move(SffEngine::Create(o, size, CV_8UC1).value());
+  ASSERT_TRUE(engine->PushFrame(f, 0.0).ok());
+  ASSERT_TRUE(engine->PushFrame(f, 1.0).ok());
+  expect_frame_error(engine->PushFrame(cv::Mat(13, 16, CV_8U), 2.0), "frame 2: size");
+  expect_frame_error(engine->PushFrame(cv::Mat(size, CV_16U), 2.0), "frame 2: pixel type");
+  expect_frame_error(engine->PushFrame(f, 1.0), "frame 2: z_um");        // duplicate
+  expect_frame_error(engine->PushFrame(f, 0.5), "frame 2: z_um");        // direction reversed
+  expect_frame_error(engine->PushFrame(f, std::nan("")), "frame 2: z_um");
+  EXPECT_EQ(engine->frames_pushed(), 2);  // rejected frames leave no trace
+  ASSERT_TRUE(engine->PushFrame(f, 2.0).ok());
+  ASSERT_TRUE(engine->Finish().ok());
+  EXPECT_EQ(engine->PushFrame(f, 3.0).code(), StatusCode::kFailedPrecondition);
+
+  // Batch: the same checks, naming the frame.
+  std::vector<cv::Mat> frames(4, f);
+  expect_frame_error(SffEngine::ReconstructInMemory(o, {f, f}, {0, 1}).status(), "at least 3");
+  frames[2] = cv::Mat(size, CV_16U, cv::Scalar(0));
+  expect_frame_error(SffEngine::ReconstructInMemory(o, frames, {0, 1, 2, 3}).status(), "frame 2");
+  frames[2] = cv::Mat(12, 17, CV_8U, cv::Scalar(0));
+  expect_frame_error(SffEngine::ReconstructInMemory(o, frames, {0, 1, 2, 3}).status(), "frame 2: size");
+  frames[2] = f;
+  expect_frame_error(SffEngine::ReconstructInMemory(o, frames, {0, 1, 1, 3}).status(), "frames[2].z_um");
+  expect_frame_error(SffEngine::ReconstructInMemory(o, frames, {0, 1, 2}).status(), "z_um");
+  o.window_px = 6;
+  expect_frame_error(SffEngine::ReconstructInMemory(o, frames, {0, 1, 2, 3}).status(), "window_px");
+}
+
+TEST(SffEngineTest, ReconstructStackFolderNamesUnreadableFrame) {
+  const auto dir = std::filesystem::temp_directory_path() / ("sff_stack_test_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const auto s = TiltedPlaneStack(cv::Size(48, 32), UniformZ(6, 0.0, 1.0), 2.0, 0.02, 0.02);
+  StackManifest m;
+  m.pixel_size_um = 1.0;
+  for (size_t k = 0; k < s.frames.size(); ++k) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "frame_%04zu.png", k);
+    ASSERT_TRUE(cv::imwrite((dir / name).string(), s.frames[k]));
+    m.frames.push_back({name, s.z_um[k], 0.0, "uniform:128"});
+  }
+  ASSERT_TRUE(WriteStackManifest(dir, m).ok());
+  auto ok = ReconstructStack(dir, SffOptions{});
+  ASSERT_TRUE(ok.ok()) << ok.status().ToString();
+  EXPECT_TRUE(BitIdentical(ok->depth_um, Streamed(SffOptions{}, s.frames, s.z_um).depth_um));
+  std::ofstream(dir / "frame_0003.png", std::ios::trunc) << "garbage";
+  auto bad = ReconstructStack(dir, SffOptions{});
+  EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.status().message().find("frame_0003.png"), std::string::npos) << bad.status().ToString();
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace inspection

@@ -1,0 +1,82 @@
+// Starts the real server (InspectionServer) on a free loopback port with a temporary data dir,
+// and connects the real client library to it.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "client_cli/inspection_client.h"
+#include "server/inspection_server.h"
+#include "tests/server/test_rig.h"
+
+namespace inspection::testing {
+
+namespace v1 = ::inspection::v1;
+
+inline std::filesystem::path UniqueTempDir(const std::string& tag) {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  std::filesystem::path p = std::filesystem::temp_directory_path() /
+                            ("inspect_" + tag + "_" + std::to_string(::getpid()) + "_" +
+                             (info ? std::string(info->test_suite_name()) + "_" + info->name() : std::string("x")));
+  std::filesystem::remove_all(p);
+  std::filesystem::create_directories(p);
+  return p;
+}
+
+class ServerTest : public ::testing::Test {
+ protected:
+  void SetUp() override { data_dir_ = UniqueTempDir("data"); }
+  void TearDown() override {
+    if (control_) control_->Release();  // never leave a held capture behind
+    client_.reset();
+    server_.reset();
+    std::filesystem::remove_all(data_dir_);
+  }
+
+  // Small camera: physics identical to the default, frames fast to render.
+  virtual SimulatedRigOptions SimOptions() {
+    SimulatedRigOptions o;
+    o.specimen = "skew5";
+    o.seed = 7;
+    o.camera_size = {320, 240};
+    return o;
+  }
+
+  void StartServer(int queue_capacity = 4) {
+    ServerOptions opt;
+    opt.listen_address = "127.0.0.1:0";
+    opt.data_dir = data_dir_;
+    opt.rig_queue_capacity = queue_capacity;
+    opt.simulation = SimOptions();
+    if (!control_) control_ = std::make_shared<RigControl>();
+    auto sim = CreateSimulatedRig(opt.simulation);
+    ASSERT_TRUE(sim.ok()) << sim.status().ToString();
+    auto server = InspectionServer::Start(opt, std::make_unique<ControlledRig>(std::move(*sim), control_));
+    ASSERT_TRUE(server.ok()) << server.status().ToString();
+    server_ = std::move(*server);
+    client_ = NewClient();
+  }
+
+  void StopServer() {
+    client_.reset();
+    server_.reset();
+  }
+
+  std::unique_ptr<client::InspectionClient> NewClient() {
+    client::ClientOptions co;
+    co.target = server_->address();
+    auto c = std::make_unique<client::InspectionClient>(co);
+    EXPECT_TRUE(c->WaitConnected().ok());
+    return c;
+  }
+
+  std::filesystem::path data_dir_;
+  std::shared_ptr<RigControl> control_;
+  std::unique_ptr<InspectionServer> server_;
+  std::unique_ptr<client::InspectionClient> client_;
+};
+
+}  // namespace inspection::testing
