@@ -3,6 +3,7 @@
 // prediction error is bounded, and step selection, dependencies and cancellation behave.
 #include "server/procedures/calibration_procedure.h"
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -304,7 +305,11 @@ TEST(CalibrationProcedureStepsTest, DISABLED_FullSizeTimings) {
   const auto dir = std::filesystem::temp_directory_path() / "calib_full_size";
   std::filesystem::remove_all(dir);
   ASSERT_TRUE(b->Save(dir).ok());
-  std::printf("saved to %s\n", dir.c_str());
+  const auto t0 = std::chrono::steady_clock::now();
+  auto loaded = CalibrationBundle::Load(dir);
+  ASSERT_TRUE(loaded.ok()) << loaded.status().ToString();
+  std::printf("saved to %s; Load took %.3f s\n", dir.c_str(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 }
 
 }  // namespace
