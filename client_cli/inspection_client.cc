@@ -60,7 +60,7 @@ struct UploadFile {
   int64_t size_bytes = 0;
 };
 
-// Lists stack.json and every frame file it names, with sizes. Only reads the manifest's file
+// Lists stack.json, every frame file it names and ground_truth_depth.tiff if present, with sizes. Only reads the manifest's file
 // list; the server validates the rest (z monotonic, image formats).
 grpc::Status ListStackFiles(const fs::path& stack_dir, std::vector<UploadFile>* files) {
   const fs::path manifest_path = stack_dir / "stack.json";
@@ -98,6 +98,13 @@ grpc::Status ListStackFiles(const fs::path& stack_dir, std::vector<UploadFile>* 
               "frame " + std::to_string(i) + " (" + rel + "): cannot read " + path.string() + ": " + ec.message()};
     }
     files->push_back({rel, path, static_cast<int64_t>(size)});
+  }
+  // The simulated rig's ground truth travels with the stack so the server can report the
+  // reconstruction's error against it; other files in the folder are not part of the stack.
+  const fs::path truth = stack_dir / "ground_truth_depth.tiff";
+  if (fs::is_regular_file(truth, ec)) {
+    const auto size = fs::file_size(truth, ec);
+    if (!ec) files->push_back({"ground_truth_depth.tiff", truth, static_cast<int64_t>(size)});
   }
   return grpc::Status::OK;
 }

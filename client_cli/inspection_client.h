@@ -46,8 +46,10 @@ class InspectionClient {
   grpc::Status Scan(const v1::ScanRequest& request, const EventCallback& on_event, v1::Job* job);
   grpc::Status Calibrate(const v1::CalibrateRequest& request, const EventCallback& on_event, v1::Job* job);
   grpc::Status ReconstructStored(const v1::ReconstructStart& start, const EventCallback& on_event, v1::Job* job);
-  // Uploads every file of the stack folder (stack.json first, then the frames it lists) and
-  // follows the reconstruction. start.source is replaced by the upload.
+  // Uploads every file of the stack folder (stack.json first, then the frames it lists, then
+  // ground_truth_depth.tiff when present) in chunks of at most 1 MiB and follows the
+  // reconstruction. start.source is replaced by the upload. A missing or unreadable stack.json
+  // or frame file is INVALID_ARGUMENT naming it, before any RPC.
   grpc::Status ReconstructUpload(const std::filesystem::path& stack_dir, v1::ReconstructStart start,
                                  const EventCallback& on_event, v1::Job* job, const ByteProgress& on_upload = {});
   // Re-attach: replays the job's events from the first and follows it to the end.

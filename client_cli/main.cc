@@ -31,7 +31,7 @@ namespace inspection::client {
 namespace {
 
 namespace fs = std::filesystem;
-using nlohmann::json;
+using json = nlohmann::ordered_json;
 
 // Exit codes (USAGE.md "Exit codes").
 constexpr int kExitOk = 0;
@@ -202,7 +202,7 @@ int TerminalWidth() {
   return 80;
 }
 
-std::string Bar(double fraction, int width = 20) {
+std::string Bar(double fraction, int width = 10) {
   fraction = std::clamp(fraction, 0.0, 1.0);
   const int filled = static_cast<int>(fraction * width + 0.5);
   return "[" + std::string(filled, '#') + std::string(width - filled, '-') + "]";
@@ -224,7 +224,7 @@ class ProgressPrinter {
       return;
     }
     if (out_.quiet) return;
-    std::string line = EventText(event);
+    std::string line = EventText(event, out_.tty);
     if (out_.tty) {
       Redraw(Bar(event.progress()) + " " + line);
       // Keep the line of a terminal event on screen.
@@ -238,12 +238,8 @@ class ProgressPrinter {
     std::lock_guard<std::mutex> lock(mu_);
     if (out_.json || out_.quiet) return;
     const double fraction = total > 0 ? static_cast<double>(done) / static_cast<double>(total) : 0.0;
-    if (out_.tty) {
-      Redraw(Bar(fraction) + " " + what + " " + Megabytes(done) + " / " + Megabytes(total));
-    } else if (done == total) {
-      // One line per transfer when not on a terminal.
-      std::cout << what << " " << Megabytes(done) << " done\n" << std::flush;
-    }
+    // Only on a terminal: in logs the list of written files says enough.
+    if (out_.tty) Redraw(Bar(fraction) + " " + what + " " + Megabytes(done) + " / " + Megabytes(total));
   }
 
   void Finish() {
@@ -252,17 +248,20 @@ class ProgressPrinter {
   }
 
  private:
-  static std::string EventText(const v1::JobEvent& e) {
+  static std::string EventText(const v1::JobEvent& e, bool terminal) {
     std::string text;
+    const bool frame = e.has_frame() && e.frame().frame_count() > 0;
+    // On a terminal a frame line leaves out the phase (it is always acquiring) to fit 80 columns.
     if (e.state() >= v1::JOB_STATE_SUCCEEDED) {
       text = Short(v1::JobState_Name(e.state()), "JOB_STATE_");
-    } else {
+    } else if (!(frame && terminal)) {
       text = Short(v1::JobPhase_Name(e.phase()), "JOB_PHASE_");
     }
-    if (e.has_frame() && e.frame().frame_count() > 0) {
+    if (frame) {
       const auto& f = e.frame();
       const auto& s = f.statistics();
-      text += Format(" %d/%d z=%.1fum mean=%.0f sat=%.1f%% under=%.1f%%", f.frame_index() + 1, f.frame_count(),
+      if (!text.empty()) text += ' ';
+      text += Format("%d/%d z=%.1fum mean=%.0f sat=%.1f%% under=%.1f%%", f.frame_index() + 1, f.frame_count(),
                      f.z_um(), s.mean_grey(), s.saturated_percent(), s.underexposed_percent());
     } else {
       text += Format(" %3.0f%%", 100.0 * e.progress());
@@ -296,7 +295,8 @@ class ProgressPrinter {
 // Ctrl-C while following a job: stop following (the job keeps running on the server) and say
 // how to re-attach. The message is prepared outside the handler; the handler only write()s.
 
-char g_detach_message[512] = "\ninspectctl: stopped following (no job id received yet)\n";
+char g_detach_message[512] =
+    "\ninspectctl: interrupted before the server reported a job id; `inspectctl jobs` lists the jobs\n";
 std::atomic<size_t> g_detach_length{std::strlen(g_detach_message)};
 
 void OnInterrupt(int) {
@@ -384,30 +384,31 @@ struct FollowOutcome {
   bool have_job = false;
 };
 
-// Exit code for a followed job, after printing the error line when it did not succeed.
-int JobExitCode(const FollowOutcome& outcome) {
+// Exit code for a followed job; when it did not succeed, prints the error line and sets *error.
+int JobExitCode(const FollowOutcome& outcome, grpc::Status* error) {
   const v1::Job& job = outcome.job;
+  int code = kExitOk;
   if (outcome.have_job && job.state() == v1::JOB_STATE_CANCELLED) {
-    std::cerr << "inspectctl: CANCELLED: job " << job.job_id() << " was cancelled\n";
-    return kExitCancelled;
-  }
-  if (outcome.have_job && job.state() == v1::JOB_STATE_FAILED) {
+    *error = grpc::Status(grpc::StatusCode::CANCELLED, "job " + job.job_id() + " was cancelled");
+    code = kExitCancelled;
+  } else if (outcome.have_job && job.state() == v1::JOB_STATE_FAILED) {
     // The stream's status carries the job's error; fall back to the job's fields.
-    grpc::Status s = outcome.status.ok()
-                         ? grpc::Status(static_cast<grpc::StatusCode>(job.error_code()), job.error_message())
-                         : outcome.status;
-    std::cerr << "inspectctl: " << CodeName(s.error_code()) << ": " << s.error_message() << '\n';
-    return kExitFailed;
-  }
-  if (!outcome.status.ok()) {
+    *error = outcome.status.ok()
+                 ? grpc::Status(static_cast<grpc::StatusCode>(job.error_code()), job.error_message())
+                 : outcome.status;
+    code = kExitFailed;
+  } else if (!outcome.status.ok()) {
     // An RPC error before the job ended (or before it existed): UNAVAILABLE means the server went away.
+    *error = outcome.status;
     return ReportError(outcome.status);
+  } else if (!outcome.have_job || job.state() != v1::JOB_STATE_SUCCEEDED) {
+    *error = grpc::Status(grpc::StatusCode::INTERNAL, "the event stream ended without a terminal event");
+    code = kExitFailed;
+  } else {
+    return kExitOk;
   }
-  if (!outcome.have_job || job.state() != v1::JOB_STATE_SUCCEEDED) {
-    std::cerr << "inspectctl: INTERNAL: the event stream ended without a terminal event\n";
-    return kExitFailed;
-  }
-  return kExitOk;
+  std::cerr << "inspectctl: " << CodeName(error->error_code()) << ": " << error->error_message() << '\n';
+  return code;
 }
 
 // Downloads a job's results into dir (the ones a scan/reconstruct produce), with progress.
@@ -435,12 +436,13 @@ grpc::Status FetchResults(InspectionClient& client, const v1::Job& job, const fs
 int FinishJob(InspectionClient& client, const Output& out, ProgressPrinter& printer, const FollowOutcome& outcome,
               const std::optional<fs::path>& out_dir, bool include_stack) {
   printer.Finish();
-  const int code = JobExitCode(outcome);
+  grpc::Status error;
+  const int code = JobExitCode(outcome, &error);
   json result = {{"type", "result"}};
   if (outcome.have_job) result["job"] = ProtoJson(outcome.job);
   if (code != kExitOk) {
     if (out.json) {
-      result["error"] = {{"code", CodeName(outcome.status.error_code())}, {"message", outcome.status.error_message()}};
+      result["error"] = {{"code", CodeName(error.error_code())}, {"message", error.error_message()}};
       result["exit_code"] = code;
       PrintJsonLine(result);
     }

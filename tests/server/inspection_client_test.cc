@@ -184,6 +184,7 @@ class InspectionClientTest : public ::testing::Test {
     WriteFile(stack / "sub/f1.png", Blob(static_cast<size_t>(kMiB + kMiB / 2), 2));
     WriteFile(stack / "f2.png", "");
     WriteFile(stack / "unlisted.png", Blob(10, 3));
+    WriteFile(stack / "ground_truth_depth.tiff", Blob(20, 4));
     return stack;
   }
 
@@ -201,7 +202,7 @@ TEST(Sha256OfFileTest, MatchesKnownDigestAndEmptyOnMissingFile) {
   EXPECT_EQ(Sha256OfFile(p), "");
 }
 
-TEST_F(InspectionClientTest, UploadSendsManifestThenListedFramesInChunksOfAtMostOneMiB) {
+TEST_F(InspectionClientTest, UploadSendsManifestListedFramesAndGroundTruthInChunksOfAtMostOneMiB) {
   const fs::path stack = WriteStack();
   InspectionClient client(options_);
   ASSERT_TRUE(client.WaitConnected().ok());
@@ -225,12 +226,12 @@ TEST_F(InspectionClientTest, UploadSendsManifestThenListedFramesInChunksOfAtMost
   std::lock_guard<std::mutex> lock(fake_.mu);
   ASSERT_TRUE(fake_.start.has_upload());
   const int64_t manifest_size = static_cast<int64_t>(fs::file_size(stack / "stack.json"));
-  const int64_t total = manifest_size + 1000 + kMiB + kMiB / 2 + 0;
-  EXPECT_EQ(fake_.start.upload().file_count(), 4);
+  const int64_t total = manifest_size + 1000 + kMiB + kMiB / 2 + 0 + 20;
+  EXPECT_EQ(fake_.start.upload().file_count(), 5);
   EXPECT_EQ(fake_.start.upload().total_bytes(), total);
   EXPECT_EQ(last_done, total);
   EXPECT_EQ(last_total, total);
-  EXPECT_EQ(fake_.file_order, (std::vector<std::string>{"stack.json", "f0.png", "sub/f1.png", "f2.png"}));
+  EXPECT_EQ(fake_.file_order, (std::vector<std::string>{"stack.json", "f0.png", "sub/f1.png", "f2.png", "ground_truth_depth.tiff"}));
   EXPECT_EQ(fake_.files["sub/f1.png"].chunk_sizes, (std::vector<int64_t>{kMiB, kMiB / 2}));
   EXPECT_EQ(fake_.files["sub/f1.png"].bytes, ReadFile(stack / "sub/f1.png"));
   EXPECT_EQ(fake_.files["stack.json"].bytes, ReadFile(stack / "stack.json"));

@@ -1,0 +1,469 @@
+// inspectctl as a user runs it: the built binary against the real server on loopback. Checks
+// exit codes (USAGE.md), the one-line error format, result files and the --json output.
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "core/depth_export.h"
+#include "tests/server/server_fixture.h"
+
+extern char** environ;
+
+namespace inspection::testing {
+namespace {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+fs::path InspectctlPath() {
+#ifdef INSPECTCTL_PATH
+  return INSPECTCTL_PATH;
+#else
+  return fs::read_symlink("/proc/self/exe").parent_path() / "inspectctl";
+#endif
+}
+
+std::string ReadAll(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+struct CliResult {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+};
+
+// One inspectctl process: stdout through a pipe (read by the test), stderr to a file. The
+// environment is the test's without INSPECT_* variables, so only the arguments count.
+class CliProcess {
+ public:
+  CliProcess(const std::vector<std::string>& args, const fs::path& stderr_file) : stderr_file_(stderr_file) {
+    int fds[2];
+    EXPECT_EQ(pipe(fds), 0);
+    read_fd_ = fds[0];
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_adddup2(&actions, fds[1], STDOUT_FILENO);
+    posix_spawn_file_actions_addclose(&actions, fds[0]);
+    posix_spawn_file_actions_addclose(&actions, fds[1]);
+    posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, stderr_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const std::string exe = InspectctlPath().string();
+    std::vector<std::string> storage{exe};
+    storage.insert(storage.end(), args.begin(), args.end());
+    std::vector<char*> argv;
+    for (auto& s : storage) argv.push_back(s.data());
+    argv.push_back(nullptr);
+    std::vector<char*> envp;
+    for (char** e = environ; *e != nullptr; ++e) {
+      if (std::strncmp(*e, "INSPECT_", 8) != 0) envp.push_back(*e);
+    }
+    envp.push_back(nullptr);
+    const int rc = posix_spawn(&pid_, exe.c_str(), &actions, nullptr, argv.data(), envp.data());
+    EXPECT_EQ(rc, 0) << "cannot start " << exe << ": " << std::strerror(rc);
+    posix_spawn_file_actions_destroy(&actions);
+    close(fds[1]);
+  }
+  ~CliProcess() {
+    if (read_fd_ >= 0) close(read_fd_);
+    if (pid_ > 0 && !waited_) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+  }
+
+  // Reads stdout up to and including the next newline; false at end of output.
+  bool ReadLine(std::string* line) {
+    line->clear();
+    char c;
+    while (read(read_fd_, &c, 1) == 1) {
+      out_ += c;
+      if (c == '\n') return true;
+      *line += c;
+    }
+    return false;
+  }
+
+  void Signal(int sig) { kill(pid_, sig); }
+
+  // Reads stdout to its end, waits for the exit, collects everything.
+  CliResult Finish() {
+    char buf[4096];
+    ssize_t n;
+    while ((n = read(read_fd_, buf, sizeof buf)) > 0) out_.append(buf, static_cast<size_t>(n));
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    waited_ = true;
+    CliResult r;
+    r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    r.out = out_;
+    r.err = ReadAll(stderr_file_);
+    return r;
+  }
+
+ private:
+  fs::path stderr_file_;
+  pid_t pid_ = -1;
+  int read_fd_ = -1;
+  bool waited_ = false;
+  std::string out_;
+};
+
+// Parses JSON Lines; a line that is not JSON fails the test.
+std::vector<json> JsonLines(const std::string& text) {
+  std::vector<json> lines;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    json j = json::parse(line, nullptr, false);
+    EXPECT_FALSE(j.is_discarded()) << "not JSON: " << line;
+    lines.push_back(j);
+  }
+  return lines;
+}
+
+int CountLines(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
+
+class CliTest : public ServerTest {
+ protected:
+  void SetUp() override {
+    ServerTest::SetUp();
+    work_ = UniqueTempDir("cli");
+  }
+  void TearDown() override {
+    fs::remove_all(work_);
+    ServerTest::TearDown();
+  }
+
+  std::vector<std::string> WithServer(std::vector<std::string> args) {
+    args.insert(args.begin(), {"--server", server_->address(), "--connect-timeout", "5"});
+    return args;
+  }
+  std::unique_ptr<CliProcess> Start(const std::vector<std::string>& args) {
+    return std::make_unique<CliProcess>(WithServer(args), work_ / ("stderr_" + std::to_string(++runs_) + ".txt"));
+  }
+  CliResult Run(const std::vector<std::string>& args) { return Start(args)->Finish(); }
+
+  // A scan with the rig's defaults, results into work_/name; returns the --json result object.
+  json JsonScan(const std::string& name, std::vector<std::string> extra = {}) {
+    std::vector<std::string> args{"--json", "scan", "--out", (work_ / name).string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    CliResult r = Run(args);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    auto lines = JsonLines(r.out);
+    if (lines.empty()) return json::object();
+    return lines.back();
+  }
+
+  // The newest job's id, found through the API (the CLI's output is what is under test).
+  std::string NewestJobId() {
+    v1::ListJobsRequest req;
+    req.set_page_size(1);
+    v1::ListJobsResponse resp;
+    EXPECT_TRUE(client_->ListJobs(req, &resp).ok());
+    return resp.jobs_size() > 0 ? resp.jobs(0).job_id() : "";
+  }
+
+  fs::path work_;
+  int runs_ = 0;
+};
+
+TEST_F(CliTest, ScanWritesResultFilesAndPrintsFolderAndDepthSummary) {
+  StartServer();
+  const fs::path out = work_ / "scan";
+  CliResult r = Run({"scan", "--out", out.string(), "--label", "part-7"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
+
+  v1::Job job;
+  ASSERT_TRUE(client_->GetJob(NewestJobId(), &job).ok());
+  EXPECT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED);
+  EXPECT_EQ(job.label(), "part-7");
+  // Every artifact but the stack zip, byte for byte.
+  int files = 0;
+  for (const auto& a : job.result().artifacts()) {
+    if (a.kind() == v1::ARTIFACT_KIND_STACK_ZIP) {
+      EXPECT_FALSE(fs::exists(out / a.file_name()));
+      continue;
+    }
+    ++files;
+    ASSERT_TRUE(fs::exists(out / a.file_name())) << a.file_name();
+    EXPECT_EQ(client::Sha256OfFile(out / a.file_name()), a.sha256()) << a.file_name();
+  }
+  EXPECT_GE(files, 4);
+  for (const char* name : {"depth.tiff", "confidence.tiff", "all_in_focus.png", "depth_preview.png"}) {
+    EXPECT_TRUE(fs::exists(out / name)) << name;
+  }
+  // Non-terminal output: one plain line per event, then the summary.
+  EXPECT_NE(r.out.find(job.job_id() + " #1 "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("results: " + fs::absolute(out).string()), std::string::npos) << r.out;
+  char valid[64];
+  std::snprintf(valid, sizeof valid, "valid %.1f %%", job.result().depth().valid_percent());
+  EXPECT_NE(r.out.find(valid), std::string::npos) << r.out;
+  ASSERT_TRUE(job.result().depth().has_ground_truth());
+  char rmse[64];
+  std::snprintf(rmse, sizeof rmse, "RMSE %.3f um", job.result().depth().rmse_um());
+  EXPECT_NE(r.out.find(rmse), std::string::npos) << r.out;
+}
+
+TEST_F(CliTest, JsonScanIsOneEventPerLineThenOneResultObject) {
+  StartServer();
+  const fs::path out = work_ / "scan";
+  CliResult r = Run({"scan", "--out", out.string(), "--json"});  // global option after the command
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto lines = JsonLines(r.out);
+  ASSERT_GE(lines.size(), 3u);
+  uint64_t sequence = 0;
+  int frame_events = 0;
+  for (size_t i = 0; i + 1 < lines.size(); ++i) {
+    ASSERT_EQ(lines[i]["type"], "event") << lines[i].dump();
+    const json& e = lines[i]["event"];
+    const uint64_t seq = std::stoull(e["sequence"].get<std::string>());  // uint64 is a JSON string
+    EXPECT_EQ(seq, sequence + 1);
+    sequence = seq;
+    if (e.contains("frame")) ++frame_events;
+  }
+  const json& result = lines.back();
+  ASSERT_EQ(result["type"], "result");
+  EXPECT_EQ(result["exit_code"], 0);
+  EXPECT_EQ(result["job"]["state"], "JOB_STATE_SUCCEEDED");
+  EXPECT_EQ(lines[lines.size() - 2]["event"]["state"], "JOB_STATE_SUCCEEDED");
+  EXPECT_EQ(result["job"]["result"]["depth"]["frame_count"].get<int>(), frame_events);
+  EXPECT_EQ(result["output_dir"], fs::absolute(out).string());
+  const auto files = result["files"].get<std::vector<std::string>>();
+  for (const char* name : {"depth.tiff", "confidence.tiff", "all_in_focus.png", "depth_preview.png"}) {
+    EXPECT_NE(std::find(files.begin(), files.end(), name), files.end()) << name;
+    EXPECT_TRUE(fs::exists(out / name)) << name;
+  }
+}
+
+TEST_F(CliTest, BadWindowExits4WithOneErrorLineNamingWindowPx) {
+  StartServer();
+  const fs::path out = work_ / "bad";
+  CliResult r = Run({"scan", "--out", out.string(), "--window", "4"});
+  EXPECT_EQ(r.exit_code, 4);
+  EXPECT_EQ(CountLines(r.err), 1) << r.err;
+  EXPECT_EQ(r.err.rfind("inspectctl: INVALID_ARGUMENT: ", 0), 0u) << r.err;
+  EXPECT_NE(r.err.find("window_px"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out / "depth.tiff"));
+
+  r = Run({"--json", "scan", "--out", out.string(), "--window", "4"});
+  EXPECT_EQ(r.exit_code, 4);
+  auto lines = JsonLines(r.out);
+  ASSERT_FALSE(lines.empty());
+  EXPECT_EQ(lines.back()["type"], "result");
+  EXPECT_EQ(lines.back()["exit_code"], 4);
+  EXPECT_EQ(lines.back()["error"]["code"], "INVALID_ARGUMENT");
+}
+
+TEST_F(CliTest, UnknownIdsAreNotFoundExit4) {
+  StartServer();
+  for (const auto& args : std::vector<std::vector<std::string>>{
+           {"watch", "no-such-job"},
+           {"cancel", "no-such-job"},
+           {"download", "no-such-id", "--out", (work_ / "x").string()},
+           {"reconstruct", "--scan-id", "no-such-scan", "--out", (work_ / "y").string()},
+           {"calibration", "show", "no-such-calibration"}}) {
+    CliResult r = Run(args);
+    EXPECT_EQ(r.exit_code, 4) << args[0];
+    EXPECT_EQ(r.err.rfind("inspectctl: NOT_FOUND: ", 0), 0u) << r.err;
+    EXPECT_EQ(CountLines(r.err), 1) << r.err;
+  }
+  EXPECT_FALSE(fs::exists(work_ / "x"));
+}
+
+TEST_F(CliTest, UsageErrorsExit2AndUnreachableServerExits3) {
+  StartServer();
+  EXPECT_EQ(Run({}).exit_code, 2);
+  EXPECT_EQ(Run({"scan"}).exit_code, 2);                                      // --out missing
+  EXPECT_EQ(Run({"scan", "--out", "d", "--focus-measure", "nope"}).exit_code, 2);
+  EXPECT_EQ(Run({"scan", "--out", "d", "--export", "jpeg"}).exit_code, 2);
+  EXPECT_EQ(Run({"reconstruct", "--out", "d"}).exit_code, 2);                 // no source
+  EXPECT_EQ(Run({"reconstruct", "--out", "d", "--scan-id", "a", "--stack", work_.string()}).exit_code, 2);
+  EXPECT_EQ(Run({"calibrate", "--step", "everything"}).exit_code, 2);
+  EXPECT_EQ(Run({"--help"}).exit_code, 0);
+
+  const std::string address = server_->address();
+  StopServer();
+  CliProcess p({"--server", address, "--connect-timeout", "0.5", "status"}, work_ / "unreachable.txt");
+  CliResult r = p.Finish();
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_EQ(r.err.rfind("inspectctl: UNAVAILABLE: ", 0), 0u) << r.err;
+}
+
+TEST_F(CliTest, UploadedStackReconstructsLikeTheScanAndABrokenStackFailsBeforeAnyJob) {
+  StartServer();
+  const json scan = JsonScan("scan");
+  const std::string scan_id = scan["job"]["result"]["scan_id"];
+  ASSERT_FALSE(scan_id.empty());
+  // The stored stack folder is exactly what a user would upload.
+  const fs::path stack = work_ / "stack";
+  fs::copy(data_dir_ / "scans" / scan_id, stack, fs::copy_options::recursive);
+
+  const fs::path rec_dir = work_ / "rec";
+  CliResult r = Run({"--json", "reconstruct", "--stack", stack.string(), "--out", rec_dir.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json rec = JsonLines(r.out).back();
+  EXPECT_EQ(rec["job"]["kind"], "JOB_KIND_RECONSTRUCT");
+  // The ground truth went along with the frames, so the error is reported, and it is the scan's.
+  ASSERT_TRUE(rec["job"]["result"]["depth"]["has_ground_truth"].get<bool>());
+  EXPECT_NEAR(rec["job"]["result"]["depth"]["rmse_um"].get<double>(),
+              scan["job"]["result"]["depth"]["rmse_um"].get<double>(), 1e-3);
+  auto scan_depth = ReadDepthTiff(work_ / "scan" / "depth.tiff");
+  auto rec_depth = ReadDepthTiff(rec_dir / "depth.tiff");
+  ASSERT_TRUE(scan_depth.ok() && rec_depth.ok());
+  ASSERT_EQ(scan_depth->size(), rec_depth->size());
+  double max_diff_um = 0.0;
+  for (int y = 0; y < scan_depth->rows; ++y) {
+    for (int x = 0; x < scan_depth->cols; ++x) {
+      const float a = scan_depth->at<float>(y, x), b = rec_depth->at<float>(y, x);
+      ASSERT_EQ(std::isnan(a), std::isnan(b)) << x << "," << y;
+      if (!std::isnan(a)) max_diff_um = std::max(max_diff_um, std::abs(double(a) - double(b)));
+    }
+  }
+  EXPECT_LT(max_diff_um, 1e-3);
+
+  // From the stored scan, by id.
+  r = Run({"--json", "reconstruct", "--scan-id", scan_id, "--out", (work_ / "rec2").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(work_ / "rec2" / "depth.tiff"));
+
+  // A frame listed in stack.json but missing: named, and no job is created.
+  v1::ListJobsResponse before;
+  ASSERT_TRUE(client_->ListJobs(v1::ListJobsRequest(), &before).ok());
+  fs::remove(stack / "frame_0003.png");
+  r = Run({"reconstruct", "--stack", stack.string(), "--out", (work_ / "rec3").string()});
+  EXPECT_EQ(r.exit_code, 4);
+  EXPECT_EQ(r.err.rfind("inspectctl: INVALID_ARGUMENT: ", 0), 0u) << r.err;
+  EXPECT_NE(r.err.find("frame_0003.png"), std::string::npos) << r.err;
+  v1::ListJobsResponse after;
+  ASSERT_TRUE(client_->ListJobs(v1::ListJobsRequest(), &after).ok());
+  EXPECT_EQ(after.jobs_size(), before.jobs_size());
+}
+
+TEST_F(CliTest, DownloadResumesAPartialFileAndRejectsACorruptOne) {
+  StartServer();
+  const json scan = JsonScan("scan");
+  const std::string job_id = scan["job"]["job_id"];
+  std::string depth_id;
+  for (const auto& a : scan["job"]["result"]["artifacts"]) {
+    if (a["kind"] == "ARTIFACT_KIND_DEPTH_TIFF") depth_id = a["artifact_id"];
+  }
+  ASSERT_FALSE(depth_id.empty());
+  const std::string depth_bytes = ReadAll(work_ / "scan" / "depth.tiff");
+  ASSERT_GT(depth_bytes.size(), 2000u);
+
+  const fs::path resumed = work_ / "resumed.tiff";
+  std::ofstream(resumed.string() + ".part", std::ios::binary) << depth_bytes.substr(0, 1000);
+  CliResult r = Run({"download", depth_id, "--out", resumed.string(), "--resume"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(ReadAll(resumed), depth_bytes);
+  EXPECT_FALSE(fs::exists(resumed.string() + ".part"));
+
+  const fs::path corrupt = work_ / "corrupt.tiff";
+  std::string wrong = depth_bytes.substr(0, 1000);
+  wrong[500] = static_cast<char>(wrong[500] ^ 0x5A);
+  std::ofstream(corrupt.string() + ".part", std::ios::binary) << wrong;
+  r = Run({"download", depth_id, "--out", corrupt.string(), "--resume"});
+  EXPECT_EQ(r.exit_code, 6);
+  EXPECT_EQ(r.err.rfind("inspectctl: DATA_LOSS: ", 0), 0u) << r.err;
+  EXPECT_FALSE(fs::exists(corrupt));
+  EXPECT_FALSE(fs::exists(corrupt.string() + ".part"));
+
+  // A job id downloads all its results into a folder, the stack zip only when asked.
+  r = Run({"download", job_id, "--out", (work_ / "all").string(), "--include-stack"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(ReadAll(work_ / "all" / "depth.tiff"), depth_bytes);
+  EXPECT_TRUE(fs::exists(work_ / "all" / "stack.zip"));
+}
+
+TEST_F(CliTest, CtrlCStopsFollowingButTheJobRunsOnAndWatchFetchesIt) {
+  control_ = std::make_shared<RigControl>();
+  control_->hold_at_frame = 2;
+  StartServer();
+  auto p = Start({"scan", "--out", (work_ / "never").string()});
+  std::string first;
+  ASSERT_TRUE(p->ReadLine(&first));  // an event line: the CLI knows the job id now
+  const std::string job_id = first.substr(0, first.find(' '));
+  control_->WaitUntilHolding();
+  p->Signal(SIGINT);
+  CliResult r = p->Finish();
+  EXPECT_EQ(r.exit_code, 130);
+  EXPECT_NE(r.err.find("inspectctl watch " + job_id), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(work_ / "never"));
+
+  v1::Job job;
+  ASSERT_TRUE(client_->GetJob(job_id, &job).ok());
+  EXPECT_EQ(job.state(), v1::JOB_STATE_RUNNING);  // not cancelled by the interrupt
+  control_->Release();
+
+  r = Run({"watch", job_id, "--out", (work_ / "watched").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find(job_id + " #1 "), std::string::npos);  // replayed from the first event
+  EXPECT_TRUE(fs::exists(work_ / "watched" / "depth.tiff"));
+}
+
+TEST_F(CliTest, CancelledJobExits5) {
+  control_ = std::make_shared<RigControl>();
+  control_->hold_at_frame = 2;
+  StartServer();
+  auto scan = Start({"scan", "--out", (work_ / "never").string()});
+  control_->WaitUntilHolding();
+  const std::string job_id = NewestJobId();
+  CliResult c = Run({"--json", "cancel", job_id});
+  EXPECT_EQ(c.exit_code, 0) << c.err;
+  EXPECT_EQ(JsonLines(c.out).at(0)["job_id"], job_id);
+  control_->Release();
+  CliResult r = scan->Finish();
+  EXPECT_EQ(r.exit_code, 5);
+  EXPECT_EQ(r.err.rfind("inspectctl: CANCELLED: ", 0), 0u) << r.err;
+  EXPECT_FALSE(fs::exists(work_ / "never" / "depth.tiff"));
+  r = Run({"--json", "watch", job_id});
+  EXPECT_EQ(r.exit_code, 5);
+  const json result = JsonLines(r.out).back();
+  EXPECT_EQ(result["job"]["state"], "JOB_STATE_CANCELLED");
+  EXPECT_EQ(result["error"]["code"], "CANCELLED");
+  EXPECT_EQ(result["exit_code"], 5);
+}
+
+TEST_F(CliTest, StatusJobsAndSpecimenAsJson) {
+  StartServer();
+  CliResult r = Run({"--json", "status"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  json status = JsonLines(r.out).at(0);
+  EXPECT_EQ(status["state"], "RIG_STATE_READY");
+  EXPECT_EQ(status["simulated"], true);
+  EXPECT_EQ(status["specimen"], "skew5");
+
+  r = Run({"--json", "specimen", "set", "lens"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(JsonLines(r.out).at(0)["current"], "lens");
+  EXPECT_EQ(Run({"specimen", "set", "no-such-specimen"}).exit_code, 4);
+
+  const std::string first = JsonScan("a")["job"]["job_id"];
+  const std::string second = JsonScan("b")["job"]["job_id"];
+  r = Run({"--json", "jobs", "--kind", "scan", "--limit", "1"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  json jobs = JsonLines(r.out).at(0)["jobs"];
+  ASSERT_EQ(jobs.size(), 1u);
+  EXPECT_EQ(jobs[0]["job_id"], second);  // newest first
+  r = Run({"jobs", "--state", "succeeded"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(CountLines(r.out), 2) << r.out;
+  EXPECT_NE(r.out.find(first), std::string::npos);
+  r = Run({"--json", "jobs", "--kind", "reconstruct"});
+  EXPECT_EQ(JsonLines(r.out).at(0)["jobs"].size(), 0u);
+}
+
+}  // namespace
+}  // namespace inspection::testing
