@@ -135,6 +135,21 @@ TEST_F(CalibrationProcedureTest, LookUpTableWithinAThirdOfAPixelOfTrueGeometry) 
   EXPECT_NEAR(g.camera_px_per_projector_px, f.geometry.camera_px_per_projector_px, 0.05);
 }
 
+// The simulator blurs twice (projector pass and camera pass, thesis Fig. 5.2) with its
+// DefocusModel and lights a square of camera_px_per_projector_px per projector pixel, so the
+// measured second moment must be sigma^2 = s^2 / 12 + 2 sigma_defocus(dz)^2.
+TEST_F(CalibrationProcedureTest, PsfSigmaMatchesSimulatorDefocusModel) {
+  ASSERT_NE(bundle_, nullptr);
+  const ImageFormationOptions f = Truth();
+  const double s = f.geometry.camera_px_per_projector_px;
+  for (const PsfAtDefocus& st : bundle_->psf->steps) {
+    const double sd = f.defocus.SigmaPx(std::abs(st.defocus_um));
+    const double expected = std::sqrt(s * s / 12.0 + 2.0 * sd * sd);
+    std::printf("psf at %+.1f um: sigma %.3f px, simulator %.3f px\n", st.defocus_um, st.sigma_px, expected);
+    EXPECT_NEAR(st.sigma_px, expected, 0.05 * expected) << st.defocus_um;
+  }
+}
+
 TEST_F(CalibrationProcedureTest, PsfGrowsWithDefocusAndScatterPredictsTheCamera) {
   ASSERT_NE(bundle_, nullptr);
   const PsfCalibration& psf = *bundle_->psf;
