@@ -132,7 +132,22 @@ TEST_F(CalibrationProcedureTest, LookUpTableWithinAThirdOfAPixelOfTrueGeometry) 
   std::printf("LUT vs truth: mean %.3f px, max %.3f px over %d entries\n", sum / n, worst, n);
   EXPECT_GT(n, 60 * 45);
   EXPECT_LT(sum / n, 0.3);
+  EXPECT_LT(worst, 0.3);
   EXPECT_NEAR(g.camera_px_per_projector_px, f.geometry.camera_px_per_projector_px, 0.05);
+  // The camera -> projector LUT against the simulator's CameraToProjector, in projector px
+  // (0.3 camera px is 0.09 projector px).
+  double cam_worst = 0;
+  int cam_n = 0;
+  for (int y = 0; y < f.camera_size.height; y += 7)
+    for (int x = 0; x < f.camera_size.width; x += 7) {
+      const auto p = g.ProjectorFromCamera({x, y});
+      if (!p) continue;
+      cam_worst = std::max(cam_worst, cv::norm(*p - truth.CameraToProjector({double(x), double(y)})));
+      ++cam_n;
+    }
+  std::printf("camera->projector LUT vs truth: max %.3f projector px over %d samples\n", cam_worst, cam_n);
+  EXPECT_GT(cam_n, 700);
+  EXPECT_LT(cam_worst, 0.09);
 }
 
 // The simulator blurs twice (projector pass and camera pass, thesis Fig. 5.2) with its
