@@ -1,7 +1,9 @@
 // Calibration procedure (thesis 4.3, 5.4.1): captures for every step on a Rig, core estimators,
-// figures per step. Frame counts per step (defaults): crf 24 + exposure search; prf 53;
-// geometry 2 + Gray code (4 x bits) + spacing^2; PSF 2 per defocus; scatter spacing^2 + 2;
-// IPSF 2 x half range / step + 1.
+// figures per step. Frames per step with default options on the full-size simulated rig
+// (exposure searches and the autofocus sweep of each new target included): crf 39, prf 95
+// (52 levels, re-captured at half exposure while saturated), geometry 119 (black, 40 Gray code,
+// 64 dot grids), PSF 36 (7 defocus steps), scatter 72 (64 dot grids, black, test pattern),
+// IPSF 20 (17 stack frames).
 #include "server/procedures/calibration_procedure.h"
 
 #include <algorithm>

@@ -132,7 +132,37 @@ TEST_F(CalibrationProcedureTest, LookUpTableWithinAThirdOfAPixelOfTrueGeometry) 
   std::printf("LUT vs truth: mean %.3f px, max %.3f px over %d entries\n", sum / n, worst, n);
   EXPECT_GT(n, 60 * 45);
   EXPECT_LT(sum / n, 0.3);
+  EXPECT_LT(worst, 0.3);
   EXPECT_NEAR(g.camera_px_per_projector_px, f.geometry.camera_px_per_projector_px, 0.05);
+  // The camera -> projector LUT against the simulator's CameraToProjector, in projector px
+  // (0.3 camera px is 0.09 projector px).
+  double cam_worst = 0;
+  int cam_n = 0;
+  for (int y = 0; y < f.camera_size.height; y += 7)
+    for (int x = 0; x < f.camera_size.width; x += 7) {
+      const auto p = g.ProjectorFromCamera({x, y});
+      if (!p) continue;
+      cam_worst = std::max(cam_worst, cv::norm(*p - truth.CameraToProjector({double(x), double(y)})));
+      ++cam_n;
+    }
+  std::printf("camera->projector LUT vs truth: max %.3f projector px over %d samples\n", cam_worst, cam_n);
+  EXPECT_GT(cam_n, 700);
+  EXPECT_LT(cam_worst, 0.09);
+}
+
+// The simulator blurs twice (projector pass and camera pass, thesis Fig. 5.2) with its
+// DefocusModel and lights a square of camera_px_per_projector_px per projector pixel, so the
+// measured second moment must be sigma^2 = s^2 / 12 + 2 sigma_defocus(dz)^2.
+TEST_F(CalibrationProcedureTest, PsfSigmaMatchesSimulatorDefocusModel) {
+  ASSERT_NE(bundle_, nullptr);
+  const ImageFormationOptions f = Truth();
+  const double s = f.geometry.camera_px_per_projector_px;
+  for (const PsfAtDefocus& st : bundle_->psf->steps) {
+    const double sd = f.defocus.SigmaPx(std::abs(st.defocus_um));
+    const double expected = std::sqrt(s * s / 12.0 + 2.0 * sd * sd);
+    std::printf("psf at %+.1f um: sigma %.3f px, simulator %.3f px\n", st.defocus_um, st.sigma_px, expected);
+    EXPECT_NEAR(st.sigma_px, expected, 0.05 * expected) << st.defocus_um;
+  }
 }
 
 TEST_F(CalibrationProcedureTest, PsfGrowsWithDefocusAndScatterPredictsTheCamera) {
