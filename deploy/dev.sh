@@ -22,6 +22,7 @@ packages=(
   libaravis-dev aravis-tools aravis-tools-cli libusb-1.0-0-dev umockdev
   libspdlog-dev libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libtiff-dev libzip-dev libsqlite3-dev libssl-dev
+  gwyddion  # a real x3p reader: tests open our x3p with gwyddion-thumbnailer
 )
 
 install_missing() {
