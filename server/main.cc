@@ -85,8 +85,7 @@ int main(int argc, char** argv) {
     start.allow_degraded = degraded;
     auto created = CreateRig(*config, start);
     if (!created.ok()) {
-      std::cerr << "inspectd: cannot start the rig: " << created.status().message()
-                << " (use --degraded to start anyway)\n";
+      std::cerr << "inspectd: cannot start the rig: " << created.status().message() << "\n";
       return 1;
     }
     rig = std::move(*created);
