@@ -33,10 +33,13 @@ Status WriteDepthPreviewPng(const std::filesystem::path& path, const cv::Mat& de
 // 16-bit PNG: value = round((depth_um - offset_um) / scale_um), 0 reserved for NaN; scale and
 // offset go into a tEXt chunk and a sidecar "<path>.json".
 Status WriteDepthPng16(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
-// ASCII or binary little-endian PLY: x, y = pixel * pixel_size_um, z = depth_um; NaN skipped.
+// Binary little-endian PLY (float x, y, z): x, y = pixel column/row * pixel_size_um (must be
+// > 0), z = depth_um; NaN points are skipped.
 Status WriteDepthPly(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
-// ISO 25178-72 x3p: zip holding main.xml (with md5 of bindata), bindata/data.bin (float64 µm
-// converted to metres as the format wants), md5checksum.hex.
+// ISO 25178-72 x3p: zip holding main.xml (Record1 axes: CX/CY incremental with the pixel size
+// in metres, CZ absolute float64; Record2 creator/instrument; Record3 matrix size and the md5 of
+// bindata), bindata/data.bin (float64 metres, x fastest, NaN = not measured) and md5checksum.hex
+// ("<md5 of main.xml> *main.xml", as md5sum writes it). Checked against Gwyddion's reader.
 Status WriteDepthX3p(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
 
 // Scale and offset chosen by WriteDepthPng16 for a map (value 1 = the smallest finite depth,

@@ -30,18 +30,6 @@ FocusPeak GaussianPeak(double z1, double z2, double z3, double f1, double f2, do
   return p;
 }
 
-double GaussianPeakZ(double z1, double z2, double z3, double f1, double f2, double f3) {
-  if (!(f1 > 0.0 && f2 > 0.0 && f3 > 0.0)) return z2;
-  const double u1 = z1 - z2, u3 = z3 - z2;
-  const double a = std::log(f2 / f1), b = std::log(f2 / f3);
-  const double den = a * u3 - b * u1;
-  if (!(std::abs(den) > 0.0) || !std::isfinite(den)) return z2;
-  const double mu = (a * u3 * u3 - b * u1 * u1) / (2.0 * den);
-  const double var = u1 * u3 * (u1 - u3) / (2.0 * den);
-  if (!std::isfinite(mu) || !(var > 0.0) || mu < std::min(u1, u3) || mu > std::max(u1, u3)) return z2;
-  return z2 + mu;
-}
-
 namespace {
 
 // Least-squares line f = slope * z + intercept through n >= 2 points.
@@ -115,18 +103,6 @@ FocusPeak InterpolateFocusCurve(DepthInterpolation method, const std::vector<dou
   const int half = method == DepthInterpolation::kLineFit ? std::max(linefit_half_width, 1) : 1;
   const int before = std::min(half, m), after = std::min(half, n - 1 - m);
   return InterpolatePeak(method, z_um.data() + (m - before), f.data() + (m - before), before, after);
-}
-
-float FocusConfidence(const FocusCurveSummary& s) {
-  const double prominence = s.peak - s.mean;
-  if (!(prominence > 0.0) || !(s.peak > 0.0)) return 0.f;
-  double sigma =
-      s.curvature_count > 0 ? std::sqrt(std::max(s.curvature_sq_sum, 0.0) / (6.0 * s.curvature_count)) : 0.0;
-  sigma = std::max(sigma, 1e-3 * s.peak);
-  const double snr = prominence / sigma;
-  double c = std::clamp(1.0 - kConfidenceSnrZero / snr, 0.0, 1.0);
-  if (s.peak_at_end) c *= 0.5;
-  return float(c);
 }
 
 }  // namespace inspection

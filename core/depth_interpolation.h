@@ -4,6 +4,8 @@
 // the peak can be trusted (confidence in [0, 1]).
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <vector>
 
 #include "core/sff_engine.h"
@@ -24,8 +26,19 @@ struct FocusPeak {
 // which for u1 = -dz, u3 = dz reduces to the thesis' equations. Falls back to z2 when a value is
 // not positive or the denominator vanishes.
 FocusPeak GaussianPeak(double z1, double z2, double z3, double f1, double f2, double f3);
-// The same peak position without sigma and height (the engine's per-pixel hot path).
-double GaussianPeakZ(double z1, double z2, double z3, double f1, double f2, double f3);
+// The same peak position without sigma and height (the engine's per-pixel hot path; inline).
+inline double GaussianPeakZ(double z1, double z2, double z3, double f1, double f2, double f3) {
+  if (!(f1 > 0.0 && f2 > 0.0 && f3 > 0.0)) return z2;
+  const double u1 = z1 - z2, u3 = z3 - z2;
+  const double a = std::log(f2 / f1), b = std::log(f2 / f3);
+  const double den = a * u3 - b * u1;
+  // sigma^2 = u1 u3 (u1 - u3) / (2 den) must be positive: den must have the sign of u1 u3 (u1 - u3).
+  const double num_var = u1 * u3 * (u1 - u3);
+  if (!(den * num_var > 0.0) || !std::isfinite(den)) return z2;
+  const double mu = (a * u3 * u3 - b * u1 * u1) / (2.0 * den);
+  if (!(mu >= std::min(u1, u3) && mu <= std::max(u1, u3))) return z2;  // also rejects NaN
+  return z2 + mu;
+}
 
 // Malik & Choi line fit (eq. 3.25-3.29). z/f hold the samples m - before .. m + after around the
 // maximum at position `before` (so count = before + after + 1). DS1 = the `before` samples and
@@ -66,6 +79,16 @@ struct FocusCurveSummary {
 //   confidence = clamp(1 - kConfidenceSnrZero / s, 0, 1),
 // halved when the peak is on the first or last frame (the true peak may lie outside the stack).
 inline constexpr double kConfidenceSnrZero = 4.0;
-float FocusConfidence(const FocusCurveSummary& s);
+inline float FocusConfidence(const FocusCurveSummary& s) {
+  const double prominence = s.peak - s.mean;
+  if (!(prominence > 0.0) || !(s.peak > 0.0)) return 0.f;
+  double sigma =
+      s.curvature_count > 0 ? std::sqrt(std::max(s.curvature_sq_sum, 0.0) / (6.0 * s.curvature_count)) : 0.0;
+  sigma = std::max(sigma, 1e-3 * s.peak);
+  // 1 - kConfidenceSnrZero / snr with snr = prominence / sigma, in one division.
+  double c = std::clamp(1.0 - kConfidenceSnrZero * sigma / prominence, 0.0, 1.0);
+  if (s.peak_at_end) c *= 0.5;
+  return float(c);
+}
 
 }  // namespace inspection

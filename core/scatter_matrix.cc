@@ -255,6 +255,8 @@ StatusOr<ScatterMatrix::Sparse> ReadSparseMatrix(const std::filesystem::path& fi
   if (outer[0] != 0 || outer[cols] != nnz) return Status::DataLoss(name + ": bad column index");
   for (int c = 0; c < cols; ++c) {
     if (outer[c + 1] < outer[c]) return Status::DataLoss(name + ": column index decreases");
+  }
+  for (int c = 0; c < cols; ++c) {
     for (int k = outer[c]; k < outer[c + 1]; ++k) {
       const int row = a.innerIndexPtr()[k];
       if (row < 0 || row >= rows || (k > outer[c] && row <= a.innerIndexPtr()[k - 1])) {

@@ -93,10 +93,15 @@ Status SffOptions::Validate() const {
 namespace {
 
 constexpr int kMaxJ = 4;
-// Tile of the fused kernel: 256 x 64 pixels keep the state (~25 bytes per pixel) in L2 and the
-// halo overhead (window - 1 extra rows and columns) below 10 % for the 7 x 7 window.
+// Tile of the fused kernel in PushFrame: 256 x 64 pixels; the halo (window + 1 extra rows and
+// columns of input) stays near 10 % for the 7 x 7 window.
 constexpr int kTileW = 256;
 constexpr int kTileH = 64;
+// Batch path: 256 x 32 tiles (state ~40 bytes per pixel = 330 KB, in L2), frames in chunks of 8
+// whose focus rows are kept (256 x 32 x 8 x 4 B = 256 KB) so that each state row is updated for 8
+// frames while it sits in registers / L1.
+constexpr int kBatchTileH = 32;
+constexpr int kFrameChunk = 8;
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 int Reflect101(int p, int len) {
@@ -130,6 +135,11 @@ void ParallelFor(int n_tasks, int threads, F&& fn) {
   for (auto& t : pool) t.join();
 }
 
+bool HasAvx2() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
 inline float ToFloat(int32_t v) { return float(v); }
 inline float ToFloat(float v) { return v; }
 
@@ -139,6 +149,7 @@ inline float ToFloat(float v) { return v; }
 template <typename T, typename P>
 struct StatePlanes {
   int width = 0, height = 0, j = 1;
+  bool simd = true;  // AVX2 row kernels (when the CPU has AVX2) or the portable ones
   std::vector<T> best;
   std::vector<int32_t> idx;
   std::vector<T> before[kMaxJ], after[kMaxJ], ring[kMaxJ];  // F(m-1-i), F(m+1+i), F(k-1-i)
@@ -148,7 +159,8 @@ struct StatePlanes {
   std::vector<float> sum, curv_all, curv_excl;
   std::vector<int32_t> aif;  // 32-bit lanes like the rest, so one vectorised loop updates all
 
-  void Allocate(int w, int h, int jj) {
+  void Allocate(int w, int h, int jj, bool use_simd) {
+    simd = use_simd && HasAvx2();
     width = w;
     height = h;
     j = jj;
@@ -192,11 +204,6 @@ SFF_INLINE void InitRow(StatePlanes<T, P>& s, size_t off, const T* __restrict f,
   }
 }
 
-bool HasAvx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
-
 // Row kernels of the state update, compiled twice: for AVX2 and portable (the ISA is chosen at
 // run time). Each is a separate non-inlined function with restrict pointers and lanes of one
 // width, the form in which GCC vectorises them; masks are built with integer bit operations
@@ -217,7 +224,8 @@ bool HasAvx2() {
     const int32_t km1 = k - 1, km2 = k - 2;                                                                   \
     for (int x = 0; x < n; ++x) {                                                                             \
       const T v = f[x];                                                                                       \
-      const float t = ToFloat(T(v - 2 * last[x] + last2[x]));                                                 \
+      /* In float: for wide windows 2 F overflows int32. */                                                   \
+      const float t = (ToFloat(v) - ToFloat(last[x])) - (ToFloat(last[x]) - ToFloat(last2[x]));               \
       const float t2 = t * t;                                                                                 \
       const uint32_t mgt = uint32_t(-int32_t(v > best[x]));                                                   \
       const int32_t id = idx[x];                                                                              \
@@ -241,7 +249,7 @@ bool HasAvx2() {
     for (int x = 0; x < n; ++x) {                                                                             \
       const T v = f[x], b = best[x], l = last[x], l2 = last2[x];                                              \
       const int32_t id = idx[x];                                                                              \
-      const float t = ToFloat(T(v - 2 * l + l2));                                                             \
+      const float t = (ToFloat(v) - ToFloat(l)) - (ToFloat(l) - ToFloat(l2)); /* float: 2 F overflows int32 */ \
       const float t2 = curv_scale * (t * t);                                                                  \
       const uint32_t mgt = uint32_t(-int32_t(v > b));                                                         \
       const uint32_t mnear = uint32_t(-int32_t((id == km1) | (id == km2)));                                   \
@@ -269,9 +277,9 @@ SFF_DEFINE_ROW_KERNELS(portable, __attribute__((noinline)))
 
 // Curve statistics of frame k >= 1, before the maximum is updated: sum, second differences.
 template <typename T>
-void CurveStats(int k, const T* f, const T* best, const int32_t* idx, const T* last, const T* last2, float* sum,
-                float* curv_all, float* curv_excl, int n) {
-  if (HasAvx2()) avx2::StatsRow(n, k, f, best, idx, last, last2, sum, curv_all, curv_excl);
+void CurveStats(bool simd, int k, const T* f, const T* best, const int32_t* idx, const T* last, const T* last2,
+                float* sum, float* curv_all, float* curv_excl, int n) {
+  if (simd) avx2::StatsRow(n, k, f, best, idx, last, last2, sum, curv_all, curv_excl);
   else portable::StatsRow(n, k, f, best, idx, last, last2, sum, curv_all, curv_excl);
 }
 
@@ -279,7 +287,7 @@ void CurveStats(int k, const T* f, const T* best, const int32_t* idx, const T* l
 template <typename T, typename P>
 void UpdateRowGeneral(StatePlanes<T, P>& s, size_t off, int k, const T* f, const P* pix, int n) {
   const int J = s.j;
-  CurveStats(k, f, s.best.data() + off, s.idx.data() + off, s.ring[0].data() + off, s.last2.data() + off,
+  CurveStats(s.simd, k, f, s.best.data() + off, s.idx.data() + off, s.ring[0].data() + off, s.last2.data() + off,
              s.sum.data() + off, s.curv_all.data() + off, s.curv_excl.data() + off, n);
   for (int x = 0; x < n; ++x) {
     const size_t i = off + x;
@@ -312,7 +320,7 @@ inline void UpdateRow(StatePlanes<T, P>& s, size_t off, int k, const T* f, const
   } else if (s.j == 1) {
     // The hot path (maximum and Gaussian interpolation).
     const float curv_scale = k >= 2 ? 1.f : 0.f;
-    if (HasAvx2()) {
+    if (s.simd) {
       avx2::UpdateRowJ1<T, P>(n, k, curv_scale, f, pix, s.best.data() + off, s.idx.data() + off,
                               s.before[0].data() + off, s.after[0].data() + off, s.ring[0].data() + off,
                               s.last2.data() + off, s.aif.data() + off, s.sum.data() + off, s.curv_all.data() + off,
@@ -334,6 +342,7 @@ struct TenengradScratch {
   std::vector<int16_t> sv, dv;  // vertical [1 2 1] and [1 0 -1] of the three rows (AVX2 path)
   std::vector<int32_t> ering;   // the last `window` energy rows Gx^2 + Gy^2: width tw + 2R
   std::vector<int32_t> colsum;  // vertical window sums of the energy
+  std::vector<int32_t> pairs;   // horizontal pair sums of colsum
   std::vector<int32_t> focus;   // one output row
   void Reserve(int window) {
     const int r = window / 2, ew = kTileW + 2 * r;
@@ -342,6 +351,7 @@ struct TenengradScratch {
     dv.resize(size_t(ew) + 2);
     ering.resize(size_t(ew) * window);
     colsum.resize(size_t(ew));
+    pairs.resize(size_t(ew));
     focus.resize(size_t(kTileW));
   }
 };
@@ -409,11 +419,17 @@ __attribute__((target("avx2"))) inline void EnergyRowAvx2(const int16_t* a, cons
   }
 }
 
-SFF_INLINE void WindowRow(const int32_t* __restrict colsum, int32_t* __restrict out, int tw, int window) {
-  for (int x = 0; x < tw; ++x) out[x] = colsum[x];
-  for (int i = 1; i < window; ++i) {
-    const int32_t* __restrict c = colsum + i;
-    for (int x = 0; x < tw; ++x) out[x] += c[x];
+// Horizontal window sum of the column sums: out[x] = sum of colsum[x .. x + window - 1]. Built
+// from pair sums p[x] = colsum[x] + colsum[x + 1]: (window + 1) / 2 passes instead of window.
+SFF_INLINE void WindowRow(const int32_t* __restrict colsum, int32_t* __restrict pairs, int32_t* __restrict out,
+                          int tw, int window) {
+  const int np = tw + window - 2;
+  for (int x = 0; x < np; ++x) pairs[x] = colsum[x] + colsum[x + 1];
+  const int32_t* __restrict last = colsum + window - 1;
+  for (int x = 0; x < tw; ++x) out[x] = pairs[x] + last[x];
+  for (int i = 2; i + 1 < window; i += 2) {
+    const int32_t* __restrict p = pairs + i;
+    for (int x = 0; x < tw; ++x) out[x] += p[x];
   }
 }
 
@@ -437,7 +453,7 @@ SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int 
     if (prefetch_next) {
       // The same rows of the next frame: the tile reads them on its next pass, by then from cache.
       const uint8_t* nx = prefetch_next->ptr<uint8_t>(ry) + std::max(c_first, 0);
-      for (int i = 0; i < hi - lo; i += 64) __builtin_prefetch(nx + i, 0, 2);
+      for (int i = 0; i < hi - lo; i += 64) __builtin_prefetch(nx + i, 0, 3);
     }
     int16_t* __restrict dst = sc.in[loaded % 3].data();
     {
@@ -458,8 +474,11 @@ SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int 
     ++e_rows;
     if (e_rows < window) continue;
     const int y = y0 + e_rows - window;
-    WindowRow(sc.colsum.data(), sc.focus.data(), tw, window);
-    sink(y, sc.focus.data(), frame.ptr<uint8_t>(y) + x0);
+    // A sink with Dest(y) receives the focus row in place (no copy).
+    int32_t* focus_row = sc.focus.data();
+    if constexpr (requires { sink.Dest(y); }) focus_row = sink.Dest(y);
+    WindowRow(sc.colsum.data(), sc.pairs.data(), focus_row, tw, window);
+    sink(y, focus_row, frame.ptr<uint8_t>(y) + x0);
   }
 }
 
@@ -495,8 +514,82 @@ void FusedTileFramePortable(const cv::Mat& frame, int k, int x0, int y0, int tw,
 
 void FusedTileFrame(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window, TenengradScratch& sc,
                     StatePlanes<int32_t, uint8_t>& st, int sx, int sy, const cv::Mat* next = nullptr) {
-  if (HasAvx2()) FusedTileFrameAvx2(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+  if (st.simd) FusedTileFrameAvx2(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
   else FusedTileFramePortable(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+}
+
+__attribute__((target("avx2"))) inline __m256i ld(const int32_t* p) {
+  return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+}
+__attribute__((target("avx2"))) inline void st(int32_t* p, __m256i v) {
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(p), v);
+}
+
+// Batch path, one neighbour each side, AVX2: the state of 8 pixels stays in registers while the
+// frames k_begin .. k_end-1 of a chunk update it; per pixel exactly the operations of
+// UpdateRowJ1 in the same order, so the result is bit-identical. n8: a multiple of 8.
+__attribute__((target("avx2"))) void UpdateChunkAvx2(int n8, int k_begin, int k_end, int slot0,
+                                                     const int32_t* vol_row, size_t slot_stride,
+                                                     const uint8_t* const* pix_rows, int32_t* best, int32_t* idx,
+                                                     int32_t* prev, int32_t* next, int32_t* last, int32_t* last2,
+                                                     int32_t* aif, float* sum, float* curv_all, float* curv_excl) {
+  const __m256i zero = _mm256_setzero_si256();
+  for (int x = 0; x < n8; x += 8) {
+    __m256i b = ld(best + x), id = ld(idx + x), pv = ld(prev + x), nx = ld(next + x);
+    __m256i l = ld(last + x), l2 = ld(last2 + x), a = ld(aif + x);
+    __m256 sm = _mm256_loadu_ps(sum + x), ca = _mm256_loadu_ps(curv_all + x), ce = _mm256_loadu_ps(curv_excl + x);
+    for (int k = k_begin; k < k_end; ++k) {
+      const int slot = k - slot0;
+      const __m256i v = ld(vol_row + size_t(slot) * slot_stride + x);
+      const __m256i p =
+          _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(pix_rows[slot] + x)));
+      const __m256 fv = _mm256_cvtepi32_ps(v), fl = _mm256_cvtepi32_ps(l), fl2 = _mm256_cvtepi32_ps(l2);
+      const __m256 t = _mm256_sub_ps(_mm256_sub_ps(fv, fl), _mm256_sub_ps(fl, fl2));
+      const __m256 t2 = _mm256_mul_ps(_mm256_set1_ps(k >= 2 ? 1.f : 0.f), _mm256_mul_ps(t, t));
+      const __m256i gt = _mm256_cmpgt_epi32(v, b);
+      const __m256i was = _mm256_cmpeq_epi32(id, _mm256_set1_epi32(k - 1));
+      const __m256i near = _mm256_or_si256(was, _mm256_cmpeq_epi32(id, _mm256_set1_epi32(k - 2)));
+      const __m256 kept = _mm256_add_ps(ce, _mm256_and_ps(t2, _mm256_castsi256_ps(near)));
+      sm = _mm256_add_ps(sm, fv);
+      ca = _mm256_add_ps(ca, t2);
+      ce = _mm256_blendv_ps(kept, t2, _mm256_castsi256_ps(gt));
+      nx = _mm256_blendv_epi8(_mm256_blendv_epi8(nx, v, was), zero, gt);
+      pv = _mm256_blendv_epi8(pv, l, gt);
+      b = _mm256_blendv_epi8(b, v, gt);
+      id = _mm256_blendv_epi8(id, _mm256_set1_epi32(k), gt);
+      a = _mm256_blendv_epi8(a, p, gt);
+      l2 = l;
+      l = v;
+    }
+    st(best + x, b);
+    st(idx + x, id);
+    st(prev + x, pv);
+    st(next + x, nx);
+    st(last + x, l);
+    st(last2 + x, l2);
+    st(aif + x, a);
+    _mm256_storeu_ps(sum + x, sm);
+    _mm256_storeu_ps(curv_all + x, ca);
+    _mm256_storeu_ps(curv_excl + x, ce);
+  }
+}
+
+// Sink of the batch path: keeps the focus row of frame slot `slot` for the later state update.
+struct VolumeSink {
+  int32_t* vol;
+  int slot, y0, tw;
+  SFF_INLINE int32_t* Dest(int y) { return vol + (size_t(slot) * kBatchTileH + size_t(y - y0)) * kTileW; }
+  SFF_INLINE void operator()(int, const int32_t*, const uint8_t*) {}  // already in place
+};
+
+__attribute__((target("avx2"))) void FocusRowsToVolumeAvx2(const cv::Mat& frame, int slot, int x0, int y0, int tw,
+                                                           int th, int window, TenengradScratch& sc, int32_t* vol,
+                                                           const cv::Mat* next) {
+  TenengradTile<true>(frame, x0, y0, tw, th, window, sc, VolumeSink{vol, slot, y0, tw}, next);
+}
+void FocusRowsToVolumePortable(const cv::Mat& frame, int slot, int x0, int y0, int tw, int th, int window,
+                               TenengradScratch& sc, int32_t* vol, const cv::Mat* next) {
+  TenengradTile<false>(frame, x0, y0, tw, th, window, sc, VolumeSink{vol, slot, y0, tw}, next);
 }
 
 template <typename P>
@@ -519,8 +612,8 @@ struct Outputs {
 // Interpolation and confidence for the state pixels of one row span; writes the outputs at
 // (ox, oy). Returns the number of pixels with finite depth.
 template <typename T, typename P>
-size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std::vector<double>& z,
-                  const SffOptions& o, Outputs& out, int ox, int oy) {
+size_t FinishSpanScalar(const StatePlanes<T, P>& st, size_t off, int x_begin, int count, const std::vector<double>& z,
+                        const SffOptions& o, Outputs& out, int ox, int oy) {
   const int n = int(z.size());
   const int J = st.j;
   float* depth = out.depth.ptr<float>(oy) + ox;
@@ -528,7 +621,7 @@ size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std:
   P* aif = out.aif.ptr<P>(oy) + ox;
   size_t valid = 0;
   double zw[2 * kMaxJ + 1], fw[2 * kMaxJ + 1];
-  for (int x = 0; x < count; ++x) {
+  for (int x = x_begin; x < count; ++x) {
     const size_t i = off + x;
     const int m = st.idx[i];
     const int before = std::min(J, m), after = std::min(J, n - 1 - m);
@@ -571,6 +664,205 @@ size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std:
   return valid;
 }
 
+// Natural logarithm of positive, finite floats: exponent and mantissa in [sqrt(1/2), sqrt(2)),
+// log(m) = 2 atanh(s), s = (m - 1) / (m + 1), |s| < 0.172, series to s^9 (relative error < 1e-7).
+__attribute__((target("avx2"))) inline __m256 LogPositiveAvx2(__m256 x) {
+  const __m256i bits = _mm256_castps_si256(x);
+  __m256i e = _mm256_sub_epi32(_mm256_srli_epi32(bits, 23), _mm256_set1_epi32(127));
+  __m256 m = _mm256_castsi256_ps(_mm256_or_si256(_mm256_and_si256(bits, _mm256_set1_epi32(0x007fffff)),
+                                                 _mm256_set1_epi32(0x3f800000)));  // [1, 2)
+  const __m256 big = _mm256_cmp_ps(m, _mm256_set1_ps(1.41421356f), _CMP_GT_OQ);
+  m = _mm256_blendv_ps(m, _mm256_mul_ps(m, _mm256_set1_ps(0.5f)), big);
+  e = _mm256_sub_epi32(e, _mm256_castps_si256(big));  // big lanes are -1: e + 1
+  const __m256 one = _mm256_set1_ps(1.f);
+  const __m256 sv = _mm256_div_ps(_mm256_sub_ps(m, one), _mm256_add_ps(m, one));
+  const __m256 s2 = _mm256_mul_ps(sv, sv);
+  __m256 poly = _mm256_set1_ps(1.f / 9.f);
+  poly = _mm256_add_ps(_mm256_mul_ps(poly, s2), _mm256_set1_ps(1.f / 7.f));
+  poly = _mm256_add_ps(_mm256_mul_ps(poly, s2), _mm256_set1_ps(1.f / 5.f));
+  poly = _mm256_add_ps(_mm256_mul_ps(poly, s2), _mm256_set1_ps(1.f / 3.f));
+  poly = _mm256_add_ps(_mm256_mul_ps(poly, s2), one);
+  const __m256 log_m = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(2.f), sv), poly);
+  return _mm256_add_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(e), _mm256_set1_ps(0.69314718056f)), log_m);
+}
+
+// FinishSpanScalar for 8 pixels at a time in float (fused path, one neighbour each side, maximum
+// or Gaussian): the confidence of FocusConfidence and the Gaussian position of GaussianPeakZ.
+// Returns the number of kept pixels among the first n8 (a multiple of 8).
+__attribute__((target("avx2"))) size_t FinishSpanAvx2(const StatePlanes<int32_t, uint8_t>& st, size_t off, int n8,
+                                                      const float* zf, int n, bool gaussian, float min_confidence,
+                                                      float* depth, float* conf, uint8_t* aif) {
+  size_t valid = 0;
+  const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);
+  const __m256i izero = _mm256_setzero_si256();
+  const __m256i last_frame = _mm256_set1_epi32(n - 1);
+  const __m256 inv_n = _mm256_set1_ps(1.f / float(n));
+  const __m256 nan = _mm256_set1_ps(std::numeric_limits<float>::quiet_NaN());
+  for (int x = 0; x < n8; x += 8) {
+    const size_t i = off + size_t(x);
+    const __m256i m = ld(st.idx.data() + i);
+    const __m256 best = _mm256_cvtepi32_ps(ld(st.best.data() + i));
+    const __m256 f1 = _mm256_cvtepi32_ps(ld(st.before[0].data() + i));
+    const __m256 f3 = _mm256_cvtepi32_ps(ld(st.after[0].data() + i));
+    // Confidence: prominence over the noise level of the second differences away from the peak.
+    const __m256 mean = _mm256_mul_ps(_mm256_loadu_ps(st.sum.data() + i), inv_n);
+    const __m256 prominence = _mm256_sub_ps(best, mean);
+    const __m256i hi = _mm256_min_epi32(last_frame, _mm256_add_epi32(m, _mm256_set1_epi32(2)));
+    const __m256i lo = _mm256_max_epi32(_mm256_set1_epi32(2), m);
+    const __m256i excluded = _mm256_max_epi32(izero, _mm256_add_epi32(_mm256_sub_epi32(hi, lo), _mm256_set1_epi32(1)));
+    const __m256i count = _mm256_sub_epi32(_mm256_set1_epi32(std::max(0, n - 2)), excluded);
+    const __m256 sq = _mm256_max_ps(zero, _mm256_sub_ps(_mm256_loadu_ps(st.curv_all.data() + i),
+                                                        _mm256_loadu_ps(st.curv_excl.data() + i)));
+    const __m256 countf = _mm256_cvtepi32_ps(count);
+    __m256 sigma = _mm256_sqrt_ps(_mm256_div_ps(sq, _mm256_mul_ps(_mm256_set1_ps(6.f), _mm256_max_ps(countf, one))));
+    sigma = _mm256_and_ps(sigma, _mm256_cmp_ps(countf, zero, _CMP_GT_OQ));
+    sigma = _mm256_max_ps(sigma, _mm256_mul_ps(_mm256_set1_ps(1e-3f), best));
+    __m256 c = _mm256_sub_ps(one, _mm256_div_ps(_mm256_mul_ps(_mm256_set1_ps(float(kConfidenceSnrZero)), sigma),
+                                                _mm256_max_ps(prominence, _mm256_set1_ps(1e-30f))));
+    c = _mm256_min_ps(one, _mm256_max_ps(zero, c));
+    const __m256 has_peak = _mm256_and_ps(_mm256_cmp_ps(prominence, zero, _CMP_GT_OQ),
+                                          _mm256_cmp_ps(best, zero, _CMP_GT_OQ));
+    c = _mm256_and_ps(c, has_peak);
+    const __m256i at_end = _mm256_or_si256(_mm256_cmpeq_epi32(m, izero), _mm256_cmpeq_epi32(m, last_frame));
+    c = _mm256_blendv_ps(c, _mm256_mul_ps(c, _mm256_set1_ps(0.5f)), _mm256_castsi256_ps(at_end));
+    _mm256_storeu_ps(conf + x, c);
+    // Depth: the frame's z, moved to the Gaussian's peak where the fit is valid.
+    const __m256 z2 = _mm256_i32gather_ps(zf, m, 4);
+    __m256 z_um = z2;
+    if (gaussian) {
+      const __m256i mm1 = _mm256_max_epi32(izero, _mm256_sub_epi32(m, _mm256_set1_epi32(1)));
+      const __m256i mp1 = _mm256_min_epi32(last_frame, _mm256_add_epi32(m, _mm256_set1_epi32(1)));
+      const __m256 u1 = _mm256_sub_ps(_mm256_i32gather_ps(zf, mm1, 4), z2);
+      const __m256 u3 = _mm256_sub_ps(_mm256_i32gather_ps(zf, mp1, 4), z2);
+      const __m256 ok_f = _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(f1, zero, _CMP_GT_OQ),
+                                                      _mm256_cmp_ps(f3, zero, _CMP_GT_OQ)),
+                                        _mm256_andnot_ps(_mm256_castsi256_ps(at_end),
+                                                         _mm256_cmp_ps(best, zero, _CMP_GT_OQ)));
+      // Logs only of positive finite ratios (others are masked out below).
+      const __m256 safe1 = _mm256_blendv_ps(one, f1, ok_f), safe3 = _mm256_blendv_ps(one, f3, ok_f);
+      const __m256 safe2 = _mm256_blendv_ps(one, best, ok_f);
+      const __m256 a = LogPositiveAvx2(_mm256_div_ps(safe2, safe1));
+      const __m256 b = LogPositiveAvx2(_mm256_div_ps(safe2, safe3));
+      const __m256 den = _mm256_sub_ps(_mm256_mul_ps(a, u3), _mm256_mul_ps(b, u1));
+      const __m256 num_var = _mm256_mul_ps(_mm256_mul_ps(u1, u3), _mm256_sub_ps(u1, u3));
+      const __m256 mu = _mm256_div_ps(
+          _mm256_sub_ps(_mm256_mul_ps(a, _mm256_mul_ps(u3, u3)), _mm256_mul_ps(b, _mm256_mul_ps(u1, u1))),
+          _mm256_mul_ps(_mm256_set1_ps(2.f), den));
+      const __m256 in_range = _mm256_and_ps(_mm256_cmp_ps(mu, _mm256_min_ps(u1, u3), _CMP_GE_OQ),
+                                            _mm256_cmp_ps(mu, _mm256_max_ps(u1, u3), _CMP_LE_OQ));
+      const __m256 ok = _mm256_and_ps(_mm256_and_ps(ok_f, in_range),
+                                      _mm256_cmp_ps(_mm256_mul_ps(den, num_var), zero, _CMP_GT_OQ));
+      z_um = _mm256_add_ps(z2, _mm256_and_ps(mu, ok));
+    }
+    const __m256 keep = _mm256_cmp_ps(c, _mm256_set1_ps(min_confidence), _CMP_GE_OQ);
+    _mm256_storeu_ps(depth + x, _mm256_blendv_ps(nan, z_um, keep));
+    valid += size_t(__builtin_popcount(unsigned(_mm256_movemask_ps(keep))));
+    // All-in-focus: 8 int32 grey values to bytes.
+    alignas(32) int32_t a8[8];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(a8), ld(st.aif.data() + i));
+    for (int j = 0; j < 8; ++j) aif[x + j] = uint8_t(a8[j]);
+  }
+  return valid;
+}
+
+// Scalar twin of LogPositiveAvx2: the same float operations in the same order (bit-identical).
+inline float LogPositiveScalar(float x) {
+  const uint32_t bits = std::bit_cast<uint32_t>(x);
+  int32_t e = int32_t(bits >> 23) - 127;
+  float m = std::bit_cast<float>((bits & 0x007fffffu) | 0x3f800000u);
+  if (m > 1.41421356f) {
+    m = m * 0.5f;
+    e += 1;
+  }
+  const float sv = (m - 1.f) / (m + 1.f);
+  const float s2 = sv * sv;
+  float poly = 1.f / 9.f;
+  poly = poly * s2 + 1.f / 7.f;
+  poly = poly * s2 + 1.f / 5.f;
+  poly = poly * s2 + 1.f / 3.f;
+  poly = poly * s2 + 1.f;
+  const float log_m = (2.f * sv) * poly;
+  return float(e) * 0.69314718056f + log_m;
+}
+
+// Scalar twin of FinishSpanAvx2 for pixels x_begin .. count-1 (the tail after the AVX2 blocks,
+// or everything without AVX2): bit-identical per pixel.
+size_t FinishSpanFloatScalar(const StatePlanes<int32_t, uint8_t>& st, size_t off, int x_begin, int count,
+                             const float* zf, int n, bool gaussian, float min_confidence, float* depth, float* conf,
+                             uint8_t* aif) {
+  auto maxps = [](float a, float b) { return a > b ? a : b; };  // _mm256_max_ps(a, b)
+  auto minps = [](float a, float b) { return a < b ? a : b; };  // _mm256_min_ps(a, b)
+  size_t valid = 0;
+  const float inv_n = 1.f / float(n);
+  for (int x = x_begin; x < count; ++x) {
+    const size_t i = off + size_t(x);
+    const int32_t m = st.idx[i];
+    const float best = float(st.best[i]), f1 = float(st.before[0][i]), f3 = float(st.after[0][i]);
+    const float mean = st.sum[i] * inv_n;
+    const float prominence = best - mean;
+    const int32_t hi = std::min(n - 1, m + 2), lo = std::max(2, m);
+    const int32_t excluded = std::max(0, hi - lo + 1);
+    const int32_t count_t = std::max(0, n - 2) - excluded;
+    const float sq = maxps(0.f, st.curv_all[i] - st.curv_excl[i]);
+    const float countf = float(count_t);
+    float sigma = std::sqrt(sq / (6.f * maxps(countf, 1.f)));
+    if (!(countf > 0.f)) sigma = 0.f;
+    sigma = maxps(sigma, 1e-3f * best);
+    float c = 1.f - (float(kConfidenceSnrZero) * sigma) / maxps(prominence, 1e-30f);
+    c = minps(1.f, maxps(0.f, c));
+    if (!(prominence > 0.f && best > 0.f)) c = 0.f;
+    const bool at_end = m == 0 || m == n - 1;
+    if (at_end) c = c * 0.5f;
+    conf[x] = c;
+    const float z2 = zf[m];
+    float z_um = z2;
+    if (gaussian) {
+      const float u1 = zf[std::max(0, m - 1)] - z2, u3 = zf[std::min(n - 1, m + 1)] - z2;
+      const bool ok_f = f1 > 0.f && f3 > 0.f && !at_end && best > 0.f;
+      if (ok_f) {
+        const float a = LogPositiveScalar(best / f1), b = LogPositiveScalar(best / f3);
+        const float den = a * u3 - b * u1;
+        const float num_var = (u1 * u3) * (u1 - u3);
+        if (den * num_var > 0.f) {
+          const float mu = (a * (u3 * u3) - b * (u1 * u1)) / (2.f * den);
+          if (mu >= minps(u1, u3) && mu <= maxps(u1, u3)) z_um = z2 + mu;
+        }
+      }
+      if (z_um == z2) z_um = z2 + 0.f;  // as the vector path adds a masked +0
+    }
+    const bool keep = c >= min_confidence;
+    depth[x] = keep ? z_um : std::numeric_limits<float>::quiet_NaN();
+    valid += keep;
+    aif[x] = uint8_t(st.aif[i]);
+  }
+  return valid;
+}
+
+template <typename T, typename P>
+size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std::vector<double>& z,
+                  const SffOptions& o, Outputs& out, int ox, int oy) {
+  if constexpr (std::is_same_v<T, int32_t> && std::is_same_v<P, uint8_t>) {
+    // Fused path with one neighbour each side: float arithmetic, AVX2 blocks of 8 and a scalar
+    // twin for the rest (or all of it without AVX2), bit-identical either way.
+    if (st.j == 1 && o.interpolation != DepthInterpolation::kLineFit) {
+      std::vector<float> zf(z.begin(), z.end());
+      const int n8 = st.simd ? (count & ~7) : 0;
+      const bool gaussian = o.interpolation == DepthInterpolation::kGaussian;
+      float* depth = out.depth.ptr<float>(oy) + ox;
+      float* conf = out.confidence.ptr<float>(oy) + ox;
+      uint8_t* aif = out.aif.ptr<uint8_t>(oy) + ox;
+      const int n = int(z.size());
+      size_t valid = 0;
+      if (n8 > 0) {
+        valid = FinishSpanAvx2(st, off, n8, zf.data(), n, gaussian, float(o.min_confidence), depth, conf, aif);
+      }
+      return valid + FinishSpanFloatScalar(st, off, n8, count, zf.data(), n, gaussian, float(o.min_confidence),
+                                           depth, conf, aif);
+    }
+  }
+  return FinishSpanScalar(st, off, 0, count, z, o, out, ox, oy);
+}
+
 Status CheckFrame(const cv::Mat& frame, int k, cv::Size size, int type) {
   if (frame.empty()) return Status::InvalidArgument("frame " + std::to_string(k) + ": empty image");
   if (frame.size() != size) {
@@ -593,7 +885,7 @@ class Engine final : public SffEngine {
 
   Engine(const SffOptions& o, cv::Size size, int type) : options_(o), size_(size), type_(type) {
     const int j = o.interpolation == DepthInterpolation::kLineFit ? o.linefit_half_width : 1;
-    state_.Allocate(size.width, size.height, j);
+    state_.Allocate(size.width, size.height, j, o.use_simd);
     threads_ = ResolveThreads(o.threads);
     if constexpr (kFused) {
       scratch_.resize(size_t(threads_));
@@ -628,7 +920,7 @@ class Engine final : public SffEngine {
       const int bands = std::min(size_.height, threads_ * 4);
       ParallelFor(bands, threads_, [&](int b, int) {
         const int y_begin = size_.height * b / bands, y_end = size_.height * (b + 1) / bands;
-        if (HasAvx2()) UpdateRowsAvx2(state_, k, focus, frame, y_begin, y_end);
+        if (state_.simd) UpdateRowsAvx2(state_, k, focus, frame, y_begin, y_end);
         else UpdateRowsPortable(state_, k, focus, frame, y_begin, y_end);
       });
     }
@@ -731,7 +1023,7 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
   // interpolates the tile; the same kernels as PushFrame, so the result is bit-identical.
   const int threads = ResolveThreads(options.threads);
   const int j = options.interpolation == DepthInterpolation::kLineFit ? options.linefit_half_width : 1;
-  const int tiles_x = (size.width + kTileW - 1) / kTileW, tiles_y = (size.height + kTileH - 1) / kTileH;
+  const int tiles_x = (size.width + kTileW - 1) / kTileW, tiles_y = (size.height + kBatchTileH - 1) / kBatchTileH;
   const int n_tiles = tiles_x * tiles_y;
   Outputs out;
   out.depth.create(size, CV_32F);
@@ -740,18 +1032,57 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
   const int workers = std::max(1, std::min(threads, n_tiles));
   std::vector<StatePlanes<int32_t, uint8_t>> states(static_cast<size_t>(workers));
   std::vector<TenengradScratch> scratch(static_cast<size_t>(workers));
+  std::vector<std::vector<int32_t>> volumes(static_cast<size_t>(workers));
   for (int w = 0; w < workers; ++w) {
-    states[size_t(w)].Allocate(kTileW, kTileH, j);
+    states[size_t(w)].Allocate(kTileW, kBatchTileH, j, options.use_simd);
     scratch[size_t(w)].Reserve(options.window_px);
+    volumes[size_t(w)].resize(size_t(kTileW) * kBatchTileH * kFrameChunk);
   }
+  const bool avx2 = options.use_simd && HasAvx2();
+  const int n = int(frames.size());
   std::atomic<size_t> valid{0};
   ParallelFor(n_tiles, workers, [&](int t, int worker) {
     auto& st = states[size_t(worker)];
-    const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kTileH;
-    const int tw = std::min(kTileW, size.width - x0), th = std::min(kTileH, size.height - y0);
-    for (size_t k = 0; k < frames.size(); ++k) {
-      FusedTileFrame(frames[k], int(k), x0, y0, tw, th, options.window_px, scratch[size_t(worker)], st, 0, 0,
-                     k + 1 < frames.size() ? &frames[k + 1] : nullptr);
+    int32_t* vol = volumes[size_t(worker)].data();
+    const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kBatchTileH;
+    const int tw = std::min(kTileW, size.width - x0), th = std::min(kBatchTileH, size.height - y0);
+    for (int k0 = 0; k0 < n; k0 += kFrameChunk) {
+      const int k1 = std::min(n, k0 + kFrameChunk);
+      for (int k = k0; k < k1; ++k) {
+        const cv::Mat* next = k + 1 < n ? &frames[size_t(k) + 1] : nullptr;
+        if (avx2) FocusRowsToVolumeAvx2(frames[size_t(k)], k - k0, x0, y0, tw, th, options.window_px,
+                                        scratch[size_t(worker)], vol, next);
+        else FocusRowsToVolumePortable(frames[size_t(k)], k - k0, x0, y0, tw, th, options.window_px,
+                                       scratch[size_t(worker)], vol, next);
+      }
+      // Each state row stays in L1 (AVX2: in registers) while the chunk's frames update it, in
+      // frame order.
+      const size_t slot_stride = size_t(kBatchTileH) * kTileW;
+      for (int y = 0; y < th; ++y) {
+        const size_t off = size_t(y) * st.width;
+        const int32_t* vol_row = vol + size_t(y) * kTileW;
+        const uint8_t* pix_rows[kFrameChunk];
+        for (int k = k0; k < k1; ++k) pix_rows[k - k0] = frames[size_t(k)].ptr<uint8_t>(y0 + y) + x0;
+        int k_begin = k0;
+        if (st.simd && st.j == 1) {
+          if (k0 == 0) {  // frame 0 initialises the state
+            UpdateRow(st, off, 0, vol_row, pix_rows[0], tw);
+            k_begin = 1;
+          }
+          const int n8 = tw & ~7;
+          UpdateChunkAvx2(n8, k_begin, k1, k0, vol_row, slot_stride, pix_rows, st.best.data() + off,
+                          st.idx.data() + off, st.before[0].data() + off, st.after[0].data() + off,
+                          st.ring[0].data() + off, st.last2.data() + off, st.aif.data() + off, st.sum.data() + off,
+                          st.curv_all.data() + off, st.curv_excl.data() + off);
+          for (int k = k_begin; k < k1 && n8 < tw; ++k) {
+            UpdateRow(st, off + n8, k, vol_row + size_t(k - k0) * slot_stride + n8, pix_rows[k - k0] + n8, tw - n8);
+          }
+        } else {
+          for (int k = k0; k < k1; ++k) {
+            UpdateRow(st, off, k, vol_row + size_t(k - k0) * slot_stride, pix_rows[k - k0], tw);
+          }
+        }
+      }
     }
     size_t v = 0;
     for (int y = 0; y < th; ++y) v += FinishSpan(st, size_t(y) * st.width, tw, z_um, options, out, x0, y0 + y);

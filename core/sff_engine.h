@@ -52,6 +52,9 @@ struct SffOptions {
   double min_confidence = 0.4;
   // Worker threads for the per-frame pass; 0 = all hardware threads.
   int threads = 0;
+  // AVX2 kernels when the CPU has them (chosen at run time); false forces the portable kernels.
+  // Both give bit-identical results.
+  bool use_simd = true;
 
   // INVALID_ARGUMENT naming the field when out of range.
   Status Validate() const;
@@ -67,6 +70,19 @@ struct DepthResult {
 
 // Not thread-safe: one producer pushes frames in acquisition order. The engine may use
 // several threads internally per frame.
+//
+// State per pixel (about 40 bytes, independent of the frame count): best focus value F_max and
+// its frame index, the focus values next to it (1, or linefit_half_width on each side), the
+// last two focus values, the sum of F and the squared second differences of the curve (for the
+// confidence), and the all-in-focus grey value. At Finish each pixel is interpolated
+// (core/depth_interpolation.h) and gets its confidence; pixels below min_confidence get NaN.
+//
+// Speed: 8-bit frames with Tenengrad run through a fused integer kernel (Sobel, squares, window
+// sum and state update per cache-sized tile; 16-bit AVX2 lanes chosen at run time, portable
+// fallback, bit-identical). PushFrame splits each frame into tiles over options.threads threads;
+// ReconstructInMemory runs each tile across all frames so its state stays in cache. Other
+// measures and 16-bit frames compute the whole-frame focus map (core/focus_measure.h) and share
+// the same state update. inspect-bench measures it (tests/bench/inspect_bench.cc).
 class SffEngine {
  public:
   // frame_type: CV_8UC1 or CV_16UC1.

@@ -33,6 +33,9 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   JobManagerOptions jo;
   jo.rig_queue_capacity = options.rig_queue_capacity;
   s->jobs_ = std::make_unique<JobManager>(jo, s->store_.get(), s->rig_.get());
+  s->calibrations_ = std::make_unique<CalibrationStore>(s->store_.get());
+  (void)s->calibrations_->LoadActive();  // logged; the server still serves without it
+  s->jobs_->SetCalibrationRunner([cal = s->calibrations_.get()](const CalibrationContext& ctx) { return cal->Run(ctx); });
   INSPECT_RETURN_IF_ERROR(s->jobs_->Start());
 
   ServiceOptions so;

@@ -11,6 +11,7 @@
 #include "core/status.h"
 #include "devices/rig.h"
 #include "devices/sim/simulated_rig.h"
+#include "server/calibration_store.h"
 #include "server/data_store.h"
 #include "server/inspection_service.h"
 #include "server/job_manager.h"
@@ -57,6 +58,7 @@ class InspectionServer {
   ServerOptions options_;
   std::unique_ptr<DataStore> store_;
   std::unique_ptr<RigController> rig_;
+  std::unique_ptr<CalibrationStore> calibrations_;
   std::unique_ptr<JobManager> jobs_;
   std::unique_ptr<InspectionServiceImpl> service_;
   std::unique_ptr<SimulationServiceImpl> sim_service_;

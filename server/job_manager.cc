@@ -122,6 +122,25 @@ v1::DepthSummary Summarise(const DepthResult& r, double pixel_size_um, const cv:
   return d;
 }
 
+// A per-frame progress event: frame i of n with its statistics; the frames make up 90 % of a
+// job, the remaining time is extrapolated from the frame rate so far.
+void FillFrameEvent(v1::JobPhase phase, int index, int count, double z_um, double exposure_us,
+                    const FrameStatistics& st, v1::JobEvent* e) {
+  e->set_phase(phase);
+  v1::FrameProgress* fp = e->mutable_frame();
+  fp->set_frame_index(index);
+  fp->set_frame_count(count);
+  fp->set_z_um(z_um);
+  fp->set_exposure_us(exposure_us);
+  fp->mutable_statistics()->set_mean_grey(st.mean_grey);
+  fp->mutable_statistics()->set_stddev_grey(st.stddev_grey);
+  fp->mutable_statistics()->set_saturated_percent(st.saturated_percent);
+  fp->mutable_statistics()->set_underexposed_percent(st.underexposed_percent);
+  const double done = index + 1;
+  e->set_progress(0.9 * done / count);
+  e->set_remaining_seconds(e->elapsed_seconds() / done * (count - done));
+}
+
 void RemoveAll(const fs::path& p) {
   std::error_code ec;
   if (!p.empty()) fs::remove_all(p, ec);
@@ -588,19 +607,7 @@ Status JobManager::RunScan(const RecordPtr& r) {
 
   auto on_frame = [&](const ScanFrameEvent& f) {
     Emit(r, [&](v1::JobEvent& e) {
-      e.set_phase(v1::JOB_PHASE_ACQUIRING);
-      v1::FrameProgress* fp = e.mutable_frame();
-      fp->set_frame_index(f.index);
-      fp->set_frame_count(f.count);
-      fp->set_z_um(f.z_um);
-      fp->set_exposure_us(f.exposure_us);
-      fp->mutable_statistics()->set_mean_grey(f.statistics.mean_grey);
-      fp->mutable_statistics()->set_stddev_grey(f.statistics.stddev_grey);
-      fp->mutable_statistics()->set_saturated_percent(f.statistics.saturated_percent);
-      fp->mutable_statistics()->set_underexposed_percent(f.statistics.underexposed_percent);
-      const double done = f.index + 1;
-      e.set_progress(0.9 * done / f.count);
-      e.set_remaining_seconds(e.elapsed_seconds() / done * (f.count - done));
+      FillFrameEvent(v1::JOB_PHASE_ACQUIRING, f.index, f.count, f.z_um, f.exposure_us, f.statistics, &e);
     });
   };
   auto outcome = inspection::RunScan(rig_->rig(), plan, tmp_stack, on_frame, r->cancel_requested);
@@ -687,17 +694,7 @@ void JobManager::RunReconstruct(const RecordPtr& r) {
     INSPECT_ASSIGN_OR_RETURN(StackManifest m, ReadStackManifest(r->stack_dir_));
     auto on_frame = [&](int i, int n, double z, const FrameStatistics& st) {
       Emit(r, [&](v1::JobEvent& e) {
-        e.set_phase(v1::JOB_PHASE_RECONSTRUCTING);
-        e.mutable_frame()->set_frame_index(i);
-        e.mutable_frame()->set_frame_count(n);
-        e.mutable_frame()->set_z_um(z);
-        e.mutable_frame()->set_exposure_us(m.frames[i].exposure_us);
-        e.mutable_frame()->mutable_statistics()->set_mean_grey(st.mean_grey);
-        e.mutable_frame()->mutable_statistics()->set_stddev_grey(st.stddev_grey);
-        e.mutable_frame()->mutable_statistics()->set_saturated_percent(st.saturated_percent);
-        e.mutable_frame()->mutable_statistics()->set_underexposed_percent(st.underexposed_percent);
-        e.set_progress(0.9 * (i + 1) / n);
-        e.set_remaining_seconds(e.elapsed_seconds() / (i + 1) * (n - i - 1));
+        FillFrameEvent(v1::JOB_PHASE_RECONSTRUCTING, i, n, z, m.frames[i].exposure_us, st, &e);
       });
     };
     INSPECT_ASSIGN_OR_RETURN(DepthResult depth,

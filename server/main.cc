@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include "devices/rig_config.h"
 #include "server/inspection_server.h"
 
 using namespace inspection;
@@ -31,6 +32,8 @@ int main(int argc, char** argv) {
   std::string log_level = "info";
   std::string token_file;
   bool no_reflection = false;
+  std::string rig_config;
+  bool degraded = false;
   app.add_option("--listen", opt.listen_address, "host:port to listen on (port 0 = any free port)")->capture_default_str();
   app.add_option("--data-dir", data_dir, "where scans, artifacts, calibrations and the job database live")->capture_default_str();
   app.add_option("--queue-capacity", opt.rig_queue_capacity, "rig jobs that may wait behind the running one")->capture_default_str();
@@ -38,6 +41,8 @@ int main(int argc, char** argv) {
   app.add_option("--tls-cert", opt.tls_cert_file, "PEM certificate chain; enables TLS with --tls-key");
   app.add_option("--tls-key", opt.tls_key_file, "PEM private key");
   app.add_option("--auth-token-file", token_file, "file holding a bearer token that every call must present");
+  app.add_option("--rig-config", rig_config, "rig configuration file (JSON, devices/README.md); default: the simulated rig");
+  app.add_flag("--degraded", degraded, "start even when configured devices are absent (health NOT_SERVING until ResetRig)");
   app.add_option("--specimen", opt.simulation.specimen, "simulated rig: specimen name or file:/path/scene.json")->capture_default_str();
   app.add_option("--seed", opt.simulation.seed, "simulated rig: random seed")->capture_default_str();
   app.add_option("--camera-size", camera_size, "simulated rig: camera WIDTHxHEIGHT")->capture_default_str();
@@ -70,6 +75,23 @@ int main(int argc, char** argv) {
 
   std::unique_ptr<Rig> rig;
   Status rig_startup;
+  if (!rig_config.empty()) {
+    auto config = LoadRigConfig(rig_config);
+    if (!config.ok()) {
+      std::cerr << "inspectd: " << config.status().message() << "\n";
+      return 2;
+    }
+    RigStartOptions start;
+    start.allow_degraded = degraded;
+    auto created = CreateRig(*config, start);
+    if (!created.ok()) {
+      std::cerr << "inspectd: cannot start the rig: " << created.status().message() << "\n";
+      return 1;
+    }
+    rig = std::move(*created);
+    rig_startup = rig->CheckDevices();
+    if (!rig_startup.ok()) spdlog::warn("rig started degraded: {}", rig_startup.message());
+  }
   auto server = InspectionServer::Start(opt, std::move(rig), rig_startup);
   if (!server.ok()) {
     std::cerr << "inspectd: " << server.status().ToString() << "\n";

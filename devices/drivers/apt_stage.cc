@@ -52,6 +52,7 @@ AptStage::AptStage(AptStageOptions options, UsbTransportFactory open_transport)
   StatusOr<AptStageType> type = LookupAptStageType(options_.stage_type);
   counts_per_mm_ = options_.counts_per_mm > 0.0 ? options_.counts_per_mm : (type.ok() ? type->counts_per_mm : 0.0);
   last_error_ = "not connected yet";
+  published_.Set(BuildInfo());
 }
 
 AptStage::~AptStage() = default;
@@ -62,7 +63,7 @@ int32_t AptStage::CountsFromUm(double z_um) const {
 
 double AptStage::UmFromCounts(int32_t counts) const { return counts * 1000.0 / counts_per_mm_; }
 
-DeviceInfo AptStage::info() const {
+DeviceInfo AptStage::BuildInfo() const {
   DeviceInfo d;
   d.role = "stage";
   d.driver = "apt-usb";
@@ -88,6 +89,7 @@ Status AptStage::CheckConnected() const {
 }
 
 Status AptStage::Connect() {
+  Republish publish{this};
   connected_ = false;
   serial_.reset();
   transport_.reset();
@@ -162,6 +164,7 @@ StatusOr<apt::Message> AptStage::WaitFor(uint16_t id, double timeout_ms, const s
 }
 
 Status AptStage::Home() {
+  Republish publish{this};
   INSPECT_RETURN_IF_ERROR(CheckConnected());
   INSPECT_RETURN_IF_ERROR(Fail(Send(apt::MoveHome())));
   StatusOr<apt::Message> homed = WaitFor(apt::kMotMoveHomed, options_.home_timeout_ms, "MOVE_HOMED");
@@ -175,6 +178,7 @@ Status AptStage::Home() {
 }
 
 Status AptStage::MoveTo(double z_um) {
+  Republish publish{this};
   if (!std::isfinite(z_um) || z_um < options_.min_z_um || z_um > options_.max_z_um) {
     return Status::OutOfRange("stage z " + std::to_string(z_um) + " µm outside travel limits [" +
                               std::to_string(options_.min_z_um) + ", " + std::to_string(options_.max_z_um) + "] µm");
@@ -195,6 +199,7 @@ Status AptStage::MoveTo(double z_um) {
 }
 
 StatusOr<double> AptStage::position_um() {
+  Republish publish{this};
   INSPECT_RETURN_IF_ERROR(CheckConnected());
   INSPECT_RETURN_IF_ERROR(Fail(Send(apt::ReqPosCounter())));
   StatusOr<apt::Message> reply = WaitFor(apt::kMotGetPosCounter, options_.line.control_timeout_ms, "GET_POSCOUNTER");
@@ -205,6 +210,7 @@ StatusOr<double> AptStage::position_um() {
 }
 
 StatusOr<apt::MotorStatus> AptStage::QueryStatus() {
+  Republish publish{this};
   INSPECT_RETURN_IF_ERROR(CheckConnected());
   INSPECT_RETURN_IF_ERROR(Fail(Send(apt::ReqDcStatusUpdate())));
   StatusOr<apt::Message> reply =

@@ -9,6 +9,7 @@
 
 #include "devices/drivers/apt_protocol.h"
 #include "devices/drivers/ftdi_serial.h"
+#include "devices/drivers/published_info.h"
 #include "devices/drivers/usb_transport.h"
 #include "devices/stage.h"
 
@@ -39,7 +40,7 @@ struct AptStageOptions {
   Status Validate() const;  // INVALID_ARGUMENT naming the field
 };
 
-// Not thread-safe. Survives unplugging: operations return UNAVAILABLE until Connect() succeeds.
+// Not thread-safe, except info(), which any thread may call. Survives unplugging: operations return UNAVAILABLE until Connect() succeeds.
 class AptStage : public Stage {
  public:
   AptStage(AptStageOptions options, UsbTransportFactory open_transport);
@@ -48,7 +49,7 @@ class AptStage : public Stage {
   // Opens the transport, configures the FTDI bridge, reads HW info, enables the channel.
   Status Connect();
 
-  DeviceInfo info() const override;
+  DeviceInfo info() const override { return published_.Get(); }
   double min_z_um() const override { return options_.min_z_um; }
   double max_z_um() const override { return options_.max_z_um; }
   Status Home() override;
@@ -71,6 +72,11 @@ class AptStage : public Stage {
   StatusOr<apt::Message> ReadMessage(std::chrono::steady_clock::time_point deadline);
   Status Fail(Status s);  // marks the stage disconnected when s is UNAVAILABLE
   Status CheckConnected() const;
+  DeviceInfo BuildInfo() const;
+  struct Republish {
+    AptStage* s;
+    ~Republish() { s->published_.Set(s->BuildInfo()); }
+  };
 
   AptStageOptions options_;
   double counts_per_mm_ = 0.0;
@@ -82,6 +88,7 @@ class AptStage : public Stage {
   bool homed_ = false;
   std::string last_error_;
   std::optional<int32_t> last_position_counts_;
+  PublishedInfo published_;
 };
 
 }  // namespace inspection

@@ -19,12 +19,16 @@ std::string TakeError(GError*& e) {
 // GigE Vision: the control channel reports heartbeat loss through the "control-lost" signal.
 void OnControlLost(ArvGvDevice*, gpointer flag) { static_cast<std::atomic<bool>*>(flag)->store(true); }
 
+constexpr const char* kControlLost = "control channel lost (no heartbeat answer)";
+
 }  // namespace
 
 struct AravisCamera::Handles {
   ArvCamera* camera = nullptr;
   ArvStream* stream = nullptr;
-  std::atomic<bool> control_lost{false};
+  // Shared with the published info so status readers see a heartbeat loss at once.
+  std::shared_ptr<std::atomic<bool>> lost_flag = std::make_shared<std::atomic<bool>>(false);
+  std::atomic<bool>& control_lost = *lost_flag;
   gulong lost_handler = 0;
 
   ~Handles() {
@@ -36,6 +40,11 @@ struct AravisCamera::Handles {
 
 AravisCamera::AravisCamera(AravisCameraOptions options) : options_(std::move(options)) {
   bits_ = AravisPixelFormatBits(options_.pixel_format).ok() ? *AravisPixelFormatBits(options_.pixel_format) : 8;
+  Publish();
+}
+
+void AravisCamera::Publish() {
+  published_.Set(BuildInfo(), h_ ? h_->lost_flag : nullptr, kControlLost);
 }
 
 AravisCamera::~AravisCamera() {
@@ -67,6 +76,7 @@ Status AravisCamera::Lost(const std::string& what) {
 }
 
 Status AravisCamera::Connect() {
+  Republish publish{this};
   Disconnect("reconnecting");
   if (reaper_.joinable()) reaper_.join();
   INSPECT_RETURN_IF_ERROR(options_.Validate());
@@ -111,7 +121,7 @@ Status AravisCamera::Connect() {
     }
     g_clear_error(&e);
     h->lost_handler = g_signal_connect(arv_camera_get_device(h->camera), "control-lost",
-                                       G_CALLBACK(OnControlLost), &h->control_lost);
+                                       G_CALLBACK(OnControlLost), h->lost_flag.get());
   }
   {
     // An unsupported pixel format is a configuration error, not an absent camera.
@@ -175,7 +185,7 @@ Status AravisCamera::Connect() {
   return Status::Ok();
 }
 
-DeviceInfo AravisCamera::info() const {
+DeviceInfo AravisCamera::BuildInfo() const {
   DeviceInfo d;
   d.role = "camera";
   d.driver = "aravis";
@@ -184,7 +194,7 @@ DeviceInfo AravisCamera::info() const {
   d.connected = h_ != nullptr && !h_->control_lost.load();
   d.detail = d.connected ? device_id_ + ", " + options_.pixel_format + ", " + std::to_string(size_.width) + "x" +
                                std::to_string(size_.height)
-                         : (h_ ? "control channel lost" : last_error_);
+                         : (h_ ? kControlLost : last_error_);
   return d;
 }
 
@@ -192,6 +202,7 @@ cv::Size AravisCamera::frame_size() const { return size_; }
 int AravisCamera::bit_depth() const { return bits_; }
 
 Status AravisCamera::SetExposure(double exposure_us) {
+  Republish publish{this};
   if (!(exposure_us > 0.0)) return Status::InvalidArgument("exposure_us must be > 0");
   if (!h_) return Status::Unavailable("camera (aravis) is not connected: " + last_error_);
   GError* e = nullptr;
@@ -202,6 +213,7 @@ Status AravisCamera::SetExposure(double exposure_us) {
 }
 
 Status AravisCamera::SetGain(double gain_db) {
+  Republish publish{this};
   if (!h_) return Status::Unavailable("camera (aravis) is not connected: " + last_error_);
   GError* e = nullptr;
   arv_camera_set_gain(h_->camera, gain_db, &e);
@@ -219,6 +231,7 @@ Status AravisCamera::SetGain(double gain_db) {
 }
 
 StatusOr<cv::Mat> AravisCamera::Capture() {
+  Republish publish{this};
   if (!h_) return Status::Unavailable("camera (aravis) is not connected: " + last_error_);
   if (h_->control_lost.load()) return Lost("control channel lost (heartbeat)");
   // Drop frames left over from an earlier, timed-out trigger.

@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "devices/camera.h"
+#include "devices/drivers/published_info.h"
 
 namespace inspection {
 
@@ -33,7 +34,7 @@ struct AravisCameraOptions {
 // Bits that a pixel format name carries; INVALID_ARGUMENT for unsupported formats.
 StatusOr<int> AravisPixelFormatBits(const std::string& pixel_format);
 
-// Not thread-safe (the rig's job worker owns it).
+// Not thread-safe (the rig's job worker owns it), except info(), which any thread may call.
 //
 // Failure semantics: when the camera disappears (cable, power, the process serving it), the
 // next Capture returns UNAVAILABLE (the trigger or a control read fails, or the frame does not
@@ -49,7 +50,7 @@ class AravisCamera : public Camera {
 
   Status Connect();  // (re)opens the camera and starts triggered acquisition
 
-  DeviceInfo info() const override;
+  DeviceInfo info() const override { return published_.Get(); }
   cv::Size frame_size() const override;
   int bit_depth() const override;
   Status SetExposure(double exposure_us) override;
@@ -60,6 +61,12 @@ class AravisCamera : public Camera {
  private:
   struct Handles;
   void Disconnect(const std::string& reason);
+  void Publish();
+  DeviceInfo BuildInfo() const;
+  struct Republish {
+    AravisCamera* c;
+    ~Republish() { c->Publish(); }
+  };
   Status Lost(const std::string& what);
 
   AravisCameraOptions options_;
@@ -69,6 +76,7 @@ class AravisCamera : public Camera {
   cv::Size size_;
   int bits_ = 8;
   std::string last_error_ = "not connected yet";
+  PublishedInfo published_;
 };
 
 }  // namespace inspection

@@ -37,6 +37,7 @@ Status FramebufferMode::Validate() const {
 
 FramebufferProjector::FramebufferProjector(FramebufferProjectorOptions options) : options_(std::move(options)) {
   if (options_.mode) mode_ = *options_.mode;
+  published_.Set(BuildInfo());
 }
 
 FramebufferProjector::~FramebufferProjector() { Close(); }
@@ -47,6 +48,7 @@ void FramebufferProjector::Close() {
 }
 
 Status FramebufferProjector::Connect() {
+  Republish publish{this};
   Close();
   const std::string& path = options_.device;
   int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
@@ -121,7 +123,7 @@ Status FramebufferProjector::Connect() {
   return Status::Ok();
 }
 
-DeviceInfo FramebufferProjector::info() const {
+DeviceInfo FramebufferProjector::BuildInfo() const {
   DeviceInfo d;
   d.role = "projector";
   d.driver = "framebuffer";
@@ -156,6 +158,7 @@ void FramebufferProjector::EncodePixel(uint8_t grey, uint8_t* out) const {
 }
 
 Status FramebufferProjector::Show(const cv::Mat& pattern) {
+  Republish publish{this};
   if (fd_ < 0) return Status::Unavailable("projector (framebuffer " + options_.device + ") is not connected: " + last_error_);
   if (pattern.type() != CV_8UC1 || pattern.size() != region_.size()) {
     return Status::InvalidArgument("pattern must be CV_8UC1 of " + std::to_string(region_.width) + "x" +

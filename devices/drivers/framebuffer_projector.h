@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 
+#include "devices/drivers/published_info.h"
 #include "devices/projector.h"
 
 namespace inspection {
@@ -49,7 +50,7 @@ struct FramebufferProjectorOptions {
   bool flip_vertical = false;
 };
 
-// Not thread-safe. Operations return UNAVAILABLE while the display is not connected.
+// Not thread-safe, except info(), which any thread may call. Operations return UNAVAILABLE while the display is not connected.
 class FramebufferProjector : public Projector {
  public:
   explicit FramebufferProjector(FramebufferProjectorOptions options);
@@ -58,7 +59,7 @@ class FramebufferProjector : public Projector {
   // Opens the device (or file) and determines the mode; UNAVAILABLE when absent.
   Status Connect();
 
-  DeviceInfo info() const override;
+  DeviceInfo info() const override { return published_.Get(); }
   cv::Size resolution() const override;
   Status Show(const cv::Mat& pattern) override;
 
@@ -68,6 +69,11 @@ class FramebufferProjector : public Projector {
 
  private:
   void Close();
+  DeviceInfo BuildInfo() const;
+  struct Republish {
+    FramebufferProjector* p;
+    ~Republish() { p->published_.Set(p->BuildInfo()); }
+  };
 
   FramebufferProjectorOptions options_;
   FramebufferMode mode_;
@@ -76,6 +82,7 @@ class FramebufferProjector : public Projector {
   std::string fb_id_;
   std::string last_error_ = "not connected yet";
   cv::Rect region_;
+  PublishedInfo published_;
 };
 
 }  // namespace inspection

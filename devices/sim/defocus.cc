@@ -189,27 +189,17 @@ void SpatiallyVaryingBlur::Apply(const cv::Mat& src, const BlurPlan& plan, cv::M
   }, tasks);
 
   // Bilinear enlargement of reduced rungs (same sampling as cv::resize INTER_LINEAR), done per
-  // row into small buffers so no full-size copy of a reduced rung is ever stored.
+  // row into small buffers so no full-size copy of a reduced rung is ever stored. For an exact
+  // power-of-two factor f, output pixel f*a + q mixes reduced columns a-1, a (q < f/2) or a,
+  // a+1 (q >= f/2) with weights that depend on q only.
   const int m = i1 - i0 + 1;
-  struct Taps {
-    std::vector<int> x0;
-    std::vector<float> wx;
-  };
-  std::vector<Taps> taps(m);
+  std::vector<std::vector<float>> phase_weight(m);
   for (int j = 0; j < m; ++j) {
     const int f = layer_factor_[i0 + j];
-    if (f == 1) continue;
-    const int low_w = layers_[i0 + j].cols;
-    taps[j].x0.resize(src.cols);
-    taps[j].wx.resize(src.cols);
-    for (int x = 0; x < src.cols; ++x) {
-      const float sx = (x + 0.5f) / f - 0.5f;
-      int x0 = static_cast<int>(std::floor(sx));
-      float w = sx - x0;
-      if (x0 < 0) x0 = 0, w = 0.0f;
-      if (x0 >= low_w - 1) x0 = low_w - 1, w = 0.0f;
-      taps[j].x0[x] = x0;
-      taps[j].wx[x] = w;
+    phase_weight[j].resize(f);
+    for (int q = 0; q < f; ++q) {
+      const float t = (q + 0.5f) / f - 0.5f;  // position relative to column a
+      phase_weight[j][q] = t < 0.0f ? 1.0f + t : t;
     }
   }
   // Per pixel: mix the plan's two rungs. Runs of equal rung are long, so the inner loop is a
@@ -218,15 +208,24 @@ void SpatiallyVaryingBlur::Apply(const cv::Mat& src, const BlurPlan& plan, cv::M
   cv::parallel_for_(cv::Range(0, src.rows), [&](const cv::Range& r) {
     std::vector<const float*> rows(m + 1);
     std::vector<std::vector<float>> enlarged(m);
+    std::vector<float> column_mix;
+    std::vector<int> first(m), last(m);
     for (int y = r.start; y < r.end; ++y) {
       const uint8_t* rung = plan.rung.ptr<uint8_t>(y);
-      int lo = m - 1, hi = 0;
+      // Columns where each rung is needed (as the lower or the upper of a pair).
+      std::fill(first.begin(), first.end(), src.cols);
+      std::fill(last.begin(), last.end(), -1);
       for (int x = 0; x < src.cols; ++x) {
-        lo = std::min<int>(lo, rung[x]);
-        hi = std::max<int>(hi, rung[x]);
+        const int j = rung[x];
+        first[j] = std::min(first[j], x);
+        last[j] = x;
+        if (j + 1 < m) {
+          first[j + 1] = std::min(first[j + 1], x);
+          last[j + 1] = std::max(last[j + 1], x);
+        }
       }
-      hi = std::min(hi + 1, m - 1);
-      for (int j = lo; j <= hi; ++j) {
+      for (int j = 0; j < m; ++j) {
+        if (last[j] < 0) continue;
         const cv::Mat& layer = layers_[i0 + j];
         const int f = layer_factor_[i0 + j];
         if (f == 1) {
@@ -240,29 +239,36 @@ void SpatiallyVaryingBlur::Apply(const cv::Mat& src, const BlurPlan& plan, cv::M
         if (y0 >= layer.rows - 1) y0 = layer.rows - 1, wy = 0.0f;
         const float* r0 = layer.ptr<float>(y0);
         const float* r1 = layer.ptr<float>(std::min(y0 + 1, layer.rows - 1));
+        // Vertical mix on the reduced columns the span needs (one replicated column each side),
+        // then the horizontal enlargement.
+        const int a0 = first[j] / f, a1 = last[j] / f, top = layer.cols - 1;
+        column_mix.resize(layer.cols + 2);
+        float* c = column_mix.data() + 1;
+        for (int a = std::max(a0 - 1, 0); a <= std::min(a1 + 1, top); ++a) c[a] = r0[a] + wy * (r1[a] - r0[a]);
+        c[-1] = c[0];
+        c[top + 1] = c[top];
         std::vector<float>& out = enlarged[j];
-        out.resize(src.cols);
-        const int* x0 = taps[j].x0.data();
-        const float* wx = taps[j].wx.data();
-        const int last = layer.cols - 1;
-        for (int x = 0; x < src.cols; ++x) {
-          const int a = x0[x], b = std::min(a + 1, last);
-          const float top = r0[a] + wx[x] * (r0[b] - r0[a]);
-          const float bottom = r1[a] + wx[x] * (r1[b] - r1[a]);
-          out[x] = top + wy * (bottom - top);
+        out.resize(static_cast<size_t>(layer.cols) * f);
+        const float* pw = phase_weight[j].data();
+        const int half = f / 2;
+        for (int a = a0; a <= a1; ++a) {
+          const float left = c[a - 1], centre = c[a], right = c[a + 1];
+          float* o = out.data() + static_cast<size_t>(a) * f;
+          for (int q = 0; q < half; ++q) o[q] = left + pw[q] * (centre - left);
+          for (int q = half; q < f; ++q) o[q] = centre + pw[q] * (right - centre);
         }
         rows[j] = out.data();
       }
       rows[m] = rows[m - 1];
-      const float* w = plan.weight.ptr<float>(y);
-      float* d = dst->ptr<float>(y);
+      const float* __restrict w = plan.weight.ptr<float>(y);
+      float* __restrict d = dst->ptr<float>(y);
       int x = 0;
       while (x < src.cols) {
         const int j = rung[x];
         int end = x + 1;
         while (end < src.cols && rung[end] == j) ++end;
-        const float* a = rows[j];
-        const float* b = rows[j + 1];
+        const float* __restrict a = rows[j];
+        const float* __restrict b = rows[j + 1];
         for (int k = x; k < end; ++k) d[k] = a[k] + w[k] * (b[k] - a[k]);
         x = end;
       }

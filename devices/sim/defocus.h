@@ -46,7 +46,9 @@ struct BlurPlan {
   cv::Mat weight;  // CV_32FC1: weight of the upper rung (0..1)
 };
 
-// Not thread-safe (keeps scratch buffers between calls); one per renderer.
+// Not thread-safe (keeps scratch buffers between calls); one per renderer. Type and size
+// mismatches of its inputs are programming errors (CV_Assert), not user errors: the renderer
+// builds every input itself.
 class SpatiallyVaryingBlur {
  public:
   explicit SpatiallyVaryingBlur(const DefocusModel& model);

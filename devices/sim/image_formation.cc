@@ -66,14 +66,24 @@ Status ImageFormation::SetSpecimen(Specimen specimen) {
   return Status::Ok();
 }
 
-cv::Mat ImageFormation::ProjectorIrradianceOnCamera(const cv::Mat& pattern) const {
+Status ImageFormation::ValidatePattern(const cv::Mat& pattern) const {
+  if (pattern.type() != CV_8UC1 || pattern.size() != options_.projector_size) {
+    return Status::InvalidArgument("pattern must be CV_8UC1 of the projector size " +
+                                   std::to_string(options_.projector_size.width) + "x" +
+                                   std::to_string(options_.projector_size.height) + ", got " +
+                                   std::to_string(pattern.cols) + "x" + std::to_string(pattern.rows));
+  }
+  return Status::Ok();
+}
+
+StatusOr<cv::Mat> ImageFormation::ProjectorIrradianceOnCamera(const cv::Mat& pattern) const {
+  INSPECT_RETURN_IF_ERROR(ValidatePattern(pattern));
   cv::Mat on_camera;
   ProjectorIrradianceInto(pattern, &on_camera);
   return on_camera;
 }
 
 void ImageFormation::ProjectorIrradianceInto(const cv::Mat& pattern, cv::Mat* on_camera) const {
-  CV_Assert(pattern.type() == CV_8UC1 && pattern.size() == options_.projector_size);
   const cv::Mat seen = pattern(projector_roi_);
   cv::Mat irradiance(seen.size(), CV_32FC1);  // eq. 5.1
   for (int r = 0; r < seen.rows; ++r) {
@@ -111,7 +121,9 @@ void ImageFormation::DefocusSigmaInto(double z_um, cv::Mat* sigma_out) const {
   });
 }
 
-cv::Mat ImageFormation::CameraIrradiance(const cv::Mat& pattern, double z_um) {
+StatusOr<cv::Mat> ImageFormation::CameraIrradiance(const cv::Mat& pattern, double z_um) {
+  INSPECT_RETURN_IF_ERROR(ValidatePattern(pattern));
+  if (!std::isfinite(z_um)) return Status::InvalidArgument("z_um must be finite");
   return CameraIrradianceScratch(pattern, z_um).clone();
 }
 
@@ -134,11 +146,7 @@ const cv::Mat& ImageFormation::CameraIrradianceScratch(const cv::Mat& pattern, d
 
 StatusOr<cv::Mat> ImageFormation::Render(const cv::Mat& pattern, double z_um, double exposure_us, double gain_db,
                                          uint64_t noise_seed) {
-  if (pattern.type() != CV_8UC1 || pattern.size() != options_.projector_size) {
-    return Status::InvalidArgument("pattern must be CV_8UC1 of the projector size " +
-                                   std::to_string(options_.projector_size.width) + "x" +
-                                   std::to_string(options_.projector_size.height));
-  }
+  INSPECT_RETURN_IF_ERROR(ValidatePattern(pattern));
   if (!std::isfinite(z_um)) return Status::InvalidArgument("z_um must be finite");
   if (!(exposure_us > 0.0 && exposure_us <= 1e8)) return Status::InvalidArgument("exposure_us must be in (0, 1e8]");
   if (!(gain_db >= 0.0 && gain_db <= 48.0)) return Status::InvalidArgument("gain_db must be in [0, 48]");

@@ -49,13 +49,14 @@ class ImageFormation {
   StatusOr<cv::Mat> Render(const cv::Mat& pattern, double z_um, double exposure_us, double gain_db,
                            uint64_t noise_seed);
 
-  // Stages of the chain, for tests and for noise-free analysis (all CV_32FC1, camera size):
+  // Stages of the chain, for tests and for noise-free analysis (all CV_32FC1, camera size;
+  // INVALID_ARGUMENT for a pattern that is not CV_8UC1 of the projector size):
   // E_p on the camera grid (prf + mapping), no defocus.
-  cv::Mat ProjectorIrradianceOnCamera(const cv::Mat& pattern) const;
+  StatusOr<cv::Mat> ProjectorIrradianceOnCamera(const cv::Mat& pattern) const;
   // PSF sigma (camera px) of every pixel with the stage at z_um.
   cv::Mat DefocusSigmaPx(double z_um) const;
   // E_c: irradiance reaching the sensor (both defocus passes), relative units.
-  cv::Mat CameraIrradiance(const cv::Mat& pattern, double z_um);
+  StatusOr<cv::Mat> CameraIrradiance(const cv::Mat& pattern, double z_um);
 
   // Exposure (us) for which the noise-free, in-focus image under a uniform projector grey has
   // mean grey level target_grey (8-bit scale), with gain 0 dB.
@@ -63,6 +64,7 @@ class ImageFormation {
 
  private:
   ImageFormation(const ImageFormationOptions& options);
+  Status ValidatePattern(const cv::Mat& pattern) const;
   void ProjectorIrradianceInto(const cv::Mat& pattern, cv::Mat* on_camera) const;
   void DefocusSigmaInto(double z_um, cv::Mat* sigma) const;
   const cv::Mat& CameraIrradianceScratch(const cv::Mat& pattern, double z_um);

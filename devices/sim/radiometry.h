@@ -48,7 +48,9 @@ struct CameraResponse {
 
 // Converts a camera irradiance image (CV_32FC1, relative units) into the camera's output frame:
 // exposure, gain, shot + read noise (seeded by noise_seed; deterministic for any thread count),
-// response, black level, saturation and quantisation.
+// response, black level, saturation and quantisation. Precondition (a programming error
+// otherwise, checked by CV_Assert): irradiance is CV_32FC1; ImageFormation::Render validates
+// user input before calling it.
 cv::Mat ExposeAndDigitise(const cv::Mat& irradiance, double exposure_us, double gain_db,
                           const CameraResponse& response, uint64_t noise_seed);
 

@@ -27,6 +27,9 @@ Status SimulatedRigOptions::Validate() const {
   if (!(pixel_size_um > 0.01 && pixel_size_um < 100.0)) {
     return Status::InvalidArgument("pixel_size_um must be in (0.01, 100)");
   }
+  if (!(numerical_aperture >= 0.02 && numerical_aperture <= 0.95)) {
+    return Status::InvalidArgument("numerical_aperture must be in [0.02, 0.95]");
+  }
   if (!(stage_repeatability_um >= 0.0 && stage_repeatability_um <= 100.0)) {
     return Status::InvalidArgument("stage_repeatability_um must be in [0, 100]");
   }
@@ -45,8 +48,11 @@ StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptio
   f.camera.bit_depth = options.camera_bit_depth;
   f.camera.read_noise_dn8 = options.read_noise_dn;
   f.camera.shot_noise = options.shot_noise;
-  // 10x / NA 0.3 objective: geometric blur radius tan(asin(0.3)) per um of defocus.
-  f.defocus.blur_radius_px_per_um = std::tan(std::asin(0.3)) / options.pixel_size_um;
+  // Geometric blur-circle radius tan(asin(NA)) per um of defocus; diffraction-limited in-focus
+  // PSF sigma ~0.21 lambda / NA (lambda 0.55 um), at least the 0.55 px of the thesis rig.
+  const double na = options.numerical_aperture;
+  f.defocus.blur_radius_px_per_um = std::tan(std::asin(na)) / options.pixel_size_um;
+  f.defocus.in_focus_sigma_px = std::clamp(0.21 * 0.55 / na / options.pixel_size_um, 0.55, 5.0);
   INSPECT_RETURN_IF_ERROR(f.Validate());
   return f;
 }

@@ -1,7 +1,9 @@
 // Calibration procedure (thesis 4.3, 5.4.1): captures for every step on a Rig, core estimators,
-// figures per step. Frame counts per step (defaults): crf 24 + exposure search; prf 53;
-// geometry 2 + Gray code (4 x bits) + spacing^2; PSF 2 per defocus; scatter spacing^2 + 2;
-// IPSF 2 x half range / step + 1.
+// figures per step. Frames per step with default options on the full-size simulated rig
+// (exposure searches and the autofocus sweep of each new target included): crf 39, prf 95
+// (52 levels, re-captured at half exposure while saturated), geometry 119 (black, 40 Gray code,
+// 64 dot grids), PSF 36 (7 defocus steps), scatter 72 (64 dot grids, black, test pattern),
+// IPSF 20 (17 stack frames).
 #include "server/procedures/calibration_procedure.h"
 
 #include <algorithm>
@@ -487,6 +489,11 @@ Status RunIntegralPsf(Session& s, Targeting& t, const CalibrationOptions& o, Cal
   }
   INSPECT_RETURN_IF_ERROR(s.MoveTo(z_focus));
   INSPECT_ASSIGN_OR_RETURN(cv::Mat integral, IntegralImage(frames));
+  const cv::Size cs = integral.size();
+  const int rw = std::min(cs.width, o.ipsf_region_px), rh = std::min(cs.height, o.ipsf_region_px);
+  const cv::Rect region((cs.width - rw) / 2, (cs.height - rh) / 2, rw, rh);
+  integral = integral(region).clone();
+  focused = focused(region).clone();
   IntegralPsfOptions io;
   io.radius_px = o.ipsf_radius_px;
   io.regularisation = o.ipsf_regularisation;
@@ -499,6 +506,7 @@ Status RunIntegralPsf(Session& s, Targeting& t, const CalibrationOptions& o, Cal
       ipsf.integral_rms_error > 0 ? ipsf.restored_rms_error / ipsf.integral_rms_error : 0.0;
   rep.figures["stack_frames"] = ipsf.stack_frames;
   rep.figures["kernel_radius_px"] = o.ipsf_radius_px;
+  rep.figures["region_px"] = std::min(rw, rh);
   b.integral_psf = std::move(ipsf);
   return Status::Ok();
 }
@@ -525,6 +533,9 @@ Status CalibrationOptions::Validate() const {
     return Status::InvalidArgument("ipsf_step_um must be > 0 and ipsf_half_range_um >= ipsf_step_um");
   }
   if (ipsf_radius_px < 1) return Status::InvalidArgument("ipsf_radius_px must be >= 1");
+  if (ipsf_region_px < 4 * ipsf_radius_px + 2) {
+    return Status::InvalidArgument("ipsf_region_px must be at least 4 * ipsf_radius_px + 2");
+  }
   return Status::Ok();
 }
 
@@ -534,8 +545,8 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
                                            const std::atomic<bool>& cancel) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
   std::set<CalibrationStep> wanted(options.steps.begin(), options.steps.end());
-  if (wanted.empty()) wanted = {AllCalibrationSteps().begin(), AllCalibrationSteps().end()};
   const std::vector<CalibrationStep> all = AllCalibrationSteps();
+  if (wanted.empty()) wanted = std::set<CalibrationStep>(all.begin(), all.end());
   std::vector<CalibrationStep> steps;
   for (CalibrationStep s : all)
     if (wanted.count(s)) steps.push_back(s);

@@ -82,6 +82,9 @@ struct CalibrationOptions {
   int ipsf_radius_px = 8;
   IpsfRegularisation ipsf_regularisation = IpsfRegularisation::kGradientL2;
   double ipsf_regularisation_weight = 1e-4;
+  // The IPSF is one kernel for the whole field (thesis 5.4.1): it is estimated on the central
+  // region of at most this many pixels per side, which bounds the solve time on big cameras.
+  int ipsf_region_px = 512;
 
   Status Validate() const;
 };

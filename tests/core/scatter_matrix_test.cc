@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -115,6 +116,15 @@ TEST(ScatterMatrixTest, SparseFileRoundTripAndCorruption) {
   EXPECT_EQ(back->nonZeros(), 3);
   EXPECT_FLOAT_EQ(back->coeff(4, 0), -2.0f);
   EXPECT_FLOAT_EQ(back->coeff(2, 3), 7.25f);
+  {
+    // A column pointer beyond nnz must be caught before any row index is read through it.
+    std::fstream f(file, std::ios::in | std::ios::out | std::ios::binary);
+    const int32_t bad = 100;
+    f.seekp(24 + 4);
+    f.write(reinterpret_cast<const char*>(&bad), 4);
+  }
+  EXPECT_EQ(ReadSparseMatrix(file).status().code(), StatusCode::kDataLoss);
+  ASSERT_TRUE(WriteSparseMatrix(file, a).ok());
   std::filesystem::resize_file(file, std::filesystem::file_size(file) - 4);
   EXPECT_EQ(ReadSparseMatrix(file).status().code(), StatusCode::kDataLoss);
   std::filesystem::remove(file);

@@ -190,6 +190,53 @@ TEST(SffEngineTest, StreamingAndBatchAreBitIdentical) {
   }
 }
 
+TEST(SffEngineTest, PortableKernelsGiveTheSameResult) {
+  const auto s = TiltedPlaneStack(cv::Size(270, 80), UniformZ(10, 0.0, 1.0), 3.0, 0.02, 0.03);
+  for (FocusMeasure m : {FocusMeasure::kTenengrad, FocusMeasure::kSumModifiedLaplacian}) {
+    SffOptions o;
+    o.focus_measure = m;
+    o.use_simd = false;
+    const DepthResult portable = Streamed(o, s.frames, s.z_um);
+    auto portable_batch = SffEngine::ReconstructInMemory(o, s.frames, s.z_um);
+    o.use_simd = true;
+    const DepthResult simd = Streamed(o, s.frames, s.z_um);
+    ASSERT_TRUE(portable_batch.ok());
+    EXPECT_TRUE(BitIdentical(portable.depth_um, simd.depth_um)) << FocusMeasureName(m);
+    EXPECT_TRUE(BitIdentical(portable.confidence, simd.confidence)) << FocusMeasureName(m);
+    EXPECT_TRUE(BitIdentical(portable.all_in_focus, simd.all_in_focus)) << FocusMeasureName(m);
+    EXPECT_TRUE(BitIdentical(portable_batch->depth_um, simd.depth_um)) << FocusMeasureName(m);
+  }
+}
+
+TEST(SffEngineTest, FullContrastWithWidestWindowStaysExact) {
+  // 0/255 blocks: Tenengrad sums with the 31 x 31 window reach ~1e9, so twice a focus value
+  // (second differences) no longer fits int32; the engine must still be exact (UBSan checks).
+  cv::Mat sharp(64, 64, CV_8U);
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) sharp.at<uint8_t>(y, x) = ((x / 2 + y / 2) & 1) ? 255 : 0;
+  std::vector<cv::Mat> frames;
+  std::vector<double> z;
+  for (int k = 0; k < 7; ++k) {
+    cv::Mat f;
+    const double sigma = 0.3 + 0.6 * std::abs(k - 3);
+    cv::GaussianBlur(sharp, f, cv::Size(0, 0), sigma, sigma, cv::BORDER_REFLECT_101);
+    frames.push_back(f);
+    z.push_back(2.0 * k);
+  }
+  SffOptions o;
+  o.window_px = 31;
+  o.min_confidence = 0.0;
+  const DepthResult r = Streamed(o, frames, z);
+  auto batch = SffEngine::ReconstructInMemory(o, frames, z);
+  ASSERT_TRUE(batch.ok());
+  EXPECT_TRUE(BitIdentical(r.depth_um, batch->depth_um));
+  // Symmetric blur around frame 3: the peak is at z = 6 µm everywhere.
+  double lo, hi;
+  cv::minMaxLoc(r.depth_um, &lo, &hi);
+  EXPECT_NEAR(lo, 6.0, 1e-3);
+  EXPECT_NEAR(hi, 6.0, 1e-3);
+}
+
 TEST(SffEngineTest, BatchFallsBackToStreamingForOtherMeasuresAnd16Bit) {
   const auto s = TiltedPlaneStack(cv::Size(64, 48), UniformZ(9, 0.0, 1.0), 3.0, 0.03, 0.02, CV_16U);
   SffOptions o;

@@ -36,7 +36,9 @@ TEST(ImageFormationTest, UniformLightOnUniformSurfaceFollowsEq51To54) {
   const cv::Mat pattern(o.projector_size, CV_8UC1, cv::Scalar(200));
   // E_c = R * prf(200), whatever the defocus.
   for (double z : {100.0, 130.0}) {
-    const cv::Mat ec = (*f)->CameraIrradiance(pattern, z);
+    auto ec_or = (*f)->CameraIrradiance(pattern, z);
+    ASSERT_TRUE(ec_or.ok());
+    const cv::Mat& ec = *ec_or;
     double lo, hi;
     cv::minMaxLoc(ec, &lo, &hi);
     EXPECT_NEAR(lo, 0.4 * o.projector.Irradiance(200), 1e-6);
@@ -58,7 +60,9 @@ TEST(ImageFormationTest, NoLightOutsideTheProjectorImage) {
   const ImageFormationOptions o = SmallOptions({256, 256}, {40, 40});
   auto f = ImageFormation::Create(o, Flat(o.camera_size, 0.5f));
   ASSERT_TRUE(f.ok());
-  const cv::Mat ep = (*f)->ProjectorIrradianceOnCamera(cv::Mat(o.projector_size, CV_8UC1, cv::Scalar(255)));
+  auto ep_or = (*f)->ProjectorIrradianceOnCamera(cv::Mat(o.projector_size, CV_8UC1, cv::Scalar(255)));
+  ASSERT_TRUE(ep_or.ok());
+  const cv::Mat& ep = *ep_or;
   EXPECT_FLOAT_EQ(ep.at<float>(128, 128), 1.0f);
   EXPECT_FLOAT_EQ(ep.at<float>(5, 5), 0.0f);
   EXPECT_FLOAT_EQ(ep.at<float>(128, 250), 0.0f);
@@ -79,7 +83,9 @@ TEST(ImageFormationTest, ProjectedSpotIsDefocusedTwice) {
   pattern.at<uint8_t>(32, 32) = 255;
   const double black = o.projector.Irradiance(0);
   auto spot = [&](double z) {
-    cv::Mat e = (*f)->CameraIrradiance(pattern, z) - black;
+    auto ec = (*f)->CameraIrradiance(pattern, z);
+    EXPECT_TRUE(ec.ok());
+    cv::Mat e = *ec - black;
     return e(cv::Rect(24, 24, 80, 80)).clone();
   };
   const double box_variance = 3.4 * 3.4 / 12.0;  // one square projector pixel
@@ -100,6 +106,9 @@ TEST(ImageFormationTest, RejectsBadInput) {
   EXPECT_EQ((*f)->Render(ok_pattern, NAN, 1000, 0, 1).status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ((*f)->Render(ok_pattern, 100, -1, 0, 1).status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ((*f)->SetSpecimen(Flat({10, 10}, 0.5f)).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ((*f)->CameraIrradiance(cv::Mat(10, 10, CV_8UC1), 100).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ((*f)->ProjectorIrradianceOnCamera(cv::Mat(o.projector_size, CV_16UC1)).status().code(),
+            StatusCode::kInvalidArgument);
   ImageFormationOptions bad = o;
   bad.defocus.in_focus_sigma_px = 0.0;
   EXPECT_EQ(ImageFormation::Create(bad, Flat(o.camera_size, 0.5f)).status().code(), StatusCode::kInvalidArgument);

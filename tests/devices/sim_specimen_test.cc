@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <thread>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
@@ -222,6 +223,26 @@ TEST(SimulatedRigBehaviourTest, RendererAloneReproducesTheRigsFrames) {
   }
 }
 
+TEST(SimulatedRigBehaviourTest, SpecimenSwitchWhileCapturingFromAnotherThread) {
+  SimulatedRigOptions o;
+  o.camera_size = {64, 48};
+  auto rig = CreateSimulatedRig(o);
+  ASSERT_TRUE(rig.ok());
+  int captured = 0;
+  std::thread worker([&] {
+    for (int i = 0; i < 20; ++i) {
+      auto frame = (*rig)->camera().Capture();
+      if (frame.ok() && frame->size() == cv::Size(64, 48)) ++captured;
+    }
+  });
+  int switched = 0;
+  for (const std::string name : {"plane", "cutter", "lens", "skew10"}) switched += (*rig)->simulation()->SetSpecimen(name).ok();
+  worker.join();
+  EXPECT_EQ(captured, 20);
+  EXPECT_EQ(switched, 4);
+  EXPECT_EQ((*rig)->simulation()->specimen(), "skew10");
+}
+
 TEST(SimulatedRigBehaviourTest, StageRepeatabilityAndTravel) {
   SimulatedRigOptions o;
   o.camera_size = {32, 32};
@@ -317,6 +338,7 @@ TEST(SimulatedRigOptionsTest, ValidateNamesTheField) {
            {[](SimulatedRigOptions& o) { o.projector_size = {0, 720}; }, "projector_size"},
            {[](SimulatedRigOptions& o) { o.pixel_size_um = 0; }, "pixel_size_um"},
            {[](SimulatedRigOptions& o) { o.stage_repeatability_um = -1; }, "stage_repeatability_um"},
+           {[](SimulatedRigOptions& o) { o.numerical_aperture = 1.2; }, "numerical_aperture"},
            {[](SimulatedRigOptions& o) { o.read_noise_dn = 100; }, "read_noise_dn"},
            {[](SimulatedRigOptions& o) { o.specimen = ""; }, "specimen"},
        }) {
