@@ -544,6 +544,13 @@ __attribute__((target("avx2"))) inline void st(int32_t* p, __m256i v) {
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(p), v);
 }
 
+// Lanes of y where the 32-bit lane of mask is all ones, else of x (mask lanes: 0 or all ones).
+// vblendvps: GCC turns _mm256_blendv_epi8 on such masks into an extra byte comparison.
+__attribute__((target("avx2"))) inline __m256i BlendLanes(__m256i x, __m256i y, __m256i mask) {
+  return _mm256_castps_si256(
+      _mm256_blendv_ps(_mm256_castsi256_ps(x), _mm256_castsi256_ps(y), _mm256_castsi256_ps(mask)));
+}
+
 // Batch path, one neighbour each side, AVX2: the state of 8 pixels stays in registers while the
 // frames k_begin .. k_end-1 of a chunk update it; per pixel exactly the float and integer
 // results of UpdateRowJ1 (bit-identical), with fewer instructions: the step F(k-1) - F(k-2) is
@@ -580,11 +587,11 @@ __attribute__((target("avx2"))) void UpdateChunkAvx2(int n8, int k_begin, int k_
       sm = _mm256_add_ps(sm, fv);
       ca = _mm256_add_ps(ca, t2);
       ce = _mm256_blendv_ps(kept, t2, _mm256_castsi256_ps(gt));
-      nx = _mm256_andnot_si256(gt, _mm256_blendv_epi8(nx, v, was));
-      pv = _mm256_blendv_epi8(pv, l, gt);
-      b = _mm256_blendv_epi8(b, v, gt);
-      id = _mm256_blendv_epi8(id, kv, gt);
-      a = _mm256_blendv_epi8(a, p, gt);
+      nx = _mm256_andnot_si256(gt, BlendLanes(nx, v, was));
+      pv = BlendLanes(pv, l, gt);
+      b = BlendLanes(b, v, gt);
+      id = BlendLanes(id, kv, gt);
+      a = BlendLanes(a, p, gt);
       d = dn;
       l = v;
       kv = _mm256_add_epi32(kv, one);
