@@ -140,6 +140,11 @@ bool HasAvx2() {
   return has;
 }
 
+bool HasAvx512() {
+  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("avx512f");
+  return has;
+}
+
 inline float ToFloat(int32_t v) { return float(v); }
 inline float ToFloat(float v) { return v; }
 
@@ -556,15 +561,15 @@ __attribute__((target("avx2"))) inline __m256i BlendLanes(__m256i x, __m256i y, 
 // results of UpdateRowJ1 (bit-identical), with fewer instructions: the step F(k-1) - F(k-2) is
 // carried from the previous frame instead of recomputed, F(k-2) is reloaded from the chunk only
 // at the end, and since idx < k at frame k, idx == k-1 is idx > k-2 and idx in {k-1, k-2} is
-// idx > k-3. n8: a multiple of 8; k_begin >= 1.
-__attribute__((target("avx2"))) void UpdateChunkAvx2(int n8, int k_begin, int k_end, int slot0,
+// idx > k-3. Pixels x_begin .. x_end-1 of the row, in blocks of 8; k_begin >= 1.
+__attribute__((target("avx2"))) void UpdateChunkAvx2(int x_begin, int x_end, int k_begin, int k_end, int slot0,
                                                      const int32_t* vol_row, size_t slot_stride,
                                                      const uint8_t* const* pix_rows, int32_t* best, int32_t* idx,
                                                      int32_t* prev, int32_t* next, int32_t* last, int32_t* last2,
                                                      int32_t* aif, float* sum, float* curv_all, float* curv_excl) {
   const __m256i one = _mm256_set1_epi32(1), two = _mm256_set1_epi32(2), three = _mm256_set1_epi32(3);
   const __m256 fzero = _mm256_setzero_ps();
-  for (int x = 0; x < n8; x += 8) {
+  for (int x = x_begin; x + 8 <= x_end; x += 8) {
     __m256i b = ld(best + x), id = ld(idx + x), pv = ld(prev + x), nx = ld(next + x);
     __m256i l = ld(last + x), a = ld(aif + x);
     __m256 sm = _mm256_loadu_ps(sum + x), ca = _mm256_loadu_ps(curv_all + x), ce = _mm256_loadu_ps(curv_excl + x);
@@ -612,6 +617,67 @@ __attribute__((target("avx2"))) void UpdateChunkAvx2(int n8, int k_begin, int k_
     _mm256_storeu_ps(curv_excl + x, ce);
   }
 }
+
+// GCC 12's AVX-512 headers trip -Wmaybe-uninitialized (their _mm512_undefined_* pass-through).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+// UpdateChunkAvx2 with 16 lanes and mask registers: the same operations per pixel (a masked add
+// of t_k equals adding t_k & mask, as curv_excl is never -0), bit-identical.
+__attribute__((target("avx512f"))) void UpdateChunkAvx512(int x_begin, int x_end, int k_begin, int k_end, int slot0,
+                                                          const int32_t* vol_row, size_t slot_stride,
+                                                          const uint8_t* const* pix_rows, int32_t* best, int32_t* idx,
+                                                          int32_t* prev, int32_t* next, int32_t* last, int32_t* last2,
+                                                          int32_t* aif, float* sum, float* curv_all,
+                                                          float* curv_excl) {
+  const __m512i one = _mm512_set1_epi32(1), two = _mm512_set1_epi32(2), three = _mm512_set1_epi32(3);
+  const __m512 fzero = _mm512_setzero_ps();
+  for (int x = x_begin; x + 16 <= x_end; x += 16) {
+    __m512i b = _mm512_loadu_si512(best + x), id = _mm512_loadu_si512(idx + x);
+    __m512i pv = _mm512_loadu_si512(prev + x), nx = _mm512_loadu_si512(next + x);
+    __m512i l = _mm512_loadu_si512(last + x), a = _mm512_loadu_si512(aif + x);
+    __m512 sm = _mm512_loadu_ps(sum + x), ca = _mm512_loadu_ps(curv_all + x), ce = _mm512_loadu_ps(curv_excl + x);
+    __m512 d = _mm512_sub_ps(_mm512_cvtepi32_ps(l), _mm512_cvtepi32_ps(_mm512_loadu_si512(last2 + x)));
+    __m512i kv = _mm512_set1_epi32(k_begin);
+    for (int k = k_begin; k < k_end; ++k) {
+      const int slot = k - slot0;
+      const __m512i v = _mm512_loadu_si512(vol_row + size_t(slot) * slot_stride + x);
+      const __m512i p = _mm512_cvtepu8_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(pix_rows[slot] + x)));
+      const __m512 fv = _mm512_cvtepi32_ps(v);
+      const __m512 dn = _mm512_sub_ps(fv, _mm512_cvtepi32_ps(l));
+      const __m512 t = _mm512_sub_ps(dn, d);
+      const __m512 t2 = k >= 2 ? _mm512_mul_ps(t, t) : fzero;
+      const __mmask16 gt = _mm512_cmpgt_epi32_mask(v, b);
+      const __mmask16 was = _mm512_cmpgt_epi32_mask(id, _mm512_sub_epi32(kv, two));
+      const __mmask16 near = _mm512_cmpgt_epi32_mask(id, _mm512_sub_epi32(kv, three));
+      const __m512 kept = _mm512_mask_add_ps(ce, near, ce, t2);
+      sm = _mm512_add_ps(sm, fv);
+      ca = _mm512_add_ps(ca, t2);
+      ce = _mm512_mask_mov_ps(kept, gt, t2);
+      nx = _mm512_maskz_mov_epi32(_mm512_knot(gt), _mm512_mask_mov_epi32(nx, was, v));
+      pv = _mm512_mask_mov_epi32(pv, gt, l);
+      b = _mm512_mask_mov_epi32(b, gt, v);
+      id = _mm512_mask_mov_epi32(id, gt, kv);
+      a = _mm512_mask_mov_epi32(a, gt, p);
+      d = dn;
+      l = v;
+      kv = _mm512_add_epi32(kv, one);
+    }
+    const __m512i l2 = k_end - k_begin >= 2 ? _mm512_loadu_si512(vol_row + size_t(k_end - 2 - slot0) * slot_stride + x)
+                       : k_end - k_begin == 1 ? _mm512_loadu_si512(last + x)
+                                             : _mm512_loadu_si512(last2 + x);
+    _mm512_storeu_si512(best + x, b);
+    _mm512_storeu_si512(idx + x, id);
+    _mm512_storeu_si512(prev + x, pv);
+    _mm512_storeu_si512(next + x, nx);
+    _mm512_storeu_si512(last2 + x, l2);
+    _mm512_storeu_si512(last + x, l);
+    _mm512_storeu_si512(aif + x, a);
+    _mm512_storeu_ps(sum + x, sm);
+    _mm512_storeu_ps(curv_all + x, ca);
+    _mm512_storeu_ps(curv_excl + x, ce);
+  }
+}
+#pragma GCC diagnostic pop
 
 // Sink of the batch path: keeps the focus row of frame slot `slot` for the later state update.
 struct VolumeSink {
@@ -1078,6 +1144,7 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
     volumes[size_t(w)].resize(size_t(kTileW) * kBatchTileH * kFrameChunk);
   }
   const bool avx2 = options.use_simd && HasAvx2();
+  const bool avx512 = avx2 && options.use_avx512 && HasAvx512();
   const int n = int(frames.size());
   std::atomic<size_t> valid{0};
   ParallelFor(n_tiles, workers, [&](int t, int worker) {
@@ -1108,8 +1175,14 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
             UpdateRow(st, off, 0, vol_row, pix_rows[0], tw);
             k_begin = 1;
           }
-          const int n8 = tw & ~7;
-          UpdateChunkAvx2(n8, k_begin, k1, k0, vol_row, slot_stride, pix_rows, st.best.data() + off,
+          const int n8 = tw & ~7, n16 = avx512 ? tw & ~15 : 0;
+          if (n16 > 0) {
+            UpdateChunkAvx512(0, n16, k_begin, k1, k0, vol_row, slot_stride, pix_rows, st.best.data() + off,
+                              st.idx.data() + off, st.before[0].data() + off, st.after[0].data() + off,
+                              st.ring[0].data() + off, st.last2.data() + off, st.aif.data() + off,
+                              st.sum.data() + off, st.curv_all.data() + off, st.curv_excl.data() + off);
+          }
+          UpdateChunkAvx2(n16, n8, k_begin, k1, k0, vol_row, slot_stride, pix_rows, st.best.data() + off,
                           st.idx.data() + off, st.before[0].data() + off, st.after[0].data() + off,
                           st.ring[0].data() + off, st.last2.data() + off, st.aif.data() + off, st.sum.data() + off,
                           st.curv_all.data() + off, st.curv_excl.data() + off);

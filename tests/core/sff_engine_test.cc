@@ -193,7 +193,8 @@ TEST(SffEngineTest, StreamingAndBatchAreBitIdentical) {
 TEST(SffEngineTest, BatchChunksOfEveryLengthMatchStreaming) {
   // The batch path updates the state in chunks of 8 frames: 9 and 17 frames end with a chunk of
   // one frame, 16 with a full one; 270 px wide leaves a partial tile whose width is no multiple
-  // of 8 or 16. Maximum interpolation with min_confidence 0 compares every pixel's index.
+  // of 8 or 16 (AVX-512 blocks of 16, AVX2 blocks of 8, scalar rest). min_confidence 0 keeps and
+  // compares every pixel.
   for (int n : {9, 16, 17}) {
     const auto s = TiltedPlaneStack(cv::Size(270, 70), UniformZ(n, 0.0, 1.0), 0.25 * n, 0.02, 0.03);
     for (int window : {5, 9}) {
@@ -211,6 +212,12 @@ TEST(SffEngineTest, BatchChunksOfEveryLengthMatchStreaming) {
         EXPECT_TRUE(BitIdentical(streamed.confidence, batch->confidence)) << what;
         EXPECT_TRUE(BitIdentical(streamed.all_in_focus, batch->all_in_focus)) << what;
         EXPECT_EQ(streamed.valid_fraction, 1.0) << what;
+        o.use_avx512 = false;  // the AVX2 state update (the default where the CPU has AVX-512)
+        auto batch_avx2 = SffEngine::ReconstructInMemory(o, s.frames, s.z_um);
+        ASSERT_TRUE(batch_avx2.ok());
+        EXPECT_TRUE(BitIdentical(streamed.depth_um, batch_avx2->depth_um)) << what;
+        EXPECT_TRUE(BitIdentical(streamed.confidence, batch_avx2->confidence)) << what;
+        EXPECT_TRUE(BitIdentical(streamed.all_in_focus, batch_avx2->all_in_focus)) << what;
       }
     }
   }
