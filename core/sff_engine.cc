@@ -3,8 +3,9 @@
 // Per-pixel state is O(pixels): best focus value, its frame index, j values before and after it,
 // the last j values, the curve's sum and squared steps (for the confidence) and the all-in-focus
 // grey value. 8-bit Tenengrad runs through a fused integer kernel (Sobel, squares, window sum and
-// state update in one pass over a cache-sized tile, AVX2 selected at run time); every other
-// measure goes through core/focus_measure.h and the same state update.
+// state update in one pass over a cache-sized tile, AVX2 selected at run time; the batch path's
+// state update uses AVX-512 where the CPU has it); every other measure goes through
+// core/focus_measure.h and the same state update.
 #include "core/sff_engine.h"
 
 #include <algorithm>
