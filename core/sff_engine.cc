@@ -3,8 +3,9 @@
 // Per-pixel state is O(pixels): best focus value, its frame index, j values before and after it,
 // the last j values, the curve's sum and squared steps (for the confidence) and the all-in-focus
 // grey value. 8-bit Tenengrad runs through a fused integer kernel (Sobel, squares, window sum and
-// state update in one pass over a cache-sized tile, AVX2 selected at run time); every other
-// measure goes through core/focus_measure.h and the same state update.
+// state update in one pass over a cache-sized tile, AVX2 selected at run time; the batch path's
+// state update uses AVX-512 where the CPU has it); every other measure goes through
+// core/focus_measure.h and the same state update.
 #include "core/sff_engine.h"
 
 #include <algorithm>
@@ -137,6 +138,11 @@ void ParallelFor(int n_tasks, int threads, F&& fn) {
 
 bool HasAvx2() {
   static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
+bool HasAvx512() {
+  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("avx512f");
   return has;
 }
 
@@ -340,43 +346,51 @@ inline void UpdateRow(StatePlanes<T, P>& s, size_t off, int k, const T* f, const
 struct TenengradScratch {
   std::vector<int16_t> in[3];   // three input rows, reflected, widened: width tw + 2R + 2
   std::vector<int16_t> sv, dv;  // vertical [1 2 1] and [1 0 -1] of the three rows (AVX2 path)
-  std::vector<int32_t> ering;   // the last `window` energy rows Gx^2 + Gy^2: width tw + 2R
+  std::vector<int32_t> ering;   // the last `window` energy rows Gx^2 + Gy^2: stride EnergyStride(ew)
+  std::vector<int32_t> zeros;   // an all-zero energy row: the "old" row of the first `window` rows
   std::vector<int32_t> colsum;  // vertical window sums of the energy
   std::vector<int32_t> pairs;   // horizontal pair sums of colsum
   std::vector<int32_t> focus;   // one output row
   void Reserve(int window) {
-    const int r = window / 2, ew = kTileW + 2 * r;
-    for (auto& v : in) v.resize(size_t(ew) + 2);
-    sv.resize(size_t(ew) + 2);
-    dv.resize(size_t(ew) + 2);
-    ering.resize(size_t(ew) * window);
-    colsum.resize(size_t(ew));
+    const int r = window / 2, ew = kTileW + 2 * r, es = EnergyStride(ew);
+    // The AVX2 kernel runs whole blocks of 16 up to es (+ 16 input columns); the columns past
+    // the tile's are computed but never read.
+    for (auto& v : in) v.resize(size_t(es) + 18);
+    sv.resize(size_t(es) + 18);
+    dv.resize(size_t(es) + 18);
+    ering.resize(size_t(es) * window);
+    zeros.assign(size_t(es), 0);
+    colsum.resize(size_t(es));
     pairs.resize(size_t(ew));
     focus.resize(size_t(kTileW));
   }
+  // Energy row width ew rounded up to whole blocks of 16.
+  static int EnergyStride(int ew) { return (ew + 15) & ~15; }
 };
 
 // Sobel energy of one row (eq. 3.13-3.14 before the window sum) and the running column sums.
 // a, b, c: input rows y-1, y, y+1; output x uses columns x .. x+2 (centre x+1).
+// old_in: the energy row leaving the window (old_out itself, or zeros while the window fills).
 SFF_INLINE void EnergyRow(const int16_t* __restrict a, const int16_t* __restrict b, const int16_t* __restrict c,
-                          int32_t* __restrict old_row, int32_t* __restrict colsum, int ew) {
+                          const int32_t* old_in, int32_t* old_out, int32_t* __restrict colsum, int ew) {
   for (int x = 0; x < ew; ++x) {
     const int32_t gx = (a[x] + 2 * b[x] + c[x]) - (a[x + 2] + 2 * b[x + 2] + c[x + 2]);
     const int32_t gy = (a[x] - c[x]) + 2 * (a[x + 1] - c[x + 1]) + (a[x + 2] - c[x + 2]);
     const int32_t e = gx * gx + gy * gy;
-    colsum[x] += e - old_row[x];
-    old_row[x] = e;
+    colsum[x] += e - old_in[x];
+    old_out[x] = e;
   }
 }
 
 // The same with AVX2 in 16-bit lanes: |Gx|, |Gy| <= 1020 fit int16, and vpmaddwd of interleaved
 // (Gx, Gy) pairs gives Gx^2 + Gy^2 in int32 exactly.
+// Whole blocks of 16 up to EnergyStride(ew) (buffers sized by TenengradScratch::Reserve): the
+// columns past ew hold garbage that is never read.
 __attribute__((target("avx2"))) inline void EnergyRowAvx2(const int16_t* a, const int16_t* b, const int16_t* c,
-                                                          int16_t* sv, int16_t* dv, int32_t* old_row,
-                                                          int32_t* colsum, int ew) {
-  const int pw = ew + 2;
-  int i = 0;
-  for (; i + 16 <= pw; i += 16) {
+                                                          int16_t* sv, int16_t* dv, const int32_t* old_in,
+                                                          int32_t* old_out, int32_t* colsum, int ew) {
+  const int es = TenengradScratch::EnergyStride(ew);
+  for (int i = 0; i < es + 2; i += 16) {
     const __m256i va = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a + i));
     const __m256i vb = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(b + i));
     const __m256i vc = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(c + i));
@@ -384,12 +398,7 @@ __attribute__((target("avx2"))) inline void EnergyRowAvx2(const int16_t* a, cons
                         _mm256_add_epi16(_mm256_add_epi16(va, vc), _mm256_add_epi16(vb, vb)));
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(dv + i), _mm256_sub_epi16(va, vc));
   }
-  for (; i < pw; ++i) {
-    sv[i] = int16_t(a[i] + 2 * b[i] + c[i]);
-    dv[i] = int16_t(a[i] - c[i]);
-  }
-  int x = 0;
-  for (; x + 16 <= ew; x += 16) {
+  for (int x = 0; x < es; x += 16) {
     const __m256i gx = _mm256_sub_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(sv + x)),
                                         _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sv + x + 2)));
     const __m256i d1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x + 1));
@@ -403,26 +412,41 @@ __attribute__((target("avx2"))) inline void EnergyRowAvx2(const int16_t* a, cons
     const __m256i e0 = _mm256_permute2x128_si256(elo, ehi, 0x20);
     const __m256i e1 = _mm256_permute2x128_si256(elo, ehi, 0x31);
     __m256i* cs = reinterpret_cast<__m256i*>(colsum + x);
-    __m256i* od = reinterpret_cast<__m256i*>(old_row + x);
-    const __m256i o0 = _mm256_loadu_si256(od), o1 = _mm256_loadu_si256(od + 1);
+    const __m256i* oi = reinterpret_cast<const __m256i*>(old_in + x);
+    __m256i* od = reinterpret_cast<__m256i*>(old_out + x);
+    const __m256i o0 = _mm256_loadu_si256(oi), o1 = _mm256_loadu_si256(oi + 1);
     _mm256_storeu_si256(cs, _mm256_add_epi32(_mm256_loadu_si256(cs), _mm256_sub_epi32(e0, o0)));
     _mm256_storeu_si256(cs + 1, _mm256_add_epi32(_mm256_loadu_si256(cs + 1), _mm256_sub_epi32(e1, o1)));
     _mm256_storeu_si256(od, e0);
     _mm256_storeu_si256(od + 1, e1);
   }
-  for (; x < ew; ++x) {
-    const int32_t gx = sv[x] - sv[x + 2];
-    const int32_t gy = dv[x] + 2 * dv[x + 1] + dv[x + 2];
-    const int32_t e = gx * gx + gy * gy;
-    colsum[x] += e - old_row[x];
-    old_row[x] = e;
-  }
 }
 
 // Horizontal window sum of the column sums: out[x] = sum of colsum[x .. x + window - 1]. Built
 // from pair sums p[x] = colsum[x] + colsum[x + 1]: (window + 1) / 2 passes instead of window.
+// W: the window as a compile-time constant (the common sizes): one pass adds all pair sums.
+template <int W>
+SFF_INLINE void WindowRowFixed(const int32_t* __restrict colsum, int32_t* __restrict pairs, int32_t* __restrict out,
+                               int tw) {
+  const int np = tw + W - 2;
+  for (int x = 0; x < np; ++x) pairs[x] = colsum[x] + colsum[x + 1];
+  for (int x = 0; x < tw; ++x) {
+    int32_t s = colsum[x + W - 1];
+    for (int i = 0; i + 1 < W; i += 2) s += pairs[x + i];
+    out[x] = s;
+  }
+}
+
 SFF_INLINE void WindowRow(const int32_t* __restrict colsum, int32_t* __restrict pairs, int32_t* __restrict out,
                           int tw, int window) {
+  switch (window) {
+    case 3: return WindowRowFixed<3>(colsum, pairs, out, tw);
+    case 5: return WindowRowFixed<5>(colsum, pairs, out, tw);
+    case 7: return WindowRowFixed<7>(colsum, pairs, out, tw);
+    case 9: return WindowRowFixed<9>(colsum, pairs, out, tw);
+    case 11: return WindowRowFixed<11>(colsum, pairs, out, tw);
+    default: break;
+  }
   const int np = tw + window - 2;
   for (int x = 0; x < np; ++x) pairs[x] = colsum[x] + colsum[x + 1];
   const int32_t* __restrict last = colsum + window - 1;
@@ -438,10 +462,9 @@ SFF_INLINE void WindowRow(const int32_t* __restrict colsum, int32_t* __restrict 
 template <bool kAvx2, typename Sink>
 SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int th, int window,
                               TenengradScratch& sc, Sink&& sink, const cv::Mat* prefetch_next = nullptr) {
-  const int r = window / 2, ew = tw + 2 * r, pw = ew + 2;
+  const int r = window / 2, ew = tw + 2 * r, pw = ew + 2, es = TenengradScratch::EnergyStride(ew);
   const int rows = frame.rows, cols = frame.cols;
-  std::fill_n(sc.colsum.data(), ew, 0);
-  std::fill_n(sc.ering.data(), size_t(ew) * window, 0);
+  std::fill_n(sc.colsum.data(), es, 0);  // the energy ring needs no clearing: see old_in below
   // Columns x0 - r - 1 .. x0 + tw + r: [lo, hi) lie inside the frame and are copied directly,
   // the few outside are mirrored (BORDER_REFLECT_101).
   const int c_first = x0 - r - 1;
@@ -464,12 +487,14 @@ SFF_INLINE void TenengradTile(const cv::Mat& frame, int x0, int y0, int tw, int 
     for (int i = std::max(hi, lo); i < pw; ++i) dst[i] = src[Reflect101(c_first + i, cols)];
     ++loaded;
     if (loaded < 3) continue;
+    int32_t* old_out = sc.ering.data() + size_t(e_rows % window) * es;
+    const int32_t* old_in = e_rows < window ? sc.zeros.data() : old_out;
     if constexpr (kAvx2) {
       EnergyRowAvx2(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(),
-                    sc.sv.data(), sc.dv.data(), sc.ering.data() + size_t(e_rows % window) * ew, sc.colsum.data(), ew);
+                    sc.sv.data(), sc.dv.data(), old_in, old_out, sc.colsum.data(), ew);
     } else {
-      EnergyRow(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(),
-                sc.ering.data() + size_t(e_rows % window) * ew, sc.colsum.data(), ew);
+      EnergyRow(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(), old_in,
+                old_out, sc.colsum.data(), ew);
     }
     ++e_rows;
     if (e_rows < window) continue;
@@ -525,54 +550,135 @@ __attribute__((target("avx2"))) inline void st(int32_t* p, __m256i v) {
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(p), v);
 }
 
+// Lanes of y where the 32-bit lane of mask is all ones, else of x (mask lanes: 0 or all ones).
+// vblendvps: GCC turns _mm256_blendv_epi8 on such masks into an extra byte comparison.
+__attribute__((target("avx2"))) inline __m256i BlendLanes(__m256i x, __m256i y, __m256i mask) {
+  return _mm256_castps_si256(
+      _mm256_blendv_ps(_mm256_castsi256_ps(x), _mm256_castsi256_ps(y), _mm256_castsi256_ps(mask)));
+}
+
 // Batch path, one neighbour each side, AVX2: the state of 8 pixels stays in registers while the
-// frames k_begin .. k_end-1 of a chunk update it; per pixel exactly the operations of
-// UpdateRowJ1 in the same order, so the result is bit-identical. n8: a multiple of 8.
-__attribute__((target("avx2"))) void UpdateChunkAvx2(int n8, int k_begin, int k_end, int slot0,
+// frames k_begin .. k_end-1 of a chunk update it; per pixel exactly the float and integer
+// results of UpdateRowJ1 (bit-identical), with fewer instructions: the step F(k-1) - F(k-2) is
+// carried from the previous frame instead of recomputed, F(k-2) is reloaded from the chunk only
+// at the end, and since idx < k at frame k, idx == k-1 is idx > k-2 and idx in {k-1, k-2} is
+// idx > k-3. Pixels x_begin .. x_end-1 of the row, in blocks of 8; k_begin >= 1.
+__attribute__((target("avx2"))) void UpdateChunkAvx2(int x_begin, int x_end, int k_begin, int k_end, int slot0,
                                                      const int32_t* vol_row, size_t slot_stride,
                                                      const uint8_t* const* pix_rows, int32_t* best, int32_t* idx,
                                                      int32_t* prev, int32_t* next, int32_t* last, int32_t* last2,
                                                      int32_t* aif, float* sum, float* curv_all, float* curv_excl) {
-  const __m256i zero = _mm256_setzero_si256();
-  for (int x = 0; x < n8; x += 8) {
+  const __m256i one = _mm256_set1_epi32(1), two = _mm256_set1_epi32(2), three = _mm256_set1_epi32(3);
+  const __m256 fzero = _mm256_setzero_ps();
+  for (int x = x_begin; x + 8 <= x_end; x += 8) {
     __m256i b = ld(best + x), id = ld(idx + x), pv = ld(prev + x), nx = ld(next + x);
-    __m256i l = ld(last + x), l2 = ld(last2 + x), a = ld(aif + x);
+    __m256i l = ld(last + x), a = ld(aif + x);
     __m256 sm = _mm256_loadu_ps(sum + x), ca = _mm256_loadu_ps(curv_all + x), ce = _mm256_loadu_ps(curv_excl + x);
+    __m256 d = _mm256_sub_ps(_mm256_cvtepi32_ps(l), _mm256_cvtepi32_ps(ld(last2 + x)));  // F(k-1) - F(k-2)
+    __m256i kv = _mm256_set1_epi32(k_begin);
     for (int k = k_begin; k < k_end; ++k) {
       const int slot = k - slot0;
       const __m256i v = ld(vol_row + size_t(slot) * slot_stride + x);
       const __m256i p =
           _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(pix_rows[slot] + x)));
-      const __m256 fv = _mm256_cvtepi32_ps(v), fl = _mm256_cvtepi32_ps(l), fl2 = _mm256_cvtepi32_ps(l2);
-      const __m256 t = _mm256_sub_ps(_mm256_sub_ps(fv, fl), _mm256_sub_ps(fl, fl2));
-      const __m256 t2 = _mm256_mul_ps(_mm256_set1_ps(k >= 2 ? 1.f : 0.f), _mm256_mul_ps(t, t));
+      const __m256 fv = _mm256_cvtepi32_ps(v);
+      const __m256 dn = _mm256_sub_ps(fv, _mm256_cvtepi32_ps(l));
+      const __m256 t = _mm256_sub_ps(dn, d);
+      // k == 1: t_k does not exist (UpdateRowJ1 multiplies t * t by 0, giving +0 as well).
+      const __m256 t2 = k >= 2 ? _mm256_mul_ps(t, t) : fzero;
       const __m256i gt = _mm256_cmpgt_epi32(v, b);
-      const __m256i was = _mm256_cmpeq_epi32(id, _mm256_set1_epi32(k - 1));
-      const __m256i near = _mm256_or_si256(was, _mm256_cmpeq_epi32(id, _mm256_set1_epi32(k - 2)));
+      const __m256i was = _mm256_cmpgt_epi32(id, _mm256_sub_epi32(kv, two));
+      const __m256i near = _mm256_cmpgt_epi32(id, _mm256_sub_epi32(kv, three));
       const __m256 kept = _mm256_add_ps(ce, _mm256_and_ps(t2, _mm256_castsi256_ps(near)));
       sm = _mm256_add_ps(sm, fv);
       ca = _mm256_add_ps(ca, t2);
       ce = _mm256_blendv_ps(kept, t2, _mm256_castsi256_ps(gt));
-      nx = _mm256_blendv_epi8(_mm256_blendv_epi8(nx, v, was), zero, gt);
-      pv = _mm256_blendv_epi8(pv, l, gt);
-      b = _mm256_blendv_epi8(b, v, gt);
-      id = _mm256_blendv_epi8(id, _mm256_set1_epi32(k), gt);
-      a = _mm256_blendv_epi8(a, p, gt);
-      l2 = l;
+      nx = _mm256_andnot_si256(gt, BlendLanes(nx, v, was));
+      pv = BlendLanes(pv, l, gt);
+      b = BlendLanes(b, v, gt);
+      id = BlendLanes(id, kv, gt);
+      a = BlendLanes(a, p, gt);
+      d = dn;
       l = v;
+      kv = _mm256_add_epi32(kv, one);
     }
+    // F(k_end - 2): from the chunk, or the state's last value when the chunk added one frame.
+    const __m256i l2 = k_end - k_begin >= 2 ? ld(vol_row + size_t(k_end - 2 - slot0) * slot_stride + x)
+                       : k_end - k_begin == 1 ? ld(last + x)
+                                             : ld(last2 + x);
     st(best + x, b);
     st(idx + x, id);
     st(prev + x, pv);
     st(next + x, nx);
-    st(last + x, l);
     st(last2 + x, l2);
+    st(last + x, l);
     st(aif + x, a);
     _mm256_storeu_ps(sum + x, sm);
     _mm256_storeu_ps(curv_all + x, ca);
     _mm256_storeu_ps(curv_excl + x, ce);
   }
 }
+
+// GCC 12's AVX-512 headers trip -Wmaybe-uninitialized (their _mm512_undefined_* pass-through).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+// UpdateChunkAvx2 with 16 lanes and mask registers: the same operations per pixel (a masked add
+// of t_k equals adding t_k & mask, as curv_excl is never -0), bit-identical.
+__attribute__((target("avx512f"))) void UpdateChunkAvx512(int x_begin, int x_end, int k_begin, int k_end, int slot0,
+                                                          const int32_t* vol_row, size_t slot_stride,
+                                                          const uint8_t* const* pix_rows, int32_t* best, int32_t* idx,
+                                                          int32_t* prev, int32_t* next, int32_t* last, int32_t* last2,
+                                                          int32_t* aif, float* sum, float* curv_all,
+                                                          float* curv_excl) {
+  const __m512i one = _mm512_set1_epi32(1), two = _mm512_set1_epi32(2), three = _mm512_set1_epi32(3);
+  const __m512 fzero = _mm512_setzero_ps();
+  for (int x = x_begin; x + 16 <= x_end; x += 16) {
+    __m512i b = _mm512_loadu_si512(best + x), id = _mm512_loadu_si512(idx + x);
+    __m512i pv = _mm512_loadu_si512(prev + x), nx = _mm512_loadu_si512(next + x);
+    __m512i l = _mm512_loadu_si512(last + x), a = _mm512_loadu_si512(aif + x);
+    __m512 sm = _mm512_loadu_ps(sum + x), ca = _mm512_loadu_ps(curv_all + x), ce = _mm512_loadu_ps(curv_excl + x);
+    __m512 d = _mm512_sub_ps(_mm512_cvtepi32_ps(l), _mm512_cvtepi32_ps(_mm512_loadu_si512(last2 + x)));
+    __m512i kv = _mm512_set1_epi32(k_begin);
+    for (int k = k_begin; k < k_end; ++k) {
+      const int slot = k - slot0;
+      const __m512i v = _mm512_loadu_si512(vol_row + size_t(slot) * slot_stride + x);
+      const __m512i p = _mm512_cvtepu8_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(pix_rows[slot] + x)));
+      const __m512 fv = _mm512_cvtepi32_ps(v);
+      const __m512 dn = _mm512_sub_ps(fv, _mm512_cvtepi32_ps(l));
+      const __m512 t = _mm512_sub_ps(dn, d);
+      const __m512 t2 = k >= 2 ? _mm512_mul_ps(t, t) : fzero;
+      const __mmask16 gt = _mm512_cmpgt_epi32_mask(v, b);
+      const __mmask16 was = _mm512_cmpgt_epi32_mask(id, _mm512_sub_epi32(kv, two));
+      const __mmask16 near = _mm512_cmpgt_epi32_mask(id, _mm512_sub_epi32(kv, three));
+      const __m512 kept = _mm512_mask_add_ps(ce, near, ce, t2);
+      sm = _mm512_add_ps(sm, fv);
+      ca = _mm512_add_ps(ca, t2);
+      ce = _mm512_mask_mov_ps(kept, gt, t2);
+      nx = _mm512_maskz_mov_epi32(_mm512_knot(gt), _mm512_mask_mov_epi32(nx, was, v));
+      pv = _mm512_mask_mov_epi32(pv, gt, l);
+      b = _mm512_mask_mov_epi32(b, gt, v);
+      id = _mm512_mask_mov_epi32(id, gt, kv);
+      a = _mm512_mask_mov_epi32(a, gt, p);
+      d = dn;
+      l = v;
+      kv = _mm512_add_epi32(kv, one);
+    }
+    const __m512i l2 = k_end - k_begin >= 2 ? _mm512_loadu_si512(vol_row + size_t(k_end - 2 - slot0) * slot_stride + x)
+                       : k_end - k_begin == 1 ? _mm512_loadu_si512(last + x)
+                                             : _mm512_loadu_si512(last2 + x);
+    _mm512_storeu_si512(best + x, b);
+    _mm512_storeu_si512(idx + x, id);
+    _mm512_storeu_si512(prev + x, pv);
+    _mm512_storeu_si512(next + x, nx);
+    _mm512_storeu_si512(last2 + x, l2);
+    _mm512_storeu_si512(last + x, l);
+    _mm512_storeu_si512(aif + x, a);
+    _mm512_storeu_ps(sum + x, sm);
+    _mm512_storeu_ps(curv_all + x, ca);
+    _mm512_storeu_ps(curv_excl + x, ce);
+  }
+}
+#pragma GCC diagnostic pop
 
 // Sink of the batch path: keeps the focus row of frame slot `slot` for the later state update.
 struct VolumeSink {
@@ -1039,6 +1145,7 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
     volumes[size_t(w)].resize(size_t(kTileW) * kBatchTileH * kFrameChunk);
   }
   const bool avx2 = options.use_simd && HasAvx2();
+  const bool avx512 = avx2 && options.use_avx512 && HasAvx512();
   const int n = int(frames.size());
   std::atomic<size_t> valid{0};
   ParallelFor(n_tiles, workers, [&](int t, int worker) {
@@ -1069,8 +1176,14 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
             UpdateRow(st, off, 0, vol_row, pix_rows[0], tw);
             k_begin = 1;
           }
-          const int n8 = tw & ~7;
-          UpdateChunkAvx2(n8, k_begin, k1, k0, vol_row, slot_stride, pix_rows, st.best.data() + off,
+          const int n8 = tw & ~7, n16 = avx512 ? tw & ~15 : 0;
+          if (n16 > 0) {
+            UpdateChunkAvx512(0, n16, k_begin, k1, k0, vol_row, slot_stride, pix_rows, st.best.data() + off,
+                              st.idx.data() + off, st.before[0].data() + off, st.after[0].data() + off,
+                              st.ring[0].data() + off, st.last2.data() + off, st.aif.data() + off,
+                              st.sum.data() + off, st.curv_all.data() + off, st.curv_excl.data() + off);
+          }
+          UpdateChunkAvx2(n16, n8, k_begin, k1, k0, vol_row, slot_stride, pix_rows, st.best.data() + off,
                           st.idx.data() + off, st.before[0].data() + off, st.after[0].data() + off,
                           st.ring[0].data() + off, st.last2.data() + off, st.aif.data() + off, st.sum.data() + off,
                           st.curv_all.data() + off, st.curv_excl.data() + off);

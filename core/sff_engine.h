@@ -55,6 +55,9 @@ struct SffOptions {
   // AVX2 kernels when the CPU has them (chosen at run time); false forces the portable kernels.
   // Both give bit-identical results.
   bool use_simd = true;
+  // With use_simd: AVX-512 for ReconstructInMemory's state update when the CPU has it (false
+  // keeps AVX2). Bit-identical either way.
+  bool use_avx512 = true;
 
   // INVALID_ARGUMENT naming the field when out of range.
   Status Validate() const;

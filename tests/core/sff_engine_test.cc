@@ -190,6 +190,39 @@ TEST(SffEngineTest, StreamingAndBatchAreBitIdentical) {
   }
 }
 
+TEST(SffEngineTest, BatchChunksOfEveryLengthMatchStreaming) {
+  // The batch path updates the state in chunks of 8 frames: 9 and 17 frames end with a chunk of
+  // one frame, 16 with a full one; 270 px wide leaves a partial tile whose width is no multiple
+  // of 8 or 16 (AVX-512 blocks of 16, AVX2 blocks of 8, scalar rest). min_confidence 0 keeps and
+  // compares every pixel.
+  for (int n : {9, 16, 17}) {
+    const auto s = TiltedPlaneStack(cv::Size(270, 70), UniformZ(n, 0.0, 1.0), 0.25 * n, 0.02, 0.03);
+    for (int window : {5, 9}) {
+      for (DepthInterpolation interp : {DepthInterpolation::kMaximum, DepthInterpolation::kGaussian}) {
+        SffOptions o;
+        o.window_px = window;
+        o.interpolation = interp;
+        o.min_confidence = 0.0;
+        const DepthResult streamed = Streamed(o, s.frames, s.z_um);
+        auto batch = SffEngine::ReconstructInMemory(o, s.frames, s.z_um);
+        ASSERT_TRUE(batch.ok()) << batch.status().ToString();
+        const std::string what = std::to_string(n) + " frames, w" + std::to_string(window) + " " +
+                                 DepthInterpolationName(interp);
+        EXPECT_TRUE(BitIdentical(streamed.depth_um, batch->depth_um)) << what;
+        EXPECT_TRUE(BitIdentical(streamed.confidence, batch->confidence)) << what;
+        EXPECT_TRUE(BitIdentical(streamed.all_in_focus, batch->all_in_focus)) << what;
+        EXPECT_EQ(streamed.valid_fraction, 1.0) << what;
+        o.use_avx512 = false;  // the AVX2 state update (the default where the CPU has AVX-512)
+        auto batch_avx2 = SffEngine::ReconstructInMemory(o, s.frames, s.z_um);
+        ASSERT_TRUE(batch_avx2.ok());
+        EXPECT_TRUE(BitIdentical(streamed.depth_um, batch_avx2->depth_um)) << what;
+        EXPECT_TRUE(BitIdentical(streamed.confidence, batch_avx2->confidence)) << what;
+        EXPECT_TRUE(BitIdentical(streamed.all_in_focus, batch_avx2->all_in_focus)) << what;
+      }
+    }
+  }
+}
+
 TEST(SffEngineTest, PortableKernelsGiveTheSameResult) {
   const auto s = TiltedPlaneStack(cv::Size(270, 80), UniformZ(10, 0.0, 1.0), 3.0, 0.02, 0.03);
   for (FocusMeasure m : {FocusMeasure::kTenengrad, FocusMeasure::kSumModifiedLaplacian}) {
@@ -252,7 +285,7 @@ TEST(SffEngineTest, FusedTenengradEqualsReferenceMeasure) {
   cv::Mat img = testing::RandomTexture(cv::Size(290, 70), 4);
   cv::Mat u8;
   img.convertTo(u8, CV_8U);
-  for (int w : {3, 7, 15, 31}) {
+  for (int w : {3, 5, 7, 9, 11, 15, 31}) {
     cv::Mat fused, portable, ref;
     ASSERT_TRUE(ComputeTenengradU8(u8, w, &fused).ok());
     ASSERT_TRUE(ComputeTenengradU8(u8, w, &portable, /*use_simd=*/false).ok());
