@@ -14,6 +14,7 @@ namespace inspection {
 
 Status CompensationOptions::Validate() const {
   if (pattern_cell_px < 1 || pattern_cell_px > 32) return Status::InvalidArgument("pattern_cell_px must be in [1, 32]");
+  if (camera_bin_px < 1 || camera_bin_px > 16) return Status::InvalidArgument("camera_bin_px must be in [1, 16]");
   if (solver_iterations < 1 || solver_iterations > 1000) {
     return Status::InvalidArgument("solver_iterations must be in [1, 1000]");
   }
@@ -75,7 +76,28 @@ StatusOr<std::unique_ptr<Compensator>> Compensator::Create(const CameraResponseF
   }
   Eigen::SparseMatrix<float, Eigen::ColMajor, int> u(p.area(), cs.area());
   u.setFromTriplets(t.begin(), t.end());  // duplicates (clamped edges) are summed
-  c->au_ = (scatter.a * u).pruned();
+  // B: binned camera rows x camera pixels (sums).
+  const int bin = options.camera_bin_px;
+  const cv::Size cam = scatter.camera_size;
+  c->bin_size_ = cv::Size((cam.width + bin - 1) / bin, (cam.height + bin - 1) / bin);
+  std::vector<Eigen::Triplet<float, int>> tb;
+  tb.reserve(size_t(cam.area()));
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) tb.emplace_back((y / bin) * c->bin_size_.width + x / bin, y * cam.width + x, 1.0f);
+  }
+  Eigen::SparseMatrix<float, Eigen::ColMajor, int> bm(c->bin_size_.area(), cam.area());
+  bm.setFromTriplets(tb.begin(), tb.end());
+  Eigen::SparseMatrix<float, Eigen::ColMajor, int> ba = bm * scatter.a;
+  c->au_ = (ba * u).pruned();
+  c->solver_ = std::make_unique<Eigen::LeastSquaresConjugateGradient<Sparse>>();
+  c->solver_->setMaxIterations(options.solver_iterations);
+  c->solver_->setTolerance(float(options.solver_tolerance));
+  c->solver_->compute(c->au_);
+  const int top = crf.levels - 1;
+  c->exposure_table_.resize(size_t(top) * 16 + 2);
+  for (size_t k = 0; k < c->exposure_table_.size(); ++k) {
+    c->exposure_table_[k] = float(std::exp(crf.LogExposure(std::min(double(k) / 16.0, double(top)))));
+  }
   for (int k = 0; k <= 4096; ++k) {
     c->inverse_prf_[k] = cv::saturate_cast<uint8_t>(prf.GreyForIrradiance(double(k) / 4096.0));
   }
@@ -141,20 +163,26 @@ StatusOr<cv::Mat> Compensator::SolveIrradiance(const cv::Mat& scene_radiance, co
     return Status::InvalidArgument("warm_start must be CV_32FC1 of the projector size");
   }
   const Eigen::VectorXf c0 = Downsample(warm_start);
-  const Eigen::VectorXf pred0 = au_ * c0;
-  cv::Mat sr = scene_radiance.isContinuous() ? scene_radiance : scene_radiance.clone();
-  const float* s = sr.ptr<float>();
-  cv::Mat br = scatter_->black_radiance.isContinuous() ? scatter_->black_radiance : scatter_->black_radiance.clone();
-  const float* e = br.ptr<float>();
-  Eigen::VectorXf b(au_.rows());
-  for (Eigen::Index i = 0; i < b.size(); ++i) b[i] = std::isfinite(s[i]) ? s[i] - e[i] : pred0[i];
-  Eigen::LeastSquaresConjugateGradient<Eigen::SparseMatrix<float, Eigen::ColMajor, int>> solver;
-  solver.setMaxIterations(options_.solver_iterations);
-  solver.setTolerance(float(options_.solver_tolerance));
-  solver.compute(au_);
-  Eigen::VectorXf c = solver.solveWithGuess(b, c0);
-  if (iterations) *iterations = int(solver.iterations());
-  if (error) *error = double(solver.error());
+  // Rows without a constraint (NaN) take the prediction of the warm start, so they pull nothing.
+  cv::Mat pred0;
+  if (cv::checkRange(scene_radiance, true, nullptr, -1e30, 1e30) == false) {
+    INSPECT_ASSIGN_OR_RETURN(pred0, scatter_->PredictRadiance(warm_start));
+  }
+  const int bin = options_.camera_bin_px;
+  Eigen::VectorXf b = Eigen::VectorXf::Zero(au_.rows());
+  for (int y = 0; y < scene_radiance.rows; ++y) {
+    const float* s = scene_radiance.ptr<float>(y);
+    const float* e = scatter_->black_radiance.ptr<float>(y);
+    const float* p = pred0.empty() ? nullptr : pred0.ptr<float>(y);
+    float* brow = b.data() + (y / bin) * bin_size_.width;
+    for (int x = 0; x < scene_radiance.cols; ++x) {
+      const float v = std::isfinite(s[x]) ? s[x] : p[x];
+      brow[x / bin] += v - e[x];
+    }
+  }
+  Eigen::VectorXf c = solver_->solveWithGuess(b, c0);
+  if (iterations) *iterations = int(solver_->iterations());
+  if (error) *error = double(solver_->error());
   for (Eigen::Index i = 0; i < c.size(); ++i) {
     if (!std::isfinite(c[i])) c[i] = c0[i];
   }
@@ -176,8 +204,8 @@ StatusOr<CompensationStep> Compensator::Step(const cv::Mat& irradiance, const cv
   cv::minMaxLoc(predicted, nullptr, &max_pred);
   const float lit = float(options_.min_lit_fraction * max_pred);
   const int top = crf_->levels - 1;
-  // Desired camera radiance per grey level (eq. 5.4 inverted), tabulated on 1/16 grey steps.
-  const double log_dt = std::log(exposure_us);
+  // Desired camera radiance per grey level (eq. 5.4 inverted) from the 1/16-grey table.
+  const float inv_dt = float(1.0 / exposure_us);
   CompensationStep out;
   out.reflectance = cv::Mat(frame.size(), CV_32FC1);
   cv::Mat target(frame.size(), CV_32FC1);
@@ -203,8 +231,11 @@ StatusOr<CompensationStep> Compensator::Step(const cv::Mat& irradiance, const cv
       if (zr[x] >= float(top)) refl *= float(options_.saturated_reflectance_factor);
       refl = std::max(refl, 1e-6f);
       r[x] = refl;
-      const double want = std::exp(crf_->LogExposure(d[x]) - log_dt);
-      t[x] = float(want / refl);  // eq. 5.6, scene radiance at unit reflectance
+      const float g = std::clamp(d[x], 0.0f, float(top)) * 16.0f;
+      const int k = int(g);
+      const float f = g - float(k);
+      const float want = (exposure_table_[k] * (1 - f) + exposure_table_[k + 1] * f) * inv_dt;
+      t[x] = want / refl;  // eq. 5.6, scene radiance at unit reflectance
       err += std::abs(zr[x] - d[x]);
       ++n;
     }

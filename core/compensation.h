@@ -6,12 +6,16 @@
 //
 // Low-pass (5.1.2): the projector irradiance is solved on a coarse grid of nodes every
 // pattern_cell_px projector pixels and bilinearly interpolated to the projector, e_p = U c, so
-// the system is A U c = e_s (A U is formed once at construction). This keeps the pattern free of
-// high frequencies that would disturb the focus measure and makes one solve ~cell^2 smaller.
+// the system is A U c = e_s. The camera side is binned alike (sums over camera_bin_px^2 blocks,
+// B), so the solved system is B A U c = B e_s, formed once at construction: it keeps the pattern
+// free of high frequencies that would disturb the focus measure and makes one solve ~bin^2
+// cheaper than one on A (tests/bench/compensation_bench.cc).
 #pragma once
 
 #include <memory>
+#include <vector>
 
+#include <Eigen/IterativeLinearSolvers>
 #include <Eigen/SparseCore>
 #include <opencv2/core.hpp>
 
@@ -24,6 +28,7 @@ namespace inspection {
 
 struct CompensationOptions {
   int pattern_cell_px = 4;          // coarse-grid spacing of the low-pass, projector px (1..32)
+  int camera_bin_px = 4;            // camera rows summed in bin x bin blocks (1..16)
   int solver_iterations = 12;       // LSCG iterations per solve (warm-started), 1..1000
   double solver_tolerance = 1e-3;   // relative residual at which LSCG stops early
   // Pixels whose predicted scene radiance is below this share of the maximum are not lit by
@@ -45,7 +50,7 @@ struct CompensationStep {
   double solver_error = 0;       // LSCG relative residual
 };
 
-// Holds pointers to the models: they must outlive the compensator.
+// Holds pointers to the models: they must outlive the compensator. Not thread-safe (one solver).
 class Compensator {
  public:
   static StatusOr<std::unique_ptr<Compensator>> Create(const CameraResponseFunction& crf,
@@ -82,8 +87,12 @@ class Compensator {
   const ScatterMatrix* scatter_ = nullptr;
   CompensationOptions options_;
   cv::Size coarse_size_;
-  Eigen::SparseMatrix<float, Eigen::ColMajor, int> au_;  // A U
-  uint8_t inverse_prf_[4097] = {};                      // grey for irradiance k / 4096
+  using Sparse = Eigen::SparseMatrix<float, Eigen::ColMajor, int>;
+  cv::Size bin_size_;
+  Sparse au_;  // B A U
+  std::unique_ptr<Eigen::LeastSquaresConjugateGradient<Sparse>> solver_;
+  std::vector<float> exposure_table_;  // exp(crf(g)) at g = k / 16
+  uint8_t inverse_prf_[4097] = {};     // grey for irradiance k / 4096
 };
 
 // Eq. 5.12: E_p,i+1 = E_p,i + lambda (E_p,i - E_p,i-1), clamped to [floor, 1]. CV_32FC1.
