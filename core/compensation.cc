@@ -190,7 +190,7 @@ StatusOr<cv::Mat> Compensator::SolveIrradiance(const cv::Mat& scene_radiance, co
 }
 
 StatusOr<CompensationStep> Compensator::Step(const cv::Mat& irradiance, const cv::Mat& frame, double exposure_us,
-                                             const cv::Mat& desired_grey) const {
+                                             const cv::Mat& desired_grey, const cv::Mat& warm_start) const {
   if (frame.size() != scatter_->camera_size || (frame.type() != CV_8UC1 && frame.type() != CV_16UC1)) {
     return Status::InvalidArgument("frame must be CV_8UC1/CV_16UC1 of the camera size");
   }
@@ -242,7 +242,7 @@ StatusOr<CompensationStep> Compensator::Step(const cv::Mat& irradiance, const cv
   }
   out.mean_abs_error_grey = n ? err / double(n) : 0.0;
   INSPECT_ASSIGN_OR_RETURN(out.projector_irradiance,
-                           SolveIrradiance(target, irradiance, &out.solver_iterations, &out.solver_error));
+                           SolveIrradiance(target, warm_start.empty() ? irradiance : warm_start, &out.solver_iterations, &out.solver_error));
   out.pattern = PatternFor(out.projector_irradiance);
   return out;
 }

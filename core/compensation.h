@@ -61,9 +61,11 @@ class Compensator {
   // One iteration of eq. 5.5, 5.6, 5.11: `irradiance` is the projector irradiance that lit
   // `frame` (CV_32FC1, projector size; e.g. prf.IrradianceImage(pattern)), frame the camera
   // image (CV_8UC1/CV_16UC1) captured at exposure_us; desired_grey the desired camera image
-  // (CV_32FC1 camera size, camera grey levels). The solve is warm-started from `irradiance`.
+  // (CV_32FC1 camera size, camera grey levels). The solve is warm-started from warm_start
+  // (CV_32FC1 projector size), or from `irradiance` when empty (HF+ADAPT passes the adapted
+  // part without the added checkerboard).
   StatusOr<CompensationStep> Step(const cv::Mat& irradiance, const cv::Mat& frame, double exposure_us,
-                                  const cv::Mat& desired_grey) const;
+                                  const cv::Mat& desired_grey, const cv::Mat& warm_start = cv::Mat()) const;
 
   // Eq. 5.11 alone: the projector irradiance whose predicted scene radiance is closest to
   // scene_radiance (CV_32FC1 camera size; NaN entries are unconstrained -> keep warm start),
