@@ -242,10 +242,36 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
     return Status::FailedPrecondition("rig is not ready (state " + v1::RigState_Name(rig_->state()) + ": " +
                                       rig_->state_detail() + "); fix the cause and call ResetRig");
   }
-  if (req.illumination() != v1::ILLUMINATION_MODE_UNSPECIFIED && req.illumination() != v1::ILLUMINATION_MODE_STD) {
-    return Status::InvalidArgument("illumination " + v1::IlluminationMode_Name(req.illumination()) +
-                                   " is not supported by this server");
+  std::shared_ptr<const CalibrationBundle> bundle = active_calibration_ ? active_calibration_() : nullptr;
+  IlluminationMode mode = IlluminationMode::kStd;
+  switch (req.illumination()) {
+    case v1::ILLUMINATION_MODE_UNSPECIFIED:
+      // Default for an unknown specimen: HF+ADAPT handles both high dynamic range and missing
+      // texture (thesis 5.3, 6.2.3); without its calibration models, STD.
+      mode = CheckCalibrationFor(IlluminationMode::kHfAdapt, bundle.get()).ok() ? IlluminationMode::kHfAdapt
+                                                                                : IlluminationMode::kStd;
+      break;
+    case v1::ILLUMINATION_MODE_STD: mode = IlluminationMode::kStd; break;
+    case v1::ILLUMINATION_MODE_HDR: mode = IlluminationMode::kHdr; break;
+    case v1::ILLUMINATION_MODE_ADAPT_IT: mode = IlluminationMode::kAdaptIterative; break;
+    case v1::ILLUMINATION_MODE_ADAPT: mode = IlluminationMode::kAdapt; break;
+    case v1::ILLUMINATION_MODE_TEXTURE: mode = IlluminationMode::kTexture; break;
+    case v1::ILLUMINATION_MODE_HF_ADAPT: mode = IlluminationMode::kHfAdapt; break;
+    case v1::ILLUMINATION_MODE_ADAPTED_HF: mode = IlluminationMode::kAdaptedHf; break;
+    default: return Status::InvalidArgument("illumination " + std::to_string(int(req.illumination())) + " is unknown");
   }
+  IlluminationParams params;
+  const v1::IlluminationParameters& ip = req.illumination_parameters();
+  if (ip.has_hdr_exposures()) params.hdr_exposures = ip.hdr_exposures();
+  if (ip.has_lambda()) params.lambda = ip.lambda();
+  if (ip.has_gamma()) params.gamma = ip.gamma();
+  if (ip.has_psi()) params.psi = ip.psi();
+  if (ip.has_max_iterations()) params.max_iterations = ip.max_iterations();
+  {
+    Status v = params.Validate();
+    if (!v.ok()) return Status::InvalidArgument("illumination_parameters." + v.message());
+  }
+  INSPECT_RETURN_IF_ERROR(CheckCalibrationFor(mode, bundle.get()));
   const ScanDefaults defaults = rig_->rig().scan_defaults();
   // Range unset (both ends zero) = the rig's default range; step zero = the rig's default step.
   const bool default_range = req.z_start_um() == 0.0 && req.z_end_um() == 0.0;
@@ -257,6 +283,9 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
   INSPECT_ASSIGN_OR_RETURN(ScanPlan plan, MakeScanPlan(z0, z1, dz, exposure, rig_->rig().stage()));
   std::vector<int> extras;
   INSPECT_ASSIGN_OR_RETURN(plan.sff, ToSffOptions(req.reconstruction(), "reconstruction", &extras));
+  plan.mode = mode;
+  plan.params = params;
+  plan.illumination = IlluminationModeName(mode, params.hdr_exposures);
 
   std::lock_guard<std::mutex> lock(mu_);
   if (stopping_) return Status::Unavailable("server is shutting down");
@@ -603,7 +632,10 @@ Status JobManager::RunScan(const RecordPtr& r) {
       e.set_remaining_seconds(e.elapsed_seconds() / done * (f.count - done));
     });
   };
-  auto outcome = inspection::RunScan(rig_->rig(), plan, tmp_stack, on_frame, r->cancel_requested);
+  // The bundle is taken again at run time (a calibration may have finished since submission);
+  // RunScan re-checks that it holds the mode's models.
+  std::shared_ptr<const CalibrationBundle> bundle = active_calibration_ ? active_calibration_() : nullptr;
+  auto outcome = inspection::RunScan(rig_->rig(), plan, tmp_stack, on_frame, r->cancel_requested, bundle.get());
   if (!outcome.ok()) {
     return fail(outcome.status());
   }

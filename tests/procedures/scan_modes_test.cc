@@ -151,6 +151,30 @@ TEST_F(ScanModesTest, HfAdaptHasFewerOutliersThanStdOnCoin) {
   EXPECT_LT(hf->error.outlier_percent, std_run->error.outlier_percent);
 }
 
+TEST_F(ScanModesTest, IterativeAdaptCompensatesPerZ) {
+  ASSERT_NE(bundle_, nullptr);
+  auto std_run = Scan("cutter", IlluminationMode::kStd);
+  IlluminationParams p;
+  p.max_iterations = 3;
+  auto it = Scan("cutter", IlluminationMode::kAdaptIterative, p);
+  ASSERT_TRUE(std_run.ok() && it.ok());
+  // At least one frame per z, at most max_iterations; the iteration must have run somewhere.
+  EXPECT_GT(it->images, std_run->images);
+  EXPECT_LE(it->images, 3 * std_run->images);
+  EXPECT_LT(it->error.stddev_error_um, std_run->error.stddev_error_um);
+  EXPECT_GT(it->error.valid_percent, std_run->error.valid_percent);
+}
+
+TEST_F(ScanModesTest, AdaptedHfHasFewerOutliersThanStdOnCoin) {
+  ASSERT_NE(bundle_, nullptr);
+  auto std_run = Scan("coin", IlluminationMode::kStd);
+  auto ahf = Scan("coin", IlluminationMode::kAdaptedHf);
+  ASSERT_TRUE(std_run.ok()) << std_run.status().ToString();
+  ASSERT_TRUE(ahf.ok()) << ahf.status().ToString();
+  EXPECT_LT(ahf->error.outlier_percent, std_run->error.outlier_percent);
+  EXPECT_LE(ahf->images, std_run->images + 3);
+}
+
 TEST_F(ScanModesTest, MissingCalibrationIsNamed) {
   CalibrationBundle partial;
   partial.camera_response = bundle_->camera_response;
