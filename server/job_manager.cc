@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/depth_metrics.h"
+#include "core/texture_pattern.h"
 #include "server/artifact_files.h"
 #include "server/procedures/reconstruct_procedure.h"
 
@@ -247,9 +248,9 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
   switch (req.illumination()) {
     case v1::ILLUMINATION_MODE_UNSPECIFIED:
       // Default for an unknown specimen: HF+ADAPT handles both high dynamic range and missing
-      // texture (thesis 5.3, 6.2.3); without its calibration models, STD.
-      mode = CheckCalibrationFor(IlluminationMode::kHfAdapt, bundle.get()).ok() ? IlluminationMode::kHfAdapt
-                                                                                : IlluminationMode::kStd;
+      // texture (thesis 5.3, 6.2.3); chosen below when its models are calibrated and the
+      // window fits the checkerboard (eq. 5.15), else ADAPT, else STD.
+      mode = IlluminationMode::kHfAdapt;
       break;
     case v1::ILLUMINATION_MODE_STD: mode = IlluminationMode::kStd; break;
     case v1::ILLUMINATION_MODE_HDR: mode = IlluminationMode::kHdr; break;
@@ -271,7 +272,9 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
     Status v = params.Validate();
     if (!v.ok()) return Status::InvalidArgument("illumination_parameters." + v.message());
   }
-  INSPECT_RETURN_IF_ERROR(CheckCalibrationFor(mode, bundle.get()));
+  if (req.illumination() != v1::ILLUMINATION_MODE_UNSPECIFIED) {
+    INSPECT_RETURN_IF_ERROR(CheckCalibrationFor(mode, bundle.get()));
+  }
   const ScanDefaults defaults = rig_->rig().scan_defaults();
   // Range unset (both ends zero) = the rig's default range; step zero = the rig's default step.
   const bool default_range = req.z_start_um() == 0.0 && req.z_end_um() == 0.0;
@@ -283,6 +286,23 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
   INSPECT_ASSIGN_OR_RETURN(ScanPlan plan, MakeScanPlan(z0, z1, dz, exposure, rig_->rig().stage()));
   std::vector<int> extras;
   INSPECT_ASSIGN_OR_RETURN(plan.sff, ToSffOptions(req.reconstruction(), "reconstruction", &extras));
+  auto texture_fits = [&] {
+    return bundle && bundle->psf && bundle->geometry &&
+           ChooseTexturePeriod(bundle->psf->influence_radius_px, bundle->geometry->camera_px_per_projector_px,
+                               plan.sff.window_px)
+               .ok();
+  };
+  if (req.illumination() == v1::ILLUMINATION_MODE_UNSPECIFIED) {
+    if (!CheckCalibrationFor(IlluminationMode::kHfAdapt, bundle.get()).ok() || !texture_fits()) {
+      mode = CheckCalibrationFor(IlluminationMode::kAdapt, bundle.get()).ok() ? IlluminationMode::kAdapt
+                                                                              : IlluminationMode::kStd;
+    }
+  } else if (mode == IlluminationMode::kTexture || mode == IlluminationMode::kHfAdapt ||
+             mode == IlluminationMode::kAdaptedHf) {
+    auto period = ChooseTexturePeriod(bundle->psf->influence_radius_px, bundle->geometry->camera_px_per_projector_px,
+                                      plan.sff.window_px);
+    if (!period.ok()) return period.status().WithContext("reconstruction.window_px " + std::to_string(plan.sff.window_px));
+  }
   plan.mode = mode;
   plan.params = params;
   plan.illumination = IlluminationModeName(mode, params.hdr_exposures);
