@@ -81,7 +81,10 @@ struct ScanFrameEvent {
   double exposure_us = 0.0;
   FrameStatistics statistics;
   int acquisition = 0;      // 0-based number of this capture in the scan (all captures)
-  bool stack_frame = true;  // false for HDR exposures and ADAPT init/iteration frames
+  // false for HDR exposures and ADAPT initialisation / iteration frames. ADAPT-IT decides which
+  // iteration frame it keeps after its stop test, so its events all say false; the kept ones
+  // are marked in ScanOutcome::capture_is_stack_frame.
+  bool stack_frame = true;
 };
 
 struct ScanOutcome {
