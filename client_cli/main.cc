@@ -597,6 +597,17 @@ int Main(int argc, char** argv) {
   scan_cmd->add_option("--z-end", z_end_um, "Last z position, um (unset: rig default)");
   scan_cmd->add_option("--z-step", z_step_um, "z step, um > 0 (unset: rig default)");
   scan_cmd->add_option("--exposure-us", exposure_us, "Camera exposure, us (unset: rig default)");
+  std::string illumination;
+  std::optional<int> hdr_exposures, max_iterations;
+  std::optional<double> adapt_lambda, texture_gamma, hf_psi;
+  scan_cmd->add_option("--illumination", illumination,
+                       "std | hdr | adapt-it | adapt | texture | hf+adapt | adapted-hf (unset: server default)")
+      ->check(CLI::IsMember({"std", "hdr", "adapt-it", "adapt", "texture", "hf+adapt", "adapted-hf"}));
+  scan_cmd->add_option("--hdr-exposures", hdr_exposures, "HDR: exposures per z, 2..5 (thesis Table 6.2)");
+  scan_cmd->add_option("--lambda", adapt_lambda, "ADAPT family: prediction scale of eq. 5.12, 0..2");
+  scan_cmd->add_option("--gamma", texture_gamma, "TEXTURE: checkerboard weight of eq. 5.16, 0..0.5");
+  scan_cmd->add_option("--psi", hf_psi, "HF+ADAPT: added checkerboard weight of eq. 5.17, 0..1");
+  scan_cmd->add_option("--max-iterations", max_iterations, "ADAPT-IT: frames per z at most, 1..20");
   scan_flags.Add(scan_cmd);
   scan_cmd->add_option("--label", label, "Free text kept with the job");
   scan_cmd->add_option("--request-id", request_id, "Idempotency key: repeating it returns the same job");
@@ -746,6 +757,18 @@ int Main(int argc, char** argv) {
       request.set_z_step_um(z_step_um.value_or(defaults.z_step_um()));
     }
     if (exposure_us) request.set_exposure_us(*exposure_us);
+    static const std::map<std::string, v1::IlluminationMode> kModes = {
+        {"std", v1::ILLUMINATION_MODE_STD},           {"hdr", v1::ILLUMINATION_MODE_HDR},
+        {"adapt-it", v1::ILLUMINATION_MODE_ADAPT_IT}, {"adapt", v1::ILLUMINATION_MODE_ADAPT},
+        {"texture", v1::ILLUMINATION_MODE_TEXTURE},   {"hf+adapt", v1::ILLUMINATION_MODE_HF_ADAPT},
+        {"adapted-hf", v1::ILLUMINATION_MODE_ADAPTED_HF}};
+    if (!illumination.empty()) request.set_illumination(kModes.at(illumination));
+    v1::IlluminationParameters* ip = request.mutable_illumination_parameters();
+    if (hdr_exposures) ip->set_hdr_exposures(*hdr_exposures);
+    if (adapt_lambda) ip->set_lambda(*adapt_lambda);
+    if (texture_gamma) ip->set_gamma(*texture_gamma);
+    if (hf_psi) ip->set_psi(*hf_psi);
+    if (max_iterations) ip->set_max_iterations(*max_iterations);
     *request.mutable_reconstruction() = scan_flags.ToProto();
     FollowOutcome outcome = Follow(printer, [&](const EventCallback& cb, v1::Job* job) {
       return client.Scan(request, cb, job);

@@ -36,6 +36,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   s->calibrations_ = std::make_unique<CalibrationStore>(s->store_.get());
   (void)s->calibrations_->LoadActive();  // logged; the server still serves without it
   s->jobs_->SetCalibrationRunner([cal = s->calibrations_.get()](const CalibrationContext& ctx) { return cal->Run(ctx); });
+  s->jobs_->SetActiveCalibrationProvider([cal = s->calibrations_.get()] { return cal->active(); });
   INSPECT_RETURN_IF_ERROR(s->jobs_->Start());
 
   ServiceOptions so;

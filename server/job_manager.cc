@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/depth_metrics.h"
+#include "core/texture_pattern.h"
 #include "server/artifact_files.h"
 #include "server/procedures/reconstruct_procedure.h"
 
@@ -261,9 +262,37 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
     return Status::FailedPrecondition("rig is not ready (state " + v1::RigState_Name(rig_->state()) + ": " +
                                       rig_->state_detail() + "); fix the cause and call ResetRig");
   }
-  if (req.illumination() != v1::ILLUMINATION_MODE_UNSPECIFIED && req.illumination() != v1::ILLUMINATION_MODE_STD) {
-    return Status::InvalidArgument("illumination " + v1::IlluminationMode_Name(req.illumination()) +
-                                   " is not supported by this server");
+  std::shared_ptr<const CalibrationBundle> bundle = active_calibration_ ? active_calibration_() : nullptr;
+  IlluminationMode mode = IlluminationMode::kStd;
+  switch (req.illumination()) {
+    case v1::ILLUMINATION_MODE_UNSPECIFIED:
+      // Default for an unknown specimen: HF+ADAPT handles both high dynamic range and missing
+      // texture (thesis 5.3, 6.2.3); chosen below when its models are calibrated and the
+      // window fits the checkerboard (eq. 5.15), else ADAPT, else STD.
+      mode = IlluminationMode::kHfAdapt;
+      break;
+    case v1::ILLUMINATION_MODE_STD: mode = IlluminationMode::kStd; break;
+    case v1::ILLUMINATION_MODE_HDR: mode = IlluminationMode::kHdr; break;
+    case v1::ILLUMINATION_MODE_ADAPT_IT: mode = IlluminationMode::kAdaptIterative; break;
+    case v1::ILLUMINATION_MODE_ADAPT: mode = IlluminationMode::kAdapt; break;
+    case v1::ILLUMINATION_MODE_TEXTURE: mode = IlluminationMode::kTexture; break;
+    case v1::ILLUMINATION_MODE_HF_ADAPT: mode = IlluminationMode::kHfAdapt; break;
+    case v1::ILLUMINATION_MODE_ADAPTED_HF: mode = IlluminationMode::kAdaptedHf; break;
+    default: return Status::InvalidArgument("illumination " + std::to_string(int(req.illumination())) + " is unknown");
+  }
+  IlluminationParams params;
+  const v1::IlluminationParameters& ip = req.illumination_parameters();
+  if (ip.has_hdr_exposures()) params.hdr_exposures = ip.hdr_exposures();
+  if (ip.has_lambda()) params.lambda = ip.lambda();
+  if (ip.has_gamma()) params.gamma = ip.gamma();
+  if (ip.has_psi()) params.psi = ip.psi();
+  if (ip.has_max_iterations()) params.max_iterations = ip.max_iterations();
+  {
+    Status v = params.Validate();
+    if (!v.ok()) return Status::InvalidArgument("illumination_parameters." + v.message());
+  }
+  if (req.illumination() != v1::ILLUMINATION_MODE_UNSPECIFIED) {
+    INSPECT_RETURN_IF_ERROR(CheckCalibrationFor(mode, bundle.get()));
   }
   const ScanDefaults defaults = rig_->rig().scan_defaults();
   // Range unset (both ends zero) = the rig's default range; step zero = the rig's default step.
@@ -276,6 +305,26 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
   INSPECT_ASSIGN_OR_RETURN(ScanPlan plan, MakeScanPlan(z0, z1, dz, exposure, rig_->rig().stage()));
   std::vector<int> extras;
   INSPECT_ASSIGN_OR_RETURN(plan.sff, ToSffOptions(req.reconstruction(), "reconstruction", &extras));
+  auto texture_fits = [&] {
+    return bundle && bundle->psf && bundle->geometry &&
+           ChooseTexturePeriod(bundle->psf->influence_radius_px, bundle->geometry->camera_px_per_projector_px,
+                               plan.sff.window_px)
+               .ok();
+  };
+  if (req.illumination() == v1::ILLUMINATION_MODE_UNSPECIFIED) {
+    if (!CheckCalibrationFor(IlluminationMode::kHfAdapt, bundle.get()).ok() || !texture_fits()) {
+      mode = CheckCalibrationFor(IlluminationMode::kAdapt, bundle.get()).ok() ? IlluminationMode::kAdapt
+                                                                              : IlluminationMode::kStd;
+    }
+  } else if (mode == IlluminationMode::kTexture || mode == IlluminationMode::kHfAdapt ||
+             mode == IlluminationMode::kAdaptedHf) {
+    auto period = ChooseTexturePeriod(bundle->psf->influence_radius_px, bundle->geometry->camera_px_per_projector_px,
+                                      plan.sff.window_px);
+    if (!period.ok()) return period.status().WithContext("reconstruction.window_px " + std::to_string(plan.sff.window_px));
+  }
+  plan.mode = mode;
+  plan.params = params;
+  plan.illumination = IlluminationModeName(mode, params.hdr_exposures);
 
   std::lock_guard<std::mutex> lock(mu_);
   if (stopping_) return Status::Unavailable("server is shutting down");
@@ -610,7 +659,10 @@ Status JobManager::RunScan(const RecordPtr& r) {
       FillFrameEvent(v1::JOB_PHASE_ACQUIRING, f.index, f.count, f.z_um, f.exposure_us, f.statistics, &e);
     });
   };
-  auto outcome = inspection::RunScan(rig_->rig(), plan, tmp_stack, on_frame, r->cancel_requested);
+  // The bundle is taken again at run time (a calibration may have finished since submission);
+  // RunScan re-checks that it holds the mode's models.
+  std::shared_ptr<const CalibrationBundle> bundle = active_calibration_ ? active_calibration_() : nullptr;
+  auto outcome = inspection::RunScan(rig_->rig(), plan, tmp_stack, on_frame, r->cancel_requested, bundle.get());
   if (!outcome.ok()) {
     return fail(outcome.status());
   }

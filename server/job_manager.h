@@ -86,6 +86,11 @@ class JobManager {
   void Shutdown();
 
   void SetCalibrationRunner(CalibrationRunner runner) { calibration_runner_ = std::move(runner); }
+  // Source of the active calibration bundle for scans in calibrated illumination modes (null
+  // or returning null = no calibration: only STD scans).
+  void SetActiveCalibrationProvider(std::function<std::shared_ptr<const CalibrationBundle>()> provider) {
+    active_calibration_ = std::move(provider);
+  }
 
   StatusOr<std::shared_ptr<JobRecord>> SubmitScan(const v1::ScanRequest& request);
   StatusOr<std::shared_ptr<JobRecord>> SubmitCalibrate(const v1::CalibrateRequest& request);
@@ -128,6 +133,7 @@ class JobManager {
   DataStore* store_;
   RigController* rig_;
   CalibrationRunner calibration_runner_;
+  std::function<std::shared_ptr<const CalibrationBundle>()> active_calibration_;
 
   mutable std::mutex mu_;
   std::condition_variable work_cv_;

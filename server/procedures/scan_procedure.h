@@ -1,6 +1,8 @@
 // Scan procedure: drives the rig through focus (thesis 3.1.2, Fig. 3.3) and streams every frame
 // into the SFF engine while writing the stack folder, so the depth map is ready when the last
-// frame arrives. Illumination here is the thesis's STD (uniform projector grey 128).
+// frame arrives. Illumination modes of thesis 5 and 6.2 (IlluminationMode below): STD, HDR-n,
+// ADAPT-IT, ADAPT, TEXTURE, HF+ADAPT, ADAPTED-HF. Frames that are not stack frames (HDR
+// exposures, ADAPT initialisation and iteration frames) are stored under raw/ in the stack.
 #pragma once
 
 #include <atomic>
@@ -9,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "core/calibration_bundle.h"
+#include "core/compensation.h"
 #include "core/frame_statistics.h"
 #include "core/sff_engine.h"
 #include "core/stack.h"
@@ -17,11 +21,49 @@
 
 namespace inspection {
 
+// Thesis 5-6.2. Names as in the thesis's tables: "STD", "HDR<n>", "ADAPT-IT", "ADAPT",
+// "TEXTURE", "HF+ADAPT", "ADAPTED-HF".
+enum class IlluminationMode {
+  kStd,             // uniform grey 128 (uniform_grey), one frame per z
+  kHdr,             // hdr_exposures frames per z at the relative exposures of Table 6.2, merged (eq. 3.44)
+  kAdaptIterative,  // per z: compensate (eq. 5.5-5.6, 5.11) until the stop criterion
+  kAdapt,           // predictive (eq. 5.12): one frame per z after 2 initialisation frames
+  kTexture,         // checkerboard of eq. 5.16, period from eq. 5.15, exposure for STD's mean irradiance
+  kHfAdapt,         // ADAPT with the modified checkerboard added (eq. 5.17-5.18)
+  kAdaptedHf,       // ADAPT towards a 25 %/75 % checkerboard camera image (5.3.2)
+};
+
+struct IlluminationParams {
+  int hdr_exposures = 3;          // 2..5: HDR2..HDR5 of Table 6.2
+  double lambda = 0.5;            // prediction scale of eq. 5.12, [0, 2]
+  double gamma = 0.0;             // checkerboard weight of eq. 5.16, [0, 0.5]
+  double psi = 0.25;              // added checkerboard weight of eq. 5.17, [0, 1] (thesis 0.25-0.3)
+  int max_iterations = 4;         // ADAPT-IT frames per z at most, 1..20
+  double tolerance_grey = 6.0;    // ADAPT-IT: stop when mean |Z_c - 128| (8-bit units) is below,
+  double min_improvement = 0.15;  // or improves by less than this share over the last iteration
+  double target_grey = 128.0;     // desired camera grey (8-bit units), ADAPT family
+  CompensationOptions compensation;
+  Status Validate() const;
+};
+
+// "STD", "HDR3", ... as in the thesis.
+std::string IlluminationModeName(IlluminationMode mode, int hdr_exposures = 3);
+
+// The relative exposures (share of exposure_us) of Table 6.2 for HDR<n>, n = 2..5.
+StatusOr<std::vector<double>> HdrRelativeExposures(int n);
+
+// FAILED_PRECONDITION naming the missing calibration step(s) when `bundle` lacks a model the
+// mode needs (HDR: camera_response; ADAPT family: camera_response, projector_response,
+// scatter_matrix; TEXTURE: projector_response, geometry, psf; the combinations all five).
+Status CheckCalibrationFor(IlluminationMode mode, const CalibrationBundle* bundle);
+
 struct ScanPlan {
   std::vector<double> z_um;       // stage positions in acquisition order
   double exposure_us = 0.0;
   int uniform_grey = 128;          // STD projector pattern
-  std::string illumination = "STD";
+  std::string illumination = "STD";  // recorded name; RunScan sets it from `mode`
+  IlluminationMode mode = IlluminationMode::kStd;
+  IlluminationParams params;
   SffOptions sff;
   std::string calibration_id;      // recorded in stack.json
 };
@@ -38,6 +80,11 @@ struct ScanFrameEvent {
   double z_um = 0.0;  // position reported by the stage
   double exposure_us = 0.0;
   FrameStatistics statistics;
+  int acquisition = 0;      // 0-based number of this capture in the scan (all captures)
+  // false for HDR exposures and ADAPT initialisation / iteration frames. ADAPT-IT decides which
+  // iteration frame it keeps after its stop test, so its events all say false; the kept ones
+  // are marked in ScanOutcome::capture_is_stack_frame.
+  bool stack_frame = true;
 };
 
 struct ScanOutcome {
@@ -46,11 +93,20 @@ struct ScanOutcome {
   cv::Mat ground_truth_um;  // simulated rig only; empty otherwise
   double acquisition_seconds = 0.0;
   double engine_finish_seconds = 0.0;  // time from the last frame to the depth map
+  int images_acquired = 0;                    // every capture (thesis Table 6.3 #imgs)
+  std::vector<FrameStatistics> capture_statistics;  // per capture, in order (Fig. 6.3)
+  std::vector<bool> capture_is_stack_frame;
 };
 
 // Acquires into stack_dir (created; the caller owns clean-up on failure) and reconstructs.
 // Returns CANCELLED as soon as `cancel` is seen between frames; device errors pass through
 // (UNAVAILABLE, DEADLINE_EXCEEDED, OUT_OF_RANGE).
+// Modes other than STD need `bundle` (see CheckCalibrationFor); it must outlive the call and
+// match the rig's camera and projector size.
+StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const std::filesystem::path& stack_dir,
+                              const std::function<void(const ScanFrameEvent&)>& on_frame,
+                              const std::atomic<bool>& cancel, const CalibrationBundle* bundle);
+// STD only (no calibration).
 StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const std::filesystem::path& stack_dir,
                               const std::function<void(const ScanFrameEvent&)>& on_frame,
                               const std::atomic<bool>& cancel);

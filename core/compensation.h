@@ -1,0 +1,103 @@
+// Radiometric compensation by adaptive illumination (thesis 5.1): reflectance estimate
+// R = E_c / E_s (eq. 5.5), desired scene irradiance E_c^ / R (eq. 5.6) and the projector
+// pattern through the scatter matrix's pseudo-inverse (eq. 5.11), solved iteratively
+// (Eigen LeastSquaresConjugateGradient on the sparse system, never a dense inverse), with the
+// low-pass of 5.1.2, plus the prediction of eq. 5.12 used by the predictive ADAPT mode.
+//
+// Low-pass (5.1.2): the projector irradiance is solved on a coarse grid of nodes every
+// pattern_cell_px projector pixels and bilinearly interpolated to the projector, e_p = U c, so
+// the system is A U c = e_s. The camera side is binned alike (sums over camera_bin_px^2 blocks,
+// B), so the solved system is B A U c = B e_s, formed once at construction: it keeps the pattern
+// free of high frequencies that would disturb the focus measure and makes one solve ~bin^2
+// cheaper than one on A (tests/bench/compensation_bench.cc).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include <Eigen/IterativeLinearSolvers>
+#include <Eigen/SparseCore>
+#include <opencv2/core.hpp>
+
+#include "core/camera_response.h"
+#include "core/projector_response.h"
+#include "core/scatter_matrix.h"
+#include "core/status.h"
+
+namespace inspection {
+
+struct CompensationOptions {
+  int pattern_cell_px = 4;          // coarse-grid spacing of the low-pass, projector px (1..32)
+  int camera_bin_px = 4;            // camera rows summed in bin x bin blocks (1..16)
+  int solver_iterations = 12;       // LSCG iterations per solve (warm-started), 1..1000
+  double solver_tolerance = 1e-3;   // relative residual at which LSCG stops early
+  // Pixels whose predicted scene radiance is below this share of the maximum are not lit by
+  // the projector: they do not enter the reflectance estimate.
+  double min_lit_fraction = 0.02;
+  // A saturated pixel's radiance is only a lower bound of the truth: its reflectance estimate
+  // is multiplied by this factor (> 1) so the next pattern dims it faster.
+  double saturated_reflectance_factor = 2.0;
+  Status Validate() const;
+};
+
+// The outcome of one compensation step.
+struct CompensationStep {
+  cv::Mat projector_irradiance;  // CV_32FC1 projector size, relative irradiance (prf units)
+  cv::Mat pattern;               // CV_8UC1 projector size: prf^-1 of projector_irradiance
+  cv::Mat reflectance;           // CV_32FC1 camera size, eq. 5.5 (NaN = not lit)
+  double mean_abs_error_grey = 0;  // |Z_c - Z_c^| over lit pixels of the frame given, camera levels
+  int solver_iterations = 0;
+  double solver_error = 0;       // LSCG relative residual
+};
+
+// Holds pointers to the models: they must outlive the compensator. Not thread-safe (one solver).
+class Compensator {
+ public:
+  static StatusOr<std::unique_ptr<Compensator>> Create(const CameraResponseFunction& crf,
+                                                       const ProjectorResponseFunction& prf,
+                                                       const ScatterMatrix& scatter,
+                                                       const CompensationOptions& options);
+
+  // One iteration of eq. 5.5, 5.6, 5.11: `irradiance` is the projector irradiance that lit
+  // `frame` (CV_32FC1, projector size; e.g. prf.IrradianceImage(pattern)), frame the camera
+  // image (CV_8UC1/CV_16UC1) captured at exposure_us; desired_grey the desired camera image
+  // (CV_32FC1 camera size, camera grey levels). The solve is warm-started from warm_start
+  // (CV_32FC1 projector size), or from `irradiance` when empty (HF+ADAPT passes the adapted
+  // part without the added checkerboard).
+  StatusOr<CompensationStep> Step(const cv::Mat& irradiance, const cv::Mat& frame, double exposure_us,
+                                  const cv::Mat& desired_grey, const cv::Mat& warm_start = cv::Mat()) const;
+
+  // Eq. 5.11 alone: the projector irradiance whose predicted scene radiance is closest to
+  // scene_radiance (CV_32FC1 camera size; NaN entries are unconstrained -> keep warm start),
+  // low-passed and clamped to [prf(0), 1]. warm_start: CV_32FC1 projector size.
+  StatusOr<cv::Mat> SolveIrradiance(const cv::Mat& scene_radiance, const cv::Mat& warm_start,
+                                    int* iterations = nullptr, double* error = nullptr) const;
+
+  // Irradiance -> 8-bit projector pattern through the inverse prf.
+  cv::Mat PatternFor(const cv::Mat& irradiance) const;
+
+  const CompensationOptions& options() const { return options_; }
+  cv::Size coarse_size() const { return coarse_size_; }
+
+ private:
+  Compensator() = default;
+  cv::Mat Upsample(const Eigen::VectorXf& c) const;
+  Eigen::VectorXf Downsample(const cv::Mat& irradiance) const;
+
+  const CameraResponseFunction* crf_ = nullptr;
+  const ProjectorResponseFunction* prf_ = nullptr;
+  const ScatterMatrix* scatter_ = nullptr;
+  CompensationOptions options_;
+  cv::Size coarse_size_;
+  using Sparse = Eigen::SparseMatrix<float, Eigen::ColMajor, int>;
+  cv::Size bin_size_;
+  Sparse au_;  // B A U
+  std::unique_ptr<Eigen::LeastSquaresConjugateGradient<Sparse>> solver_;
+  std::vector<float> exposure_table_;  // exp(crf(g)) at g = k / 16
+  uint8_t inverse_prf_[4097] = {};     // grey for irradiance k / 4096
+};
+
+// Eq. 5.12: E_p,i+1 = E_p,i + lambda (E_p,i - E_p,i-1), clamped to [floor, 1]. CV_32FC1.
+StatusOr<cv::Mat> PredictIrradiance(const cv::Mat& current, const cv::Mat& previous, double lambda, double floor);
+
+}  // namespace inspection

@@ -1,0 +1,114 @@
+// Scan requests for the illumination modes of thesis 5: parameters out of range name their
+// field, and modes whose calibration models are missing fail with FAILED_PRECONDITION naming
+// the calibration step, before any job is created.
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "tests/server/server_fixture.h"
+
+namespace inspection::testing {
+namespace {
+
+class IlluminationRequestTest : public ServerTest {
+ protected:
+  void SetUp() override {
+    ServerTest::SetUp();
+    StartServer();
+  }
+};
+
+TEST_F(IlluminationRequestTest, ParametersOutOfRangeNameTheField) {
+  struct Case {
+    void (*mutate)(v1::ScanRequest&);
+    const char* field;
+  };
+  const Case cases[] = {
+      {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_hdr_exposures(6); },
+       "illumination_parameters.hdr_exposures"},
+      {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_lambda(-0.1); },
+       "illumination_parameters.lambda"},
+      {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_gamma(0.7); },
+       "illumination_parameters.gamma"},
+      {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_psi(1.5); }, "illumination_parameters.psi"},
+      {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_max_iterations(0); },
+       "illumination_parameters.max_iterations"},
+      {[](v1::ScanRequest& r) { r.set_illumination(static_cast<v1::IlluminationMode>(99)); }, "illumination"},
+  };
+  for (const Case& c : cases) {
+    v1::ScanRequest r;
+    c.mutate(r);
+    v1::Job job;
+    grpc::Status s = client_->Scan(r, nullptr, &job);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << c.field;
+    EXPECT_NE(s.error_message().find(c.field), std::string::npos) << c.field << ": " << s.error_message();
+  }
+}
+
+TEST_F(IlluminationRequestTest, UncalibratedModesNameTheMissingStep) {
+  const std::pair<v1::IlluminationMode, const char*> cases[] = {
+      {v1::ILLUMINATION_MODE_HDR, "camera_response"},      {v1::ILLUMINATION_MODE_ADAPT, "scatter_matrix"},
+      {v1::ILLUMINATION_MODE_ADAPT_IT, "projector_response"}, {v1::ILLUMINATION_MODE_TEXTURE, "psf"},
+      {v1::ILLUMINATION_MODE_HF_ADAPT, "geometry"},        {v1::ILLUMINATION_MODE_ADAPTED_HF, "scatter_matrix"},
+  };
+  for (const auto& [mode, step] : cases) {
+    v1::ScanRequest r;
+    r.set_illumination(mode);
+    v1::Job job;
+    grpc::Status s = client_->Scan(r, nullptr, &job);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << v1::IlluminationMode_Name(mode);
+    EXPECT_NE(s.error_message().find(step), std::string::npos) << s.error_message();
+  }
+  v1::ListJobsResponse jobs;
+  ASSERT_TRUE(client_->ListJobs(v1::ListJobsRequest(), &jobs).ok());
+  EXPECT_EQ(jobs.jobs_size(), 0);
+}
+
+class CalibratedIlluminationTest : public ServerTest {
+ protected:
+  SimulatedRigOptions SimOptions() override {
+    SimulatedRigOptions o = ServerTest::SimOptions();
+    o.projector_size = {160, 90};  // small projector: calibration steps stay quick in tests
+    return o;
+  }
+};
+
+// With the models ADAPT needs (but no PSF), the default mode is ADAPT (HF+ADAPT needs sigma_p):
+// STD's frames + 2 initialisation frames, each reported with its grey statistics, and the first
+// frames converge towards 128; TEXTURE names the missing psf step.
+TEST_F(CalibratedIlluminationTest, DefaultFallsBackToAdaptAndReportsConvergence) {
+  StartServer();
+  v1::CalibrateRequest req;
+  for (auto step : {v1::CALIBRATION_STEP_CAMERA_RESPONSE, v1::CALIBRATION_STEP_PROJECTOR_RESPONSE,
+                    v1::CALIBRATION_STEP_GEOMETRY, v1::CALIBRATION_STEP_SCATTER_MATRIX}) {
+    req.add_steps(step);
+  }
+  v1::Job cal;
+  grpc::Status s = client_->Calibrate(req, nullptr, &cal);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  ASSERT_EQ(cal.state(), v1::JOB_STATE_SUCCEEDED) << cal.error_message();
+
+  v1::ScanRequest scan;
+  scan.set_z_start_um(180);
+  scan.set_z_end_um(220);
+  scan.set_z_step_um(5);  // 9 stack frames
+  std::vector<v1::FrameStatistics> frames;
+  v1::Job job;
+  s = client_->Scan(scan, [&](const v1::JobEvent& e) {
+    if (e.has_frame()) frames.push_back(e.frame().statistics());
+  }, &job);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  ASSERT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED) << job.error_message();
+  ASSERT_EQ(frames.size(), 9u + 2u);
+  EXPECT_GT(std::abs(frames[0].mean_grey() - 128.0), std::abs(frames[2].mean_grey() - 128.0) - 1.0);
+  EXPECT_NEAR(frames[2].mean_grey(), 128.0, 12.0);
+
+  v1::ScanRequest tex;
+  tex.set_illumination(v1::ILLUMINATION_MODE_TEXTURE);
+  s = client_->Scan(tex, nullptr, &job);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(s.error_message().find("psf"), std::string::npos) << s.error_message();
+}
+
+}  // namespace
+}  // namespace inspection::testing
