@@ -550,17 +550,18 @@ void JobManager::Finish(const RecordPtr& r, const Status& status) {
   }
 }
 
+JobManager::RecordPtr JobManager::WaitForWork(std::deque<RecordPtr>& queue, bool mark_running_rig) {
+  std::unique_lock<std::mutex> lock(mu_);
+  work_cv_.wait(lock, [&] { return stopping_ || !queue.empty(); });
+  if (stopping_) return nullptr;
+  RecordPtr r = queue.front();
+  queue.pop_front();
+  if (mark_running_rig) running_rig_ = r;
+  return r;
+}
+
 void JobManager::RigWorker() {
-  for (;;) {
-    RecordPtr r;
-    {
-      std::unique_lock<std::mutex> lock(mu_);
-      work_cv_.wait(lock, [&] { return stopping_ || !rig_queue_.empty(); });
-      if (stopping_) return;
-      r = rig_queue_.front();
-      rig_queue_.pop_front();
-      running_rig_ = r;
-    }
+  while (RecordPtr r = WaitForWork(rig_queue_, /*mark_running_rig=*/true)) {
     Status status;
     {
       auto rig_lock = rig_->Acquire();
@@ -577,17 +578,7 @@ void JobManager::RigWorker() {
 }
 
 void JobManager::ReconstructWorker() {
-  for (;;) {
-    RecordPtr r;
-    {
-      std::unique_lock<std::mutex> lock(mu_);
-      work_cv_.wait(lock, [&] { return stopping_ || !reconstruct_queue_.empty(); });
-      if (stopping_) return;
-      r = reconstruct_queue_.front();
-      reconstruct_queue_.pop_front();
-    }
-    RunReconstruct(r);
-  }
+  while (RecordPtr r = WaitForWork(reconstruct_queue_, /*mark_running_rig=*/false)) RunReconstruct(r);
 }
 
 Status JobManager::PublishArtifacts(const RecordPtr& r, const fs::path& tmp_dir,

@@ -118,6 +118,8 @@ class JobManager {
   RecordPtr NewRecord(v1::JobKind kind, const std::string& request_id, const std::string& label);
   void Emit(const RecordPtr& r, const std::function<void(v1::JobEvent&)>& fill);
   void Finish(const RecordPtr& r, const Status& status);
+  // Blocks until `queue` has a job (returned, removed from the queue) or the manager stops (nullptr).
+  RecordPtr WaitForWork(std::deque<RecordPtr>& queue, bool mark_running_rig);
   void RigWorker();
   void ReconstructWorker();
   // Rig jobs return their final status; the rig worker finishes the job after releasing the rig.
