@@ -475,7 +475,8 @@ grpc::Status InspectionClient::DownloadArtifact(const std::string& artifact_id, 
 }
 
 grpc::Status InspectionClient::DownloadResults(const v1::Job& job, const std::filesystem::path& dir,
-                                               bool include_stack, std::vector<std::filesystem::path>* written) {
+                                               bool include_stack, std::vector<std::filesystem::path>* written,
+                                               bool resume, const FileProgress& on_progress) {
   if (!init_status_.ok()) return init_status_;
   if (job.state() != v1::JOB_STATE_SUCCEEDED) {
     return {grpc::StatusCode::FAILED_PRECONDITION,
@@ -490,7 +491,9 @@ grpc::Status InspectionClient::DownloadResults(const v1::Job& job, const std::fi
     std::string name = fs::path(artifact.file_name()).filename().string();
     if (name.empty() || name == "." || name == "..") name = artifact.artifact_id();
     const fs::path dest = dir / name;
-    grpc::Status status = DownloadArtifact(artifact.artifact_id(), dest, /*resume=*/false);
+    ByteProgress progress;
+    if (on_progress) progress = [&](int64_t done, int64_t total) { on_progress(name, done, total); };
+    grpc::Status status = DownloadArtifact(artifact.artifact_id(), dest, resume, progress);
     if (!status.ok()) return status;
     if (written != nullptr) written->push_back(dest);
   }

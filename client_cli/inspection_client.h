@@ -29,6 +29,8 @@ struct ClientOptions {
 using EventCallback = std::function<void(const v1::JobEvent&)>;
 // (bytes done, bytes total)
 using ByteProgress = std::function<void(int64_t, int64_t)>;
+// (file name, bytes done, bytes total)
+using FileProgress = std::function<void(const std::string&, int64_t, int64_t)>;
 
 class InspectionClient {
  public:
@@ -70,9 +72,11 @@ class InspectionClient {
 
   // Downloads the result artifacts of a succeeded job into dir under their file names
   // (depth.tiff, confidence.tiff, all_in_focus.png, depth_preview.png and any extras; the
-  // stack zip only when include_stack). Returns the written paths.
+  // stack zip only when include_stack). Returns the written paths. With resume, partial
+  // downloads (".part") continue; on_progress is called per file as bytes arrive.
   grpc::Status DownloadResults(const v1::Job& job, const std::filesystem::path& dir, bool include_stack,
-                               std::vector<std::filesystem::path>* written);
+                               std::vector<std::filesystem::path>* written, bool resume = false,
+                               const FileProgress& on_progress = {});
 
   grpc::Status GetCalibration(const std::string& calibration_id, v1::Calibration* calibration);
   grpc::Status ListCalibrations(v1::ListCalibrationsResponse* response);

@@ -411,25 +411,15 @@ int JobExitCode(const FollowOutcome& outcome, grpc::Status* error) {
   return code;
 }
 
-// Downloads a job's results into dir (the ones a scan/reconstruct produce), with progress.
+// Downloads a succeeded job's results into dir, with progress.
 grpc::Status FetchResults(InspectionClient& client, const v1::Job& job, const fs::path& dir, bool include_stack,
                           bool resume, ProgressPrinter& printer, std::vector<fs::path>* written) {
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec) return {grpc::StatusCode::INTERNAL, "cannot create " + dir.string() + ": " + ec.message()};
-  for (const v1::Artifact& artifact : job.result().artifacts()) {
-    if (artifact.kind() == v1::ARTIFACT_KIND_STACK_ZIP && !include_stack) continue;
-    std::string name = fs::path(artifact.file_name()).filename().string();
-    if (name.empty() || name == "." || name == "..") name = artifact.artifact_id();
-    const fs::path dest = dir / name;
-    grpc::Status s = client.DownloadArtifact(artifact.artifact_id(), dest, resume, [&](int64_t done, int64_t total) {
-      printer.OnBytes(name, done, total);
-    });
-    if (!s.ok()) return s;
-    written->push_back(dest);
-  }
+  grpc::Status s = client.DownloadResults(job, dir, include_stack, written, resume,
+                                          [&](const std::string& name, int64_t done, int64_t total) {
+                                            printer.OnBytes(name, done, total);
+                                          });
   printer.Finish();
-  return grpc::Status::OK;
+  return s;
 }
 
 // Common ending of scan / reconstruct / watch: exit code, result download, summary.
