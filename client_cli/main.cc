@@ -589,7 +589,7 @@ int Main(int argc, char** argv) {
   scan_cmd->add_option("--exposure-us", exposure_us, "Camera exposure, us (unset: rig default)");
   std::string illumination;
   std::optional<int> hdr_exposures, max_iterations;
-  std::optional<double> adapt_lambda, texture_gamma, hf_psi;
+  std::optional<double> adapt_lambda, texture_gamma, hf_psi, target_grey;
   scan_cmd->add_option("--illumination", illumination,
                        "std | hdr | adapt-it | adapt | texture | hf+adapt | adapted-hf (unset: server default)")
       ->check(CLI::IsMember({"std", "hdr", "adapt-it", "adapt", "texture", "hf+adapt", "adapted-hf"}));
@@ -598,6 +598,7 @@ int Main(int argc, char** argv) {
   scan_cmd->add_option("--gamma", texture_gamma, "TEXTURE: checkerboard weight of eq. 5.16, 0..0.5");
   scan_cmd->add_option("--psi", hf_psi, "HF+ADAPT: added checkerboard weight of eq. 5.17, 0..1");
   scan_cmd->add_option("--max-iterations", max_iterations, "ADAPT-IT: frames per z at most, 1..20");
+  scan_cmd->add_option("--target-grey", target_grey, "ADAPT family: desired camera grey, 8-bit units, 0..255");
   scan_flags.Add(scan_cmd);
   scan_cmd->add_option("--label", label, "Free text kept with the job");
   scan_cmd->add_option("--request-id", request_id, "Idempotency key: repeating it returns the same job");
@@ -759,6 +760,7 @@ int Main(int argc, char** argv) {
     if (texture_gamma) ip->set_gamma(*texture_gamma);
     if (hf_psi) ip->set_psi(*hf_psi);
     if (max_iterations) ip->set_max_iterations(*max_iterations);
+    if (target_grey) ip->set_target_grey(*target_grey);
     *request.mutable_reconstruction() = scan_flags.ToProto();
     FollowOutcome outcome = Follow(printer, [&](const EventCallback& cb, v1::Job* job) {
       return client.Scan(request, cb, job);

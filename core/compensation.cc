@@ -223,8 +223,10 @@ StatusOr<CompensationStep> Compensator::Step(const cv::Mat& irradiance, const cv
     float* t = target.ptr<float>(y);
     for (int x = 0; x < frame.cols; ++x) {
       if (!(p[x] > lit)) {
+        // Unlit: no reflectance estimate; the pixel keeps the radiance it has now, so it pulls
+        // nothing (SolveIrradiance's NaN rule, without a second prediction A e_p).
         r[x] = nan;
-        t[x] = nan;
+        t[x] = p[x];
         continue;
       }
       float refl = ec[x] / p[x];  // eq. 5.5

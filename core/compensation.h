@@ -27,7 +27,7 @@
 namespace inspection {
 
 struct CompensationOptions {
-  int pattern_cell_px = 4;          // coarse-grid spacing of the low-pass, projector px (1..32)
+  int pattern_cell_px = 2;          // coarse-grid spacing of the low-pass, projector px (1..32)
   int camera_bin_px = 4;            // camera rows summed in bin x bin blocks (1..16)
   int solver_iterations = 12;       // LSCG iterations per solve (warm-started), 1..1000
   double solver_tolerance = 1e-3;   // relative residual at which LSCG stops early
@@ -36,7 +36,7 @@ struct CompensationOptions {
   double min_lit_fraction = 0.02;
   // A saturated pixel's radiance is only a lower bound of the truth: its reflectance estimate
   // is multiplied by this factor (> 1) so the next pattern dims it faster.
-  double saturated_reflectance_factor = 2.0;
+  double saturated_reflectance_factor = 4.0;
   Status Validate() const;
 };
 

@@ -287,6 +287,7 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
   if (ip.has_gamma()) params.gamma = ip.gamma();
   if (ip.has_psi()) params.psi = ip.psi();
   if (ip.has_max_iterations()) params.max_iterations = ip.max_iterations();
+  if (ip.has_target_grey()) params.target_grey = ip.target_grey();
   {
     Status v = params.Validate();
     if (!v.ok()) return Status::InvalidArgument("illumination_parameters." + v.message());
@@ -648,6 +649,8 @@ Status JobManager::RunScan(const RecordPtr& r) {
   auto on_frame = [&](const ScanFrameEvent& f) {
     Emit(r, [&](v1::JobEvent& e) {
       FillFrameEvent(v1::JOB_PHASE_ACQUIRING, f.index, f.count, f.z_um, f.exposure_us, f.statistics, &e);
+      e.mutable_frame()->set_acquisition_index(f.acquisition);
+      e.mutable_frame()->set_stack_frame(f.stack_frame);
     });
   };
   // The bundle is taken again at run time (a calibration may have finished since submission);

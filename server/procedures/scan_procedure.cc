@@ -105,11 +105,18 @@ Status CheckCalibrationFor(IlluminationMode mode, const CalibrationBundle* bundl
 
 namespace {
 
-// Linear radiance -> 16 bit for the engine (HDR): full scale is the radiance that saturates the
-// shortest exposure, so no merged value clips.
-cv::Mat RadianceTo16(const cv::Mat& radiance, double full_scale) {
+// Merged radiance -> 16 bit for the engine (HDR). The mapping is logarithmic: eq. 3.44 yields
+// ln E, and a focus measure on ln E responds to relative contrast, so a glint tens of times the
+// surrounding metal and the dark metal beside it both keep their texture. (A linear mapping lets
+// the defocused halo of a glint out-gradient the in-focus texture next to it; a sensor that sees
+// the scene once cannot do better than the camera's own grey levels.) 0 is the radiance of level
+// 1 at the longest exposure, 65535 the radiance that saturates the shortest one.
+cv::Mat RadianceTo16(const cv::Mat& radiance, double lo, double hi) {
+  cv::Mat log_e;
+  cv::log(cv::max(radiance, lo), log_e);
   cv::Mat out;
-  radiance.convertTo(out, CV_16UC1, 65535.0 / full_scale);
+  const double scale = 65535.0 / (std::log(hi) - std::log(lo));
+  log_e.convertTo(out, CV_16UC1, scale, -std::log(lo) * scale);
   return out;
 }
 
@@ -195,10 +202,17 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
   }
 
   int acquisition = 0;
+  ScanFrameEvent pending;  // ADAPT-IT: the last capture, reported once its stop test decided
+  // Reports a capture (stack_frame: whether it became a stack frame).
+  auto report = [&](ScanFrameEvent ev, bool stack_frame) {
+    ev.stack_frame = stack_frame;
+    out.capture_is_stack_frame[size_t(ev.acquisition)] = stack_frame;
+    if (on_frame) on_frame(ev);
+  };
   // Shows `pattern` (when not empty), captures at exposure_us, stores the frame (raw/ unless a
-  // stack frame) and reports it.
+  // stack frame) and reports it, or with defer_report leaves the report to the caller (pending).
   auto capture = [&](int i, const cv::Mat& pattern, double exposure_us, bool stack_frame,
-                     const std::string& raw_name) -> StatusOr<cv::Mat> {
+                     const std::string& raw_name, bool defer_report = false) -> StatusOr<cv::Mat> {
     if (cancel.load()) {
       return Status::Cancelled("scan cancelled at frame " + std::to_string(i) + " of " + std::to_string(count));
     }
@@ -214,17 +228,15 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
     const FrameStatistics st = ComputeFrameStatistics(frame, bit_depth);
     out.capture_statistics.push_back(st);
     out.capture_is_stack_frame.push_back(stack_frame);
-    if (on_frame) {
-      ScanFrameEvent ev;
-      ev.index = i;
-      ev.count = count;
-      INSPECT_ASSIGN_OR_RETURN(ev.z_um, rig.stage().position_um());
-      ev.exposure_us = camera.exposure_us();
-      ev.statistics = st;
-      ev.acquisition = acquisition;
-      ev.stack_frame = stack_frame;
-      on_frame(ev);
-    }
+    ScanFrameEvent ev;
+    ev.index = i;
+    ev.count = count;
+    INSPECT_ASSIGN_OR_RETURN(ev.z_um, rig.stage().position_um());
+    ev.exposure_us = camera.exposure_us();
+    ev.statistics = st;
+    ev.acquisition = acquisition;
+    if (defer_report) pending = ev;
+    else report(ev, stack_frame);
     ++acquisition;
     return frame;
   };
@@ -304,8 +316,9 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
         frames.push_back(f);
       }
       INSPECT_ASSIGN_OR_RETURN(cv::Mat e, MergeRadiance(frames, hdr_dt, *bundle->camera_response));  // eq. 3.44
-      const double full = std::exp(bundle->camera_response->LogExposure(top)) / hdr_dt.front();
-      INSPECT_RETURN_IF_ERROR(push(i, RadianceTo16(e, full), 0.0, fixed_name + ":hdr" + std::to_string(prm.hdr_exposures)));
+      const double hi = std::exp(bundle->camera_response->LogExposure(top)) / hdr_dt.front();
+      const double lo = std::exp(bundle->camera_response->LogExposure(1)) / hdr_dt.back();
+      INSPECT_RETURN_IF_ERROR(push(i, RadianceTo16(e, lo, hi), 0.0, fixed_name + ":hdr" + std::to_string(prm.hdr_exposures)));
       continue;
     }
     if (!adapt) {
@@ -320,17 +333,17 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
       double last_err = std::numeric_limits<double>::infinity();
       for (int k = 0;; ++k) {
         INSPECT_ASSIGN_OR_RETURN(pattern, shown(irr));
-        INSPECT_ASSIGN_OR_RETURN(frame, capture(i, pattern, dt, false, raw_name(i, "it", k)));
+        INSPECT_ASSIGN_OR_RETURN(frame, capture(i, pattern, dt, false, raw_name(i, "it", k), /*defer_report=*/true));
         INSPECT_ASSIGN_OR_RETURN(CompensationStep st, comp->Step(prf->IrradianceImage(pattern), frame, dt, desired, irr));
         const double err = st.mean_abs_error_grey / level_scale;
         const bool done = k + 1 >= prm.max_iterations || err < prm.tolerance_grey ||
                           err > last_err * (1.0 - prm.min_improvement);
         last_err = err;
+        // The last frame is the stack frame; the next z starts from the pattern that made it.
+        report(pending, done);
         if (done) break;
         irr = st.projector_irradiance;
       }
-      // The last frame is the stack frame; the next z starts from the pattern that made it.
-      out.capture_is_stack_frame.back() = true;
       irr_next = irr;
       INSPECT_RETURN_IF_ERROR(push(i, frame, dt, "adapted"));
       continue;

@@ -35,13 +35,13 @@ enum class IlluminationMode {
 
 struct IlluminationParams {
   int hdr_exposures = 3;          // 2..5: HDR2..HDR5 of Table 6.2
-  double lambda = 0.5;            // prediction scale of eq. 5.12, [0, 2]
+  double lambda = 0.25;           // prediction scale of eq. 5.12, [0, 2]
   double gamma = 0.0;             // checkerboard weight of eq. 5.16, [0, 0.5]
   double psi = 0.25;              // added checkerboard weight of eq. 5.17, [0, 1] (thesis 0.25-0.3)
   int max_iterations = 4;         // ADAPT-IT frames per z at most, 1..20
   double tolerance_grey = 6.0;    // ADAPT-IT: stop when mean |Z_c - 128| (8-bit units) is below,
   double min_improvement = 0.15;  // or improves by less than this share over the last iteration
-  double target_grey = 128.0;     // desired camera grey (8-bit units), ADAPT family
+  double target_grey = 140.0;     // desired camera grey (8-bit units), ADAPT family
   CompensationOptions compensation;
   Status Validate() const;
 };
@@ -81,9 +81,8 @@ struct ScanFrameEvent {
   double exposure_us = 0.0;
   FrameStatistics statistics;
   int acquisition = 0;      // 0-based number of this capture in the scan (all captures)
-  // false for HDR exposures and ADAPT initialisation / iteration frames. ADAPT-IT decides which
-  // iteration frame it keeps after its stop test, so its events all say false; the kept ones
-  // are marked in ScanOutcome::capture_is_stack_frame.
+  // false for HDR exposures, ADAPT initialisation frames and ADAPT-IT iterations that are not
+  // kept. ADAPT-IT reports each iteration after its stop test, so the kept one says true.
   bool stack_frame = true;
 };
 

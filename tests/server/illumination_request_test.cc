@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include "server/procedures/scan_procedure.h"
 #include "tests/server/server_fixture.h"
 
 namespace inspection::testing {
@@ -33,6 +34,8 @@ TEST_F(IlluminationRequestTest, ParametersOutOfRangeNameTheField) {
       {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_psi(1.5); }, "illumination_parameters.psi"},
       {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_max_iterations(0); },
        "illumination_parameters.max_iterations"},
+      {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_target_grey(300); },
+       "illumination_parameters.target_grey"},
       {[](v1::ScanRequest& r) { r.set_illumination(static_cast<v1::IlluminationMode>(99)); }, "illumination"},
   };
   for (const Case& c : cases) {
@@ -75,7 +78,7 @@ class CalibratedIlluminationTest : public ServerTest {
 
 // With the models ADAPT needs (but no PSF), the default mode is ADAPT (HF+ADAPT needs sigma_p):
 // STD's frames + 2 initialisation frames, each reported with its grey statistics, and the first
-// frames converge towards 128; TEXTURE names the missing psf step.
+// frames converge towards the target grey; TEXTURE names the missing psf step.
 TEST_F(CalibratedIlluminationTest, DefaultFallsBackToAdaptAndReportsConvergence) {
   StartServer();
   v1::CalibrateRequest req;
@@ -93,15 +96,26 @@ TEST_F(CalibratedIlluminationTest, DefaultFallsBackToAdaptAndReportsConvergence)
   scan.set_z_end_um(220);
   scan.set_z_step_um(5);  // 9 stack frames
   std::vector<v1::FrameStatistics> frames;
+  std::vector<v1::FrameProgress> progress;
   v1::Job job;
   s = client_->Scan(scan, [&](const v1::JobEvent& e) {
-    if (e.has_frame()) frames.push_back(e.frame().statistics());
+    if (e.has_frame()) {
+      frames.push_back(e.frame().statistics());
+      progress.push_back(e.frame());
+    }
   }, &job);
   ASSERT_TRUE(s.ok()) << s.error_message();
   ASSERT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED) << job.error_message();
   ASSERT_EQ(frames.size(), 9u + 2u);
-  EXPECT_GT(std::abs(frames[0].mean_grey() - 128.0), std::abs(frames[2].mean_grey() - 128.0) - 1.0);
-  EXPECT_NEAR(frames[2].mean_grey(), 128.0, 12.0);
+  // ADAPT: two initialisation captures at the first z, then one stack frame per z.
+  for (size_t k = 0; k < progress.size(); ++k) {
+    EXPECT_EQ(progress[k].acquisition_index(), int(k));
+    EXPECT_EQ(progress[k].stack_frame(), k >= 2) << "capture " << k;
+    EXPECT_EQ(progress[k].frame_index(), k < 2 ? 0 : int(k) - 2);
+  }
+  const double target = IlluminationParams{}.target_grey;
+  EXPECT_GT(std::abs(frames[0].mean_grey() - target), std::abs(frames[2].mean_grey() - target) - 1.0);
+  EXPECT_NEAR(frames[2].mean_grey(), target, 12.0);
 
   v1::ScanRequest tex;
   tex.set_illumination(v1::ILLUMINATION_MODE_TEXTURE);
