@@ -27,7 +27,10 @@
 namespace inspection {
 
 struct CompensationOptions {
-  int pattern_cell_px = 2;          // coarse-grid spacing of the low-pass, projector px (1..32)
+  // Coarse-grid spacing of the low-pass, projector px (1..32). 2 (~7 camera px at 3.4 camera px
+  // per projector px) dims glints of a few camera pixels; 4 flattens less texture on specimens
+  // that never saturate but leaves the glints' halos (README, "Illumination modes").
+  int pattern_cell_px = 2;
   int camera_bin_px = 4;            // camera rows summed in bin x bin blocks (1..16)
   int solver_iterations = 12;       // LSCG iterations per solve (warm-started), 1..1000
   double solver_tolerance = 1e-3;   // relative residual at which LSCG stops early
