@@ -261,8 +261,11 @@ class ProgressPrinter {
       const auto& f = e.frame();
       const auto& s = f.statistics();
       if (!text.empty()) text += ' ';
-      text += Format("%d/%d z=%.1fum mean=%.0f sat=%.1f%% under=%.1f%%", f.frame_index() + 1, f.frame_count(),
-                     f.z_um(), s.mean_grey(), s.saturated_percent(), s.underexposed_percent());
+      text += Format("%d/%d z=%.1fum mean=%.0f sd=%.0f sat=%.1f%% under=%.1f%%", f.frame_index() + 1,
+                     f.frame_count(), f.z_um(), s.mean_grey(), s.stddev_grey(), s.saturated_percent(),
+                     s.underexposed_percent());
+      // HDR exposures and ADAPT initialisation / iteration captures that are not stack frames.
+      if (!f.stack_frame()) text += Format(" (capture %d, not kept)", f.acquisition_index() + 1);
     } else {
       text += Format(" %3.0f%%", 100.0 * e.progress());
     }

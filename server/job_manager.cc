@@ -133,6 +133,8 @@ void FillFrameEvent(v1::JobPhase phase, int index, int count, double z_um, doubl
   fp->set_frame_count(count);
   fp->set_z_um(z_um);
   fp->set_exposure_us(exposure_us);
+  fp->set_acquisition_index(index);  // scans with extra captures overwrite both
+  fp->set_stack_frame(true);
   fp->mutable_statistics()->set_mean_grey(st.mean_grey);
   fp->mutable_statistics()->set_stddev_grey(st.stddev_grey);
   fp->mutable_statistics()->set_saturated_percent(st.saturated_percent);
