@@ -3,9 +3,11 @@
 // Per-pixel state is O(pixels): best focus value, its frame index, j values before and after it,
 // the last j values, the curve's sum and squared steps (for the confidence) and the all-in-focus
 // grey value. 8-bit Tenengrad runs through a fused integer kernel (Sobel, squares, window sum and
-// state update in one pass over a cache-sized tile, AVX2 selected at run time; the batch path's
-// state update uses AVX-512 where the CPU has it); every other measure goes through
-// core/focus_measure.h and the same state update.
+// state update in one pass over a cache-sized tile, AVX2 / AVX-512 selected at run time); with
+// maximum or Gaussian interpolation (the scan default) its state is the compact 23-byte layout
+// described at CompactState (exact 32-bit state was 40 bytes; PushFrame is bound by streaming
+// the state through memory every frame). The line fit and every other measure (through
+// core/focus_measure.h) keep exact 32-bit state: 28 + 12 j bytes per pixel (StatePlanes).
 #include "core/sff_engine.h"
 
 #include <algorithm>
@@ -150,6 +152,8 @@ inline float ToFloat(int32_t v) { return float(v); }
 inline float ToFloat(float v) { return v; }
 
 // Per-pixel state as planes (structure of arrays), so the update loops vectorise.
+// Exact 32-bit state, 28 + 12 j bytes per pixel: the line fit and every case but 8-bit
+// Tenengrad (the fused Tenengrad with maximum or Gaussian uses CompactState instead).
 // T: focus value type (int32_t exact for the fused 8-bit Tenengrad, float otherwise).
 // P: pixel type of the frames (all-in-focus image).
 template <typename T, typename P>
@@ -897,13 +901,30 @@ void UpdateCompactRow(CompactState& st, size_t off, int n, int k_begin, int k_en
   if (x < n) UpdateCompactScalar(s, x, n, k_begin, k_end, slot0, vol_row, slot_stride, pix_rows);
 }
 
+// Prefetches the n pixels of a state row span for writing.
+SFF_INLINE void PrefetchCompactRow(const CompactPtrs& s, int n) {
+  for (int i = 0; i < n; i += 16) {
+    __builtin_prefetch(s.best + i, 1, 3);
+    __builtin_prefetch(s.sum_idx + i, 1, 3);
+    __builtin_prefetch(s.kept_idx + i, 1, 3);
+  }
+  for (int i = 0; i < n; i += 32) {
+    for (uint16_t* p : {s.last, s.last2, s.before, s.after, s.pending}) __builtin_prefetch(p + i, 1, 3);
+  }
+  for (int i = 0; i < n; i += 64) __builtin_prefetch(s.aif + i, 1, 3);
+}
+
 // Sink of the fused kernel in PushFrame: one frame k over the tile row.
 struct CompactSink {
   CompactState& st;
   int k, y0, tw, sx, sy;
   SFF_INLINE void operator()(int y, const int32_t* f, const uint8_t* pix) {
+    const int sy_row = y - y0 + sy;
+    // The next row's state, one frame-row of planes away from this one: the hardware prefetcher
+    // follows the ten planes within a row but not the jump between rows.
+    if (sy_row + 1 < st.height) PrefetchCompactRow(st.Row(size_t(sy_row + 1) * st.width + sx), tw);
     const uint8_t* rows[1] = {pix};
-    UpdateCompactRow(st, size_t(y - y0 + sy) * st.width + sx, tw, k, k + 1, k, f, 0, rows);
+    UpdateCompactRow(st, size_t(sy_row) * st.width + sx, tw, k, k + 1, k, f, 0, rows);
   }
 };
 
