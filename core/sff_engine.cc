@@ -621,8 +621,19 @@ struct CompactState {
     best.create(h, w, CV_32F);
     sum_idx.create(h, w, CV_32F);
     aif.create(h, w, CV_8U);
-    kept_idx.assign(n, 0);
-    for (auto* v : {&last, &last2, &before, &after, &pending}) v->assign(n, 0);
+    kept_idx.resize(n);
+    for (auto* v : {&last, &last2, &before, &after, &pending}) v->resize(n);
+    Reset();
+  }
+  // The state before frame 0: F_max below every focus value, so that frame 0 is a new maximum
+  // for every pixel and the update kernels initialise the state themselves; all else 0.
+  void Reset() {
+    const size_t n = size_t(width) * height;
+    std::fill_n(reinterpret_cast<int32_t*>(best.data), n, std::numeric_limits<int32_t>::min());
+    std::fill_n(reinterpret_cast<uint32_t*>(sum_idx.data), n, 0u);
+    std::fill_n(aif.data, n, uint8_t(0));
+    std::fill(kept_idx.begin(), kept_idx.end(), 0u);
+    for (auto* v : {&last, &last2, &before, &after, &pending}) std::fill(v->begin(), v->end(), uint16_t(0));
   }
   size_t Bytes() const {
     return best.total() * best.elemSize() + sum_idx.total() * sum_idx.elemSize() + aif.total() * aif.elemSize() +
@@ -635,20 +646,8 @@ struct CompactState {
   }
 };
 
-// Frame 0: the maximum is frame 0.
-void InitCompactRow(const CompactPtrs& s, int n, const int32_t* f, const uint8_t* pix) {
-  for (int x = 0; x < n; ++x) {
-    const float fv = float(f[x]);
-    s.best[x] = f[x];
-    s.sum_idx[x] = Bits(fv) & kSumMask;  // idx 0
-    s.kept_idx[x] = 0;
-    s.last[x] = uint16_t(((Bits(fv + 1.f) & kSampleMask) - kOneBits) >> 12);
-    s.last2[x] = s.before[x] = s.after[x] = s.pending[x] = 0;
-    s.aif[x] = pix[x];
-  }
-}
-
-// Frames k_begin .. k_end-1 (k_begin >= 1) over pixels x_begin .. x_end-1 of a row: the focus
+// Frames k_begin .. k_end-1 over pixels x_begin .. x_end-1 of a row (frame 0 on the Reset
+// state initialises it: t_0 and t_1 do not exist, F_max = F(0), idx = 0): the focus
 // value of frame k at x is vol_row[(k - slot0) * slot_stride + x], its grey value
 // pix_rows[k - slot0][x]. The reference for the vector kernels below, which do the same float
 // and integer operations in the same order (bit-identical). Since idx < k at frame k,
@@ -878,16 +877,11 @@ __attribute__((target("avx512f"))) void UpdateCompactAvx512(const CompactPtrs& s
 }
 #pragma GCC diagnostic pop
 
-// Frames k_begin .. k_end-1 over the n pixels of a state row at off (frame 0 initialises it):
-// AVX-512 blocks of 16, AVX2 blocks of 8 and the scalar rest, as the state selects.
+// Frames k_begin .. k_end-1 over the n pixels of a state row at off: AVX-512 blocks of 16, AVX2
+// blocks of 8 and the scalar rest, as the state selects.
 void UpdateCompactRow(CompactState& st, size_t off, int n, int k_begin, int k_end, int slot0, const int32_t* vol_row,
                       size_t slot_stride, const uint8_t* const* pix_rows) {
   const CompactPtrs s = st.Row(off);
-  if (k_begin == 0) {
-    InitCompactRow(s, n, vol_row, pix_rows[0]);  // slot0 is 0 when the span starts at frame 0
-    if (k_end == 1) return;
-    k_begin = 1;
-  }
   int x = 0;
   if (st.avx512 && n >= 16) {
     x = n & ~15;
@@ -1487,6 +1481,7 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
   std::atomic<size_t> valid{0};
   ParallelFor(n_tiles, workers, [&](int t, int worker) {
     int32_t* vol = volumes[size_t(worker)].data();
+    if (compact) compact_states[size_t(worker)].Reset();
     const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kBatchTileH;
     const int tw = std::min(kTileW, size.width - x0), th = std::min(kBatchTileH, size.height - y0);
     for (int k0 = 0; k0 < n; k0 += kFrameChunk) {
