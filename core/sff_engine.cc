@@ -100,9 +100,9 @@ constexpr int kMaxJ = 4;
 // columns of input) stays near 10 % for the 7 x 7 window.
 constexpr int kTileW = 256;
 constexpr int kTileH = 64;
-// Batch path: 256 x 32 tiles (state ~40 bytes per pixel = 330 KB, in L2), frames in chunks of 8
-// whose focus rows are kept (256 x 32 x 8 x 4 B = 256 KB) so that each state row is updated for 8
-// frames while it sits in registers / L1.
+// Batch path: 256 x 32 tiles (compact state 23 bytes per pixel = 188 KB, in L2; exact line-fit
+// state up to 76 bytes = 620 KB), frames in chunks of 8 whose focus rows are kept (256 x 32 x 8
+// x 4 B = 256 KB) so that each state row is updated for 8 frames while it sits in registers / L1.
 constexpr int kBatchTileH = 32;
 constexpr int kFrameChunk = 8;
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
