@@ -370,6 +370,30 @@ TEST(SffEngineTest, CompactStreamingKernelsAgree) {
   }
 }
 
+TEST(SffEngineTest, MaximaBeyondFrame255) {
+  // 300 frames 0.1 µm apart, the plane at 27.0-27.6 µm: every maximum is at frame 270-276, so
+  // the frame index needs its high byte (kept in a separate word of the compact state).
+  const auto s = TiltedPlaneStack(cv::Size(40, 12), UniformZ(300, 0.0, 0.1), 27.0, 0.015, 0.0);
+  for (DepthInterpolation interp : {DepthInterpolation::kMaximum, DepthInterpolation::kGaussian}) {
+    SffOptions o;
+    o.interpolation = interp;
+    o.min_confidence = 0.0;
+    const DepthResult streamed = Streamed(o, s.frames, s.z_um);
+    auto batch = SffEngine::ReconstructInMemory(o, s.frames, s.z_um);
+    ASSERT_TRUE(batch.ok());
+    o.use_simd = false;
+    const DepthResult portable = Streamed(o, s.frames, s.z_um);
+    EXPECT_TRUE(BitIdentical(streamed.depth_um, batch->depth_um));
+    EXPECT_TRUE(BitIdentical(streamed.confidence, batch->confidence));
+    EXPECT_TRUE(BitIdentical(streamed.depth_um, portable.depth_um));
+    const auto e = CompareDepth(streamed.depth_um, s.height_um);
+    std::printf("[figures] 300 frames, maxima at 270-276 (%s): RMSE %.4f µm, max %.3f µm\n",
+                DepthInterpolationName(interp), e.rmse_um, e.max_abs_um);
+    EXPECT_LT(e.max_abs_um, 0.3);  // 3 z steps; a lost high byte would be 25.6 µm off
+    EXPECT_GT(streamed.valid_fraction, 0.99);
+  }
+}
+
 TEST(SffEngineTest, BatchFallsBackToStreamingForOtherMeasuresAnd16Bit) {
   const auto s = TiltedPlaneStack(cv::Size(64, 48), UniformZ(9, 0.0, 1.0), 3.0, 0.03, 0.02, CV_16U);
   SffOptions o;
