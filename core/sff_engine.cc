@@ -3,9 +3,11 @@
 // Per-pixel state is O(pixels): best focus value, its frame index, j values before and after it,
 // the last j values, the curve's sum and squared steps (for the confidence) and the all-in-focus
 // grey value. 8-bit Tenengrad runs through a fused integer kernel (Sobel, squares, window sum and
-// state update in one pass over a cache-sized tile, AVX2 selected at run time; the batch path's
-// state update uses AVX-512 where the CPU has it); every other measure goes through
-// core/focus_measure.h and the same state update.
+// state update in one pass over a cache-sized tile, AVX2 / AVX-512 selected at run time); with
+// maximum or Gaussian interpolation (the scan default) its state is the compact 23-byte layout
+// described at CompactState (exact 32-bit state was 40 bytes; PushFrame is bound by streaming
+// the state through memory every frame). The line fit and every other measure (through
+// core/focus_measure.h) keep exact 32-bit state: 28 + 12 j bytes per pixel (StatePlanes).
 #include "core/sff_engine.h"
 
 #include <algorithm>
@@ -98,9 +100,9 @@ constexpr int kMaxJ = 4;
 // columns of input) stays near 10 % for the 7 x 7 window.
 constexpr int kTileW = 256;
 constexpr int kTileH = 64;
-// Batch path: 256 x 32 tiles (state ~40 bytes per pixel = 330 KB, in L2), frames in chunks of 8
-// whose focus rows are kept (256 x 32 x 8 x 4 B = 256 KB) so that each state row is updated for 8
-// frames while it sits in registers / L1.
+// Batch path: 256 x 32 tiles (compact state 23 bytes per pixel = 188 KB, in L2; exact line-fit
+// state up to 76 bytes = 620 KB), frames in chunks of 8 whose focus rows are kept (256 x 32 x 8
+// x 4 B = 256 KB) so that each state row is updated for 8 frames while it sits in registers / L1.
 constexpr int kBatchTileH = 32;
 constexpr int kFrameChunk = 8;
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
@@ -150,6 +152,8 @@ inline float ToFloat(int32_t v) { return float(v); }
 inline float ToFloat(float v) { return v; }
 
 // Per-pixel state as planes (structure of arrays), so the update loops vectorise.
+// Exact 32-bit state, 28 + 12 j bytes per pixel: the line fit and every case but 8-bit
+// Tenengrad (the fused Tenengrad with maximum or Gaussian uses CompactState instead).
 // T: focus value type (int32_t exact for the fused 8-bit Tenengrad, float otherwise).
 // P: pixel type of the frames (all-in-focus image).
 template <typename T, typename P>
@@ -183,6 +187,12 @@ struct StatePlanes {
     curv_all.assign(n, 0.f);
     curv_excl.assign(n, 0.f);
     aif.assign(n, 0);
+  }
+  size_t Bytes() const {
+    size_t b = (best.size() + last2.size()) * sizeof(T) + (idx.size() + aif.size()) * 4 +
+               (sum.size() + curv_all.size() + curv_excl.size()) * 4;
+    for (int i = 0; i < kMaxJ; ++i) b += (before[i].size() + after[i].size() + ring[i].size()) * sizeof(T);
+    return b;
   }
 };
 
@@ -557,128 +567,369 @@ __attribute__((target("avx2"))) inline __m256i BlendLanes(__m256i x, __m256i y, 
       _mm256_blendv_ps(_mm256_castsi256_ps(x), _mm256_castsi256_ps(y), _mm256_castsi256_ps(mask)));
 }
 
-// Batch path, one neighbour each side, AVX2: the state of 8 pixels stays in registers while the
-// frames k_begin .. k_end-1 of a chunk update it; per pixel exactly the float and integer
-// results of UpdateRowJ1 (bit-identical), with fewer instructions: the step F(k-1) - F(k-2) is
-// carried from the previous frame instead of recomputed, F(k-2) is reloaded from the chunk only
-// at the end, and since idx < k at frame k, idx == k-1 is idx > k-2 and idx in {k-1, k-2} is
-// idx > k-3. Pixels x_begin .. x_end-1 of the row, in blocks of 8; k_begin >= 1.
-__attribute__((target("avx2"))) void UpdateChunkAvx2(int x_begin, int x_end, int k_begin, int k_end, int slot0,
-                                                     const int32_t* vol_row, size_t slot_stride,
-                                                     const uint8_t* const* pix_rows, int32_t* best, int32_t* idx,
-                                                     int32_t* prev, int32_t* next, int32_t* last, int32_t* last2,
-                                                     int32_t* aif, float* sum, float* curv_all, float* curv_excl) {
-  const __m256i one = _mm256_set1_epi32(1), two = _mm256_set1_epi32(2), three = _mm256_set1_epi32(3);
-  const __m256 fzero = _mm256_setzero_ps();
+// ---- Compact state: the fused 8-bit Tenengrad path with one neighbour each side ----
+// (maximum and Gaussian interpolation, the scan default): 23 bytes per pixel instead of 40.
+//  - F_max exact (int32): the running maximum compares exactly.
+//  - The four curve samples the fit and the second differences need, F(k-1), F(k-2), F(m-1) and
+//    F(m+1), as 16-bit codes of F + 1 (5 exponent and 11 mantissa bits, truncated): relative
+//    error < 2^-11 (exact below 2^12), 0 <-> 0; every F < 2^31 fits. The Gaussian fit only uses
+//    ln(F_max / F(m-1)) and ln(F_max / F(m+1)), which move by < 5e-4.
+//  - The sum of F and the sum of the squared second differences t_k^2 that do not involve the
+//    current maximum ("kept"), as floats truncated to a 16-bit significand (relative error
+//    < 2^-15 per frame); their freed low bytes hold the 16-bit frame index of the maximum.
+//  - The pending t_k^2 that do involve the maximum (at most three; they join "kept" when a new
+//    maximum arrives and are left out at the end), as a 16-bit code of P + 1 with 6 exponent and
+//    10 mantissa bits (saturated at ~2^64).
+//  - The all-in-focus grey value (8 bits).
+// Every rounding is a truncation of float bits applied after each frame, by the per-frame
+// streaming kernels and by the batch kernels that keep a pixel's state in registers over a
+// chunk of frames alike, so streaming and batch stay bit-identical.
+constexpr uint32_t kOneBits = 0x3F800000u;         // 1.0f: codes are offsets from it
+constexpr uint32_t kSampleMask = 0xFFFFF000u;      // 11 mantissa bits
+constexpr uint32_t kPendingMask = 0xFFFFE000u;     // 10 mantissa bits
+constexpr uint32_t kPendingMaxBits = 0x5F7FE000u;  // code 65535 (~1.8e19)
+constexpr uint32_t kSumMask = 0xFFFFFF00u;         // 16-bit significand; low byte: index bits
+
+inline float FromBits(uint32_t b) { return std::bit_cast<float>(b); }
+inline uint32_t Bits(float f) { return std::bit_cast<uint32_t>(f); }
+
+// Row pointers into a CompactState (one row span).
+struct CompactPtrs {
+  int32_t* best;
+  uint32_t* sum_idx;   // sum of F | idx bits 0-7
+  uint32_t* kept_idx;  // kept sum of t_k^2 | idx bits 8-15
+  uint16_t *last, *last2, *before, *after, *pending;
+  uint8_t* aif;
+};
+
+struct CompactState {
+  static constexpr int kBytesPerPixel = 23;
+  int width = 0, height = 0;
+  bool avx2 = false, avx512 = false;
+  // Float-typed Mats holding int32 / packed words while frames arrive, so that Finish writes
+  // depth_um and confidence into them in place and hands them out as the result.
+  cv::Mat best, sum_idx, aif;
+  std::vector<uint32_t> kept_idx;
+  std::vector<uint16_t> last, last2, before, after, pending;
+
+  void Allocate(int w, int h, bool use_simd, bool use_avx512) {
+    avx2 = use_simd && HasAvx2();
+    avx512 = avx2 && use_avx512 && HasAvx512();
+    width = w;
+    height = h;
+    const size_t n = size_t(w) * h;
+    best.create(h, w, CV_32F);
+    sum_idx.create(h, w, CV_32F);
+    aif.create(h, w, CV_8U);
+    kept_idx.resize(n);
+    for (auto* v : {&last, &last2, &before, &after, &pending}) v->resize(n);
+    Reset();
+  }
+  // The state before frame 0: F_max below every focus value, so that frame 0 is a new maximum
+  // for every pixel and the update kernels initialise the state themselves; all else 0.
+  void Reset() {
+    const size_t n = size_t(width) * height;
+    std::fill_n(reinterpret_cast<int32_t*>(best.data), n, std::numeric_limits<int32_t>::min());
+    std::fill_n(reinterpret_cast<uint32_t*>(sum_idx.data), n, 0u);
+    std::fill_n(aif.data, n, uint8_t(0));
+    std::fill(kept_idx.begin(), kept_idx.end(), 0u);
+    for (auto* v : {&last, &last2, &before, &after, &pending}) std::fill(v->begin(), v->end(), uint16_t(0));
+  }
+  size_t Bytes() const {
+    return best.total() * best.elemSize() + sum_idx.total() * sum_idx.elemSize() + aif.total() * aif.elemSize() +
+           kept_idx.size() * 4 + 2 * (last.size() + last2.size() + before.size() + after.size() + pending.size());
+  }
+  CompactPtrs Row(size_t off) {
+    return {reinterpret_cast<int32_t*>(best.data) + off, reinterpret_cast<uint32_t*>(sum_idx.data) + off,
+            kept_idx.data() + off, last.data() + off, last2.data() + off, before.data() + off, after.data() + off,
+            pending.data() + off, aif.data + off};
+  }
+};
+
+// Frames k_begin .. k_end-1 over pixels x_begin .. x_end-1 of a row (frame 0 on the Reset
+// state initialises it: t_0 and t_1 do not exist, F_max = F(0), idx = 0): the focus
+// value of frame k at x is vol_row[(k - slot0) * slot_stride + x], its grey value
+// pix_rows[k - slot0][x]. The reference for the vector kernels below, which do the same float
+// and integer operations in the same order (bit-identical). Since idx < k at frame k,
+// idx == k-1 is idx > k-2 and idx in {k-1, k-2} (t_k involves the maximum) is idx > k-3.
+void UpdateCompactScalar(const CompactPtrs& s, int x_begin, int x_end, int k_begin, int k_end, int slot0,
+                         const int32_t* vol_row, size_t slot_stride, const uint8_t* const* pix_rows) {
+  const float pmax = FromBits(kPendingMaxBits);
+  for (int x = x_begin; x < x_end; ++x) {
+    int32_t b = s.best[x];
+    const uint32_t w1 = s.sum_idx[x], w2 = s.kept_idx[x];
+    int32_t id = int32_t((w1 & 0xFFu) | ((w2 & 0xFFu) << 8));
+    float sum = FromBits(w1 & kSumMask), kept = FromBits(w2 & kSumMask);
+    uint32_t lbits = (uint32_t(s.last[x]) << 12) + kOneBits, l2bits = (uint32_t(s.last2[x]) << 12) + kOneBits;
+    uint32_t pbits = (uint32_t(s.before[x]) << 12) + kOneBits, nbits = (uint32_t(s.after[x]) << 12) + kOneBits;
+    uint32_t ebits = (uint32_t(s.pending[x]) << 13) + kOneBits;
+    int32_t a = s.aif[x];
+    float lf = FromBits(lbits) - 1.f;
+    float d = lf - (FromBits(l2bits) - 1.f);  // F(k-1) - F(k-2)
+    float ef = FromBits(ebits) - 1.f;
+    for (int k = k_begin; k < k_end; ++k) {
+      const int slot = k - slot0;
+      const int32_t v = vol_row[size_t(slot) * slot_stride + x];
+      const int32_t p = pix_rows[slot][x];
+      const float fv = float(v);
+      const float t = (fv - lf) - d;  // t_k in float: for wide windows 2 F overflows int32
+      const float t2 = k >= 2 ? t * t : 0.f;  // t_1 does not exist
+      const bool gt = v > b, was = id > k - 2, near = id > k - 3;
+      kept = FromBits(Bits(kept + (gt ? ef : (near ? 0.f : t2))) & kSumMask);
+      const float en = gt ? t2 : ef + (near ? t2 : 0.f);
+      const float e1 = en + 1.f;
+      ebits = Bits(e1 < pmax ? e1 : pmax) & kPendingMask;
+      ef = FromBits(ebits) - 1.f;
+      sum = FromBits(Bits(sum + fv) & kSumMask);
+      const uint32_t vbits = Bits(fv + 1.f) & kSampleMask;
+      const float vf = FromBits(vbits) - 1.f;
+      nbits = gt ? kOneBits : (was ? vbits : nbits);
+      pbits = gt ? lbits : pbits;
+      b = gt ? v : b;
+      id = gt ? k : id;
+      a = gt ? p : a;
+      d = vf - lf;
+      lf = vf;
+      l2bits = lbits;
+      lbits = vbits;
+    }
+    s.best[x] = b;
+    s.sum_idx[x] = Bits(sum) | (uint32_t(id) & 0xFFu);
+    s.kept_idx[x] = Bits(kept) | (uint32_t(id) >> 8);
+    s.last[x] = uint16_t((lbits - kOneBits) >> 12);
+    s.last2[x] = uint16_t((l2bits - kOneBits) >> 12);
+    s.before[x] = uint16_t((pbits - kOneBits) >> 12);
+    s.after[x] = uint16_t((nbits - kOneBits) >> 12);
+    s.pending[x] = uint16_t((ebits - kOneBits) >> 13);
+    s.aif[x] = uint8_t(a);
+  }
+}
+
+__attribute__((target("avx2"))) inline __m256i Ld16(const uint16_t* p) {
+  return _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
+}
+__attribute__((target("avx2"))) inline void St16(uint16_t* p, __m256i v) {  // lanes < 65536
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(p),
+                   _mm_packus_epi32(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1)));
+}
+__attribute__((target("avx2"))) inline __m256i Ld8(const uint8_t* p) {
+  return _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p)));
+}
+__attribute__((target("avx2"))) inline void St8(uint8_t* p, __m256i v) {  // lanes < 256
+  const __m128i w = _mm_packus_epi32(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+  _mm_storel_epi64(reinterpret_cast<__m128i*>(p), _mm_packus_epi16(w, w));
+}
+__attribute__((target("avx2"))) inline __m256 AsPs(__m256i v) { return _mm256_castsi256_ps(v); }
+__attribute__((target("avx2"))) inline __m256i AsSi(__m256 v) { return _mm256_castps_si256(v); }
+
+// UpdateCompactScalar for blocks of 8 pixels whose state stays in registers over the frames.
+__attribute__((target("avx2"))) void UpdateCompactAvx2(const CompactPtrs& s, int x_begin, int x_end, int k_begin,
+                                                       int k_end, int slot0, const int32_t* vol_row,
+                                                       size_t slot_stride, const uint8_t* const* pix_rows) {
+  const __m256i one_bits = _mm256_set1_epi32(int(kOneBits)), low8 = _mm256_set1_epi32(0xFF);
+  const __m256i sample_mask = _mm256_set1_epi32(int(kSampleMask)), pending_mask = _mm256_set1_epi32(int(kPendingMask));
+  const __m256 sum_mask = AsPs(_mm256_set1_epi32(int(kSumMask)));
+  const __m256 pmax = AsPs(_mm256_set1_epi32(int(kPendingMaxBits)));
+  const __m256 fone = _mm256_set1_ps(1.f), fzero = _mm256_setzero_ps();
+  const __m256i ione = _mm256_set1_epi32(1);
   for (int x = x_begin; x + 8 <= x_end; x += 8) {
-    __m256i b = ld(best + x), id = ld(idx + x), pv = ld(prev + x), nx = ld(next + x);
-    __m256i l = ld(last + x), a = ld(aif + x);
-    __m256 sm = _mm256_loadu_ps(sum + x), ca = _mm256_loadu_ps(curv_all + x), ce = _mm256_loadu_ps(curv_excl + x);
-    __m256 d = _mm256_sub_ps(_mm256_cvtepi32_ps(l), _mm256_cvtepi32_ps(ld(last2 + x)));  // F(k-1) - F(k-2)
-    __m256i kv = _mm256_set1_epi32(k_begin);
+    __m256i b = ld(s.best + x);
+    const __m256i w1 = ld(reinterpret_cast<const int32_t*>(s.sum_idx + x));
+    const __m256i w2 = ld(reinterpret_cast<const int32_t*>(s.kept_idx + x));
+    __m256i id = _mm256_or_si256(_mm256_and_si256(w1, low8), _mm256_slli_epi32(_mm256_and_si256(w2, low8), 8));
+    __m256 sum = _mm256_and_ps(AsPs(w1), sum_mask), kept = _mm256_and_ps(AsPs(w2), sum_mask);
+    __m256i lbits = _mm256_add_epi32(_mm256_slli_epi32(Ld16(s.last + x), 12), one_bits);
+    __m256i l2bits = _mm256_add_epi32(_mm256_slli_epi32(Ld16(s.last2 + x), 12), one_bits);
+    __m256i pbits = _mm256_add_epi32(_mm256_slli_epi32(Ld16(s.before + x), 12), one_bits);
+    __m256i nbits = _mm256_add_epi32(_mm256_slli_epi32(Ld16(s.after + x), 12), one_bits);
+    __m256i ebits = _mm256_add_epi32(_mm256_slli_epi32(Ld16(s.pending + x), 13), one_bits);
+    __m256i a = Ld8(s.aif + x);
+    __m256 lf = _mm256_sub_ps(AsPs(lbits), fone);
+    __m256 d = _mm256_sub_ps(lf, _mm256_sub_ps(AsPs(l2bits), fone));
+    __m256 ef = _mm256_sub_ps(AsPs(ebits), fone);
+    __m256i kv = _mm256_set1_epi32(k_begin), km2 = _mm256_set1_epi32(k_begin - 2),
+            km3 = _mm256_set1_epi32(k_begin - 3);
     for (int k = k_begin; k < k_end; ++k) {
       const int slot = k - slot0;
       const __m256i v = ld(vol_row + size_t(slot) * slot_stride + x);
-      const __m256i p =
-          _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(pix_rows[slot] + x)));
+      const __m256i p = Ld8(pix_rows[slot] + x);
       const __m256 fv = _mm256_cvtepi32_ps(v);
-      const __m256 dn = _mm256_sub_ps(fv, _mm256_cvtepi32_ps(l));
-      const __m256 t = _mm256_sub_ps(dn, d);
-      // k == 1: t_k does not exist (UpdateRowJ1 multiplies t * t by 0, giving +0 as well).
+      const __m256 t = _mm256_sub_ps(_mm256_sub_ps(fv, lf), d);
       const __m256 t2 = k >= 2 ? _mm256_mul_ps(t, t) : fzero;
       const __m256i gt = _mm256_cmpgt_epi32(v, b);
-      const __m256i was = _mm256_cmpgt_epi32(id, _mm256_sub_epi32(kv, two));
-      const __m256i near = _mm256_cmpgt_epi32(id, _mm256_sub_epi32(kv, three));
-      const __m256 kept = _mm256_add_ps(ce, _mm256_and_ps(t2, _mm256_castsi256_ps(near)));
-      sm = _mm256_add_ps(sm, fv);
-      ca = _mm256_add_ps(ca, t2);
-      ce = _mm256_blendv_ps(kept, t2, _mm256_castsi256_ps(gt));
-      nx = _mm256_andnot_si256(gt, BlendLanes(nx, v, was));
-      pv = BlendLanes(pv, l, gt);
+      const __m256 gtf = AsPs(gt);
+      const __m256i was = _mm256_cmpgt_epi32(id, km2);
+      const __m256 nearf = AsPs(_mm256_cmpgt_epi32(id, km3));
+      kept = _mm256_and_ps(_mm256_add_ps(kept, _mm256_blendv_ps(_mm256_andnot_ps(nearf, t2), ef, gtf)), sum_mask);
+      const __m256 en = _mm256_blendv_ps(_mm256_add_ps(ef, _mm256_and_ps(nearf, t2)), t2, gtf);
+      ebits = _mm256_and_si256(AsSi(_mm256_min_ps(_mm256_add_ps(en, fone), pmax)), pending_mask);
+      ef = _mm256_sub_ps(AsPs(ebits), fone);
+      sum = _mm256_and_ps(_mm256_add_ps(sum, fv), sum_mask);
+      const __m256i vbits = _mm256_and_si256(AsSi(_mm256_add_ps(fv, fone)), sample_mask);
+      const __m256 vf = _mm256_sub_ps(AsPs(vbits), fone);
+      nbits = BlendLanes(BlendLanes(nbits, vbits, was), one_bits, gt);
+      pbits = BlendLanes(pbits, lbits, gt);
       b = BlendLanes(b, v, gt);
       id = BlendLanes(id, kv, gt);
       a = BlendLanes(a, p, gt);
-      d = dn;
-      l = v;
-      kv = _mm256_add_epi32(kv, one);
+      d = _mm256_sub_ps(vf, lf);
+      lf = vf;
+      l2bits = lbits;
+      lbits = vbits;
+      kv = _mm256_add_epi32(kv, ione);
+      km2 = _mm256_add_epi32(km2, ione);
+      km3 = _mm256_add_epi32(km3, ione);
     }
-    // F(k_end - 2): from the chunk, or the state's last value when the chunk added one frame.
-    const __m256i l2 = k_end - k_begin >= 2 ? ld(vol_row + size_t(k_end - 2 - slot0) * slot_stride + x)
-                       : k_end - k_begin == 1 ? ld(last + x)
-                                             : ld(last2 + x);
-    st(best + x, b);
-    st(idx + x, id);
-    st(prev + x, pv);
-    st(next + x, nx);
-    st(last2 + x, l2);
-    st(last + x, l);
-    st(aif + x, a);
-    _mm256_storeu_ps(sum + x, sm);
-    _mm256_storeu_ps(curv_all + x, ca);
-    _mm256_storeu_ps(curv_excl + x, ce);
+    st(s.best + x, b);
+    st(reinterpret_cast<int32_t*>(s.sum_idx + x), _mm256_or_si256(AsSi(sum), _mm256_and_si256(id, low8)));
+    st(reinterpret_cast<int32_t*>(s.kept_idx + x), _mm256_or_si256(AsSi(kept), _mm256_srli_epi32(id, 8)));
+    St16(s.last + x, _mm256_srli_epi32(_mm256_sub_epi32(lbits, one_bits), 12));
+    St16(s.last2 + x, _mm256_srli_epi32(_mm256_sub_epi32(l2bits, one_bits), 12));
+    St16(s.before + x, _mm256_srli_epi32(_mm256_sub_epi32(pbits, one_bits), 12));
+    St16(s.after + x, _mm256_srli_epi32(_mm256_sub_epi32(nbits, one_bits), 12));
+    St16(s.pending + x, _mm256_srli_epi32(_mm256_sub_epi32(ebits, one_bits), 13));
+    St8(s.aif + x, a);
   }
 }
 
 // GCC 12's AVX-512 headers trip -Wmaybe-uninitialized (their _mm512_undefined_* pass-through).
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-// UpdateChunkAvx2 with 16 lanes and mask registers: the same operations per pixel (a masked add
-// of t_k equals adding t_k & mask, as curv_excl is never -0), bit-identical.
-__attribute__((target("avx512f"))) void UpdateChunkAvx512(int x_begin, int x_end, int k_begin, int k_end, int slot0,
-                                                          const int32_t* vol_row, size_t slot_stride,
-                                                          const uint8_t* const* pix_rows, int32_t* best, int32_t* idx,
-                                                          int32_t* prev, int32_t* next, int32_t* last, int32_t* last2,
-                                                          int32_t* aif, float* sum, float* curv_all,
-                                                          float* curv_excl) {
-  const __m512i one = _mm512_set1_epi32(1), two = _mm512_set1_epi32(2), three = _mm512_set1_epi32(3);
-  const __m512 fzero = _mm512_setzero_ps();
+__attribute__((target("avx512f"))) inline __m512 And512(__m512 x, __m512i mask) {
+  return _mm512_castsi512_ps(_mm512_and_si512(_mm512_castps_si512(x), mask));
+}
+__attribute__((target("avx512f"))) inline __m512i Ld16x16(const uint16_t* p) {
+  return _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
+}
+__attribute__((target("avx512f"))) inline void St16x16(uint16_t* p, __m512i v) {
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(p), _mm512_cvtepi32_epi16(v));
+}
+
+// UpdateCompactAvx2 with 16 lanes and mask registers: the same operations per pixel (a masked
+// add of t_k^2 equals adding t_k^2 & mask, as the pending sum is never -0), bit-identical.
+__attribute__((target("avx512f"))) void UpdateCompactAvx512(const CompactPtrs& s, int x_begin, int x_end,
+                                                            int k_begin, int k_end, int slot0, const int32_t* vol_row,
+                                                            size_t slot_stride, const uint8_t* const* pix_rows) {
+  const __m512i one_bits = _mm512_set1_epi32(int(kOneBits)), low8 = _mm512_set1_epi32(0xFF);
+  const __m512i sample_mask = _mm512_set1_epi32(int(kSampleMask)), pending_mask = _mm512_set1_epi32(int(kPendingMask));
+  const __m512i sum_mask = _mm512_set1_epi32(int(kSumMask));
+  const __m512 pmax = _mm512_castsi512_ps(_mm512_set1_epi32(int(kPendingMaxBits)));
+  const __m512 fone = _mm512_set1_ps(1.f), fzero = _mm512_setzero_ps();
+  const __m512i ione = _mm512_set1_epi32(1);
   for (int x = x_begin; x + 16 <= x_end; x += 16) {
-    __m512i b = _mm512_loadu_si512(best + x), id = _mm512_loadu_si512(idx + x);
-    __m512i pv = _mm512_loadu_si512(prev + x), nx = _mm512_loadu_si512(next + x);
-    __m512i l = _mm512_loadu_si512(last + x), a = _mm512_loadu_si512(aif + x);
-    __m512 sm = _mm512_loadu_ps(sum + x), ca = _mm512_loadu_ps(curv_all + x), ce = _mm512_loadu_ps(curv_excl + x);
-    __m512 d = _mm512_sub_ps(_mm512_cvtepi32_ps(l), _mm512_cvtepi32_ps(_mm512_loadu_si512(last2 + x)));
-    __m512i kv = _mm512_set1_epi32(k_begin);
+    __m512i b = _mm512_loadu_si512(s.best + x);
+    const __m512i w1 = _mm512_loadu_si512(s.sum_idx + x), w2 = _mm512_loadu_si512(s.kept_idx + x);
+    __m512i id = _mm512_or_si512(_mm512_and_si512(w1, low8), _mm512_slli_epi32(_mm512_and_si512(w2, low8), 8));
+    __m512 sum = _mm512_castsi512_ps(_mm512_and_si512(w1, sum_mask));
+    __m512 kept = _mm512_castsi512_ps(_mm512_and_si512(w2, sum_mask));
+    __m512i lbits = _mm512_add_epi32(_mm512_slli_epi32(Ld16x16(s.last + x), 12), one_bits);
+    __m512i l2bits = _mm512_add_epi32(_mm512_slli_epi32(Ld16x16(s.last2 + x), 12), one_bits);
+    __m512i pbits = _mm512_add_epi32(_mm512_slli_epi32(Ld16x16(s.before + x), 12), one_bits);
+    __m512i nbits = _mm512_add_epi32(_mm512_slli_epi32(Ld16x16(s.after + x), 12), one_bits);
+    __m512i ebits = _mm512_add_epi32(_mm512_slli_epi32(Ld16x16(s.pending + x), 13), one_bits);
+    __m512i a = _mm512_cvtepu8_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(s.aif + x)));
+    __m512 lf = _mm512_sub_ps(_mm512_castsi512_ps(lbits), fone);
+    __m512 d = _mm512_sub_ps(lf, _mm512_sub_ps(_mm512_castsi512_ps(l2bits), fone));
+    __m512 ef = _mm512_sub_ps(_mm512_castsi512_ps(ebits), fone);
+    __m512i kv = _mm512_set1_epi32(k_begin), km2 = _mm512_set1_epi32(k_begin - 2),
+            km3 = _mm512_set1_epi32(k_begin - 3);
     for (int k = k_begin; k < k_end; ++k) {
       const int slot = k - slot0;
       const __m512i v = _mm512_loadu_si512(vol_row + size_t(slot) * slot_stride + x);
       const __m512i p = _mm512_cvtepu8_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(pix_rows[slot] + x)));
       const __m512 fv = _mm512_cvtepi32_ps(v);
-      const __m512 dn = _mm512_sub_ps(fv, _mm512_cvtepi32_ps(l));
-      const __m512 t = _mm512_sub_ps(dn, d);
+      const __m512 t = _mm512_sub_ps(_mm512_sub_ps(fv, lf), d);
       const __m512 t2 = k >= 2 ? _mm512_mul_ps(t, t) : fzero;
       const __mmask16 gt = _mm512_cmpgt_epi32_mask(v, b);
-      const __mmask16 was = _mm512_cmpgt_epi32_mask(id, _mm512_sub_epi32(kv, two));
-      const __mmask16 near = _mm512_cmpgt_epi32_mask(id, _mm512_sub_epi32(kv, three));
-      const __m512 kept = _mm512_mask_add_ps(ce, near, ce, t2);
-      sm = _mm512_add_ps(sm, fv);
-      ca = _mm512_add_ps(ca, t2);
-      ce = _mm512_mask_mov_ps(kept, gt, t2);
-      nx = _mm512_maskz_mov_epi32(_mm512_knot(gt), _mm512_mask_mov_epi32(nx, was, v));
-      pv = _mm512_mask_mov_epi32(pv, gt, l);
+      const __mmask16 was = _mm512_cmpgt_epi32_mask(id, km2);
+      const __mmask16 near = _mm512_cmpgt_epi32_mask(id, km3);
+      const __m512 addend = _mm512_mask_mov_ps(_mm512_maskz_mov_ps(_mm512_knot(near), t2), gt, ef);
+      kept = And512(_mm512_add_ps(kept, addend), sum_mask);
+      const __m512 en = _mm512_mask_mov_ps(_mm512_mask_add_ps(ef, near, ef, t2), gt, t2);
+      ebits = _mm512_and_si512(_mm512_castps_si512(_mm512_min_ps(_mm512_add_ps(en, fone), pmax)), pending_mask);
+      ef = _mm512_sub_ps(_mm512_castsi512_ps(ebits), fone);
+      sum = And512(_mm512_add_ps(sum, fv), sum_mask);
+      const __m512i vbits = _mm512_and_si512(_mm512_castps_si512(_mm512_add_ps(fv, fone)), sample_mask);
+      const __m512 vf = _mm512_sub_ps(_mm512_castsi512_ps(vbits), fone);
+      nbits = _mm512_mask_mov_epi32(_mm512_mask_mov_epi32(nbits, was, vbits), gt, one_bits);
+      pbits = _mm512_mask_mov_epi32(pbits, gt, lbits);
       b = _mm512_mask_mov_epi32(b, gt, v);
       id = _mm512_mask_mov_epi32(id, gt, kv);
       a = _mm512_mask_mov_epi32(a, gt, p);
-      d = dn;
-      l = v;
-      kv = _mm512_add_epi32(kv, one);
+      d = _mm512_sub_ps(vf, lf);
+      lf = vf;
+      l2bits = lbits;
+      lbits = vbits;
+      kv = _mm512_add_epi32(kv, ione);
+      km2 = _mm512_add_epi32(km2, ione);
+      km3 = _mm512_add_epi32(km3, ione);
     }
-    const __m512i l2 = k_end - k_begin >= 2 ? _mm512_loadu_si512(vol_row + size_t(k_end - 2 - slot0) * slot_stride + x)
-                       : k_end - k_begin == 1 ? _mm512_loadu_si512(last + x)
-                                             : _mm512_loadu_si512(last2 + x);
-    _mm512_storeu_si512(best + x, b);
-    _mm512_storeu_si512(idx + x, id);
-    _mm512_storeu_si512(prev + x, pv);
-    _mm512_storeu_si512(next + x, nx);
-    _mm512_storeu_si512(last2 + x, l2);
-    _mm512_storeu_si512(last + x, l);
-    _mm512_storeu_si512(aif + x, a);
-    _mm512_storeu_ps(sum + x, sm);
-    _mm512_storeu_ps(curv_all + x, ca);
-    _mm512_storeu_ps(curv_excl + x, ce);
+    _mm512_storeu_si512(s.best + x, b);
+    _mm512_storeu_si512(s.sum_idx + x, _mm512_or_si512(_mm512_castps_si512(sum), _mm512_and_si512(id, low8)));
+    _mm512_storeu_si512(s.kept_idx + x, _mm512_or_si512(_mm512_castps_si512(kept), _mm512_srli_epi32(id, 8)));
+    St16x16(s.last + x, _mm512_srli_epi32(_mm512_sub_epi32(lbits, one_bits), 12));
+    St16x16(s.last2 + x, _mm512_srli_epi32(_mm512_sub_epi32(l2bits, one_bits), 12));
+    St16x16(s.before + x, _mm512_srli_epi32(_mm512_sub_epi32(pbits, one_bits), 12));
+    St16x16(s.after + x, _mm512_srli_epi32(_mm512_sub_epi32(nbits, one_bits), 12));
+    St16x16(s.pending + x, _mm512_srli_epi32(_mm512_sub_epi32(ebits, one_bits), 13));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(s.aif + x), _mm512_cvtepi32_epi8(a));
   }
 }
 #pragma GCC diagnostic pop
+
+// Frames k_begin .. k_end-1 over the n pixels of a state row at off: AVX-512 blocks of 16, AVX2
+// blocks of 8 and the scalar rest, as the state selects.
+void UpdateCompactRow(CompactState& st, size_t off, int n, int k_begin, int k_end, int slot0, const int32_t* vol_row,
+                      size_t slot_stride, const uint8_t* const* pix_rows) {
+  const CompactPtrs s = st.Row(off);
+  int x = 0;
+  if (st.avx512 && n >= 16) {
+    x = n & ~15;
+    UpdateCompactAvx512(s, 0, x, k_begin, k_end, slot0, vol_row, slot_stride, pix_rows);
+  }
+  if (st.avx2 && n - x >= 8) {
+    const int x8 = x + ((n - x) & ~7);
+    UpdateCompactAvx2(s, x, x8, k_begin, k_end, slot0, vol_row, slot_stride, pix_rows);
+    x = x8;
+  }
+  if (x < n) UpdateCompactScalar(s, x, n, k_begin, k_end, slot0, vol_row, slot_stride, pix_rows);
+}
+
+// Prefetches the n pixels of a state row span for writing.
+SFF_INLINE void PrefetchCompactRow(const CompactPtrs& s, int n) {
+  for (int i = 0; i < n; i += 16) {
+    __builtin_prefetch(s.best + i, 1, 3);
+    __builtin_prefetch(s.sum_idx + i, 1, 3);
+    __builtin_prefetch(s.kept_idx + i, 1, 3);
+  }
+  for (int i = 0; i < n; i += 32) {
+    for (uint16_t* p : {s.last, s.last2, s.before, s.after, s.pending}) __builtin_prefetch(p + i, 1, 3);
+  }
+  for (int i = 0; i < n; i += 64) __builtin_prefetch(s.aif + i, 1, 3);
+}
+
+// Sink of the fused kernel in PushFrame: one frame k over the tile row.
+struct CompactSink {
+  CompactState& st;
+  int k, y0, tw, sx, sy;
+  SFF_INLINE void operator()(int y, const int32_t* f, const uint8_t* pix) {
+    const int sy_row = y - y0 + sy;
+    // The next row's state, one frame-row of planes away from this one: the hardware prefetcher
+    // follows the ten planes within a row but not the jump between rows.
+    if (sy_row + 1 < st.height) PrefetchCompactRow(st.Row(size_t(sy_row + 1) * st.width + sx), tw);
+    const uint8_t* rows[1] = {pix};
+    UpdateCompactRow(st, size_t(sy_row) * st.width + sx, tw, k, k + 1, k, f, 0, rows);
+  }
+};
+
+__attribute__((target("avx2"))) void CompactTileFrameAvx2(const cv::Mat& frame, int k, int x0, int y0, int tw, int th,
+                                                          int window, TenengradScratch& sc, CompactState& st) {
+  TenengradTile<true>(frame, x0, y0, tw, th, window, sc, CompactSink{st, k, y0, tw, x0, y0});
+}
+void CompactTileFramePortable(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window,
+                              TenengradScratch& sc, CompactState& st) {
+  TenengradTile<false>(frame, x0, y0, tw, th, window, sc, CompactSink{st, k, y0, tw, x0, y0});
+}
 
 // Sink of the batch path: keeps the focus row of frame slot `slot` for the later state update.
 struct VolumeSink {
@@ -792,33 +1043,38 @@ __attribute__((target("avx2"))) inline __m256 LogPositiveAvx2(__m256 x) {
   return _mm256_add_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(e), _mm256_set1_ps(0.69314718056f)), log_m);
 }
 
-// FinishSpanScalar for 8 pixels at a time in float (fused path, one neighbour each side, maximum
-// or Gaussian): the confidence of FocusConfidence and the Gaussian position of GaussianPeakZ.
+// Interpolation and confidence of a compact state row span, 8 pixels at a time in float (one
+// neighbour each side, maximum or Gaussian): the confidence of FocusConfidence and the Gaussian
+// position of GaussianPeakZ. The outputs may be the state's own buffers (PushFrame's Finish
+// writes depth into best and confidence into sum_idx): each block is read before it is written.
 // Returns the number of kept pixels among the first n8 (a multiple of 8).
-__attribute__((target("avx2"))) size_t FinishSpanAvx2(const StatePlanes<int32_t, uint8_t>& st, size_t off, int n8,
-                                                      const float* zf, int n, bool gaussian, float min_confidence,
-                                                      float* depth, float* conf, uint8_t* aif) {
+__attribute__((target("avx2"))) size_t FinishCompactAvx2(const CompactPtrs& s, int n8, const float* zf, int n,
+                                                         bool gaussian, float min_confidence, uint32_t* depth,
+                                                         uint32_t* conf, uint8_t* aif) {
   size_t valid = 0;
   const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);
-  const __m256i izero = _mm256_setzero_si256();
+  const __m256i izero = _mm256_setzero_si256(), low8 = _mm256_set1_epi32(0xFF);
+  const __m256i one_bits = _mm256_set1_epi32(int(kOneBits));
+  const __m256 sum_mask = AsPs(_mm256_set1_epi32(int(kSumMask)));
   const __m256i last_frame = _mm256_set1_epi32(n - 1);
   const __m256 inv_n = _mm256_set1_ps(1.f / float(n));
   const __m256 nan = _mm256_set1_ps(std::numeric_limits<float>::quiet_NaN());
   for (int x = 0; x < n8; x += 8) {
-    const size_t i = off + size_t(x);
-    const __m256i m = ld(st.idx.data() + i);
-    const __m256 best = _mm256_cvtepi32_ps(ld(st.best.data() + i));
-    const __m256 f1 = _mm256_cvtepi32_ps(ld(st.before[0].data() + i));
-    const __m256 f3 = _mm256_cvtepi32_ps(ld(st.after[0].data() + i));
+    const __m256i w1 = ld(reinterpret_cast<const int32_t*>(s.sum_idx + x));
+    const __m256i w2 = ld(reinterpret_cast<const int32_t*>(s.kept_idx + x));
+    const __m256i m = _mm256_or_si256(_mm256_and_si256(w1, low8), _mm256_slli_epi32(_mm256_and_si256(w2, low8), 8));
+    const __m256 best = _mm256_cvtepi32_ps(ld(s.best + x));
+    const __m256 f1 = _mm256_sub_ps(AsPs(_mm256_add_epi32(_mm256_slli_epi32(Ld16(s.before + x), 12), one_bits)), one);
+    const __m256 f3 = _mm256_sub_ps(AsPs(_mm256_add_epi32(_mm256_slli_epi32(Ld16(s.after + x), 12), one_bits)), one);
+    const __m128i grey = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(s.aif + x));
     // Confidence: prominence over the noise level of the second differences away from the peak.
-    const __m256 mean = _mm256_mul_ps(_mm256_loadu_ps(st.sum.data() + i), inv_n);
+    const __m256 mean = _mm256_mul_ps(_mm256_and_ps(AsPs(w1), sum_mask), inv_n);
     const __m256 prominence = _mm256_sub_ps(best, mean);
     const __m256i hi = _mm256_min_epi32(last_frame, _mm256_add_epi32(m, _mm256_set1_epi32(2)));
     const __m256i lo = _mm256_max_epi32(_mm256_set1_epi32(2), m);
     const __m256i excluded = _mm256_max_epi32(izero, _mm256_add_epi32(_mm256_sub_epi32(hi, lo), _mm256_set1_epi32(1)));
     const __m256i count = _mm256_sub_epi32(_mm256_set1_epi32(std::max(0, n - 2)), excluded);
-    const __m256 sq = _mm256_max_ps(zero, _mm256_sub_ps(_mm256_loadu_ps(st.curv_all.data() + i),
-                                                        _mm256_loadu_ps(st.curv_excl.data() + i)));
+    const __m256 sq = _mm256_max_ps(zero, _mm256_and_ps(AsPs(w2), sum_mask));
     const __m256 countf = _mm256_cvtepi32_ps(count);
     __m256 sigma = _mm256_sqrt_ps(_mm256_div_ps(sq, _mm256_mul_ps(_mm256_set1_ps(6.f), _mm256_max_ps(countf, one))));
     sigma = _mm256_and_ps(sigma, _mm256_cmp_ps(countf, zero, _CMP_GT_OQ));
@@ -830,8 +1086,7 @@ __attribute__((target("avx2"))) size_t FinishSpanAvx2(const StatePlanes<int32_t,
                                           _mm256_cmp_ps(best, zero, _CMP_GT_OQ));
     c = _mm256_and_ps(c, has_peak);
     const __m256i at_end = _mm256_or_si256(_mm256_cmpeq_epi32(m, izero), _mm256_cmpeq_epi32(m, last_frame));
-    c = _mm256_blendv_ps(c, _mm256_mul_ps(c, _mm256_set1_ps(0.5f)), _mm256_castsi256_ps(at_end));
-    _mm256_storeu_ps(conf + x, c);
+    c = _mm256_blendv_ps(c, _mm256_mul_ps(c, _mm256_set1_ps(0.5f)), AsPs(at_end));
     // Depth: the frame's z, moved to the Gaussian's peak where the fit is valid.
     const __m256 z2 = _mm256_i32gather_ps(zf, m, 4);
     __m256 z_um = z2;
@@ -842,8 +1097,7 @@ __attribute__((target("avx2"))) size_t FinishSpanAvx2(const StatePlanes<int32_t,
       const __m256 u3 = _mm256_sub_ps(_mm256_i32gather_ps(zf, mp1, 4), z2);
       const __m256 ok_f = _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(f1, zero, _CMP_GT_OQ),
                                                       _mm256_cmp_ps(f3, zero, _CMP_GT_OQ)),
-                                        _mm256_andnot_ps(_mm256_castsi256_ps(at_end),
-                                                         _mm256_cmp_ps(best, zero, _CMP_GT_OQ)));
+                                        _mm256_andnot_ps(AsPs(at_end), _mm256_cmp_ps(best, zero, _CMP_GT_OQ)));
       // Logs only of positive finite ratios (others are masked out below).
       const __m256 safe1 = _mm256_blendv_ps(one, f1, ok_f), safe3 = _mm256_blendv_ps(one, f3, ok_f);
       const __m256 safe2 = _mm256_blendv_ps(one, best, ok_f);
@@ -861,12 +1115,10 @@ __attribute__((target("avx2"))) size_t FinishSpanAvx2(const StatePlanes<int32_t,
       z_um = _mm256_add_ps(z2, _mm256_and_ps(mu, ok));
     }
     const __m256 keep = _mm256_cmp_ps(c, _mm256_set1_ps(min_confidence), _CMP_GE_OQ);
-    _mm256_storeu_ps(depth + x, _mm256_blendv_ps(nan, z_um, keep));
+    _mm256_storeu_ps(reinterpret_cast<float*>(conf + x), c);
+    _mm256_storeu_ps(reinterpret_cast<float*>(depth + x), _mm256_blendv_ps(nan, z_um, keep));
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(aif + x), grey);
     valid += size_t(__builtin_popcount(unsigned(_mm256_movemask_ps(keep))));
-    // All-in-focus: 8 int32 grey values to bytes.
-    alignas(32) int32_t a8[8];
-    _mm256_store_si256(reinterpret_cast<__m256i*>(a8), ld(st.aif.data() + i));
-    for (int j = 0; j < 8; ++j) aif[x + j] = uint8_t(a8[j]);
   }
   return valid;
 }
@@ -891,25 +1143,27 @@ inline float LogPositiveScalar(float x) {
   return float(e) * 0.69314718056f + log_m;
 }
 
-// Scalar twin of FinishSpanAvx2 for pixels x_begin .. count-1 (the tail after the AVX2 blocks,
-// or everything without AVX2): bit-identical per pixel.
-size_t FinishSpanFloatScalar(const StatePlanes<int32_t, uint8_t>& st, size_t off, int x_begin, int count,
-                             const float* zf, int n, bool gaussian, float min_confidence, float* depth, float* conf,
-                             uint8_t* aif) {
+// Scalar twin of FinishCompactAvx2 for pixels x_begin .. count-1 (the tail after the AVX2
+// blocks, or everything without AVX2): bit-identical per pixel; the same in-place rule.
+size_t FinishCompactScalar(const CompactPtrs& s, int x_begin, int count, const float* zf, int n, bool gaussian,
+                           float min_confidence, uint32_t* depth, uint32_t* conf, uint8_t* aif) {
   auto maxps = [](float a, float b) { return a > b ? a : b; };  // _mm256_max_ps(a, b)
   auto minps = [](float a, float b) { return a < b ? a : b; };  // _mm256_min_ps(a, b)
   size_t valid = 0;
   const float inv_n = 1.f / float(n);
   for (int x = x_begin; x < count; ++x) {
-    const size_t i = off + size_t(x);
-    const int32_t m = st.idx[i];
-    const float best = float(st.best[i]), f1 = float(st.before[0][i]), f3 = float(st.after[0][i]);
-    const float mean = st.sum[i] * inv_n;
+    const uint32_t w1 = s.sum_idx[x], w2 = s.kept_idx[x];
+    const int32_t m = int32_t((w1 & 0xFFu) | ((w2 & 0xFFu) << 8));
+    const float best = float(s.best[x]);
+    const float f1 = FromBits((uint32_t(s.before[x]) << 12) + kOneBits) - 1.f;
+    const float f3 = FromBits((uint32_t(s.after[x]) << 12) + kOneBits) - 1.f;
+    const uint8_t grey = s.aif[x];
+    const float mean = FromBits(w1 & kSumMask) * inv_n;
     const float prominence = best - mean;
     const int32_t hi = std::min(n - 1, m + 2), lo = std::max(2, m);
     const int32_t excluded = std::max(0, hi - lo + 1);
     const int32_t count_t = std::max(0, n - 2) - excluded;
-    const float sq = maxps(0.f, st.curv_all[i] - st.curv_excl[i]);
+    const float sq = maxps(0.f, FromBits(w2 & kSumMask));
     const float countf = float(count_t);
     float sigma = std::sqrt(sq / (6.f * maxps(countf, 1.f)));
     if (!(countf > 0.f)) sigma = 0.f;
@@ -919,7 +1173,6 @@ size_t FinishSpanFloatScalar(const StatePlanes<int32_t, uint8_t>& st, size_t off
     if (!(prominence > 0.f && best > 0.f)) c = 0.f;
     const bool at_end = m == 0 || m == n - 1;
     if (at_end) c = c * 0.5f;
-    conf[x] = c;
     const float z2 = zf[m];
     float z_um = z2;
     if (gaussian) {
@@ -937,35 +1190,29 @@ size_t FinishSpanFloatScalar(const StatePlanes<int32_t, uint8_t>& st, size_t off
       if (z_um == z2) z_um = z2 + 0.f;  // as the vector path adds a masked +0
     }
     const bool keep = c >= min_confidence;
-    depth[x] = keep ? z_um : std::numeric_limits<float>::quiet_NaN();
+    conf[x] = Bits(c);
+    depth[x] = Bits(keep ? z_um : std::numeric_limits<float>::quiet_NaN());
+    aif[x] = grey;
     valid += keep;
-    aif[x] = uint8_t(st.aif[i]);
   }
   return valid;
+}
+
+// Interpolation and confidence of count pixels of a compact state row at off; outputs as above.
+size_t FinishCompactRow(CompactState& st, size_t off, int count, const std::vector<float>& zf, const SffOptions& o,
+                        uint32_t* depth, uint32_t* conf, uint8_t* aif) {
+  const CompactPtrs s = st.Row(off);
+  const int n = int(zf.size());
+  const bool gaussian = o.interpolation == DepthInterpolation::kGaussian;
+  const int n8 = st.avx2 ? (count & ~7) : 0;
+  size_t valid = 0;
+  if (n8 > 0) valid = FinishCompactAvx2(s, n8, zf.data(), n, gaussian, float(o.min_confidence), depth, conf, aif);
+  return valid + FinishCompactScalar(s, n8, count, zf.data(), n, gaussian, float(o.min_confidence), depth, conf, aif);
 }
 
 template <typename T, typename P>
 size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std::vector<double>& z,
                   const SffOptions& o, Outputs& out, int ox, int oy) {
-  if constexpr (std::is_same_v<T, int32_t> && std::is_same_v<P, uint8_t>) {
-    // Fused path with one neighbour each side: float arithmetic, AVX2 blocks of 8 and a scalar
-    // twin for the rest (or all of it without AVX2), bit-identical either way.
-    if (st.j == 1 && o.interpolation != DepthInterpolation::kLineFit) {
-      std::vector<float> zf(z.begin(), z.end());
-      const int n8 = st.simd ? (count & ~7) : 0;
-      const bool gaussian = o.interpolation == DepthInterpolation::kGaussian;
-      float* depth = out.depth.ptr<float>(oy) + ox;
-      float* conf = out.confidence.ptr<float>(oy) + ox;
-      uint8_t* aif = out.aif.ptr<uint8_t>(oy) + ox;
-      const int n = int(z.size());
-      size_t valid = 0;
-      if (n8 > 0) {
-        valid = FinishSpanAvx2(st, off, n8, zf.data(), n, gaussian, float(o.min_confidence), depth, conf, aif);
-      }
-      return valid + FinishSpanFloatScalar(st, off, n8, count, zf.data(), n, gaussian, float(o.min_confidence),
-                                           depth, conf, aif);
-    }
-  }
   return FinishSpanScalar(st, off, 0, count, z, o, out, ox, oy);
 }
 
@@ -984,6 +1231,27 @@ Status CheckFrame(const cv::Mat& frame, int k, cv::Size size, int type) {
   return Status::Ok();
 }
 
+// Checks of PushFrame for frame k = z.size(): the engine is open, the frame matches, z_um is
+// finite and continues the strictly monotonic z, at most 65535 frames (16-bit frame index).
+Status CheckPush(const cv::Mat& frame, double z_um, const std::vector<double>& z, bool finished, cv::Size size,
+                 int type) {
+  const int k = int(z.size());
+  if (finished) return Status::FailedPrecondition("engine already finished");
+  INSPECT_RETURN_IF_ERROR(CheckFrame(frame, k, size, type));
+  if (!std::isfinite(z_um)) return Status::InvalidArgument("frame " + std::to_string(k) + ": z_um is not finite");
+  if (k >= 1) {
+    const double dz = z_um - z.back();
+    if (dz == 0.0 || (k >= 2 && (dz > 0) != (z[1] > z[0]))) {
+      return Status::InvalidArgument("frame " + std::to_string(k) + ": z_um " + std::to_string(z_um) +
+                                     (dz == 0.0 ? " duplicates the previous frame's" : " is not strictly monotonic"));
+    }
+  }
+  if (k >= 65535) return Status::ResourceExhausted("frame " + std::to_string(k) + ": more than 65535 frames");
+  return Status::Ok();
+}
+
+// Engine of every case but the compact one below: other measures and 16-bit frames (float
+// focus values) and the line fit (j neighbours each side), with exact per-pixel state.
 template <typename T, typename P>
 class Engine final : public SffEngine {
  public:
@@ -1001,17 +1269,7 @@ class Engine final : public SffEngine {
 
   Status PushFrame(const cv::Mat& frame, double z_um) override {
     const int k = int(z_.size());
-    if (finished_) return Status::FailedPrecondition("engine already finished");
-    INSPECT_RETURN_IF_ERROR(CheckFrame(frame, k, size_, type_));
-    if (!std::isfinite(z_um)) return Status::InvalidArgument("frame " + std::to_string(k) + ": z_um is not finite");
-    if (k >= 1) {
-      const double dz = z_um - z_.back();
-      if (dz == 0.0 || (k >= 2 && (dz > 0) != (z_[1] > z_[0]))) {
-        return Status::InvalidArgument("frame " + std::to_string(k) + ": z_um " + std::to_string(z_um) +
-                                       (dz == 0.0 ? " duplicates the previous frame's" : " is not strictly monotonic"));
-      }
-    }
-    if (k >= 65535) return Status::ResourceExhausted("frame " + std::to_string(k) + ": more than 65535 frames");
+    INSPECT_RETURN_IF_ERROR(CheckPush(frame, z_um, z_, finished_, size_, type_));
     if constexpr (kFused) {
       const int tiles_x = (size_.width + kTileW - 1) / kTileW, tiles_y = (size_.height + kTileH - 1) / kTileH;
       ParallelFor(tiles_x * tiles_y, threads_, [&](int t, int worker) {
@@ -1058,6 +1316,7 @@ class Engine final : public SffEngine {
   }
 
   int frames_pushed() const override { return int(z_.size()); }
+  size_t state_bytes() const override { return state_.Bytes(); }
 
  private:
   SffOptions options_;
@@ -1067,6 +1326,70 @@ class Engine final : public SffEngine {
   bool finished_ = false;
   std::vector<double> z_;
   StatePlanes<T, P> state_;
+  std::vector<TenengradScratch> scratch_;
+};
+
+// 8-bit frames, Tenengrad, maximum or Gaussian interpolation (the scan default): the fused
+// kernel over the compact state (23 bytes per pixel); Finish writes depth, confidence and the
+// all-in-focus image into the state's own buffers, so the result adds no memory, and frees the
+// rest.
+class CompactEngine final : public SffEngine {
+ public:
+  CompactEngine(const SffOptions& o, cv::Size size) : options_(o), size_(size) {
+    state_.Allocate(size.width, size.height, o.use_simd, o.use_avx512);
+    threads_ = ResolveThreads(o.threads);
+    scratch_.resize(size_t(threads_));
+    for (auto& s : scratch_) s.Reserve(o.window_px);
+  }
+
+  Status PushFrame(const cv::Mat& frame, double z_um) override {
+    const int k = int(z_.size());
+    INSPECT_RETURN_IF_ERROR(CheckPush(frame, z_um, z_, finished_, size_, CV_8UC1));
+    const int tiles_x = (size_.width + kTileW - 1) / kTileW, tiles_y = (size_.height + kTileH - 1) / kTileH;
+    ParallelFor(tiles_x * tiles_y, threads_, [&](int t, int worker) {
+      const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kTileH;
+      const int tw = std::min(kTileW, size_.width - x0), th = std::min(kTileH, size_.height - y0);
+      TenengradScratch& sc = scratch_[size_t(worker)];
+      if (state_.avx2) CompactTileFrameAvx2(frame, k, x0, y0, tw, th, options_.window_px, sc, state_);
+      else CompactTileFramePortable(frame, k, x0, y0, tw, th, options_.window_px, sc, state_);
+    });
+    z_.push_back(z_um);
+    return Status::Ok();
+  }
+
+  StatusOr<DepthResult> Finish() override {
+    const int n = int(z_.size());
+    if (finished_) return Status::FailedPrecondition("engine already finished");
+    if (n < 3) return Status::InvalidArgument("stack has " + std::to_string(n) + " frames; at least 3 are needed");
+    finished_ = true;
+    const std::vector<float> zf(z_.begin(), z_.end());
+    std::atomic<size_t> valid{0};
+    uint32_t* depth = reinterpret_cast<uint32_t*>(state_.best.data);
+    uint32_t* conf = reinterpret_cast<uint32_t*>(state_.sum_idx.data);
+    ParallelFor(size_.height, threads_, [&](int y, int) {
+      const size_t off = size_t(y) * size_.width;
+      valid += FinishCompactRow(state_, off, size_.width, zf, options_, depth + off, conf + off, state_.aif.data + off);
+    });
+    DepthResult r;
+    r.depth_um = state_.best;      // CV_32F, now holding depth_um
+    r.confidence = state_.sum_idx;  // CV_32F, now holding the confidence
+    r.all_in_focus = state_.aif;
+    r.frame_count = n;
+    r.valid_fraction = double(valid.load()) / double(size_.area());
+    state_ = {};  // the result owns its three buffers; the rest of the state is freed
+    return r;
+  }
+
+  int frames_pushed() const override { return int(z_.size()); }
+  size_t state_bytes() const override { return state_.Bytes(); }
+
+ private:
+  SffOptions options_;
+  cv::Size size_;
+  int threads_ = 1;
+  bool finished_ = false;
+  std::vector<double> z_;
+  CompactState state_;
   std::vector<TenengradScratch> scratch_;
 };
 
@@ -1083,11 +1406,16 @@ bool UseFused(const SffOptions& o, int frame_type) {
   return frame_type == CV_8UC1 && o.focus_measure == FocusMeasure::kTenengrad;
 }
 
+bool UseCompact(const SffOptions& o, int frame_type) {
+  return UseFused(o, frame_type) && o.interpolation != DepthInterpolation::kLineFit;
+}
+
 }  // namespace
 
 StatusOr<std::unique_ptr<SffEngine>> SffEngine::Create(const SffOptions& options, cv::Size frame_size,
                                                        int frame_type) {
   INSPECT_RETURN_IF_ERROR(CheckCreate(options, frame_size, frame_type));
+  if (UseCompact(options, frame_type)) return std::unique_ptr<SffEngine>(new CompactEngine(options, frame_size));
   if (UseFused(options, frame_type)) {
     return std::unique_ptr<SffEngine>(new Engine<int32_t, uint8_t>(options, frame_size, frame_type));
   }
@@ -1128,6 +1456,7 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
   // Tiles across all frames: each worker keeps one tile's state, runs every frame over it, then
   // interpolates the tile; the same kernels as PushFrame, so the result is bit-identical.
   const int threads = ResolveThreads(options.threads);
+  const bool compact = UseCompact(options, type);
   const int j = options.interpolation == DepthInterpolation::kLineFit ? options.linefit_half_width : 1;
   const int tiles_x = (size.width + kTileW - 1) / kTileW, tiles_y = (size.height + kBatchTileH - 1) / kBatchTileH;
   const int n_tiles = tiles_x * tiles_y;
@@ -1136,21 +1465,23 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
   out.confidence.create(size, CV_32F);
   out.aif.create(size, type);
   const int workers = std::max(1, std::min(threads, n_tiles));
-  std::vector<StatePlanes<int32_t, uint8_t>> states(static_cast<size_t>(workers));
+  std::vector<CompactState> compact_states(compact ? size_t(workers) : 0);
+  std::vector<StatePlanes<int32_t, uint8_t>> states(compact ? 0 : size_t(workers));
   std::vector<TenengradScratch> scratch(static_cast<size_t>(workers));
   std::vector<std::vector<int32_t>> volumes(static_cast<size_t>(workers));
   for (int w = 0; w < workers; ++w) {
-    states[size_t(w)].Allocate(kTileW, kBatchTileH, j, options.use_simd);
+    if (compact) compact_states[size_t(w)].Allocate(kTileW, kBatchTileH, options.use_simd, options.use_avx512);
+    else states[size_t(w)].Allocate(kTileW, kBatchTileH, j, options.use_simd);
     scratch[size_t(w)].Reserve(options.window_px);
     volumes[size_t(w)].resize(size_t(kTileW) * kBatchTileH * kFrameChunk);
   }
   const bool avx2 = options.use_simd && HasAvx2();
-  const bool avx512 = avx2 && options.use_avx512 && HasAvx512();
   const int n = int(frames.size());
+  const std::vector<float> zf(z_um.begin(), z_um.end());
   std::atomic<size_t> valid{0};
   ParallelFor(n_tiles, workers, [&](int t, int worker) {
-    auto& st = states[size_t(worker)];
     int32_t* vol = volumes[size_t(worker)].data();
+    if (compact) compact_states[size_t(worker)].Reset();
     const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kBatchTileH;
     const int tw = std::min(kTileW, size.width - x0), th = std::min(kBatchTileH, size.height - y0);
     for (int k0 = 0; k0 < n; k0 += kFrameChunk) {
@@ -1162,43 +1493,34 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
         else FocusRowsToVolumePortable(frames[size_t(k)], k - k0, x0, y0, tw, th, options.window_px,
                                        scratch[size_t(worker)], vol, next);
       }
-      // Each state row stays in L1 (AVX2: in registers) while the chunk's frames update it, in
-      // frame order.
+      // Each state row stays in L1 (compact state with AVX2 / AVX-512: in registers) while the
+      // chunk's frames update it, in frame order.
       const size_t slot_stride = size_t(kBatchTileH) * kTileW;
       for (int y = 0; y < th; ++y) {
-        const size_t off = size_t(y) * st.width;
+        const size_t off = size_t(y) * kTileW;
         const int32_t* vol_row = vol + size_t(y) * kTileW;
         const uint8_t* pix_rows[kFrameChunk];
         for (int k = k0; k < k1; ++k) pix_rows[k - k0] = frames[size_t(k)].ptr<uint8_t>(y0 + y) + x0;
-        int k_begin = k0;
-        if (st.simd && st.j == 1) {
-          if (k0 == 0) {  // frame 0 initialises the state
-            UpdateRow(st, off, 0, vol_row, pix_rows[0], tw);
-            k_begin = 1;
-          }
-          const int n8 = tw & ~7, n16 = avx512 ? tw & ~15 : 0;
-          if (n16 > 0) {
-            UpdateChunkAvx512(0, n16, k_begin, k1, k0, vol_row, slot_stride, pix_rows, st.best.data() + off,
-                              st.idx.data() + off, st.before[0].data() + off, st.after[0].data() + off,
-                              st.ring[0].data() + off, st.last2.data() + off, st.aif.data() + off,
-                              st.sum.data() + off, st.curv_all.data() + off, st.curv_excl.data() + off);
-          }
-          UpdateChunkAvx2(n16, n8, k_begin, k1, k0, vol_row, slot_stride, pix_rows, st.best.data() + off,
-                          st.idx.data() + off, st.before[0].data() + off, st.after[0].data() + off,
-                          st.ring[0].data() + off, st.last2.data() + off, st.aif.data() + off, st.sum.data() + off,
-                          st.curv_all.data() + off, st.curv_excl.data() + off);
-          for (int k = k_begin; k < k1 && n8 < tw; ++k) {
-            UpdateRow(st, off + n8, k, vol_row + size_t(k - k0) * slot_stride + n8, pix_rows[k - k0] + n8, tw - n8);
-          }
+        if (compact) {
+          UpdateCompactRow(compact_states[size_t(worker)], off, tw, k0, k1, k0, vol_row, slot_stride, pix_rows);
         } else {
           for (int k = k0; k < k1; ++k) {
-            UpdateRow(st, off, k, vol_row + size_t(k - k0) * slot_stride, pix_rows[k - k0], tw);
+            UpdateRow(states[size_t(worker)], off, k, vol_row + size_t(k - k0) * slot_stride, pix_rows[k - k0], tw);
           }
         }
       }
     }
     size_t v = 0;
-    for (int y = 0; y < th; ++y) v += FinishSpan(st, size_t(y) * st.width, tw, z_um, options, out, x0, y0 + y);
+    for (int y = 0; y < th; ++y) {
+      const size_t off = size_t(y) * kTileW;
+      if (compact) {
+        v += FinishCompactRow(compact_states[size_t(worker)], off, tw, zf, options,
+                              out.depth.ptr<uint32_t>(y0 + y) + x0, out.confidence.ptr<uint32_t>(y0 + y) + x0,
+                              out.aif.ptr<uint8_t>(y0 + y) + x0);
+      } else {
+        v += FinishSpan(states[size_t(worker)], off, tw, z_um, options, out, x0, y0 + y);
+      }
+    }
     valid += v;
   });
   DepthResult r;

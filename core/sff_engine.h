@@ -55,8 +55,8 @@ struct SffOptions {
   // AVX2 kernels when the CPU has them (chosen at run time); false forces the portable kernels.
   // Both give bit-identical results.
   bool use_simd = true;
-  // With use_simd: AVX-512 for ReconstructInMemory's state update when the CPU has it (false
-  // keeps AVX2). Bit-identical either way.
+  // With use_simd: AVX-512 for the state update of 8-bit Tenengrad (maximum or Gaussian) when
+  // the CPU has it (false keeps AVX2). Bit-identical either way.
   bool use_avx512 = true;
 
   // INVALID_ARGUMENT naming the field when out of range.
@@ -74,11 +74,17 @@ struct DepthResult {
 // Not thread-safe: one producer pushes frames in acquisition order. The engine may use
 // several threads internally per frame.
 //
-// State per pixel (about 40 bytes, independent of the frame count): best focus value F_max and
-// its frame index, the focus values next to it (1, or linefit_half_width on each side), the
-// last two focus values, the sum of F and the squared second differences of the curve (for the
-// confidence), and the all-in-focus grey value. At Finish each pixel is interpolated
+// State per pixel, independent of the frame count: best focus value F_max and its frame index,
+// the focus values next to it (1, or linefit_half_width on each side), the last two focus
+// values, the sum of F and the squared second differences of the curve (for the confidence),
+// and the all-in-focus grey value. At Finish each pixel is interpolated
 // (core/depth_interpolation.h) and gets its confidence; pixels below min_confidence get NaN.
+// Size (state_bytes() / pixels): 23 bytes for 8-bit frames with Tenengrad and maximum or
+// Gaussian interpolation (the scan default: exact int32 F_max, 16-bit float codes of the other
+// focus values, truncated-float sums; details in core/sff_engine.cc), and there Finish writes
+// the result into the state's own buffers, so it adds no memory. Other measures, 16-bit frames
+// and the line fit keep exact 32-bit state: 28 + 12 j bytes (j = 1, or linefit_half_width),
+// plus the result (9 or 10 bytes per pixel) at Finish.
 //
 // Speed: 8-bit frames with Tenengrad run through a fused integer kernel (Sobel, squares, window
 // sum and state update per cache-sized tile; 16-bit AVX2 lanes chosen at run time, portable
@@ -98,6 +104,8 @@ class SffEngine {
   // Needs >= 3 frames. After Finish the engine cannot take more frames.
   virtual StatusOr<DepthResult> Finish() = 0;
   virtual int frames_pushed() const = 0;
+  // Bytes of per-pixel state the engine holds while frames are pushed (0 after Finish).
+  virtual size_t state_bytes() const = 0;
 
   // Batch path for a stack already in memory: same result as pushing the frames one by one
   // (bit-identical), but processes cache-sized tiles across all frames on options.threads

@@ -270,6 +270,130 @@ TEST(SffEngineTest, FullContrastWithWidestWindowStaysExact) {
   EXPECT_NEAR(hi, 6.0, 1e-3);
 }
 
+TEST(SffEngineTest, StreamingStateBytesPerPixel) {
+  // 8-bit Tenengrad with maximum or Gaussian (the scan default): the compact 23-byte state;
+  // every other case exact 32-bit state of 28 + 12 j bytes. Nothing is left after Finish.
+  const cv::Size size(37, 11);
+  const double px = double(size.area());
+  auto bytes = [&](SffOptions o, int type) {
+    auto e = SffEngine::Create(o, size, type);
+    EXPECT_TRUE(e.ok()) << e.status().ToString();
+    return double((*e)->state_bytes()) / px;
+  };
+  SffOptions o;
+  EXPECT_EQ(bytes(o, CV_8UC1), 23.0);
+  o.interpolation = DepthInterpolation::kMaximum;
+  EXPECT_EQ(bytes(o, CV_8UC1), 23.0);
+  EXPECT_EQ(bytes(o, CV_16UC1), 40.0);
+  o.interpolation = DepthInterpolation::kLineFit;
+  o.linefit_half_width = 3;
+  EXPECT_EQ(bytes(o, CV_8UC1), 28.0 + 12 * 3);
+  o = SffOptions{};
+  o.focus_measure = FocusMeasure::kSumModifiedLaplacian;
+  EXPECT_EQ(bytes(o, CV_8UC1), 40.0);
+
+  const auto s = TiltedPlaneStack(size, UniformZ(5, 0.0, 1.0), 2.0, 0.02, 0.02);
+  auto e = std::move(SffEngine::Create(SffOptions{}, size, CV_8UC1).value());
+  for (size_t k = 0; k < s.frames.size(); ++k) ASSERT_TRUE(e->PushFrame(s.frames[k], s.z_um[k]).ok());
+  auto r = e->Finish();
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(e->state_bytes(), 0u);
+  e.reset();  // the result owns its buffers (written in place into the state's)
+  auto batch = SffEngine::ReconstructInMemory(SffOptions{}, s.frames, s.z_um);
+  ASSERT_TRUE(batch.ok());
+  EXPECT_TRUE(BitIdentical(r->depth_um, batch->depth_um));
+  EXPECT_TRUE(BitIdentical(r->confidence, batch->confidence));
+  EXPECT_TRUE(BitIdentical(r->all_in_focus, batch->all_in_focus));
+  EXPECT_TRUE(r->depth_um.isContinuous() && r->depth_um.type() == CV_32FC1 && r->depth_um.size() == size);
+}
+
+TEST(SffEngineTest, CompactStateMatchesExactState) {
+  // The same 8-bit frames as 16-bit: the 16-bit path keeps exact float state (the Tenengrad
+  // values agree to float rounding), the 8-bit path the compact one (16-bit codes of the focus
+  // values next to the peak, 16-bit significands of the sums). Depth and confidence agree to a
+  // small fraction of the z step and of the confidence scale; the maximum is the same frame.
+  const auto s = TiltedPlaneStack(cv::Size(96, 64), UniformZ(15, 0.0, 1.0), 3.0, 0.07, 0.05);
+  std::vector<cv::Mat> frames16;
+  for (const auto& f : s.frames) {
+    cv::Mat f16;
+    f.convertTo(f16, CV_16U);
+    frames16.push_back(f16);
+  }
+  for (DepthInterpolation interp : {DepthInterpolation::kGaussian, DepthInterpolation::kMaximum}) {
+    SffOptions o;
+    o.interpolation = interp;
+    o.min_confidence = 0.0;
+    const DepthResult compact = Streamed(o, s.frames, s.z_um);
+    const DepthResult exact = Streamed(o, frames16, s.z_um);
+    double worst_depth = 0, worst_conf = 0, sum_sq = 0;
+    for (int y = 0; y < compact.depth_um.rows; ++y)
+      for (int x = 0; x < compact.depth_um.cols; ++x) {
+        const double dd = std::abs(compact.depth_um.at<float>(y, x) - exact.depth_um.at<float>(y, x));
+        worst_depth = std::max(worst_depth, dd);
+        sum_sq += dd * dd;
+        worst_conf = std::max(
+            worst_conf, double(std::abs(compact.confidence.at<float>(y, x) - exact.confidence.at<float>(y, x))));
+      }
+    const double rms_depth = std::sqrt(sum_sq / double(compact.depth_um.total()));
+    std::printf("[figures] compact vs exact state (%s): depth max %.2e rms %.2e step, confidence max %.2e\n",
+                DepthInterpolationName(interp), worst_depth, rms_depth, worst_conf);
+    EXPECT_LT(worst_depth, interp == DepthInterpolation::kMaximum ? 1e-6 : 5e-3);
+    EXPECT_LT(rms_depth, interp == DepthInterpolation::kMaximum ? 1e-6 : 5e-4);
+    EXPECT_LT(worst_conf, 2e-3);
+    EXPECT_TRUE(BitIdentical(compact.all_in_focus, [&] {
+      cv::Mat a8;
+      exact.all_in_focus.convertTo(a8, CV_8U);
+      return a8;
+    }()));
+  }
+}
+
+TEST(SffEngineTest, CompactStreamingKernelsAgree) {
+  // PushFrame with AVX-512, AVX2 and portable state updates (300 px: blocks of 16 and 8 and a
+  // scalar rest), all bit-identical to the batch path.
+  const auto s = TiltedPlaneStack(cv::Size(300, 40), UniformZ(11, 0.0, 1.0), 3.0, 0.02, 0.03);
+  SffOptions o;
+  o.min_confidence = 0.0;
+  const DepthResult avx512 = Streamed(o, s.frames, s.z_um);
+  o.use_avx512 = false;
+  const DepthResult avx2 = Streamed(o, s.frames, s.z_um);
+  o.use_simd = false;
+  const DepthResult portable = Streamed(o, s.frames, s.z_um);
+  SffOptions defaults;
+  defaults.min_confidence = 0.0;
+  auto batch = SffEngine::ReconstructInMemory(defaults, s.frames, s.z_um);
+  ASSERT_TRUE(batch.ok());
+  for (const DepthResult* r : {&avx512, &avx2, &portable}) {
+    EXPECT_TRUE(BitIdentical(r->depth_um, batch->depth_um));
+    EXPECT_TRUE(BitIdentical(r->confidence, batch->confidence));
+    EXPECT_TRUE(BitIdentical(r->all_in_focus, batch->all_in_focus));
+  }
+}
+
+TEST(SffEngineTest, MaximaBeyondFrame255) {
+  // 300 frames 0.1 µm apart, the plane at 27.0-27.6 µm: every maximum is at frame 270-276, so
+  // the frame index needs its high byte (kept in a separate word of the compact state).
+  const auto s = TiltedPlaneStack(cv::Size(40, 12), UniformZ(300, 0.0, 0.1), 27.0, 0.015, 0.0);
+  for (DepthInterpolation interp : {DepthInterpolation::kMaximum, DepthInterpolation::kGaussian}) {
+    SffOptions o;
+    o.interpolation = interp;
+    o.min_confidence = 0.0;
+    const DepthResult streamed = Streamed(o, s.frames, s.z_um);
+    auto batch = SffEngine::ReconstructInMemory(o, s.frames, s.z_um);
+    ASSERT_TRUE(batch.ok());
+    o.use_simd = false;
+    const DepthResult portable = Streamed(o, s.frames, s.z_um);
+    EXPECT_TRUE(BitIdentical(streamed.depth_um, batch->depth_um));
+    EXPECT_TRUE(BitIdentical(streamed.confidence, batch->confidence));
+    EXPECT_TRUE(BitIdentical(streamed.depth_um, portable.depth_um));
+    const auto e = CompareDepth(streamed.depth_um, s.height_um);
+    std::printf("[figures] 300 frames, maxima at 270-276 (%s): RMSE %.4f µm, max %.3f µm\n",
+                DepthInterpolationName(interp), e.rmse_um, e.max_abs_um);
+    EXPECT_LT(e.max_abs_um, 0.3);  // 3 z steps; a lost high byte would be 25.6 µm off
+    EXPECT_GT(streamed.valid_fraction, 0.99);
+  }
+}
+
 TEST(SffEngineTest, BatchFallsBackToStreamingForOtherMeasuresAnd16Bit) {
   const auto s = TiltedPlaneStack(cv::Size(64, 48), UniformZ(9, 0.0, 1.0), 3.0, 0.03, 0.02, CV_16U);
   SffOptions o;
