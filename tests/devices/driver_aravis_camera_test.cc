@@ -210,8 +210,9 @@ TEST_F(GigeLoopbackTest, RigResetReconnectsTheCamera) {
   EXPECT_EQ(rig.camera().Capture().status().code(), StatusCode::kUnavailable);
   EXPECT_THAT(rig.CheckDevices().message(), ::testing::HasSubstr("camera (aravis"));
   StartFakeCamera("DRVRIG");
-  reset_until_camera();
-  ASSERT_TRUE(rig.camera().info().connected);
+  reset = reset_until_camera();
+  ASSERT_TRUE(rig.camera().info().connected) << reset.ToString();
+  EXPECT_EQ(reset.code(), StatusCode::kUnavailable);  // the stage is still absent
   StatusOr<cv::Mat> frame = rig.camera().Capture();
   ASSERT_TRUE(frame.ok()) << frame.status().ToString();
   EXPECT_EQ(frame->size(), cv::Size(32, 24));
