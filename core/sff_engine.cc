@@ -5,8 +5,9 @@
 // grey value. 8-bit Tenengrad runs through a fused integer kernel (Sobel, squares, window sum and
 // state update in one pass over a cache-sized tile, AVX2 / AVX-512 selected at run time); with
 // maximum or Gaussian interpolation (the scan default) its state is the compact 23-byte layout
-// described at CompactState (exact 32-bit state was 40 bytes; PushFrame is bound by streaming
-// the state through memory every frame). The line fit and every other measure (through
+// described at CompactState (exact 32-bit state was 40 bytes), and PushFrame takes frames in
+// chunks of 8 so that the state, which bounds its speed, is streamed through memory once per
+// chunk rather than once per frame. The line fit and every other measure (through
 // core/focus_measure.h) keep exact 32-bit state: 28 + 12 j bytes per pixel (StatePlanes).
 #include "core/sff_engine.h"
 
@@ -908,29 +909,6 @@ SFF_INLINE void PrefetchCompactRow(const CompactPtrs& s, int n) {
   for (int i = 0; i < n; i += 64) __builtin_prefetch(s.aif + i, 1, 3);
 }
 
-// Sink of the fused kernel in PushFrame: one frame k over the tile row.
-struct CompactSink {
-  CompactState& st;
-  int k, y0, tw, sx, sy;
-  SFF_INLINE void operator()(int y, const int32_t* f, const uint8_t* pix) {
-    const int sy_row = y - y0 + sy;
-    // The next row's state, one frame-row of planes away from this one: the hardware prefetcher
-    // follows the ten planes within a row but not the jump between rows.
-    if (sy_row + 1 < st.height) PrefetchCompactRow(st.Row(size_t(sy_row + 1) * st.width + sx), tw);
-    const uint8_t* rows[1] = {pix};
-    UpdateCompactRow(st, size_t(sy_row) * st.width + sx, tw, k, k + 1, k, f, 0, rows);
-  }
-};
-
-__attribute__((target("avx2"))) void CompactTileFrameAvx2(const cv::Mat& frame, int k, int x0, int y0, int tw, int th,
-                                                          int window, TenengradScratch& sc, CompactState& st) {
-  TenengradTile<true>(frame, x0, y0, tw, th, window, sc, CompactSink{st, k, y0, tw, x0, y0});
-}
-void CompactTileFramePortable(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window,
-                              TenengradScratch& sc, CompactState& st) {
-  TenengradTile<false>(frame, x0, y0, tw, th, window, sc, CompactSink{st, k, y0, tw, x0, y0});
-}
-
 // Sink of the batch path: keeps the focus row of frame slot `slot` for the later state update.
 struct VolumeSink {
   int32_t* vol;
@@ -1340,20 +1318,18 @@ class CompactEngine final : public SffEngine {
     threads_ = ResolveThreads(o.threads);
     scratch_.resize(size_t(threads_));
     for (auto& s : scratch_) s.Reserve(o.window_px);
+    volumes_.assign(size_t(threads_), std::vector<int32_t>(size_t(kTileW) * kBatchTileH * kFrameChunk));
   }
 
+  // Frames are taken in chunks of kFrameChunk: each state tile is then read and written once
+  // per chunk instead of once per frame (the state update is memory-bound), with the batch
+  // path's kernels, so the result stays bit-identical. The frames of an open chunk are held
+  // by reference (cv::Mat shares the pixels); a Mat over memory it does not own is copied.
   Status PushFrame(const cv::Mat& frame, double z_um) override {
-    const int k = int(z_.size());
     INSPECT_RETURN_IF_ERROR(CheckPush(frame, z_um, z_, finished_, size_, CV_8UC1));
-    const int tiles_x = (size_.width + kTileW - 1) / kTileW, tiles_y = (size_.height + kTileH - 1) / kTileH;
-    ParallelFor(tiles_x * tiles_y, threads_, [&](int t, int worker) {
-      const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kTileH;
-      const int tw = std::min(kTileW, size_.width - x0), th = std::min(kTileH, size_.height - y0);
-      TenengradScratch& sc = scratch_[size_t(worker)];
-      if (state_.avx2) CompactTileFrameAvx2(frame, k, x0, y0, tw, th, options_.window_px, sc, state_);
-      else CompactTileFramePortable(frame, k, x0, y0, tw, th, options_.window_px, sc, state_);
-    });
+    pending_.push_back(frame.u != nullptr ? frame : frame.clone());
     z_.push_back(z_um);
+    if (int(pending_.size()) == kFrameChunk) ProcessPending();
     return Status::Ok();
   }
 
@@ -1361,7 +1337,9 @@ class CompactEngine final : public SffEngine {
     const int n = int(z_.size());
     if (finished_) return Status::FailedPrecondition("engine already finished");
     if (n < 3) return Status::InvalidArgument("stack has " + std::to_string(n) + " frames; at least 3 are needed");
+    ProcessPending();
     finished_ = true;
+    volumes_ = {};
     const std::vector<float> zf(z_.begin(), z_.end());
     std::atomic<size_t> valid{0};
     uint32_t* depth = reinterpret_cast<uint32_t*>(state_.best.data);
@@ -1384,6 +1362,36 @@ class CompactEngine final : public SffEngine {
   size_t state_bytes() const override { return state_.Bytes(); }
 
  private:
+  // Frames z_.size() - pending_.size() .. z_.size() - 1 over the state, tile by tile.
+  void ProcessPending() {
+    if (pending_.empty()) return;
+    const int k1 = int(z_.size()), k0 = k1 - int(pending_.size());
+    const int tiles_x = (size_.width + kTileW - 1) / kTileW, tiles_y = (size_.height + kBatchTileH - 1) / kBatchTileH;
+    const size_t slot_stride = size_t(kBatchTileH) * kTileW;
+    ParallelFor(tiles_x * tiles_y, threads_, [&](int t, int worker) {
+      const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kBatchTileH;
+      const int tw = std::min(kTileW, size_.width - x0), th = std::min(kBatchTileH, size_.height - y0);
+      TenengradScratch& sc = scratch_[size_t(worker)];
+      int32_t* vol = volumes_[size_t(worker)].data();
+      for (int k = k0; k < k1; ++k) {
+        const int slot = k - k0;
+        const cv::Mat* next = slot + 1 < int(pending_.size()) ? &pending_[size_t(slot) + 1] : nullptr;
+        if (state_.avx2) FocusRowsToVolumeAvx2(pending_[size_t(slot)], slot, x0, y0, tw, th, options_.window_px, sc, vol, next);
+        else FocusRowsToVolumePortable(pending_[size_t(slot)], slot, x0, y0, tw, th, options_.window_px, sc, vol, next);
+      }
+      for (int y = 0; y < th; ++y) {
+        const uint8_t* pix_rows[kFrameChunk];
+        for (int k = k0; k < k1; ++k) pix_rows[k - k0] = pending_[size_t(k - k0)].ptr<uint8_t>(y0 + y) + x0;
+        // The next row's state is a whole frame row of planes away: the hardware prefetcher
+        // follows the planes within a row but not that jump.
+        if (y + 1 < th) PrefetchCompactRow(state_.Row(size_t(y0 + y + 1) * size_.width + x0), tw);
+        UpdateCompactRow(state_, size_t(y0 + y) * size_.width + x0, tw, k0, k1, k0, vol + size_t(y) * kTileW,
+                         slot_stride, pix_rows);
+      }
+    });
+    pending_.clear();
+  }
+
   SffOptions options_;
   cv::Size size_;
   int threads_ = 1;
@@ -1391,6 +1399,8 @@ class CompactEngine final : public SffEngine {
   std::vector<double> z_;
   CompactState state_;
   std::vector<TenengradScratch> scratch_;
+  std::vector<std::vector<int32_t>> volumes_;  // per worker: focus rows of one tile x kFrameChunk frames
+  std::vector<cv::Mat> pending_;              // frames of the open chunk
 };
 
 Status CheckCreate(const SffOptions& options, cv::Size frame_size, int frame_type) {

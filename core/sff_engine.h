@@ -89,7 +89,10 @@ struct DepthResult {
 // Speed: 8-bit frames with Tenengrad run through a fused integer kernel (Sobel, squares, window
 // sum and state update per cache-sized tile; 16-bit AVX2 lanes chosen at run time, portable
 // fallback, bit-identical). PushFrame splits each frame into tiles over options.threads threads;
-// ReconstructInMemory runs each tile across all frames so its state stays in cache. Other
+// with the compact state it takes frames in chunks of 8 and runs each tile across the chunk, so
+// the state is streamed through memory once per 8 frames (the chunk's frames are held by
+// reference meanwhile; at most 7 frames wait, and Finish processes them); ReconstructInMemory
+// runs each tile across all frames so its state stays in cache. Other
 // measures and 16-bit frames compute the whole-frame focus map (core/focus_measure.h) and share
 // the same state update. inspect-bench measures it (tests/bench/inspect_bench.cc).
 class SffEngine {
@@ -99,7 +102,10 @@ class SffEngine {
                                                      int frame_type);
   virtual ~SffEngine() = default;
 
-  // z_um must be strictly monotonic over the pushed frames (either direction).
+  // z_um must be strictly monotonic over the pushed frames (either direction). The frame is
+  // validated at once (errors name it); its pixels may be processed later, up to Finish: the
+  // engine keeps a reference (cv::Mat shares them; a Mat over memory it does not own is
+  // copied), so the caller must not write into a pushed frame's pixels.
   virtual Status PushFrame(const cv::Mat& frame, double z_um) = 0;
   // Needs >= 3 frames. After Finish the engine cannot take more frames.
   virtual StatusOr<DepthResult> Finish() = 0;

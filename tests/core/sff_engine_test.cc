@@ -307,6 +307,43 @@ TEST(SffEngineTest, StreamingStateBytesPerPixel) {
   EXPECT_TRUE(r->depth_um.isContinuous() && r->depth_um.type() == CV_32FC1 && r->depth_um.size() == size);
 }
 
+TEST(SffEngineTest, ChunkedStreamingHoldsFramesSafelyAndMatchesBatch) {
+  // PushFrame takes 8-bit Tenengrad frames in chunks of 8: any frame count (a partial chunk is
+  // processed at Finish) gives the batch result. A pushed Mat over caller memory is copied, so
+  // overwriting that memory after PushFrame changes nothing; one that owns its pixels is shared.
+  const cv::Size size(70, 40);
+  for (int n : {3, 8, 9, 16, 21}) {
+    const auto s = TiltedPlaneStack(size, UniformZ(n, 0.0, 1.0), 3.0, 0.05, 0.03);
+    auto e = std::move(SffEngine::Create(SffOptions{}, size, CV_8UC1).value());
+    std::vector<uint8_t> buffer(size_t(size.area()));
+    for (int k = 0; k < n; ++k) {
+      std::copy(s.frames[size_t(k)].datastart, s.frames[size_t(k)].dataend, buffer.begin());
+      const cv::Mat borrowed(size, CV_8UC1, buffer.data());  // does not own its pixels
+      ASSERT_TRUE(e->PushFrame(borrowed, s.z_um[size_t(k)]).ok());
+      std::fill(buffer.begin(), buffer.end(), uint8_t(0));  // the caller reuses its buffer
+    }
+    auto streamed = e->Finish();
+    auto batch = SffEngine::ReconstructInMemory(SffOptions{}, s.frames, s.z_um);
+    ASSERT_TRUE(streamed.ok() && batch.ok()) << n;
+    EXPECT_TRUE(BitIdentical(streamed->depth_um, batch->depth_um)) << n << " frames";
+    EXPECT_TRUE(BitIdentical(streamed->confidence, batch->confidence)) << n << " frames";
+    EXPECT_TRUE(BitIdentical(streamed->all_in_focus, batch->all_in_focus)) << n << " frames";
+    EXPECT_EQ(streamed->valid_fraction, batch->valid_fraction) << n << " frames";
+    EXPECT_GT(streamed->valid_fraction, 0.5) << n << " frames";
+  }
+  // Too few frames at Finish: refused, and the engine still takes frames.
+  const auto s = TiltedPlaneStack(size, UniformZ(3, 0.0, 1.0), 3.0, 0.05, 0.03);
+  auto e = std::move(SffEngine::Create(SffOptions{}, size, CV_8UC1).value());
+  ASSERT_TRUE(e->PushFrame(s.frames[0], s.z_um[0]).ok());
+  ASSERT_TRUE(e->PushFrame(s.frames[1], s.z_um[1]).ok());
+  EXPECT_EQ(e->Finish().status().code(), StatusCode::kInvalidArgument);
+  ASSERT_TRUE(e->PushFrame(s.frames[2], s.z_um[2]).ok());
+  auto r = e->Finish();
+  auto batch = SffEngine::ReconstructInMemory(SffOptions{}, s.frames, s.z_um);
+  ASSERT_TRUE(r.ok() && batch.ok());
+  EXPECT_TRUE(BitIdentical(r->depth_um, batch->depth_um));
+}
+
 TEST(SffEngineTest, CompactStateMatchesExactState) {
   // The same 8-bit frames as 16-bit: the 16-bit path keeps exact float state (the Tenengrad
   // values agree to float rounding), the 8-bit path the compact one (16-bit codes of the focus
