@@ -1,5 +1,6 @@
 #include "core/depth_metrics.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -36,6 +37,36 @@ DepthErrorStats CompareDepth(const cv::Mat& depth_um, const cv::Mat& reference_u
   s.mean_abs_error_um = sum_abs / n;
   s.outlier_percent = 100.0 * double(outliers) / n;
   return s;
+}
+
+double LocalOutlierPercent(const cv::Mat& depth_um, double jump_threshold_um, int border_px) {
+  CV_Assert(depth_um.type() == CV_32FC1);
+  size_t measured = 0, outliers = 0;
+  float nb[8];
+  for (int y = border_px; y < depth_um.rows - border_px; ++y) {
+    const float* d = depth_um.ptr<float>(y);
+    for (int x = border_px; x < depth_um.cols - border_px; ++x) {
+      if (!std::isfinite(d[x])) continue;
+      ++measured;
+      int n = 0;
+      for (int dy = -1; dy <= 1; ++dy) {
+        const int yy = y + dy;
+        if (yy < border_px || yy >= depth_um.rows - border_px) continue;
+        const float* row = depth_um.ptr<float>(yy);
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int xx = x + dx;
+          if ((dx == 0 && dy == 0) || xx < border_px || xx >= depth_um.cols - border_px) continue;
+          if (std::isfinite(row[xx])) nb[n++] = row[xx];
+        }
+      }
+      if (n < 3) continue;
+      std::nth_element(nb, nb + n / 2, nb + n);
+      double median = nb[n / 2];
+      if (n % 2 == 0) median = 0.5 * (median + double(*std::max_element(nb, nb + n / 2)));
+      outliers += std::abs(double(d[x]) - median) > jump_threshold_um;
+    }
+  }
+  return measured ? 100.0 * double(outliers) / double(measured) : 0.0;
 }
 
 std::pair<double, double> FiniteRange(const cv::Mat& depth_um) {

@@ -21,6 +21,14 @@ struct DepthErrorStats {
 DepthErrorStats CompareDepth(const cv::Mat& depth_um, const cv::Mat& reference_um, double outlier_threshold_um,
                              int border_px = 0);
 
+// Thesis 6.3's outlier measure, which needs no reference ("a significant change in depth between
+// consecutive pixels"), made robust: the percentage of measured pixels (outside border_px) whose
+// depth differs by more than jump_threshold_um from the median of their measured 8-neighbours
+// (at least 3 of them). A lone spike counts once, and the pixels along a true step of the
+// surface do not count, since most of their neighbours lie on their own side. 0 when nothing is
+// measured.
+double LocalOutlierPercent(const cv::Mat& depth_um, double jump_threshold_um, int border_px = 0);
+
 // Min and max over finite values; {NaN, NaN} when there are none.
 std::pair<double, double> FiniteRange(const cv::Mat& depth_um);
 

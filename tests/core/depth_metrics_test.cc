@@ -29,6 +29,25 @@ TEST(DepthMetricsTest, BorderIsLeftOut) {
   EXPECT_NEAR(s.rmse_um, 1.0, 1e-9);
 }
 
+TEST(DepthMetricsTest, LocalOutliersCountSpikesNotSteps) {
+  // 10 x 10 plane at 0 with a 30 um step at x >= 5, one spike of +20 um at (2, 2) and a NaN.
+  cv::Mat d(10, 10, CV_32F, cv::Scalar(0.f));
+  d(cv::Rect(5, 0, 5, 10)).setTo(30.f);
+  d.at<float>(2, 2) = 20.f;
+  d.at<float>(7, 7) = std::nanf("");
+  // 99 measured pixels: the spike is the only outlier, the 20 pixels along the step are not.
+  EXPECT_NEAR(LocalOutlierPercent(d, 10.0), 100.0 / 99.0, 1e-9);
+  EXPECT_NEAR(LocalOutlierPercent(d, 25.0), 0.0, 1e-9);  // the spike is within 25 um
+  // A border of 3 leaves the spike out (4 x 4 inner pixels, all regular).
+  EXPECT_NEAR(LocalOutlierPercent(d, 10.0, 3), 0.0, 1e-9);
+  // A pixel with fewer than 3 measured neighbours is not judged.
+  cv::Mat lone(3, 3, CV_32F, cv::Scalar(NAN));
+  lone.at<float>(1, 1) = 5.f;
+  lone.at<float>(0, 0) = 50.f;
+  EXPECT_NEAR(LocalOutlierPercent(lone, 1.0), 0.0, 1e-9);
+  EXPECT_EQ(LocalOutlierPercent(cv::Mat(2, 2, CV_32F, cv::Scalar(NAN)), 1.0), 0.0);
+}
+
 TEST(DepthMetricsTest, FiniteRange) {
   cv::Mat d = (cv::Mat_<float>(1, 4) << std::nanf(""), -2.f, 7.5f, 3.f);
   auto [lo, hi] = FiniteRange(d);

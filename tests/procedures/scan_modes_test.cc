@@ -174,6 +174,11 @@ TEST_F(ScanModesTest, HfAdaptHasFewerOutliersThanStdOnCoin) {
   const double hf_bad = hf->error.outlier_percent + (100.0 - hf->error.valid_percent);
   EXPECT_LT(hf_bad, std_bad);
   EXPECT_LT(hf->error.outlier_percent, std_run->error.outlier_percent);
+  // Also by the thesis's reference-free measure (depth jumps against the neighbours).
+  const double std_local = LocalOutlierPercent(std_run->depth_um, 10.0, 9);
+  const double hf_local = LocalOutlierPercent(hf->depth_um, 10.0, 9);
+  std::printf("coin local outliers: STD %.2f %%, HF+ADAPT %.2f %%\n", std_local, hf_local);
+  EXPECT_LT(hf_local, 0.5 * std_local);
 }
 
 TEST_F(ScanModesTest, IterativeAdaptCompensatesPerZ) {
