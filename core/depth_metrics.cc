@@ -8,14 +8,22 @@ namespace inspection {
 
 DepthErrorStats CompareDepth(const cv::Mat& depth_um, const cv::Mat& reference_um, double outlier_threshold_um,
                              int border_px) {
+  return CompareDepth(depth_um, reference_um, cv::Mat(), outlier_threshold_um, border_px);
+}
+
+DepthErrorStats CompareDepth(const cv::Mat& depth_um, const cv::Mat& reference_um, const cv::Mat& mask,
+                             double outlier_threshold_um, int border_px) {
   DepthErrorStats s;
   CV_Assert(depth_um.type() == CV_32FC1 && reference_um.type() == CV_32FC1 && depth_um.size() == reference_um.size());
+  CV_Assert(mask.empty() || (mask.type() == CV_8UC1 && mask.size() == depth_um.size()));
   double sum = 0, sum2 = 0, sum_abs = 0;
   size_t outliers = 0, measured = 0, finite = 0;
   for (int y = border_px; y < depth_um.rows - border_px; ++y) {
     const float* d = depth_um.ptr<float>(y);
     const float* r = reference_um.ptr<float>(y);
+    const uint8_t* m = mask.empty() ? nullptr : mask.ptr<uint8_t>(y);
     for (int x = border_px; x < depth_um.cols - border_px; ++x) {
+      if (m && !m[x]) continue;
       ++measured;
       if (!std::isfinite(d[x])) continue;
       ++finite;

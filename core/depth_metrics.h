@@ -20,6 +20,10 @@ struct DepthErrorStats {
 // are left out (focus windows there see the image border).
 DepthErrorStats CompareDepth(const cv::Mat& depth_um, const cv::Mat& reference_um, double outlier_threshold_um,
                              int border_px = 0);
+// The same on a footprint: only pixels where mask (CV_8UC1, same size) is non-zero count, e.g.
+// the pixels several methods all measured, so one that leaves hard pixels empty gains nothing.
+DepthErrorStats CompareDepth(const cv::Mat& depth_um, const cv::Mat& reference_um, const cv::Mat& mask,
+                             double outlier_threshold_um, int border_px = 0);
 
 // Thesis 6.3's outlier measure, which needs no reference ("a significant change in depth between
 // consecutive pixels"), made robust: the percentage of measured pixels (outside border_px) whose

@@ -7,7 +7,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <limits>
 #include <string>
 #include <unistd.h>
 
@@ -167,9 +166,7 @@ int Main(int argc, char** argv) {
         std::printf(" | %-29s", "failed");
         continue;
       }
-      cv::Mat masked(r.depth_um.size(), CV_32FC1, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
-      r.depth_um.copyTo(masked, common[k]);
-      const DepthErrorStats c = CompareDepth(masked, r.truth_um, r.outlier_threshold_um, kWindowPx);
+      const DepthErrorStats c = CompareDepth(r.depth_um, r.truth_um, common[k], r.outlier_threshold_um, kWindowPx);
       std::printf(" | %6.3f %6.3f %5d %5.1f%%  ", r.error.stddev_error_um, c.stddev_error_um, r.images,
                   r.error.valid_percent);
     }

@@ -29,6 +29,18 @@ TEST(DepthMetricsTest, BorderIsLeftOut) {
   EXPECT_NEAR(s.rmse_um, 1.0, 1e-9);
 }
 
+TEST(DepthMetricsTest, MaskLimitsTheComparedPixels) {
+  cv::Mat ref(1, 4, CV_32F, cv::Scalar(0.f));
+  cv::Mat d = (cv::Mat_<float>(1, 4) << 1.f, 3.f, 100.f, std::nanf(""));
+  cv::Mat mask = (cv::Mat_<uint8_t>(1, 4) << 1, 1, 0, 1);
+  DepthErrorStats s = CompareDepth(d, ref, mask, 10.0);
+  EXPECT_EQ(s.compared_pixels, 2u);                      // the 100 um pixel is outside the mask
+  EXPECT_NEAR(s.valid_percent, 200.0 / 3.0, 1e-9);       // 2 of the 3 masked pixels have depth
+  EXPECT_NEAR(s.mean_error_um, 2.0, 1e-9);
+  EXPECT_NEAR(s.outlier_percent, 0.0, 1e-9);
+  EXPECT_EQ(CompareDepth(d, ref, 10.0).compared_pixels, 3u);
+}
+
 TEST(DepthMetricsTest, LocalOutliersCountSpikesNotSteps) {
   // 10 x 10 plane at 0 with a 30 um step at x >= 5, one spike of +20 um at (2, 2) and a NaN.
   cv::Mat d(10, 10, CV_32F, cv::Scalar(0.f));
