@@ -465,5 +465,146 @@ TEST_F(CliTest, StatusJobsAndSpecimenAsJson) {
   EXPECT_EQ(JsonLines(r.out).at(0)["jobs"].size(), 0u);
 }
 
+TEST_F(CliTest, BadArgumentsOfEveryCommandExit2BeforeAnyCall) {
+  StartServer();
+  for (const auto& args : std::vector<std::vector<std::string>>{
+           {"no-such-command"},
+           {"status", "extra"},
+           {"status", "jobs"},  // one command per call
+           {"calibration"},
+           {"specimen"},
+           {"specimen", "set"},
+           {"watch"},
+           {"cancel"},
+           {"download", "some-id"},  // --out missing
+           {"scan", "--out", "d", "--illumination", "HDR"},  // mode names are lower case
+           {"scan", "--out", "d", "--window", "seven"},
+           {"scan", "--out", "d", "--lambda", "a"},
+           {"reconstruct", "--out", "d", "--stack", (work_ / "no-such-folder").string()},
+           {"jobs", "--limit", "0"},
+           {"jobs", "--state", "done"}}) {
+    CliResult r = Run(args);
+    EXPECT_EQ(r.exit_code, 2) << args[0] << " " << r.err;
+    EXPECT_EQ(r.out, "") << args[0];
+    EXPECT_NE(r.err, "") << args[0];
+  }
+  CliProcess p({"--server", server_->address(), "--connect-timeout", "0", "status"}, work_ / "timeout.txt");
+  EXPECT_EQ(p.Finish().exit_code, 2);
+  v1::ListJobsResponse jobs;
+  ASSERT_TRUE(client_->ListJobs(v1::ListJobsRequest(), &jobs).ok());
+  EXPECT_EQ(jobs.jobs_size(), 0);
+
+  // Help of a command: exit 0, on stdout, lists every option of the command.
+  CliResult help = Run({"scan", "--help"});
+  EXPECT_EQ(help.exit_code, 0);
+  for (const char* option : {"--out", "--z-start", "--illumination", "--lambda", "--target-grey", "--focus-measure",
+                             "--window", "--min-confidence", "--export", "--include-stack"}) {
+    EXPECT_NE(help.out.find(option), std::string::npos) << option;
+  }
+}
+
+TEST_F(CliTest, TokenFileIsTrimmedAndSentAndAnUnusableTokenOrCaFileExits2) {
+  ServerOptions opt;
+  opt.listen_address = "127.0.0.1:0";
+  opt.data_dir = data_dir_;
+  opt.auth_token = "s3cret";
+  opt.simulation = SimOptions();
+  auto server = InspectionServer::Start(opt);
+  ASSERT_TRUE(server.ok()) << server.status().ToString();
+  server_ = std::move(*server);
+
+  const fs::path token = work_ / "token", wrong = work_ / "wrong", blank = work_ / "blank";
+  std::ofstream(token) << "  s3cret \n";
+  std::ofstream(wrong) << "s3cret-not";
+  std::ofstream(blank) << " \n\t";
+  CliResult r = Run({"--json", "--token-file", token.string(), "status"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(JsonLines(r.out).at(0)["state"], "RIG_STATE_READY");
+
+  for (const auto& args : std::vector<std::vector<std::string>>{{"status"}, {"--token-file", wrong.string(), "status"}}) {
+    r = Run(args);
+    EXPECT_EQ(r.exit_code, 4);
+    EXPECT_EQ(r.err.rfind("inspectctl: UNAUTHENTICATED: ", 0), 0u) << r.err;
+    EXPECT_EQ(CountLines(r.err), 1) << r.err;
+  }
+
+  const fs::path missing = work_ / "missing";
+  const std::vector<std::pair<std::vector<std::string>, std::string>> unusable = {
+      {{"--token-file", missing.string(), "status"},
+       "inspectctl: INVALID_ARGUMENT: cannot read token file " + missing.string() + "\n"},
+      {{"--token-file", blank.string(), "status"},
+       "inspectctl: INVALID_ARGUMENT: token file " + blank.string() + " is empty\n"},
+      {{"--tls-ca", missing.string(), "status"},
+       "inspectctl: INVALID_ARGUMENT: tls_ca_file: cannot read " + missing.string() + "\n"}};
+  for (const auto& [args, error_line] : unusable) {
+    r = Run(args);
+    EXPECT_EQ(r.exit_code, 2) << args[0];
+    EXPECT_EQ(r.err, error_line);
+    EXPECT_EQ(r.out, "");
+  }
+}
+
+TEST_F(CliTest, PlainTextOfStatusResetSpecimensAndEmptyLists) {
+  StartServer();
+  CliResult r = Run({"status"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.rfind("state: ready\n", 0), 0u) << r.out;
+  for (const char* line : {"\ncalibration: none\n", "\nrunning job: none, queue 0/4\n",
+                           "\nsimulated rig, specimen: skew5\n", "\nserver version: "}) {
+    EXPECT_NE(r.out.find(line), std::string::npos) << line << "\n" << r.out;
+  }
+  r = Run({"reset"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.rfind("state: ready\n", 0), 0u) << r.out;
+
+  r = Run({"specimen", "list"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("* skew5\n"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("  lens\n"), std::string::npos) << r.out;
+  r = Run({"specimen", "set", "lens"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("* lens\n"), std::string::npos) << r.out;
+
+  r = Run({"jobs"});
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_EQ(r.out, "no jobs\n");
+  EXPECT_EQ(Run({"jobs", "-q"}).out, "");
+  r = Run({"calibration", "list"});
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_EQ(r.out, "no calibrations\n");
+  r = Run({"--json", "calibration", "list"});
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_EQ(JsonLines(r.out).at(0)["calibrations"], json::array());
+}
+
+TEST_F(CliTest, QuietScanPrintsOnlyTheFolderAndARunningJobHasNoResultsToDownload) {
+  control_ = std::make_shared<RigControl>();
+  control_->hold_at_frame = 2;
+  StartServer();
+  const fs::path out = work_ / "quiet";
+  auto scan = Start({"-q", "scan", "--out", out.string()});
+  ASSERT_TRUE(control_->WaitUntilHolding());
+  const std::string job_id = NewestJobId();
+  CliResult r = Run({"download", job_id, "--out", (work_ / "early").string()});
+  EXPECT_EQ(r.exit_code, 4);
+  EXPECT_EQ(r.err, "inspectctl: FAILED_PRECONDITION: job " + job_id +
+                       " is running; only a succeeded job has results\n");
+  EXPECT_FALSE(fs::exists(work_ / "early"));
+  control_->Release();
+  r = scan->Finish();
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out, fs::absolute(out).string() + "\n");
+  EXPECT_EQ(r.err, "");
+  EXPECT_TRUE(fs::exists(out / "depth.tiff"));
+
+  // Watching a succeeded job without --out lists its artifacts instead of downloading them.
+  r = Run({"watch", job_id});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("job " + job_id + " succeeded (scan "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("artifacts (inspectctl download ID --out FILE):\n"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("  depth.tiff  "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\ndepth: "), std::string::npos) << r.out;
+}
+
 }  // namespace
 }  // namespace inspection::testing
