@@ -23,8 +23,10 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "core/cpu_features.h"
 #include "core/depth_interpolation.h"
 #include "core/focus_measure.h"
+#include "core/parallel_for.h"
 #include "core/stack.h"
 
 #define SFF_INLINE inline __attribute__((always_inline))
@@ -51,41 +53,6 @@ int Reflect101(int p, int len) {
   return p;
 }
 
-int ResolveThreads(int threads) {
-  if (threads > 0) return threads;
-  return std::max(1u, std::thread::hardware_concurrency());
-}
-
-// Runs fn(task, worker) for task = 0..n_tasks-1 on up to `threads` threads (the caller's included).
-template <typename F>
-void ParallelFor(int n_tasks, int threads, F&& fn) {
-  threads = std::max(1, std::min(threads, n_tasks));
-  std::atomic<int> next{0};
-  auto worker = [&](int id) {
-    for (int i = next.fetch_add(1); i < n_tasks; i = next.fetch_add(1)) fn(i, id);
-  };
-  std::vector<std::thread> pool;
-  for (int t = 1; t < threads; ++t) {
-    try {
-      pool.emplace_back(worker, t);
-    } catch (const std::system_error&) {
-      break;  // fewer threads; the tasks are shared out dynamically anyway
-    }
-  }
-  worker(0);
-  for (auto& t : pool) t.join();
-}
-
-bool HasAvx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
-
-bool HasAvx512() {
-  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("avx512f");
-  return has;
-}
-
 inline float ToFloat(int32_t v) { return float(v); }
 inline float ToFloat(float v) { return v; }
 
@@ -108,7 +75,7 @@ struct StatePlanes {
   std::vector<int32_t> aif;  // 32-bit lanes like the rest, so one vectorised loop updates all
 
   void Allocate(int w, int h, int jj, bool use_simd) {
-    simd = use_simd && HasAvx2();
+    simd = use_simd && CpuHasAvx2();
     width = w;
     height = h;
     j = jj;
@@ -551,8 +518,8 @@ struct CompactState {
   std::vector<uint16_t> last, last2, before, after, pending;
 
   void Allocate(int w, int h, bool use_simd, bool use_avx512) {
-    avx2 = use_simd && HasAvx2();
-    avx512 = avx2 && use_avx512 && HasAvx512();
+    avx2 = use_simd && CpuHasAvx2();
+    avx512 = avx2 && use_avx512 && CpuHasAvx512();
     width = w;
     height = h;
     const size_t n = size_t(w) * h;
@@ -1422,7 +1389,7 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
     scratch[size_t(w)].Reserve(options.window_px);
     volumes[size_t(w)].resize(size_t(kTileW) * kBatchTileH * kFrameChunk);
   }
-  const bool avx2 = options.use_simd && HasAvx2();
+  const bool avx2 = options.use_simd && CpuHasAvx2();
   const int n = int(frames.size());
   const std::vector<float> zf(z_um.begin(), z_um.end());
   std::atomic<size_t> valid{0};
@@ -1513,7 +1480,7 @@ Status ComputeTenengradU8(const cv::Mat& frame, int window_px, cv::Mat* focus, b
     return Status::InvalidArgument("window_px " + std::to_string(window_px) + " must be odd and between 3 and 31");
   }
   cv::Mat out(frame.size(), CV_32SC1);
-  if (use_simd && HasAvx2()) TenengradMapAvx2(frame, window_px, &out);
+  if (use_simd && CpuHasAvx2()) TenengradMapAvx2(frame, window_px, &out);
   else TenengradMapPortable(frame, window_px, &out);
   *focus = out;
   return Status::Ok();
