@@ -27,15 +27,15 @@
 #include "core/depth_interpolation.h"
 #include "core/focus_measure.h"
 #include "core/parallel_for.h"
+#include "core/sff_state.h"
 #include "core/stack.h"
-
-#define SFF_INLINE inline __attribute__((always_inline))
 
 namespace inspection {
 
+using namespace sff_internal;  // NOLINT: transitional, while the kernels move out
+
 namespace {
 
-constexpr int kMaxJ = 4;
 // Tile of the fused kernel in PushFrame: 256 x 64 pixels; the halo (window + 1 extra rows and
 // columns of input) stays near 10 % for the 7 x 7 window.
 constexpr int kTileW = 256;
@@ -45,61 +45,12 @@ constexpr int kTileH = 64;
 // x 4 B = 256 KB) so that each state row is updated for 8 frames while it sits in registers / L1.
 constexpr int kBatchTileH = 32;
 constexpr int kFrameChunk = 8;
-constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 int Reflect101(int p, int len) {
   if (len == 1) return 0;
   while (p < 0 || p >= len) p = p < 0 ? -p : 2 * len - 2 - p;
   return p;
 }
-
-inline float ToFloat(int32_t v) { return float(v); }
-inline float ToFloat(float v) { return v; }
-
-// Per-pixel state as planes (structure of arrays), so the update loops vectorise.
-// Exact 32-bit state, 28 + 12 j bytes per pixel: the line fit and every case but 8-bit
-// Tenengrad (the fused Tenengrad with maximum or Gaussian uses CompactState instead).
-// T: focus value type (int32_t exact for the fused 8-bit Tenengrad, float otherwise).
-// P: pixel type of the frames (all-in-focus image).
-template <typename T, typename P>
-struct StatePlanes {
-  int width = 0, height = 0, j = 1;
-  bool simd = true;  // AVX2 row kernels (when the CPU has AVX2) or the portable ones
-  std::vector<T> best;
-  std::vector<int32_t> idx;
-  std::vector<T> before[kMaxJ], after[kMaxJ], ring[kMaxJ];  // F(m-1-i), F(m+1+i), F(k-1-i)
-  std::vector<T> last2;                                      // F(k-2)
-  // Sum of F; sum of squared second differences t_k = F_k - 2 F_(k-1) + F_(k-2) over the curve,
-  // and over the (up to three) t_k that involve the current maximum (excluded at the end).
-  std::vector<float> sum, curv_all, curv_excl;
-  std::vector<int32_t> aif;  // 32-bit lanes like the rest, so one vectorised loop updates all
-
-  void Allocate(int w, int h, int jj, bool use_simd) {
-    simd = use_simd && CpuHasAvx2();
-    width = w;
-    height = h;
-    j = jj;
-    const size_t n = size_t(w) * h;
-    best.assign(n, T(0));
-    idx.assign(n, 0);
-    for (int i = 0; i < jj; ++i) {
-      before[i].assign(n, T(0));
-      after[i].assign(n, T(0));
-      ring[i].assign(n, T(0));
-    }
-    last2.assign(n, T(0));
-    sum.assign(n, 0.f);
-    curv_all.assign(n, 0.f);
-    curv_excl.assign(n, 0.f);
-    aif.assign(n, 0);
-  }
-  size_t Bytes() const {
-    size_t b = (best.size() + last2.size()) * sizeof(T) + (idx.size() + aif.size()) * 4 +
-               (sum.size() + curv_all.size() + curv_excl.size()) * 4;
-    for (int i = 0; i < kMaxJ; ++i) b += (before[i].size() + after[i].size() + ring[i].size()) * sizeof(T);
-    return b;
-  }
-};
 
 // First frame: the maximum is frame 0.
 template <typename T, typename P>
@@ -472,85 +423,6 @@ __attribute__((target("avx2"))) inline __m256i BlendLanes(__m256i x, __m256i y, 
       _mm256_blendv_ps(_mm256_castsi256_ps(x), _mm256_castsi256_ps(y), _mm256_castsi256_ps(mask)));
 }
 
-// ---- Compact state: the fused 8-bit Tenengrad path with one neighbour each side ----
-// (maximum and Gaussian interpolation, the scan default): 23 bytes per pixel instead of 40.
-//  - F_max exact (int32): the running maximum compares exactly.
-//  - The four curve samples the fit and the second differences need, F(k-1), F(k-2), F(m-1) and
-//    F(m+1), as 16-bit codes of F + 1 (5 exponent and 11 mantissa bits, truncated): relative
-//    error < 2^-11 (exact below 2^12), 0 <-> 0; every F < 2^31 fits. The Gaussian fit only uses
-//    ln(F_max / F(m-1)) and ln(F_max / F(m+1)), which move by < 5e-4.
-//  - The sum of F and the sum of the squared second differences t_k^2 that do not involve the
-//    current maximum ("kept"), as floats truncated to a 16-bit significand (relative error
-//    < 2^-15 per frame); their freed low bytes hold the 16-bit frame index of the maximum.
-//  - The pending t_k^2 that do involve the maximum (at most three; they join "kept" when a new
-//    maximum arrives and are left out at the end), as a 16-bit code of P + 1 with 6 exponent and
-//    10 mantissa bits (saturated at ~2^64).
-//  - The all-in-focus grey value (8 bits).
-// Every rounding is a truncation of float bits applied after each frame, by the per-frame
-// streaming kernels and by the batch kernels that keep a pixel's state in registers over a
-// chunk of frames alike, so streaming and batch stay bit-identical.
-constexpr uint32_t kOneBits = 0x3F800000u;         // 1.0f: codes are offsets from it
-constexpr uint32_t kSampleMask = 0xFFFFF000u;      // 11 mantissa bits
-constexpr uint32_t kPendingMask = 0xFFFFE000u;     // 10 mantissa bits
-constexpr uint32_t kPendingMaxBits = 0x5F7FE000u;  // code 65535 (~1.8e19)
-constexpr uint32_t kSumMask = 0xFFFFFF00u;         // 16-bit significand; low byte: index bits
-
-inline float FromBits(uint32_t b) { return std::bit_cast<float>(b); }
-inline uint32_t Bits(float f) { return std::bit_cast<uint32_t>(f); }
-
-// Row pointers into a CompactState (one row span).
-struct CompactPtrs {
-  int32_t* best;
-  uint32_t* sum_idx;   // sum of F | idx bits 0-7
-  uint32_t* kept_idx;  // kept sum of t_k^2 | idx bits 8-15
-  uint16_t *last, *last2, *before, *after, *pending;
-  uint8_t* aif;
-};
-
-struct CompactState {
-  static constexpr int kBytesPerPixel = 23;
-  int width = 0, height = 0;
-  bool avx2 = false, avx512 = false;
-  // Float-typed Mats holding int32 / packed words while frames arrive, so that Finish writes
-  // depth_um and confidence into them in place and hands them out as the result.
-  cv::Mat best, sum_idx, aif;
-  std::vector<uint32_t> kept_idx;
-  std::vector<uint16_t> last, last2, before, after, pending;
-
-  void Allocate(int w, int h, bool use_simd, bool use_avx512) {
-    avx2 = use_simd && CpuHasAvx2();
-    avx512 = avx2 && use_avx512 && CpuHasAvx512();
-    width = w;
-    height = h;
-    const size_t n = size_t(w) * h;
-    best.create(h, w, CV_32F);
-    sum_idx.create(h, w, CV_32F);
-    aif.create(h, w, CV_8U);
-    kept_idx.resize(n);
-    for (auto* v : {&last, &last2, &before, &after, &pending}) v->resize(n);
-    Reset();
-  }
-  // The state before frame 0: F_max below every focus value, so that frame 0 is a new maximum
-  // for every pixel and the update kernels initialise the state themselves; all else 0.
-  void Reset() {
-    const size_t n = size_t(width) * height;
-    std::fill_n(reinterpret_cast<int32_t*>(best.data), n, std::numeric_limits<int32_t>::min());
-    std::fill_n(reinterpret_cast<uint32_t*>(sum_idx.data), n, 0u);
-    std::fill_n(aif.data, n, uint8_t(0));
-    std::fill(kept_idx.begin(), kept_idx.end(), 0u);
-    for (auto* v : {&last, &last2, &before, &after, &pending}) std::fill(v->begin(), v->end(), uint16_t(0));
-  }
-  size_t Bytes() const {
-    return best.total() * best.elemSize() + sum_idx.total() * sum_idx.elemSize() + aif.total() * aif.elemSize() +
-           kept_idx.size() * 4 + 2 * (last.size() + last2.size() + before.size() + after.size() + pending.size());
-  }
-  CompactPtrs Row(size_t off) {
-    return {reinterpret_cast<int32_t*>(best.data) + off, reinterpret_cast<uint32_t*>(sum_idx.data) + off,
-            kept_idx.data() + off, last.data() + off, last2.data() + off, before.data() + off, after.data() + off,
-            pending.data() + off, aif.data + off};
-  }
-};
-
 // Frames k_begin .. k_end-1 over pixels x_begin .. x_end-1 of a row (frame 0 on the Reset
 // state initialises it: t_0 and t_1 do not exist, F_max = F(0), idx = 0): the focus
 // value of frame k at x is vol_row[(k - slot0) * slot_stride + x], its grey value
@@ -800,19 +672,6 @@ void UpdateCompactRow(CompactState& st, size_t off, int n, int k_begin, int k_en
   if (x < n) UpdateCompactScalar(s, x, n, k_begin, k_end, slot0, vol_row, slot_stride, pix_rows);
 }
 
-// Prefetches the n pixels of a state row span for writing.
-SFF_INLINE void PrefetchCompactRow(const CompactPtrs& s, int n) {
-  for (int i = 0; i < n; i += 16) {
-    __builtin_prefetch(s.best + i, 1, 3);
-    __builtin_prefetch(s.sum_idx + i, 1, 3);
-    __builtin_prefetch(s.kept_idx + i, 1, 3);
-  }
-  for (int i = 0; i < n; i += 32) {
-    for (uint16_t* p : {s.last, s.last2, s.before, s.after, s.pending}) __builtin_prefetch(p + i, 1, 3);
-  }
-  for (int i = 0; i < n; i += 64) __builtin_prefetch(s.aif + i, 1, 3);
-}
-
 // Sink of the batch path: keeps the focus row of frame slot `slot` for the later state update.
 struct VolumeSink {
   int32_t* vol;
@@ -842,65 +701,6 @@ void UpdateRowsPortable(StatePlanes<float, P>& st, int k, const cv::Mat& focus, 
                         int y_end) {
   for (int y = y_begin; y < y_end; ++y)
     UpdateRow(st, size_t(y) * st.width, k, focus.ptr<float>(y), frame.ptr<P>(y), st.width);
-}
-
-struct Outputs {
-  cv::Mat depth, confidence, aif;
-};
-
-// Interpolation and confidence for the state pixels of one row span; writes the outputs at
-// (ox, oy). Returns the number of pixels with finite depth.
-template <typename T, typename P>
-size_t FinishSpanScalar(const StatePlanes<T, P>& st, size_t off, int x_begin, int count, const std::vector<double>& z,
-                        const SffOptions& o, Outputs& out, int ox, int oy) {
-  const int n = int(z.size());
-  const int J = st.j;
-  float* depth = out.depth.ptr<float>(oy) + ox;
-  float* conf = out.confidence.ptr<float>(oy) + ox;
-  P* aif = out.aif.ptr<P>(oy) + ox;
-  size_t valid = 0;
-  double zw[2 * kMaxJ + 1], fw[2 * kMaxJ + 1];
-  for (int x = x_begin; x < count; ++x) {
-    const size_t i = off + x;
-    const int m = st.idx[i];
-    const int before = std::min(J, m), after = std::min(J, n - 1 - m);
-    const double best = ToFloat(st.best[i]);
-    zw[before] = z[m];
-    fw[before] = best;
-    for (int t = 1; t <= before; ++t) {
-      zw[before - t] = z[m - t];
-      fw[before - t] = ToFloat(st.before[t - 1][i]);
-    }
-    for (int t = 1; t <= after; ++t) {
-      zw[before + t] = z[m + t];
-      fw[before + t] = ToFloat(st.after[t - 1][i]);
-    }
-    FocusCurveSummary s;
-    s.peak = best;
-    s.mean = double(st.sum[i]) / n;
-    // Second differences t_k, k = 2..n-1; those with m in {k-2, k-1, k} involve the maximum.
-    const int excluded = std::max(0, std::min(n - 1, m + 2) - std::max(2, m) + 1);
-    s.curvature_sq_sum = double(st.curv_all[i]) - double(st.curv_excl[i]);
-    s.curvature_count = std::max(0, n - 2) - excluded;
-    s.peak_at_end = m == 0 || m == n - 1;
-    const float c = FocusConfidence(s);
-    conf[x] = c;
-    if (c >= o.min_confidence) {
-      // Only kept pixels are interpolated (the logarithms are the costly part).
-      double z_um;
-      if (o.interpolation == DepthInterpolation::kGaussian && before == 1 && after == 1) {
-        z_um = GaussianPeakZ(zw[0], zw[1], zw[2], fw[0], fw[1], fw[2]);
-      } else {
-        z_um = InterpolatePeak(o.interpolation, zw, fw, before, after).z_um;
-      }
-      depth[x] = float(z_um);
-      ++valid;
-    } else {
-      depth[x] = kNaN;
-    }
-    aif[x] = P(st.aif[i]);
-  }
-  return valid;
 }
 
 // Natural logarithm of positive, finite floats: exponent and mantissa in [sqrt(1/2), sqrt(2)),
@@ -1092,12 +892,6 @@ size_t FinishCompactRow(CompactState& st, size_t off, int count, const std::vect
   return valid + FinishCompactScalar(s, n8, count, zf.data(), n, gaussian, float(o.min_confidence), depth, conf, aif);
 }
 
-template <typename T, typename P>
-size_t FinishSpan(const StatePlanes<T, P>& st, size_t off, int count, const std::vector<double>& z,
-                  const SffOptions& o, Outputs& out, int ox, int oy) {
-  return FinishSpanScalar(st, off, 0, count, z, o, out, ox, oy);
-}
-
 Status CheckFrame(const cv::Mat& frame, int k, cv::Size size, int type) {
   if (frame.empty()) return Status::InvalidArgument("frame " + std::to_string(k) + ": empty image");
   if (frame.size() != size) {
@@ -1179,13 +973,13 @@ class Engine final : public SffEngine {
     if (finished_) return Status::FailedPrecondition("engine already finished");
     if (n < 3) return Status::InvalidArgument("stack has " + std::to_string(n) + " frames; at least 3 are needed");
     finished_ = true;
-    Outputs out;
+    DepthOutputs out;
     out.depth.create(size_, CV_32F);
     out.confidence.create(size_, CV_32F);
     out.aif.create(size_, type_);
     std::atomic<size_t> valid{0};
     ParallelFor(size_.height, threads_, [&](int y, int) {
-      valid += FinishSpan(state_, size_t(y) * size_.width, size_.width, z_, options_, out, 0, y);
+      valid += FinishExactSpan(state_, size_t(y) * size_.width, size_.width, z_, options_, out, 0, y);
     });
     DepthResult r;
     r.depth_um = out.depth;
@@ -1374,7 +1168,7 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
   const int j = options.interpolation == DepthInterpolation::kLineFit ? options.linefit_half_width : 1;
   const int tiles_x = (size.width + kTileW - 1) / kTileW, tiles_y = (size.height + kBatchTileH - 1) / kBatchTileH;
   const int n_tiles = tiles_x * tiles_y;
-  Outputs out;
+  DepthOutputs out;
   out.depth.create(size, CV_32F);
   out.confidence.create(size, CV_32F);
   out.aif.create(size, type);
@@ -1432,7 +1226,7 @@ StatusOr<DepthResult> SffEngine::ReconstructInMemory(const SffOptions& options, 
                               out.depth.ptr<uint32_t>(y0 + y) + x0, out.confidence.ptr<uint32_t>(y0 + y) + x0,
                               out.aif.ptr<uint8_t>(y0 + y) + x0);
       } else {
-        v += FinishSpan(states[size_t(worker)], off, tw, z_um, options, out, x0, y0 + y);
+        v += FinishExactSpan(states[size_t(worker)], off, tw, z_um, options, out, x0, y0 + y);
       }
     }
     valid += v;
