@@ -34,20 +34,22 @@ struct DepthResult {
 // (core/depth_interpolation.h) and gets its confidence; pixels below min_confidence get NaN.
 // Size (state_bytes() / pixels): 23 bytes for 8-bit frames with Tenengrad and maximum or
 // Gaussian interpolation (the scan default: exact int32 F_max, 16-bit float codes of the other
-// focus values, truncated-float sums; details in core/sff_engine.cc), and there Finish writes
+// focus values, truncated-float sums; details in core/sff_state.h), and there Finish writes
 // the result into the state's own buffers, so it adds no memory. Other measures, 16-bit frames
 // and the line fit keep exact 32-bit state: 28 + 12 j bytes (j = 1, or linefit_half_width),
 // plus the result (9 or 10 bytes per pixel) at Finish.
 //
 // Speed: 8-bit frames with Tenengrad run through a fused integer kernel (Sobel, squares, window
 // sum and state update per cache-sized tile; 16-bit AVX2 lanes chosen at run time, portable
-// fallback, bit-identical). PushFrame splits each frame into tiles over options.threads threads;
-// with the compact state it takes frames in chunks of 8 and runs each tile across the chunk, so
-// the state is streamed through memory once per 8 frames (the chunk's frames are held by
-// reference meanwhile; at most 7 frames wait, and Finish processes them); ReconstructInMemory
-// runs each tile across all frames so its state stays in cache. Other
-// measures and 16-bit frames compute the whole-frame focus map (core/focus_measure.h) and share
-// the same state update. inspect-bench measures it (tests/bench/inspect_bench.cc).
+// fallback, bit-identical: core/tenengrad_kernel.h). PushFrame splits each frame into tiles
+// over options.threads threads; with the compact state it takes frames in chunks of 8 and runs
+// each tile across the chunk, so the state is streamed through memory once per 8 frames (the
+// chunk's frames are held by reference meanwhile; at most 7 frames wait, and Finish processes
+// them); ReconstructInMemory runs each tile across all frames so its state stays in cache.
+// Other measures and 16-bit frames compute the whole-frame focus map (core/focus_measure.h) and
+// share the same state update. inspect-bench measures it (tests/bench/inspect_bench.cc).
+// Implementation: core/sff_engine.cc (Create), sff_compact_engine.cc (the scan default),
+// sff_exact_engine.cc (every other case), sff_batch.cc (ReconstructInMemory).
 class SffEngine {
  public:
   // frame_type: CV_8UC1 or CV_16UC1.
