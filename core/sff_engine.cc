@@ -6,7 +6,6 @@
 #include <string>
 
 #include "core/sff_engine_internal.h"
-#include "core/stack.h"
 
 namespace inspection {
 namespace sff_internal {
@@ -88,22 +87,6 @@ StatusOr<std::unique_ptr<SffEngine>> SffEngine::Create(const SffOptions& options
   INSPECT_RETURN_IF_ERROR(sff_internal::CheckCreate(options, frame_size, frame_type));
   if (sff_internal::UseCompact(options, frame_type)) return sff_internal::NewCompactEngine(options, frame_size);
   return sff_internal::NewExactEngine(options, frame_size, frame_type);
-}
-
-StatusOr<DepthResult> ReconstructStack(const std::filesystem::path& dir, const SffOptions& options) {
-  INSPECT_RETURN_IF_ERROR(options.Validate());
-  INSPECT_ASSIGN_OR_RETURN(StackManifest manifest, ReadStackManifest(dir));
-  std::unique_ptr<SffEngine> engine;
-  for (size_t k = 0; k < manifest.frames.size(); ++k) {
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, LoadStackFrame(dir, manifest, k));
-    if (!engine) {
-      INSPECT_ASSIGN_OR_RETURN(engine, SffEngine::Create(options, frame.size(), frame.type()));
-    }
-    Status st = engine->PushFrame(frame, manifest.frames[k].z_um);
-    if (!st.ok()) return st.WithContext(manifest.frames[k].file + ": ");
-  }
-  if (!engine) return Status::InvalidArgument("stack.json: frames is empty");
-  return engine->Finish();
 }
 
 }  // namespace inspection

@@ -4,7 +4,6 @@
 // the last frame arrives. Scans and Reconstruct both run through it.
 #pragma once
 
-#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -75,9 +74,5 @@ class SffEngine {
   static StatusOr<DepthResult> ReconstructInMemory(const SffOptions& options, const std::vector<cv::Mat>& frames,
                                                    const std::vector<double>& z_um);
 };
-
-// Reconstructs a stack folder (core/stack.h) by decoding and pushing its frames one at a time,
-// so memory stays O(pixels). Errors name the frame or the manifest field.
-StatusOr<DepthResult> ReconstructStack(const std::filesystem::path& dir, const SffOptions& options);
 
 }  // namespace inspection
