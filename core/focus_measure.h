@@ -12,7 +12,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "core/sff_engine.h"
+#include "core/sff_options.h"
 #include "core/status.h"
 
 namespace inspection {
