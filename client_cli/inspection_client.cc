@@ -149,6 +149,20 @@ InspectionClient::InspectionClient(const ClientOptions& options) : options_(opti
       init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                                   "tls_ca_file: cannot read " + options_.tls_ca_file);
     }
+    // mTLS: a client certificate and key, both or neither.
+    if (options_.tls_client_cert_file.empty() != options_.tls_client_key_file.empty()) {
+      init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                                  "tls_client_cert_file and tls_client_key_file go together");
+    } else if (!options_.tls_client_cert_file.empty()) {
+      if (!ReadWholeFile(options_.tls_client_cert_file, &ssl.pem_cert_chain) || ssl.pem_cert_chain.empty()) {
+        init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                                    "tls_client_cert_file: cannot read " + options_.tls_client_cert_file);
+      }
+      if (!ReadWholeFile(options_.tls_client_key_file, &ssl.pem_private_key) || ssl.pem_private_key.empty()) {
+        init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                                    "tls_client_key_file: cannot read " + options_.tls_client_key_file);
+      }
+    }
     credentials = grpc::SslCredentials(ssl);
   }
   grpc::ChannelArguments args;
