@@ -460,8 +460,12 @@ grpc::Status InspectionClient::DownloadArtifact(const std::string& artifact_id, 
       offset = 0;
       continue;
     }
-    // Keep the .part on RPC errors so a later --resume continues it.
-    if (!status.ok()) return status;
+    // Keep the .part on RPC errors so a later --resume continues it, unless nothing was ever
+    // received (e.g. NOT_FOUND): an empty .part would only be litter.
+    if (!status.ok()) {
+      if (written == 0) fs::remove(part, ec);
+      return status;
+    }
     break;
   }
 
