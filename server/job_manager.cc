@@ -3,10 +3,10 @@
 #include <google/protobuf/util/time_util.h>
 #include <spdlog/spdlog.h>
 
-#include "core/depth_metrics.h"
 #include "core/texture_pattern.h"
-#include "server/artifact_files.h"
+#include "server/owned_folder.h"
 #include "server/procedures/reconstruct_procedure.h"
+#include "server/result_publisher.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -63,20 +63,6 @@ StatusOr<SffOptions> ToSffOptions(const v1::ReconstructionOptions& o, const std:
   return s;
 }
 
-v1::ArtifactKind ToArtifactKind(DepthExportKind k) {
-  switch (k) {
-    case DepthExportKind::kDepthTiff: return v1::ARTIFACT_KIND_DEPTH_TIFF;
-    case DepthExportKind::kConfidenceTiff: return v1::ARTIFACT_KIND_CONFIDENCE_TIFF;
-    case DepthExportKind::kAllInFocusPng: return v1::ARTIFACT_KIND_ALL_IN_FOCUS_PNG;
-    case DepthExportKind::kDepthPreviewPng: return v1::ARTIFACT_KIND_DEPTH_PREVIEW_PNG;
-    case DepthExportKind::kDepthPng16: return v1::ARTIFACT_KIND_DEPTH_PNG16;
-    case DepthExportKind::kDepthPly: return v1::ARTIFACT_KIND_DEPTH_PLY;
-    case DepthExportKind::kDepthX3p: return v1::ARTIFACT_KIND_DEPTH_X3P;
-    case DepthExportKind::kGroundTruthTiff: return v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF;
-  }
-  return v1::ARTIFACT_KIND_UNSPECIFIED;
-}
-
 std::vector<DepthExportKind> ToExportKinds(const std::vector<int>& extras) {
   std::vector<DepthExportKind> out;
   for (int k : extras) {
@@ -85,42 +71,6 @@ std::vector<DepthExportKind> ToExportKinds(const std::vector<int>& extras) {
     if (k == v1::ARTIFACT_KIND_DEPTH_X3P) out.push_back(DepthExportKind::kDepthX3p);
   }
   return out;
-}
-
-const char* MediaType(v1::ArtifactKind k) {
-  switch (k) {
-    case v1::ARTIFACT_KIND_DEPTH_TIFF:
-    case v1::ARTIFACT_KIND_CONFIDENCE_TIFF:
-    case v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF: return "image/tiff";
-    case v1::ARTIFACT_KIND_ALL_IN_FOCUS_PNG:
-    case v1::ARTIFACT_KIND_DEPTH_PREVIEW_PNG:
-    case v1::ARTIFACT_KIND_DEPTH_PNG16: return "image/png";
-    case v1::ARTIFACT_KIND_STACK_ZIP: return "application/zip";
-    case v1::ARTIFACT_KIND_DEPTH_PLY: return "application/x-ply";
-    case v1::ARTIFACT_KIND_DEPTH_X3P: return "application/x-iso25178-x3p";
-    default: return "application/octet-stream";
-  }
-}
-
-// Summary of a depth result; compares with ground truth when given. The focus window's half
-// width at the image border is left out of the comparison (the window sees the border there).
-v1::DepthSummary Summarise(const DepthResult& r, double pixel_size_um, const cv::Mat& truth, int window_px) {
-  v1::DepthSummary d;
-  d.set_width(r.depth_um.cols);
-  d.set_height(r.depth_um.rows);
-  d.set_pixel_size_um(pixel_size_um);
-  d.set_valid_percent(100.0 * r.valid_fraction);
-  auto [lo, hi] = FiniteRange(r.depth_um);
-  d.set_z_min_um(lo);
-  d.set_z_max_um(hi);
-  d.set_frame_count(r.frame_count);
-  if (!truth.empty() && truth.size() == r.depth_um.size()) {
-    DepthErrorStats e = CompareDepth(r.depth_um, truth, 1e9, window_px / 2);
-    d.set_has_ground_truth(true);
-    d.set_rmse_um(e.rmse_um);
-    d.set_mean_abs_error_um(e.mean_abs_error_um);
-  }
-  return d;
 }
 
 // A per-frame progress event: frame i of n with its statistics; the frames make up 90 % of a
@@ -584,37 +534,6 @@ void JobManager::ReconstructWorker() {
   while (RecordPtr r = WaitForWork(reconstruct_queue_, /*mark_running_rig=*/false)) RunReconstruct(r);
 }
 
-Status JobManager::PublishArtifacts(const RecordPtr& r, const fs::path& tmp_dir,
-                                    const std::vector<std::pair<v1::ArtifactKind, fs::path>>& files,
-                                    v1::JobResult* result) {
-  const std::string job_id = r->Snapshot().job_id();
-  const fs::path final_dir = store_->artifacts_dir() / job_id;
-  std::vector<StoredArtifact> stored;
-  for (const auto& [kind, path] : files) {
-    StoredArtifact a;
-    a.job_id = job_id;
-    a.path = final_dir / path.filename();
-    a.artifact.set_artifact_id(NewId("art"));
-    a.artifact.set_kind(kind);
-    a.artifact.set_file_name(path.filename().string());
-    std::error_code ec;
-    a.artifact.set_size_bytes(int64_t(fs::file_size(path, ec)));
-    if (ec) return Status::Internal("artifact " + path.string() + ": " + ec.message());
-    INSPECT_ASSIGN_OR_RETURN(std::string sha, Sha256File(path));
-    a.artifact.set_sha256(sha);
-    a.artifact.set_media_type(MediaType(kind));
-    stored.push_back(std::move(a));
-  }
-  std::error_code ec;
-  fs::rename(tmp_dir, final_dir, ec);
-  if (ec) return Status::Internal("cannot move artifacts into place: " + ec.message());
-  for (const StoredArtifact& a : stored) {
-    INSPECT_RETURN_IF_ERROR(store_->PutArtifact(a));
-    *result->add_artifacts() = a.artifact;
-  }
-  return Status::Ok();
-}
-
 Status JobManager::RunScan(const RecordPtr& r) {
   if (r->cancel_requested) {
     return Status::Cancelled("cancelled before it started");
@@ -639,15 +558,7 @@ Status JobManager::RunScan(const RecordPtr& r) {
     e.set_message("scan of " + std::to_string(count) + " frames");
   });
 
-  const fs::path tmp_stack = store_->tmp_dir() / (job_id + ".stack");
-  const fs::path tmp_artifacts = store_->tmp_dir() / (job_id + ".artifacts");
-  auto fail = [&](const Status& s) {
-    RemoveAll(tmp_stack);
-    RemoveAll(tmp_artifacts);
-    rig_->ReportJobStatus(s);
-    return s;
-  };
-
+  OwnedFolder stack(store_->tmp_dir() / (job_id + ".stack"));
   auto on_frame = [&](const ScanFrameEvent& f) {
     Emit(r, [&](v1::JobEvent& e) {
       FillFrameEvent(v1::JOB_PHASE_ACQUIRING, f.index, f.count, f.z_um, f.exposure_us, f.statistics, &e);
@@ -655,73 +566,54 @@ Status JobManager::RunScan(const RecordPtr& r) {
       e.mutable_frame()->set_stack_frame(f.stack_frame);
     });
   };
-  // The bundle is taken again at run time (a calibration may have finished since submission);
-  // RunScan re-checks that it holds the mode's models.
-  std::shared_ptr<const CalibrationBundle> bundle = active_calibration_ ? active_calibration_() : nullptr;
-  auto outcome = inspection::RunScan(rig_->rig(), plan, tmp_stack, on_frame, r->cancel_requested, bundle.get());
-  if (!outcome.ok()) {
-    return fail(outcome.status());
-  }
-  Emit(r, [&](v1::JobEvent& e) {
-    e.set_phase(v1::JOB_PHASE_STORING);
-    e.set_progress(0.92);
-  });
-
-  std::error_code ec;
-  fs::create_directories(tmp_artifacts, ec);
-  DepthExportMeta meta;
-  meta.pixel_size_um = outcome->manifest.pixel_size_um;
-  meta.description = "depth (um) of scan " + job_id;
-  auto files = WriteDepthArtifacts(outcome->depth, tmp_artifacts, meta, ToExportKinds(r->extra_exports_));
-  if (!files.ok()) {
-    return fail(files.status());
-  }
-  std::vector<std::pair<v1::ArtifactKind, fs::path>> published;
-  for (const auto& f : *files) published.push_back({ToArtifactKind(f.kind), f.path});
-  if (!outcome->ground_truth_um.empty()) {
-    fs::copy_file(tmp_stack / kGroundTruthDepthName, tmp_artifacts / kGroundTruthDepthName, ec);
-    if (ec) {
-      return fail(Status::Internal("cannot copy ground truth: " + ec.message()));
+  // Everything after acquisition; the rig's status is reported once, whatever it returns.
+  auto acquire_and_store = [&]() -> StatusOr<v1::JobResult> {
+    // The bundle is taken again at run time (a calibration may have finished since submission);
+    // RunScan re-checks that it holds the mode's models.
+    std::shared_ptr<const CalibrationBundle> bundle = active_calibration_ ? active_calibration_() : nullptr;
+    INSPECT_ASSIGN_OR_RETURN(ScanOutcome outcome, inspection::RunScan(rig_->rig(), plan, stack.path(), on_frame,
+                                                                      r->cancel_requested, bundle.get()));
+    Emit(r, [&](v1::JobEvent& e) {
+      e.set_phase(v1::JOB_PHASE_STORING);
+      e.set_progress(0.92);
+    });
+    INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher, ResultPublisher::Create(store_, job_id));
+    DepthExportMeta meta;
+    meta.pixel_size_um = outcome.manifest.pixel_size_um;
+    meta.description = "depth (um) of scan " + job_id;
+    INSPECT_RETURN_IF_ERROR(publisher.WriteDepth(outcome.depth, meta, ToExportKinds(r->extra_exports_)));
+    if (!outcome.ground_truth_um.empty()) {
+      INSPECT_RETURN_IF_ERROR(
+          publisher.CopyFile(v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF, stack.path() / kGroundTruthDepthName));
     }
-    published.push_back({v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF, tmp_artifacts / kGroundTruthDepthName});
-  }
-  Status zs = ZipFolder(tmp_stack, tmp_artifacts / "stack.zip");
-  if (!zs.ok()) {
-    return fail(zs);
-  }
-  published.push_back({v1::ARTIFACT_KIND_STACK_ZIP, tmp_artifacts / "stack.zip"});
-  if (r->cancel_requested) {  // last point at which a cancel still wins
-    return fail(Status::Cancelled("scan cancelled while storing"));
-  }
+    INSPECT_RETURN_IF_ERROR(publisher.Zip(v1::ARTIFACT_KIND_STACK_ZIP, stack.path(), "stack.zip"));
+    if (r->cancel_requested) return Status::Cancelled("scan cancelled while storing");  // a cancel's last chance
 
-  v1::JobResult result;
-  result.set_scan_id(job_id);
-  result.set_calibration_id(plan.calibration_id);
-  *result.mutable_depth() =
-      Summarise(outcome->depth, outcome->manifest.pixel_size_um, outcome->ground_truth_um, plan.sff.window_px);
-  result.mutable_depth()->set_engine_seconds(outcome->engine_finish_seconds);
-  fs::rename(tmp_stack, ScanDir(job_id), ec);
-  if (ec) {
-    return fail(Status::Internal("cannot store the scan: " + ec.message()));
-  }
-  Status ps = PublishArtifacts(r, tmp_artifacts, published, &result);
-  if (!ps.ok()) {
-    RemoveAll(ScanDir(job_id));
-    return fail(ps);
-  }
-  {
-    std::lock_guard<std::mutex> lock(r->mu_);
-    *r->job_.mutable_result() = result;
-  }
-  rig_->ReportJobStatus(Status::Ok());
+    v1::JobResult result;
+    result.set_scan_id(job_id);
+    result.set_calibration_id(plan.calibration_id);
+    *result.mutable_depth() =
+        SummariseDepth(outcome.depth, outcome.manifest.pixel_size_um, outcome.ground_truth_um, plan.sff.window_px);
+    result.mutable_depth()->set_engine_seconds(outcome.engine_finish_seconds);
+    std::error_code ec;
+    fs::rename(stack.path(), ScanDir(job_id), ec);
+    if (ec) return Status::Internal("cannot store the scan: " + ec.message());
+    stack = OwnedFolder(ScanDir(job_id));  // a scan without its published result is removed again
+    INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
+    stack.Release();
+    return result;
+  };
+  auto result = acquire_and_store();
+  rig_->ReportJobStatus(result.ok() ? Status::Ok() : result.status());
+  if (!result.ok()) return result.status();
+  std::lock_guard<std::mutex> lock(r->mu_);
+  *r->job_.mutable_result() = *result;
   return Status::Ok();
 }
 
 void JobManager::RunReconstruct(const RecordPtr& r) {
   const std::string job_id = r->Snapshot().job_id();
-  const fs::path tmp_artifacts = store_->tmp_dir() / (job_id + ".artifacts");
   auto cleanup = [&] {
-    RemoveAll(tmp_artifacts);
     if (r->owns_stack_dir_) RemoveAll(r->stack_dir_);
   };
   if (r->cancel_requested) {
@@ -751,14 +643,11 @@ void JobManager::RunReconstruct(const RecordPtr& r) {
       e.set_phase(v1::JOB_PHASE_STORING);
       e.set_progress(0.92);
     });
-    std::error_code ec;
-    fs::create_directories(tmp_artifacts, ec);
+    INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher, ResultPublisher::Create(store_, job_id));
     DepthExportMeta meta;
     meta.pixel_size_um = m.pixel_size_um;
     meta.description = "depth (um) from reconstruct job " + job_id;
-    INSPECT_ASSIGN_OR_RETURN(auto files, WriteDepthArtifacts(depth, tmp_artifacts, meta, ToExportKinds(r->extra_exports_)));
-    std::vector<std::pair<v1::ArtifactKind, fs::path>> published;
-    for (const auto& f : files) published.push_back({ToArtifactKind(f.kind), f.path});
+    INSPECT_RETURN_IF_ERROR(publisher.WriteDepth(depth, meta, ToExportKinds(r->extra_exports_)));
     cv::Mat truth;
     if (fs::exists(r->stack_dir_ / kGroundTruthDepthName)) {
       auto t = ReadDepthTiff(r->stack_dir_ / kGroundTruthDepthName);
@@ -766,8 +655,8 @@ void JobManager::RunReconstruct(const RecordPtr& r) {
     }
     if (r->cancel_requested) return Status::Cancelled("reconstruction cancelled while storing");
     v1::JobResult result = r->Snapshot().result();  // carries scan_id when the source was a scan
-    *result.mutable_depth() = Summarise(depth, m.pixel_size_um, truth, r->sff_.window_px);
-    INSPECT_RETURN_IF_ERROR(PublishArtifacts(r, tmp_artifacts, published, &result));
+    *result.mutable_depth() = SummariseDepth(depth, m.pixel_size_um, truth, r->sff_.window_px);
+    INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
     return result;
   };
   auto result = run();

@@ -126,10 +126,6 @@ class JobManager {
   Status RunScan(const RecordPtr& r);
   Status RunCalibrate(const RecordPtr& r);
   void RunReconstruct(const RecordPtr& r);
-  // Moves a finished result into the store: artifacts get ids, sizes and sha256.
-  Status PublishArtifacts(const RecordPtr& r, const std::filesystem::path& tmp_dir,
-                          const std::vector<std::pair<v1::ArtifactKind, std::filesystem::path>>& files,
-                          v1::JobResult* result);
 
   JobManagerOptions options_;
   DataStore* store_;
