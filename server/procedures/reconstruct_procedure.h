@@ -19,8 +19,7 @@ enum class DepthExportKind { kDepthTiff, kConfidenceTiff, kAllInFocusPng, kDepth
 
 struct DepthArtifactFile {
   DepthExportKind kind;
-  std::filesystem::path path;
-  std::string media_type;
+  std::filesystem::path path;  // media types: server/result_publisher.h
 };
 
 // Writes depth.tiff, confidence.tiff, all_in_focus.png, depth_preview.png and the requested
