@@ -63,9 +63,11 @@ struct NccFocusOptions {
 
 // Work done by an engine (for ISFF-FAST's saving, thesis Table 6.9).
 struct NccWorkCounters {
+  int64_t computed_pixel_frames = 0;       // pixels whose NCC and F were computed, summed over frames
+  int64_t computed_pixel_frames_full = 0;  // the global maximum search's: pixels x frames
   int64_t tile_frames = 0;       // tiles processed, summed over frames
-  int64_t tile_frames_full = 0;  // what the global maximum search processes: tiles x frames
-  int64_t pixel_frames = 0;      // pixel updates (pixels of processed tiles that were still searching)
+  int64_t tile_frames_full = 0;  // tiles x frames
+  int64_t pixel_frames = 0;      // state updates (pixels that were still searching)
   int64_t stopped_pixels = 0;    // ISFF-FAST: pixels that stopped at a local maximum >= threshold
 };
 
@@ -87,9 +89,10 @@ Status ComputeNccFocus(const cv::Mat& frame, const cv::Mat& focused_template, in
 // F at the best frame, its mean NCC and index, the j values on each side of it, the last
 // max(j, 2) values, the sum of F, the squared second differences (confidence), the grey value
 // of the best frame and, for ISFF-FAST, whether and when the pixel stopped: 4 (6 + 3 j + 2) + 5
-// bytes, plus the template's statistics (20 bytes per pixel). The frame is processed in tiles
-// with their halo (correlation and summation windows): NCC sums in double precision, so
-// 12-bit frames and flat windows do not lose the variance to cancellation.
+// bytes, plus the template's statistics (12 bytes per pixel). The frame is processed in tiles
+// with their halo (correlation and summation windows); the patch sums are exact for 8-bit
+// frames and double for 16-bit ones, so flat windows do not lose their variance to
+// cancellation.
 class NccFocusEngine {
  public:
   // focused_template: CV_8U / CV_16U / CV_32F single channel of the frame size; frame_type

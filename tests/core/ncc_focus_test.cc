@@ -248,6 +248,8 @@ TEST(NccFocusTest, FastStopsAtFirstLocalMaximumAboveThreshold) {
   EXPECT_EQ(fast_work.tile_frames, 3 * 25);
   EXPECT_EQ(fast_work.tile_frames_full, 6 * 25);
   EXPECT_EQ(fast_work.pixel_frames, 3 * 40 * 40);
+  EXPECT_EQ(fast_work.computed_pixel_frames, 3 * 40 * 40);
+  EXPECT_EQ(fast_work.computed_pixel_frames_full, 6 * 40 * 40);
   const cv::Mat fast_depth = fast->depth_um;
   EXPECT_FLOAT_EQ(fast_depth.at<float>(20, 20), 1.0f);
 
