@@ -1,14 +1,15 @@
+// Scan procedure (thesis 3.1.2, Fig. 3.3): scan plan, the z loop, stack folder and engine push; what
+// each z shows and captures is the illumination strategy of the mode (illumination_strategy.h).
 #include "server/procedures/scan_procedure.h"
 
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <limits>
 
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/depth_export.h"
-#include "core/texture_pattern.h"
+#include "server/procedures/illumination_strategy.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -105,20 +106,87 @@ Status CheckCalibrationFor(IlluminationMode mode, const CalibrationBundle* bundl
 
 namespace {
 
-// Merged radiance -> 16 bit for the engine (HDR). The mapping is logarithmic: eq. 3.44 yields
-// ln E, and a focus measure on ln E responds to relative contrast, so a glint tens of times the
-// surrounding metal and the dark metal beside it both keep their texture. (A linear mapping lets
-// the defocused halo of a glint out-gradient the in-focus texture next to it; a sensor that sees
-// the scene once cannot do better than the camera's own grey levels.) 0 is the radiance of level
-// 1 at the longest exposure, 65535 the radiance that saturates the shortest one.
-cv::Mat RadianceTo16(const cv::Mat& radiance, double lo, double hi) {
-  cv::Mat log_e;
-  cv::log(cv::max(radiance, lo), log_e);
-  cv::Mat out;
-  const double scale = 65535.0 / (std::log(hi) - std::log(lo));
-  log_e.convertTo(out, CV_16UC1, scale, -std::log(lo) * scale);
-  return out;
-}
+// The rig during one scan as the illumination strategies see it: every capture is checked,
+// stored (raw/ unless a stack frame), counted and reported here.
+class ScanRecorder : public ScanCaptureContext {
+ public:
+  ScanRecorder(Rig& rig, const ScanPlan& plan, const fs::path& stack_dir,
+               const std::function<void(const ScanFrameEvent&)>& on_frame, const std::atomic<bool>& cancel,
+               ScanOutcome& out)
+      : rig_(rig), plan_(plan), stack_dir_(stack_dir), on_frame_(on_frame), cancel_(cancel), out_(out),
+        count_(int(plan.z_um.size())) {}
+
+  Status CheckCancel(int i) const {
+    if (cancel_.load()) {
+      return Status::Cancelled("scan cancelled at frame " + std::to_string(i) + " of " + std::to_string(count_));
+    }
+    return Status::Ok();
+  }
+
+  Status MoveStageTo(int i) override {
+    return rig_.stage().MoveTo(plan_.z_um[size_t(i)]).WithContext("frame " + std::to_string(i) + ": stage");
+  }
+
+  Status ShowPattern(const cv::Mat& pattern) override { return rig_.projector().Show(pattern); }
+
+  StatusOr<cv::Mat> Capture(int i, const cv::Mat& pattern, double exposure_us, CaptureRole role,
+                            const std::string& raw_name) override {
+    INSPECT_RETURN_IF_ERROR(CheckCancel(i));
+    Camera& camera = rig_.camera();
+    if (!pattern.empty()) {
+      INSPECT_RETURN_IF_ERROR(rig_.projector().Show(pattern).WithContext("frame " + std::to_string(i)));
+    }
+    if (camera.exposure_us() != exposure_us) INSPECT_RETURN_IF_ERROR(camera.SetExposure(exposure_us));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, camera.Capture());
+    if (frame.size() != camera.frame_size()) {
+      return Status::Internal("frame " + std::to_string(i) + ": camera delivered an unexpected size");
+    }
+    if (!raw_name.empty() && !cv::imwrite((stack_dir_ / "raw" / raw_name).string(), frame, kPngParams())) {
+      return Status::Internal("cannot write raw/" + raw_name);
+    }
+    const bool stack_frame = role == CaptureRole::kStackFrame;
+    const FrameStatistics st = ComputeFrameStatistics(frame, camera.bit_depth());
+    out_.capture_statistics.push_back(st);
+    out_.capture_is_stack_frame.push_back(stack_frame);
+    ScanFrameEvent ev;
+    ev.index = i;
+    ev.count = count_;
+    INSPECT_ASSIGN_OR_RETURN(ev.z_um, rig_.stage().position_um());
+    ev.exposure_us = camera.exposure_us();
+    ev.statistics = st;
+    ev.acquisition = acquisitions_;
+    if (role == CaptureRole::kUndecided) pending_ = ev;
+    else Report(ev, stack_frame);
+    ++acquisitions_;
+    return frame;
+  }
+
+  void DecideLastCapture(bool stack_frame) override { Report(pending_, stack_frame); }
+
+  int acquisitions() const { return acquisitions_; }
+
+  static const std::vector<int>& kPngParams() {
+    static const std::vector<int> params = {cv::IMWRITE_PNG_COMPRESSION, 1};
+    return params;
+  }
+
+ private:
+  void Report(ScanFrameEvent ev, bool stack_frame) {
+    ev.stack_frame = stack_frame;
+    out_.capture_is_stack_frame[size_t(ev.acquisition)] = stack_frame;
+    if (on_frame_) on_frame_(ev);
+  }
+
+  Rig& rig_;
+  const ScanPlan& plan_;
+  const fs::path& stack_dir_;
+  const std::function<void(const ScanFrameEvent&)>& on_frame_;
+  const std::atomic<bool>& cancel_;
+  ScanOutcome& out_;
+  const int count_;
+  int acquisitions_ = 0;
+  ScanFrameEvent pending_;  // the last kUndecided capture, reported by DecideLastCapture
+};
 
 }  // namespace
 
@@ -137,13 +205,11 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
                               const std::atomic<bool>& cancel, const CalibrationBundle* bundle) {
   using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
-  const IlluminationMode mode = plan.mode;
-  const IlluminationParams& prm = plan.params;
-  INSPECT_RETURN_IF_ERROR(prm.Validate());
-  INSPECT_RETURN_IF_ERROR(CheckCalibrationFor(mode, bundle));
+  INSPECT_RETURN_IF_ERROR(plan.params.Validate());
+  INSPECT_RETURN_IF_ERROR(CheckCalibrationFor(plan.mode, bundle));
   Camera& camera = rig.camera();
   Projector& projector = rig.projector();
-  if (bundle != nullptr && mode != IlluminationMode::kStd &&
+  if (bundle != nullptr && plan.mode != IlluminationMode::kStd &&
       (bundle->camera_size != camera.frame_size() || bundle->projector_size != projector.resolution())) {
     return Status::FailedPrecondition("the active calibration was made for another camera/projector size");
   }
@@ -151,214 +217,38 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
   fs::create_directories(stack_dir / "raw", ec);
   if (ec) return Status::Internal("cannot create " + stack_dir.string() + ": " + ec.message());
 
-  const int bit_depth = camera.bit_depth();
-  const int top = (1 << bit_depth) - 1;
-  const double level_scale = double(top + 1) / 256.0;  // 8-bit units -> camera levels
-  const bool hdr = mode == IlluminationMode::kHdr;
-  const int engine_type = (hdr || bit_depth > 8) ? CV_16UC1 : CV_8UC1;
+  const std::unique_ptr<IlluminationStrategy> illumination =
+      CreateIlluminationStrategy(plan, bundle, {camera.frame_size(), projector.resolution(), camera.bit_depth()});
+  const int stack_bit_depth = illumination->stack_bit_depth();
   INSPECT_ASSIGN_OR_RETURN(std::unique_ptr<SffEngine> engine,
-                           SffEngine::Create(plan.sff, camera.frame_size(), engine_type));
+                           SffEngine::Create(plan.sff, camera.frame_size(), stack_bit_depth > 8 ? CV_16UC1 : CV_8UC1));
 
   ScanOutcome out;
   StackManifest& m = out.manifest;
   m.pixel_size_um = rig.pixel_size_um();
-  m.bit_depth = hdr ? 16 : bit_depth;
-  m.illumination = IlluminationModeName(mode, prm.hdr_exposures);
+  m.bit_depth = stack_bit_depth;
+  m.illumination = IlluminationModeName(plan.mode, plan.params.hdr_exposures);
   m.calibration_id = plan.calibration_id;
   if (SimulationControl* sim = rig.simulation()) m.specimen = sim->specimen();
-  const std::vector<int> png_params = {cv::IMWRITE_PNG_COMPRESSION, 1};
   const int count = int(plan.z_um.size());
 
-  // Texture: the checkerboard period of eq. 5.15 from sigma_p and the focus window.
-  const bool textured = mode == IlluminationMode::kTexture || mode == IlluminationMode::kHfAdapt ||
-                        mode == IlluminationMode::kAdaptedHf;
-  TexturePeriod period;
-  cv::Mat cb;
-  if (textured) {
-    auto p = ChooseTexturePeriod(bundle->psf->influence_radius_px, bundle->geometry->camera_px_per_projector_px,
-                                 plan.sff.window_px);
-    if (!p.ok()) return p.status().WithContext("sff window_px " + std::to_string(plan.sff.window_px));
-    period = *p;
-    cb = CheckerboardMask(projector.resolution(), period.cell_projector_px);
-  }
-  // Compensation (ADAPT family). ADAPTED-HF's desired image holds the checkerboard itself, so
-  // its solve runs at full resolution (no low-pass grid, no camera bins).
-  const bool adapt = mode == IlluminationMode::kAdaptIterative || mode == IlluminationMode::kAdapt ||
-                     mode == IlluminationMode::kHfAdapt || mode == IlluminationMode::kAdaptedHf;
-  std::unique_ptr<Compensator> comp;
-  cv::Mat desired;
-  if (adapt) {
-    CompensationOptions co = prm.compensation;
-    if (mode == IlluminationMode::kAdaptedHf) {
-      co.pattern_cell_px = 1;
-      co.camera_bin_px = 1;
-    }
-    INSPECT_ASSIGN_OR_RETURN(comp, Compensator::Create(*bundle->camera_response, *bundle->projector_response,
-                                                       *bundle->scatter, co));
-    desired = mode == IlluminationMode::kAdaptedHf
-                  ? CameraCheckerboard(camera.frame_size(), period.half_period_camera_px, 60.0 * level_scale,
-                                       190.0 * level_scale)
-                  : cv::Mat(camera.frame_size(), CV_32FC1, cv::Scalar(prm.target_grey * level_scale));
-  }
-
-  int acquisition = 0;
-  ScanFrameEvent pending;  // ADAPT-IT: the last capture, reported once its stop test decided
-  // Reports a capture (stack_frame: whether it became a stack frame).
-  auto report = [&](ScanFrameEvent ev, bool stack_frame) {
-    ev.stack_frame = stack_frame;
-    out.capture_is_stack_frame[size_t(ev.acquisition)] = stack_frame;
-    if (on_frame) on_frame(ev);
-  };
-  // Shows `pattern` (when not empty), captures at exposure_us, stores the frame (raw/ unless a
-  // stack frame) and reports it, or with defer_report leaves the report to the caller (pending).
-  auto capture = [&](int i, const cv::Mat& pattern, double exposure_us, bool stack_frame,
-                     const std::string& raw_name, bool defer_report = false) -> StatusOr<cv::Mat> {
-    if (cancel.load()) {
-      return Status::Cancelled("scan cancelled at frame " + std::to_string(i) + " of " + std::to_string(count));
-    }
-    if (!pattern.empty()) INSPECT_RETURN_IF_ERROR(projector.Show(pattern).WithContext("frame " + std::to_string(i)));
-    if (camera.exposure_us() != exposure_us) INSPECT_RETURN_IF_ERROR(camera.SetExposure(exposure_us));
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, camera.Capture());
-    if (frame.size() != camera.frame_size()) {
-      return Status::Internal("frame " + std::to_string(i) + ": camera delivered an unexpected size");
-    }
-    if (!raw_name.empty() && !cv::imwrite((stack_dir / "raw" / raw_name).string(), frame, png_params)) {
-      return Status::Internal("cannot write raw/" + raw_name);
-    }
-    const FrameStatistics st = ComputeFrameStatistics(frame, bit_depth);
-    out.capture_statistics.push_back(st);
-    out.capture_is_stack_frame.push_back(stack_frame);
-    ScanFrameEvent ev;
-    ev.index = i;
-    ev.count = count;
-    INSPECT_ASSIGN_OR_RETURN(ev.z_um, rig.stage().position_um());
-    ev.exposure_us = camera.exposure_us();
-    ev.statistics = st;
-    ev.acquisition = acquisition;
-    if (defer_report) pending = ev;
-    else report(ev, stack_frame);
-    ++acquisition;
-    return frame;
-  };
-  auto push = [&](int i, const cv::Mat& frame, double exposure_us, const std::string& pattern) -> Status {
+  ScanRecorder recorder(rig, plan, stack_dir, on_frame, cancel, out);
+  INSPECT_RETURN_IF_ERROR(illumination->Prepare(recorder));
+  for (int i = 0; i < count; ++i) {
+    INSPECT_RETURN_IF_ERROR(recorder.CheckCancel(i));
+    INSPECT_RETURN_IF_ERROR(recorder.MoveStageTo(i));
+    INSPECT_ASSIGN_OR_RETURN(CapturedStackFrame frame, illumination->CaptureStackFrame(i, recorder));
     char name[32];
     std::snprintf(name, sizeof(name), "frame_%04d.png", i);
-    if (!cv::imwrite((stack_dir / name).string(), frame, png_params)) {
+    if (!cv::imwrite((stack_dir / name).string(), frame.image, ScanRecorder::kPngParams())) {
       return Status::Internal(std::string("cannot write ") + name);
     }
     // The commanded z is the stack coordinate: repeatability error is what the stage adds, and
     // the thesis evaluates against the nominal step positions.
-    INSPECT_RETURN_IF_ERROR(engine->PushFrame(frame, plan.z_um[i]));
-    m.frames.push_back({name, plan.z_um[i], exposure_us, pattern});
-    return Status::Ok();
-  };
-  auto raw_name = [](int i, const char* what, int k) {
-    char name[48];
-    std::snprintf(name, sizeof(name), "frame_%04d_%s%d.png", i, what, k);
-    return std::string(name);
-  };
-
-  const cv::Mat uniform(projector.resolution(), CV_8UC1, cv::Scalar(plan.uniform_grey));
-  double dt = plan.exposure_us;
-  std::vector<double> hdr_dt;
-  if (hdr) {
-    INSPECT_ASSIGN_OR_RETURN(std::vector<double> rel, HdrRelativeExposures(prm.hdr_exposures));
-    for (double r : rel) hdr_dt.push_back(r * dt);
+    INSPECT_RETURN_IF_ERROR(engine->PushFrame(frame.image, plan.z_um[size_t(i)]));
+    m.frames.push_back({name, plan.z_um[size_t(i)], frame.exposure_us, frame.pattern});
   }
-  cv::Mat fixed_pattern;  // STD, HDR, TEXTURE
-  std::string fixed_name = "uniform:" + std::to_string(plan.uniform_grey);
-  if (mode == IlluminationMode::kTexture) {
-    INSPECT_ASSIGN_OR_RETURN(fixed_pattern, MakeHfPattern(projector.resolution(), period.cell_projector_px, prm.gamma));
-    fixed_name = "checkerboard:" + std::to_string(period.cell_projector_px) + ":gamma=" + std::to_string(prm.gamma);
-    // Same mean projector irradiance as STD's uniform pattern: the exposure is scaled by
-    // prf(uniform) / mean prf(checkerboard), so the mean grey stays near STD's.
-    const ProjectorResponseFunction& pr = *bundle->projector_response;
-    dt *= pr.Irradiance(plan.uniform_grey) / cv::mean(pr.IrradianceImage(fixed_pattern))[0];
-  } else if (!adapt) {
-    fixed_pattern = uniform;
-  }
-  const ProjectorResponseFunction* prf = adapt ? &*bundle->projector_response : nullptr;
-  // Shown pattern for an adapted irradiance (HF+ADAPT adds the checkerboard, eq. 5.18).
-  auto shown = [&](const cv::Mat& irr) -> StatusOr<cv::Mat> {
-    cv::Mat p = comp->PatternFor(irr);
-    if (mode == IlluminationMode::kHfAdapt) return AddHfPattern(p, cb, prm.psi);
-    return p;
-  };
-
-  if (!adapt) {
-    INSPECT_RETURN_IF_ERROR(projector.Show(fixed_pattern));
-  }
-  cv::Mat irr_cur, irr_prev, irr_next;  // ADAPT family: corrected irradiances of z_i, z_i-1, and the next prediction
-  if (adapt) {
-    INSPECT_RETURN_IF_ERROR(rig.stage().MoveTo(plan.z_um[0]).WithContext("frame 0: stage"));
-    irr_next = prf->IrradianceImage(uniform);
-    if (mode != IlluminationMode::kAdaptIterative) {
-      // Predictive modes: two initialisation frames at the first z (thesis 5.1.3).
-      for (int k = 0; k < 2; ++k) {
-        INSPECT_ASSIGN_OR_RETURN(cv::Mat p, k == 0 ? StatusOr<cv::Mat>(uniform) : shown(irr_next));
-        INSPECT_ASSIGN_OR_RETURN(cv::Mat f, capture(0, p, dt, false, raw_name(0, "init", k)));
-        INSPECT_ASSIGN_OR_RETURN(CompensationStep st,
-                                 comp->Step(prf->IrradianceImage(p), f, dt, desired, irr_next));
-        irr_next = st.projector_irradiance;
-      }
-    }
-  }
-
-  for (int i = 0; i < count; ++i) {
-    if (cancel.load()) {
-      return Status::Cancelled("scan cancelled at frame " + std::to_string(i) + " of " + std::to_string(count));
-    }
-    INSPECT_RETURN_IF_ERROR(rig.stage().MoveTo(plan.z_um[i]).WithContext("frame " + std::to_string(i) + ": stage"));
-    if (hdr) {
-      std::vector<cv::Mat> frames;
-      for (size_t k = 0; k < hdr_dt.size(); ++k) {
-        INSPECT_ASSIGN_OR_RETURN(cv::Mat f, capture(i, cv::Mat(), hdr_dt[k], false, raw_name(i, "e", int(k))));
-        frames.push_back(f);
-      }
-      INSPECT_ASSIGN_OR_RETURN(cv::Mat e, MergeRadiance(frames, hdr_dt, *bundle->camera_response));  // eq. 3.44
-      const double hi = std::exp(bundle->camera_response->LogExposure(top)) / hdr_dt.front();
-      const double lo = std::exp(bundle->camera_response->LogExposure(1)) / hdr_dt.back();
-      INSPECT_RETURN_IF_ERROR(push(i, RadianceTo16(e, lo, hi), 0.0, fixed_name + ":hdr" + std::to_string(prm.hdr_exposures)));
-      continue;
-    }
-    if (!adapt) {
-      INSPECT_ASSIGN_OR_RETURN(cv::Mat f, capture(i, cv::Mat(), dt, true, ""));
-      INSPECT_RETURN_IF_ERROR(push(i, f, dt, fixed_name));
-      continue;
-    }
-    if (mode == IlluminationMode::kAdaptIterative) {
-      // Eq. 5.5-5.6 and 5.11 repeated at this z, starting from the previous z's pattern, until
-      // the error is below tolerance, stops improving, or max_iterations frames were taken.
-      cv::Mat irr = irr_next, frame, pattern;
-      double last_err = std::numeric_limits<double>::infinity();
-      for (int k = 0;; ++k) {
-        INSPECT_ASSIGN_OR_RETURN(pattern, shown(irr));
-        INSPECT_ASSIGN_OR_RETURN(frame, capture(i, pattern, dt, false, raw_name(i, "it", k), /*defer_report=*/true));
-        INSPECT_ASSIGN_OR_RETURN(CompensationStep st, comp->Step(prf->IrradianceImage(pattern), frame, dt, desired, irr));
-        const double err = st.mean_abs_error_grey / level_scale;
-        const bool done = k + 1 >= prm.max_iterations || err < prm.tolerance_grey ||
-                          err > last_err * (1.0 - prm.min_improvement);
-        last_err = err;
-        // The last frame is the stack frame; the next z starts from the pattern that made it.
-        report(pending, done);
-        if (done) break;
-        irr = st.projector_irradiance;
-      }
-      irr_next = irr;
-      INSPECT_RETURN_IF_ERROR(push(i, frame, dt, "adapted"));
-      continue;
-    }
-    // Predictive modes (eq. 5.12): show the prediction, capture the stack frame, correct once.
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat pattern, shown(irr_next));
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, capture(i, pattern, dt, true, ""));
-    INSPECT_RETURN_IF_ERROR(push(i, frame, dt, "adapted"));
-    INSPECT_ASSIGN_OR_RETURN(CompensationStep st, comp->Step(prf->IrradianceImage(pattern), frame, dt, desired, irr_next));
-    irr_prev = irr_cur.empty() ? st.projector_irradiance : irr_cur;
-    irr_cur = st.projector_irradiance;
-    INSPECT_ASSIGN_OR_RETURN(irr_next, PredictIrradiance(irr_cur, irr_prev, prm.lambda,
-                                                         bundle->projector_response->relative_irradiance[0]));
-  }
-  out.images_acquired = acquisition;
+  out.images_acquired = recorder.acquisitions();
   const auto t1 = Clock::now();
   INSPECT_RETURN_IF_ERROR(WriteStackManifest(stack_dir, m));
   INSPECT_ASSIGN_OR_RETURN(out.depth, engine->Finish());

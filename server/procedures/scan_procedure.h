@@ -1,8 +1,9 @@
 // Scan procedure: drives the rig through focus (thesis 3.1.2, Fig. 3.3) and streams every frame
 // into the SFF engine while writing the stack folder, so the depth map is ready when the last
 // frame arrives. Illumination modes of thesis 5 and 6.2 (IlluminationMode below): STD, HDR-n,
-// ADAPT-IT, ADAPT, TEXTURE, HF+ADAPT, ADAPTED-HF. Frames that are not stack frames (HDR
-// exposures, ADAPT initialisation and iteration frames) are stored under raw/ in the stack.
+// ADAPT-IT, ADAPT, TEXTURE, HF+ADAPT, ADAPTED-HF, each a strategy (illumination_strategy.h).
+// Frames that are not stack frames (HDR exposures, ADAPT initialisation and iteration frames) are
+// stored under raw/ in the stack.
 #pragma once
 
 #include <atomic>
