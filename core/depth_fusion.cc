@@ -30,7 +30,7 @@ StatusOr<FusedDepth> FuseDepthMaps(const std::vector<cv::Mat>& depth_um, const s
     float* od = out.depth_um.ptr<float>(y);
     float* oc = out.confidence.ptr<float>(y);
     for (int x = 0; x < size.width; ++x) {
-      float best_c = 0.f, best_d = nan;
+      float best_c = 0.f, best_d = nan, first_c = 0.f, first_d = nan;
       double sw = 0.0, swd = 0.0;
       for (size_t i = 0; i < depth_um.size(); ++i) {
         const float d = depth_um[i].ptr<float>(y)[x], c = confidence[i].ptr<float>(y)[x];
@@ -39,12 +39,21 @@ StatusOr<FusedDepth> FuseDepthMaps(const std::vector<cv::Mat>& depth_um, const s
           best_c = c;
           best_d = d;
         }
+        if (std::isnan(first_d) && c >= float(min_confidence)) {
+          first_c = c;
+          first_d = d;
+        }
         sw += c;
         swd += double(c) * d;
       }
-      oc[x] = best_c;
-      const float d = rule == DepthFusionRule::kMostConfident ? best_d : (sw > 0 ? float(swd / sw) : nan);
-      od[x] = best_c >= float(min_confidence) && best_c > 0.f ? d : nan;
+      float d = best_d, c = best_c;
+      if (rule == DepthFusionRule::kConfidenceWeighted) d = sw > 0 ? float(swd / sw) : nan;
+      if (rule == DepthFusionRule::kFirstConfident && !std::isnan(first_d)) {
+        d = first_d;
+        c = first_c;
+      }
+      oc[x] = c;
+      od[x] = c >= float(min_confidence) && c > 0.f ? d : nan;
     }
   }
   return out;

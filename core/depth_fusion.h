@@ -17,6 +17,9 @@ namespace inspection {
 enum class DepthFusionRule {
   kMostConfident,       // per pixel, the depth of the map with the highest confidence
   kConfidenceWeighted,  // per pixel, the confidence-weighted mean depth; confidence = the highest
+  kFirstConfident,      // per pixel, the first map (in the order given) whose confidence reaches
+                        // min_confidence: list small windows first to keep depth edges where the
+                        // small window suffices, larger ones carry the weak texture
 };
 
 struct FusedDepth {

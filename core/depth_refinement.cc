@@ -36,27 +36,28 @@ cv::Mat Weights(const cv::Mat& depth_um, const cv::Mat& confidence) {
 
 template <int CN>
 void WeightedMedianRows(const cv::Range& rows, const cv::Mat& depth, const cv::Mat& weight, const cv::Mat& guide,
-                        int r, const std::vector<float>& lut, float lut_scale, cv::Mat* out) {
+                        int r, int step, const std::vector<float>& lut, float lut_scale, cv::Mat* out) {
   std::vector<std::pair<float, float>> samples;
-  samples.reserve(size_t(2 * r + 1) * (2 * r + 1));
+  samples.reserve(size_t(2 * r / step + 1) * (2 * r / step + 1));
   for (int y = rows.start; y < rows.end; ++y) {
     const float* d0 = depth.ptr<float>(y);
     float* o = out->ptr<float>(y);
-    const int y_lo = std::max(0, y - r), y_hi = std::min(depth.rows - 1, y + r);
+    // Sample offsets are multiples of step from the pixel itself, so it always votes.
+    const int y_lo = y - (std::min(r, y) / step) * step, y_hi = std::min(depth.rows - 1, y + r);
     for (int x = 0; x < depth.cols; ++x) {
       if (!std::isfinite(d0[x])) {
         o[x] = kNaN;
         continue;
       }
       const float* gp = guide.ptr<float>(y) + CN * x;
-      const int x_lo = std::max(0, x - r), x_hi = std::min(depth.cols - 1, x + r);
+      const int x_lo = x - (std::min(r, x) / step) * step, x_hi = std::min(depth.cols - 1, x + r);
       samples.clear();
       float total = 0.f;
-      for (int qy = y_lo; qy <= y_hi; ++qy) {
+      for (int qy = y_lo; qy <= y_hi; qy += step) {
         const float* dq = depth.ptr<float>(qy);
         const float* wq = weight.ptr<float>(qy);
         const float* gq = guide.ptr<float>(qy);
-        for (int qx = x_lo; qx <= x_hi; ++qx) {
+        for (int qx = x_lo; qx <= x_hi; qx += step) {
           if (wq[qx] <= 0.f) continue;
           float dist2 = 0.f;
           for (int c = 0; c < CN; ++c) {
@@ -98,9 +99,10 @@ cv::Mat WeightedMedian(const cv::Mat& depth, const cv::Mat& weight, const cv::Ma
   const float lut_scale = float(kLutSize / kLutRange / (2.0 * o.guide_sigma * o.guide_sigma));
   cv::Mat out(depth.size(), CV_32F);
   const int cn = guide.channels();
+  const int step = o.sample_step_px > 0 ? o.sample_step_px : std::max(1, o.radius_px / 4);
   cv::parallel_for_(cv::Range(0, depth.rows), [&](const cv::Range& rows) {
-    if (cn == 3) WeightedMedianRows<3>(rows, depth, weight, guide, o.radius_px, lut, lut_scale, &out);
-    else WeightedMedianRows<1>(rows, depth, weight, guide, o.radius_px, lut, lut_scale, &out);
+    if (cn == 3) WeightedMedianRows<3>(rows, depth, weight, guide, o.radius_px, step, lut, lut_scale, &out);
+    else WeightedMedianRows<1>(rows, depth, weight, guide, o.radius_px, step, lut, lut_scale, &out);
   }, o.threads > 0 ? o.threads : -1);
   return out;
 }
@@ -191,9 +193,13 @@ StatusOr<DepthRefinement> ParseDepthRefinement(const std::string& name) {
 }
 
 Status DepthRefinementOptions::Validate() const {
-  if (radius_px < 1 || radius_px > 15) {
-    return Status::InvalidArgument("refinement radius_px " + std::to_string(radius_px) + " must be 1..15");
+  if (radius_px < 1 || radius_px > 31) {
+    return Status::InvalidArgument("refinement radius_px " + std::to_string(radius_px) + " must be 1..31");
   }
+  if (sample_step_px < 0 || sample_step_px > radius_px) {
+    return Status::InvalidArgument("refinement sample_step_px must be 0 (auto) .. radius_px");
+  }
+  if (iterations < 1 || iterations > 5) return Status::InvalidArgument("refinement iterations must be 1..5");
   if (!(guide_sigma > 0.0) || !std::isfinite(guide_sigma)) {
     return Status::InvalidArgument("refinement guide_sigma must be > 0");
   }
@@ -233,8 +239,12 @@ StatusOr<cv::Mat> RefineDepth(const cv::Mat& depth_um, const cv::Mat& confidence
   if (options.method == DepthRefinement::kNone) return depth_um.clone();
   const cv::Mat weight = Weights(depth_um, confidence);
   try {
-    if (options.method == DepthRefinement::kWeightedMedian) return WeightedMedian(depth_um, weight, g, options);
-    return GuidedFilter(depth_um, weight, g, options);
+    cv::Mat d = depth_um;
+    for (int i = 0; i < options.iterations; ++i) {
+      d = options.method == DepthRefinement::kWeightedMedian ? WeightedMedian(d, weight, g, options)
+                                                             : GuidedFilter(d, weight, g, options);
+    }
+    return d;
   } catch (const cv::Exception& e) {
     return Status::Internal(std::string("depth refinement failed: ") + e.what());
   }

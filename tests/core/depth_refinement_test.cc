@@ -216,6 +216,13 @@ TEST(DepthFusionTest, MostConfidentAndWeightedRules) {
   ASSERT_TRUE(w.ok());
   EXPECT_FLOAT_EQ(w->depth_um.at<float>(0, 0), (10.f * 0.9f + 14.f * 0.3f) / 1.2f);
   EXPECT_FLOAT_EQ(w->depth_um.at<float>(0, 1), (10.f * 0.1f + 20.f * 0.2f) / 0.3f);
+  // First confident: map 1 where it reaches 0.4, else map 2 where that does.
+  auto f = FuseDepthMaps({d1, d2}, {c1, c2}, DepthFusionRule::kFirstConfident, 0.25);
+  ASSERT_TRUE(f.ok());
+  EXPECT_EQ(f->depth_um.at<float>(0, 0), 10.f);
+  EXPECT_TRUE(std::isnan(f->depth_um.at<float>(0, 1)));  // 0.1 and 0.2 both below 0.25
+  EXPECT_EQ(f->depth_um.at<float>(0, 2), 7.f);
+  EXPECT_FLOAT_EQ(f->confidence.at<float>(0, 2), 0.5f);
   EXPECT_EQ(FuseDepthMaps({d1}, {c1, c2}, DepthFusionRule::kMostConfident, 0.4).status().code(),
             StatusCode::kInvalidArgument);
   EXPECT_EQ(FuseDepthMaps({d1, cv::Mat(2, 2, CV_32F)}, {c1, c2}, DepthFusionRule::kMostConfident, 0.4).status().code(),
