@@ -66,7 +66,7 @@ if [[ "${SKIP_BUILD:-0}" != 1 ]]; then
     --build-arg BASE_IMAGE="$base_image" --build-arg JOBS="${JOBS:-2}" \
     --ignorefile deploy/containerignore -f deploy/Containerfile -t "$image" . >"$work/build.log" 2>&1 ||
     { tail -40 "$work/build.log"; fail "image build failed"; }
-  grep -E '^(Hits|Misses)' "$work/build.log" | sed 's/^/   ccache /' || true
+  grep -E '^ *(Hits|Misses):' "$work/build.log" | sed 's/^ */   ccache /' || true
   echo "   build time: $((SECONDS - start)) s"
 fi
 size_bytes="$("${podman[@]}" image inspect --format '{{.Size}}' "$image")"
