@@ -23,6 +23,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/depth_interpolation.h"
+#include "core/sff_engine.h"  // DepthResult
 #include "core/status.h"
 
 namespace inspection {
