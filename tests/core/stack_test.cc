@@ -1,6 +1,7 @@
 // Stack folder format: manifest parsing and frame validation name the field or frame at fault.
 #include "core/stack.h"
 
+#include <atomic>
 #include <cstring>
 #include <fstream>
 
@@ -9,6 +10,7 @@
 
 #include "core/colour.h"
 #include "core/sff_engine.h"
+#include "core/stack_reconstruct.h"
 #include "tests/core/sff_synthetic.h"
 
 namespace inspection {
@@ -231,8 +233,14 @@ TEST_F(StackTest, ColourStackReconstructsLikeItsLuminance) {
   }
   ASSERT_TRUE(WriteStackManifest(cdir, colour).ok());
   ASSERT_TRUE(WriteStackManifest(gdir, grey).ok());
-  auto rc = ReconstructStack(cdir, SffOptions{});
-  auto rg = ReconstructStack(gdir, SffOptions{});
+  const std::atomic<bool> no_cancel{false};
+  auto reconstruct = [&](const fs::path& d) -> StatusOr<DepthResult> {
+    auto manifest = ReadStackManifest(d);
+    if (!manifest.ok()) return manifest.status();
+    return ReconstructStackFolder(d, *manifest, SffOptions{}, nullptr, no_cancel);
+  };
+  auto rc = reconstruct(cdir);
+  auto rg = reconstruct(gdir);
   ASSERT_TRUE(rc.ok()) << rc.status().ToString();
   ASSERT_TRUE(rg.ok()) << rg.status().ToString();
   EXPECT_GT(rc->valid_fraction, 0.9);
