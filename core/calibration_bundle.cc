@@ -356,7 +356,7 @@ StatusOr<CalibrationBundle> CalibrationBundle::Load(const fs::path& dir) {
   } catch (const json::exception& e) {
     return Status::InvalidArgument(std::string("bundle.json: ") + e.what());
   }
-  INSPECT_RETURN_IF_ERROR(b.Validate().WithContext(manifest.string() + ": "));
+  INSPECT_RETURN_IF_ERROR(b.Validate().WithContext(manifest.string()));
   return b;
 }
 

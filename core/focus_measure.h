@@ -49,8 +49,8 @@ inline constexpr double kHelmliFloorOfMean = 1.0 / 128.0;
 // Tenengrad (eq. 3.13-3.14) of an 8-bit frame in exact integer arithmetic with the SFF engine's
 // fused SIMD kernel (CV_32SC1; fits int32 for every window up to 31). Same values as
 // ComputeFocusMeasure(kTenengrad) up to that function's float rounding. Implemented in
-// core/sff_engine.cc, where the kernel lives. use_simd = false forces the portable kernel (the
-// AVX2 one is used when the CPU has it); both give identical values.
+// core/tenengrad_kernel_dispatch.cc, beside the kernel. use_simd = false forces the portable
+// kernel (the AVX2 one is used when the CPU has it); both give identical values.
 Status ComputeTenengradU8(const cv::Mat& frame, int window_px, cv::Mat* focus, bool use_simd = true);
 
 // Normalised discrete Chebyshev polynomial t~_m(x; N) for x = 0..N-1 (eq. 3.18-3.22, normalised

@@ -46,7 +46,7 @@ class ExactEngine final : public SffEngine {
     } else {
       cv::Mat focus;
       INSPECT_RETURN_IF_ERROR(ComputeFocusMeasure(frame, options_.focus_measure, options_.window_px, &focus)
-                                  .WithContext("frame " + std::to_string(k) + ": "));
+                                  .WithContext("frame " + std::to_string(k)));
       const int bands = std::min(size_.height, threads_ * 4);
       ParallelFor(bands, threads_, [&](int b, int) {
         const int y_begin = size_.height * b / bands, y_end = size_.height * (b + 1) / bands;

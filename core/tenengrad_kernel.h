@@ -121,11 +121,13 @@ struct TenengradKernels {
   // Tenengrad map of a whole 8-bit frame (CV_32SC1 out, allocated): ComputeTenengradU8.
   static void TenengradMap(const cv::Mat& frame, int window_px, cv::Mat* out);
   // Portable (the scalar reference), AVX2 (blocks of 8) and AVX-512 (blocks of 16): pixels
-  // x_begin .. x_end-1; the vector sets need x_end - x_begin a multiple of their block.
-  static void UpdateCompact(const CompactPtrs& s, int x_begin, int x_end, int k_begin, int k_end, int slot0,
+  // x_begin .. x_end-1; the vector sets need x_end - x_begin a multiple of their block. The row
+  // pointers come by value: a copy the stores (8-bit all-in-focus ones may alias anything)
+  // cannot change, so the loops keep them in registers.
+  static void UpdateCompact(CompactPtrs s, int x_begin, int x_end, int k_begin, int k_end, int slot0,
                             const int32_t* vol_row, size_t slot_stride, const uint8_t* const* pix_rows);
   // Portable and AVX2 (blocks of 8), pixels x_begin .. x_end-1.
-  static size_t FinishCompact(const CompactPtrs& s, int x_begin, int x_end, const float* zf, int n, bool gaussian,
+  static size_t FinishCompact(CompactPtrs s, int x_begin, int x_end, const float* zf, int n, bool gaussian,
                               float min_confidence, uint32_t* depth, uint32_t* conf, uint8_t* aif);
 };
 

@@ -55,6 +55,22 @@ SFF_INLINE SFF_TARGET void InitRow(StatePlanes<T, P>& s, size_t off, const T* __
 // pointers and lanes of one width, the form in which GCC vectorises them; masks are built with
 // integer bit operations because GCC does not if-convert an integer comparison selecting a float.
 
+// Curve statistics of one pixel at frame k >= 2, before its maximum is updated: fv = F_k,
+// t2 = t_k^2 (t_k = F_k - 2 F_(k-1) + F_(k-2)), new_max: F_k > F_max, id: the maximum's frame.
+// Adds F_k to sum and t_k^2 to curv_all; curv_excl keeps the t_k^2 that involve the current
+// maximum (m is k-2, k-1 or k): t_k^2 alone when F_k is a new maximum, else plus t_k^2 when m is
+// k-1 or k-2.
+SFF_INLINE SFF_TARGET void AddCurveStats(float fv, float t2, bool new_max, int32_t id, int32_t km1, int32_t km2,
+                                         float& sum, float& curv_all, float& curv_excl) {
+  const uint32_t mgt = uint32_t(-int32_t(new_max));
+  const uint32_t mnear = uint32_t(-int32_t((id == km1) | (id == km2)));
+  const uint32_t tb = std::bit_cast<uint32_t>(t2);
+  const float kept = curv_excl + std::bit_cast<float>(tb & mnear);
+  sum += fv;
+  curv_all += t2;
+  curv_excl = std::bit_cast<float>((tb & mgt) | (std::bit_cast<uint32_t>(kept) & ~mgt));
+}
+
 // Sum of F and, for k >= 2, t_k = F_k - 2 F_(k-1) + F_(k-2) (exact in T for int32), whose square
 // goes to curv_all and, when t_k involves the maximum (m is k-2, k-1 or k: new max), to curv_excl.
 template <typename T>
@@ -71,15 +87,7 @@ SFF_TARGET __attribute__((noinline)) void StatsRow(int n, int k, const T* __rest
     const T v = f[x];
     // In float: for wide windows 2 F overflows int32.
     const float t = (ToFloat(v) - ToFloat(last[x])) - (ToFloat(last[x]) - ToFloat(last2[x]));
-    const float t2 = t * t;
-    const uint32_t mgt = uint32_t(-int32_t(v > best[x]));
-    const int32_t id = idx[x];
-    const uint32_t mnear = uint32_t(-int32_t((id == km1) | (id == km2)));
-    const uint32_t tb = std::bit_cast<uint32_t>(t2);
-    const float kept = curv_excl[x] + std::bit_cast<float>(tb & mnear);
-    sum[x] += ToFloat(v);
-    curv_all[x] += t2;
-    curv_excl[x] = std::bit_cast<float>((tb & mgt) | (std::bit_cast<uint32_t>(kept) & ~mgt));
+    AddCurveStats(ToFloat(v), t * t, v > best[x], idx[x], km1, km2, sum[x], curv_all[x], curv_excl[x]);
   }
 }
 
@@ -97,14 +105,7 @@ SFF_TARGET __attribute__((noinline)) void UpdateRowJ1(int n, int k, float curv_s
     const T v = f[x], b = best[x], l = last[x], l2 = last2[x];
     const int32_t id = idx[x];
     const float t = (ToFloat(v) - ToFloat(l)) - (ToFloat(l) - ToFloat(l2));  // float: 2 F overflows int32
-    const float t2 = curv_scale * (t * t);
-    const uint32_t mgt = uint32_t(-int32_t(v > b));
-    const uint32_t mnear = uint32_t(-int32_t((id == km1) | (id == km2)));
-    const uint32_t tb = std::bit_cast<uint32_t>(t2);
-    const float kept = curv_excl[x] + std::bit_cast<float>(tb & mnear);
-    sum[x] += ToFloat(v);
-    curv_all[x] += t2;
-    curv_excl[x] = std::bit_cast<float>((tb & mgt) | (std::bit_cast<uint32_t>(kept) & ~mgt));
+    AddCurveStats(ToFloat(v), curv_scale * (t * t), v > b, id, km1, km2, sum[x], curv_all[x], curv_excl[x]);
     const bool gt = v > b;
     const T nx = next[x], pv = prev[x];
     const int32_t a = aif[x], p = pix[x];

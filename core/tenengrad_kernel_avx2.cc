@@ -129,7 +129,7 @@ __attribute__((target("avx2"))) inline __m256 LogPositiveAvx2(__m256 x) {
 // pixels whose state stays in registers over the frames.
 template <>
 __attribute__((target("avx2"))) void TenengradKernels<Isa::kAvx2>::UpdateCompact(
-    const CompactPtrs& s, int x_begin, int x_end, int k_begin, int k_end, int slot0, const int32_t* vol_row,
+    CompactPtrs s, int x_begin, int x_end, int k_begin, int k_end, int slot0, const int32_t* vol_row,
     size_t slot_stride, const uint8_t* const* pix_rows) {
   const __m256i one_bits = _mm256_set1_epi32(int(kOneBits)), low8 = _mm256_set1_epi32(0xFF);
   const __m256i sample_mask = _mm256_set1_epi32(int(kSampleMask)), pending_mask = _mm256_set1_epi32(int(kPendingMask));
@@ -204,7 +204,7 @@ __attribute__((target("avx2"))) void TenengradKernels<Isa::kAvx2>::UpdateCompact
 // Pixels x_begin .. x_end-1 (x_end - x_begin a multiple of 8); returns the number kept.
 template <>
 __attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompact(
-    const CompactPtrs& s, int x_begin, int x_end, const float* zf, int n, bool gaussian, float min_confidence,
+    CompactPtrs s, int x_begin, int x_end, const float* zf, int n, bool gaussian, float min_confidence,
     uint32_t* depth, uint32_t* conf, uint8_t* aif) {
   size_t valid = 0;
   const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);

@@ -31,7 +31,7 @@ __attribute__((target("avx512f"))) inline void St16x16(uint16_t* p, __m512i v) {
 // t_k^2 & mask, as the pending sum is never -0), 16 pixels at a time.
 template <>
 __attribute__((target("avx512f"))) void TenengradKernels<Isa::kAvx512>::UpdateCompact(
-    const CompactPtrs& s, int x_begin, int x_end, int k_begin, int k_end, int slot0, const int32_t* vol_row,
+    CompactPtrs s, int x_begin, int x_end, int k_begin, int k_end, int slot0, const int32_t* vol_row,
     size_t slot_stride, const uint8_t* const* pix_rows) {
   const __m512i one_bits = _mm512_set1_epi32(int(kOneBits)), low8 = _mm512_set1_epi32(0xFF);
   const __m512i sample_mask = _mm512_set1_epi32(int(kSampleMask)), pending_mask = _mm512_set1_epi32(int(kPendingMask));

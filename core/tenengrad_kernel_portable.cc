@@ -44,7 +44,7 @@ namespace inspection::sff_internal {
 // do the same float and integer operations in the same order (bit-identical). Since idx < k at
 // frame k, idx == k-1 is idx > k-2 and idx in {k-1, k-2} (t_k involves the maximum) is idx > k-3.
 template <>
-void TenengradKernels<Isa::kPortable>::UpdateCompact(const CompactPtrs& s, int x_begin, int x_end, int k_begin,
+void TenengradKernels<Isa::kPortable>::UpdateCompact(CompactPtrs s, int x_begin, int x_end, int k_begin,
                                                      int k_end, int slot0, const int32_t* vol_row, size_t slot_stride,
                                                      const uint8_t* const* pix_rows) {
   const float pmax = FromBits(kPendingMaxBits);
@@ -127,7 +127,7 @@ inline float LogPositiveScalar(float x) {
 // AVX2 blocks, or everything without AVX2): the scalar twin of the AVX2 kernel, bit-identical
 // per pixel, with the same in-place rule (core/tenengrad_kernel.h, FinishCompactRow).
 template <>
-size_t TenengradKernels<Isa::kPortable>::FinishCompact(const CompactPtrs& s, int x_begin, int x_end, const float* zf,
+size_t TenengradKernels<Isa::kPortable>::FinishCompact(CompactPtrs s, int x_begin, int x_end, const float* zf,
                                                        int n, bool gaussian, float min_confidence, uint32_t* depth,
                                                        uint32_t* conf, uint8_t* aif) {
   auto maxps = [](float a, float b) { return a > b ? a : b; };  // _mm256_max_ps(a, b)
