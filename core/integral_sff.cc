@@ -124,12 +124,20 @@ StatusOr<IsffResult> CorrelateFrames(size_t count, GetFrame&& get_frame, const s
                                      const cv::Mat& focused_template, int frame_type, const IsffOptions& options) {
   const auto t0 = Clock::now();
   INSPECT_ASSIGN_OR_RETURN(auto engine, NccFocusEngine::Create(options.ncc, focused_template, frame_type));
+  const double setup_s = SecondsSince(t0);
+  double search_s = 0.0;
   for (size_t i = 0; i < count; ++i) {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, get_frame(i));
+    const auto t_push = Clock::now();
     INSPECT_RETURN_IF_ERROR(engine->PushFrame(frame, z_um[i]));
+    search_s += SecondsSince(t_push);
   }
+  const auto t_finish = Clock::now();
   INSPECT_ASSIGN_OR_RETURN(DepthResult depth, engine->Finish());
   IsffResult r;
+  r.search_setup_seconds = setup_s;
+  r.search_seconds = search_s;
+  r.search_finish_seconds = SecondsSince(t_finish);
   r.depth = std::move(depth);
   r.work = engine->work();
   r.max_index = engine->max_index();

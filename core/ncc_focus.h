@@ -53,7 +53,10 @@ struct NccFocusOptions {
   // skipped (its frame pixels are not even read).
   bool stop_at_first_maximum = false;
   double stop_threshold = 0.9;  // (0, 1]: "fast_threshold" in the API
-  int tile_px = 32;             // 8..256
+  // 8..256. 64: the halo of the windows (6 px each side for 7 x 7) costs ~40 % on a 64 px tile,
+  // ~90 % on a 32 px one; smaller tiles follow the stopped pixels more closely. On the simulated
+  // SKEW5 stack ISFF-FAST's search took the same time with 64 and 128, ISFF's 10 % longer with 64.
+  int tile_px = 64;
 
   int threads = 0;  // 0 = all hardware threads
 
@@ -101,7 +104,8 @@ class NccFocusEngine {
                                                           const cv::Mat& focused_template, int frame_type);
   ~NccFocusEngine();
 
-  // z_um strictly monotonic over the pushed frames; errors name the frame.
+  // z_um strictly monotonic over the pushed frames; errors name the frame. This is the search,
+  // where ISFF-FAST saves.
   Status PushFrame(const cv::Mat& frame, double z_um);
   // Needs >= 3 frames. After Finish the engine takes no more frames.
   StatusOr<DepthResult> Finish();

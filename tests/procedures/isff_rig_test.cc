@@ -164,8 +164,9 @@ TEST_F(IsffRigTest, FastSkipsAThirdOfTheWorkWithFewWrongMaxima) {
   fast.ncc.stop_at_first_maximum = true;  // default threshold 0.9
   auto f = ReconstructIntegralSff(s.frames, s.z_um, &ipsf, fast);
   ASSERT_TRUE(full.ok() && f.ok());
-  EXPECT_EQ(full->work.tile_frames, full->work.tile_frames_full);
-  EXPECT_LE(double(f->work.tile_frames), 0.7 * double(f->work.tile_frames_full));
+  EXPECT_EQ(full->work.computed_pixel_frames, full->work.computed_pixel_frames_full);
+  // The NCC was computed for at most 70 % of the pixel-frames of the global search.
+  EXPECT_LE(double(f->work.computed_pixel_frames), 0.7 * double(f->work.computed_pixel_frames_full));
   const double wrong = 100.0 * cv::countNonZero(f->max_index != full->max_index) / double(s.frames[0].total());
   EXPECT_LT(wrong, 2.0);
   EXPECT_LE(Error(f->depth.depth_um, s).stddev_error_um, 1.05 * Error(full->depth.depth_um, s).stddev_error_um);
