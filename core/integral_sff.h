@@ -110,6 +110,9 @@ struct IsffResult {
   double search_setup_seconds = 0.0;
   double search_seconds = 0.0;
   double search_finish_seconds = 0.0;
+  // Process CPU time of the search (all threads; std::clock): on a shared machine the wall
+  // time also counts other jobs.
+  double search_cpu_seconds = 0.0;
 };
 
 // FAILED_PRECONDITION naming the calibration step when the bundle (may be null) has no IPSF.
