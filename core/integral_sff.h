@@ -104,7 +104,15 @@ struct IsffResult {
   cv::Mat frames_searched;         // CV_16SC1: frames each pixel's search took (ISFF-FAST stops early)
   double integral_seconds = 0.0;   // pass 1: integral image and noise
   double restore_seconds = 0.0;    // eq. 5.23 + shrinkage
-  double focus_seconds = 0.0;      // pass 2: NCC, maximum search, interpolation
+  double focus_seconds = 0.0;      // pass 2 in all: NCC, maximum search, interpolation (+ decoding)
+  // Parts of pass 2: engine set-up (template statistics, state memory), the search over the
+  // frames (NCC and maximum: what ISFF-FAST shortens), interpolation and confidence.
+  double search_setup_seconds = 0.0;
+  double search_seconds = 0.0;
+  double search_finish_seconds = 0.0;
+  // Process CPU time of the search (all threads; std::clock): on a shared machine the wall
+  // time also counts other jobs.
+  double search_cpu_seconds = 0.0;
 };
 
 // FAILED_PRECONDITION naming the calibration step when the bundle (may be null) has no IPSF.

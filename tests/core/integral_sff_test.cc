@@ -193,7 +193,7 @@ TEST(IntegralSffTest, IsffFollowsTheTiltedPlaneAndFastSkipsWork) {
   ASSERT_TRUE(f.ok());
   // The plane rises through the stack: the pixels stop one frame after their focus, so about
   // half of the stack's tile-frames are never computed.
-  EXPECT_LT(double(f->work.tile_frames), 0.75 * double(f->work.tile_frames_full));
+  EXPECT_LT(double(f->work.computed_pixel_frames), 0.75 * double(f->work.computed_pixel_frames_full));
   const double wrong = 100.0 * cv::countNonZero(f->max_index != isff->max_index) / double(frames[0].total());
   EXPECT_LT(wrong, 2.0);
   const DepthErrorStats e_fast = CompareDepth(f->depth.depth_um, s.truth_um, 10.0, 8);
