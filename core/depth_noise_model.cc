@@ -177,7 +177,7 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
   return model;
 }
 
-cv::Mat DepthNoiseModel::SamplePerturbation(const cv::Mat& depth_um, uint64_t seed, int k) const {
+cv::Mat DepthNoiseModel::SamplePerturbation(const cv::Mat& depth_um, uint64_t seed, int k, int count) const {
   const uint64_t stream = SplitMix(seed ^ SplitMix(uint64_t(k) + 0x1234567ull));
   const int r = correlation_px / 2;
   // White noise on a canvas padded by the box radius, so every pixel's box is full.
@@ -192,7 +192,10 @@ cv::Mat DepthNoiseModel::SamplePerturbation(const cv::Mat& depth_um, uint64_t se
 
   std::mt19937_64 gen(stream ^ 0xA5A5A5A5u);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
-  const double phase = uniform(gen);
+  // One random phase offset per set (from the seed alone), then evenly spaced phases.
+  std::mt19937_64 set_gen(SplitMix(seed));
+  const double offset = uniform(set_gen);
+  const double phase = offset + (k + 0.5) / double(std::max(count, 1));
   const int frames = int(grid.positions_um().size());
   std::vector<double> frame_error(frames, 0.0);
   const double half_width = stage_u_um * std::sqrt(3.0);

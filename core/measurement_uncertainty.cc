@@ -197,7 +197,7 @@ StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& d
   std::vector<double> sum(n, 0.0), sum2(n, 0.0);
   std::vector<int> count(n, 0);
   for (int k = 0; k < options.samples; ++k) {
-    const cv::Mat perturbed = depth_um + model.SamplePerturbation(depth_um, options.seed, k);
+    const cv::Mat perturbed = depth_um + model.SamplePerturbation(depth_um, options.seed, k, options.samples);
     StatusOr<std::vector<double>> v = measure(perturbed);
     if (!v.ok() || v->size() != n) continue;
     for (size_t i = 0; i < n; ++i) {
