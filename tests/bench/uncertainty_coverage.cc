@@ -316,25 +316,26 @@ int main(int argc, char** argv) {
   // 3. Report.
   std::printf("%d seeds x %zu specimens (%dx%d camera, STD, %d Monte Carlo samples): scan %.2f s, measurements %.2f s per scan\n\n",
               a.seeds, cases.size(), a.camera.width, a.camera.height, a.samples, scan_s / scans, measure_s / scans);
-  std::printf("%-10s %-17s %14s %11s %11s %11s %8s | %10s %8s\n", "specimen", "measurement", "truth", "bias", "sigma",
-              "mean U", "covered", "U uncharac", "covered");
+  std::printf("%-10s %-17s %14s %11s %11s %11s %8s %9s | %10s %8s\n", "specimen", "measurement", "truth", "bias",
+              "sigma", "mean U", "covered", "max|d|/U", "U uncharac", "covered");
   std::map<std::string, std::pair<int, int>> by_param, by_param_unchar;
   int all_cov = 0, all_n = 0, all_cov_u = 0;
   for (const auto& [key, t] : by_case) {
     const Tally& tu = by_case_unchar[key];
     const size_t bar = key.find('|');
     const std::string specimen = key.substr(0, bar), label = key.substr(bar + 1);
-    double m = 0, s2 = 0, um = 0, umu = 0;
+    double m = 0, s2 = 0, um = 0, umu = 0, worst = 0;
     const int n = int(t.dev.size());
     for (int i = 0; i < n; ++i) {
       m += t.dev[i] / n;
       um += 2.0 * t.u[i] / n;
       umu += 2.0 * tu.u[i] / n;
+      worst = std::max(worst, std::abs(t.dev[i]) / (2.0 * t.u[i]));
     }
     for (int i = 0; i < n; ++i) s2 += (t.dev[i] - m) * (t.dev[i] - m);
     const double sd = n > 1 ? std::sqrt(s2 / (n - 1)) : 0.0;
-    std::printf("%-10s %-17s %14s %+11.4g %11.4g %11.4g %3d/%-3d  | %10.4g %3d/%-3d\n", specimen.c_str(), label.c_str(),
-                truth_of[key].c_str(), m, sd, um, t.Covered(), n, umu, tu.Covered(), n);
+    std::printf("%-10s %-17s %14s %+11.4g %11.4g %11.4g %3d/%-3d %9.2f | %10.4g %3d/%-3d\n", specimen.c_str(),
+                label.c_str(), truth_of[key].c_str(), m, sd, um, t.Covered(), n, worst, umu, tu.Covered(), n);
     const std::string param = label.substr(0, label.find('('));
     by_param[param].first += t.Covered();
     by_param[param].second += n;
