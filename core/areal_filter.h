@@ -20,6 +20,23 @@ double GaussianFilterSigmaUm(double cutoff_um);
 // exp(-pi (alpha lc / wavelength)^2); 0.5 at wavelength = lc.
 double GaussianMeanTransmission(double cutoff_um, double wavelength_um);
 
+// The filter for one set of usable pixels, prepared once: the normalisation G * m is computed
+// at Create, so each MeanSurface costs one convolution (Monte Carlo runs it per sample).
+class GaussianAreaFilter {
+ public:
+  // usable: CV_8UC1, non-zero = pixels that carry data. Errors as GaussianMeanSurface.
+  static StatusOr<GaussianAreaFilter> Create(const cv::Mat& usable, double pixel_size_um, double cutoff_um);
+  // surface_um: CV_32FC1 of the mask's size, finite on the usable pixels (others are ignored).
+  // The mean surface on the usable pixels, NaN elsewhere.
+  cv::Mat MeanSurface(const cv::Mat& surface_um) const;
+
+ private:
+  cv::Mat usable_;
+  cv::Mat kernel_;       // CV_64F column, normalised
+  cv::Rect pad_box_;     // usable pixels' bounding box grown by the kernel radius
+  cv::Mat weight_sum_;   // CV_64F: G * m over pad_box_
+};
+
 // The Gaussian mean (smoothed) surface with cut-off cutoff_um of surface_um (CV_32FC1, NaN =
 // missing) over the pixels where mask (CV_8UC1) is non-zero and the surface is finite. Returns
 // CV_32FC1: the mean surface on those pixels, NaN elsewhere. The weighting function is sampled

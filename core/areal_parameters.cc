@@ -5,8 +5,6 @@
 #include <cmath>
 #include <limits>
 
-#include "core/areal_filter.h"
-
 namespace inspection {
 
 StatusOr<ArealHeightParameters> ComputeHeightParameters(const cv::Mat& surface_um, const cv::Mat& mask) {
@@ -104,25 +102,49 @@ Status ArealOptions::Validate() const {
   return Status::Ok();
 }
 
+StatusOr<ArealEvaluator> ArealEvaluator::Create(const cv::Mat& depth_um, const cv::Mat& mask, double pixel_size_um,
+                                                const ArealOptions& options) {
+  INSPECT_RETURN_IF_ERROR(options.Validate());
+  if (depth_um.empty() || depth_um.type() != CV_32FC1) {
+    return Status::InvalidArgument("depth map must be a non-empty CV_32FC1 image");
+  }
+  if (mask.type() != CV_8UC1 || mask.size() != depth_um.size()) {
+    return Status::InvalidArgument("mask must be CV_8UC1 of the depth map's size");
+  }
+  ArealEvaluator e;
+  e.usable_ = mask & (depth_um == depth_um);
+  e.pixel_size_um_ = pixel_size_um;
+  e.options_ = options;
+  if (options.s_filter_cutoff_um > 0.0) {
+    auto f = GaussianAreaFilter::Create(e.usable_, pixel_size_um, options.s_filter_cutoff_um);
+    if (!f.ok()) return f.status().WithContext("s_filter_cutoff_um");
+    e.s_filter_ = std::move(f).value();
+  }
+  if (options.l_filter_cutoff_um > 0.0) {
+    auto f = GaussianAreaFilter::Create(e.usable_, pixel_size_um, options.l_filter_cutoff_um);
+    if (!f.ok()) return f.status().WithContext("l_filter_cutoff_um");
+    e.l_filter_ = std::move(f).value();
+  }
+  return e;
+}
+
+StatusOr<ArealEvaluation> ArealEvaluator::Evaluate(const cv::Mat& depth_um) const {
+  if (depth_um.size() != usable_.size() || depth_um.type() != CV_32FC1) {
+    return Status::InvalidArgument("depth map does not match the evaluator's region");
+  }
+  const cv::Mat primary = s_filter_ ? s_filter_->MeanSurface(depth_um) : depth_um;
+  ArealEvaluation e;
+  INSPECT_ASSIGN_OR_RETURN(e.form, FitForm(primary, usable_, pixel_size_um_, options_.form));
+  e.surface_um = FormResidual(primary, usable_, pixel_size_um_, e.form);
+  if (l_filter_) e.surface_um -= l_filter_->MeanSurface(e.surface_um);  // NaN where either is NaN
+  INSPECT_ASSIGN_OR_RETURN(e.parameters, ComputeHeightParameters(e.surface_um, usable_));
+  return e;
+}
+
 StatusOr<ArealEvaluation> EvaluateArealSurface(const cv::Mat& depth_um, const cv::Mat& mask, double pixel_size_um,
                                                const ArealOptions& options) {
-  INSPECT_RETURN_IF_ERROR(options.Validate());
-  cv::Mat primary = depth_um;
-  if (options.s_filter_cutoff_um > 0.0) {
-    auto s = GaussianMeanSurface(depth_um, mask, pixel_size_um, options.s_filter_cutoff_um);
-    if (!s.ok()) return s.status().WithContext("s_filter_cutoff_um");
-    primary = std::move(s).value();
-  }
-  ArealEvaluation e;
-  INSPECT_ASSIGN_OR_RETURN(e.form, FitForm(primary, mask, pixel_size_um, options.form));
-  e.surface_um = FormResidual(primary, mask, pixel_size_um, e.form);
-  if (options.l_filter_cutoff_um > 0.0) {
-    auto l = GaussianMeanSurface(e.surface_um, mask, pixel_size_um, options.l_filter_cutoff_um);
-    if (!l.ok()) return l.status().WithContext("l_filter_cutoff_um");
-    e.surface_um -= l.value();  // NaN where either is NaN
-  }
-  INSPECT_ASSIGN_OR_RETURN(e.parameters, ComputeHeightParameters(e.surface_um, mask));
-  return e;
+  INSPECT_ASSIGN_OR_RETURN(ArealEvaluator evaluator, ArealEvaluator::Create(depth_um, mask, pixel_size_um, options));
+  return evaluator.Evaluate(depth_um);
 }
 
 }  // namespace inspection

@@ -5,10 +5,12 @@
 // Gaussian mean surface), as ISO 25178-2 defines them; they are not re-centred on their mean.
 #pragma once
 
+#include <optional>
 #include <string>
 
 #include <opencv2/core.hpp>
 
+#include "core/areal_filter.h"
 #include "core/form_removal.h"
 #include "core/status.h"
 
@@ -64,5 +66,23 @@ struct ArealEvaluation {
 // Errors as FitForm / GaussianMeanSurface, with the option's field named.
 StatusOr<ArealEvaluation> EvaluateArealSurface(const cv::Mat& depth_um, const cv::Mat& mask, double pixel_size_um,
                                                const ArealOptions& options);
+
+// The same pipeline prepared for one region and one set of measured pixels, for repeated
+// evaluation (the Monte Carlo of core/measurement_uncertainty.h): the filters' normalisation is
+// computed once. Evaluate takes maps with depth on the same pixels as the one given to Create
+// (e.g. that map plus a perturbation); other pixels are ignored.
+class ArealEvaluator {
+ public:
+  static StatusOr<ArealEvaluator> Create(const cv::Mat& depth_um, const cv::Mat& mask, double pixel_size_um,
+                                         const ArealOptions& options);
+  StatusOr<ArealEvaluation> Evaluate(const cv::Mat& depth_um) const;
+
+ private:
+  cv::Mat usable_;  // mask and finite depth
+  double pixel_size_um_ = 0.0;
+  ArealOptions options_;
+  std::optional<GaussianAreaFilter> s_filter_;
+  std::optional<GaussianAreaFilter> l_filter_;
+};
 
 }  // namespace inspection

@@ -177,37 +177,43 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
   return model;
 }
 
-cv::Mat DepthNoiseModel::SamplePerturbation(const cv::Mat& depth_um, uint64_t seed, int k) const {
+cv::Mat DepthNoiseModel::SamplePerturbation(const cv::Mat& depth_um, uint64_t seed, int k, int count) const {
   const uint64_t stream = SplitMix(seed ^ SplitMix(uint64_t(k) + 0x1234567ull));
   const int r = correlation_px / 2;
-  // White noise on a canvas padded by the box radius, so every pixel's box is full.
-  cv::Mat white(depth_um.rows + 2 * r, depth_um.cols + 2 * r, CV_32FC1);
+  cv::Mat out(depth_um.size(), CV_32FC1, cv::Scalar(0.f));
+  // Only the pixels with a sigma are perturbed: noise is drawn over their bounding box, on a
+  // canvas padded by the box radius so every pixel's box is full.
+  const cv::Rect box = cv::boundingRect(sigma_um == sigma_um);
+  if (box.empty()) return out;
+  cv::Mat white(box.height + 2 * r, box.width + 2 * r, CV_32FC1);
   cv::RNG rng(stream | 1u);
   rng.fill(white, cv::RNG::NORMAL, 0.0, 1.0);
   cv::Mat boxed;
   cv::boxFilter(white, boxed, CV_32F, cv::Size(correlation_px, correlation_px), cv::Point(-1, -1), false,
                 cv::BORDER_CONSTANT);
-  const cv::Mat correlated = boxed(cv::Rect(r, r, depth_um.cols, depth_um.rows));
+  const cv::Mat correlated = boxed(cv::Rect(r, r, box.width, box.height));
   const float unit = 1.0f / float(correlation_px);  // box of w^2 unit variances: sum has variance w^2
 
   std::mt19937_64 gen(stream ^ 0xA5A5A5A5u);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
-  const double phase = uniform(gen);
+  // One random phase offset per set (from the seed alone), then evenly spaced phases.
+  std::mt19937_64 set_gen(SplitMix(seed));
+  const double offset = uniform(set_gen);
+  const double phase = offset + (k + 0.5) / double(std::max(count, 1));
   const int frames = int(grid.positions_um().size());
   std::vector<double> frame_error(frames, 0.0);
   const double half_width = stage_u_um * std::sqrt(3.0);
   for (double& e : frame_error) e = (2.0 * uniform(gen) - 1.0) * half_width;
 
-  cv::Mat out(depth_um.size(), CV_32FC1, cv::Scalar(0.f));
-  for (int row = 0; row < depth_um.rows; ++row) {
+  for (int row = box.y; row < box.y + box.height; ++row) {
     const float* z = depth_um.ptr<float>(row);
     const float* s = sigma_um.ptr<float>(row);
-    const float* n = correlated.ptr<float>(row);
+    const float* n = correlated.ptr<float>(row - box.y);
     float* o = out.ptr<float>(row);
-    for (int col = 0; col < depth_um.cols; ++col) {
+    for (int col = box.x; col < box.x + box.width; ++col) {
       if (!std::isfinite(z[col]) || !std::isfinite(s[col])) continue;
       const ZGrid::Position p = grid.Locate(z[col]);
-      o[col] = float(double(s[col]) * n[col] * unit + linearity.At(p.fraction + phase) * p.step_um +
+      o[col] = float(double(s[col]) * n[col - box.x] * unit + linearity.At(p.fraction + phase) * p.step_um +
                      frame_error[p.nearest]);
     }
   }

@@ -68,10 +68,12 @@ struct DepthNoiseModel {
   ZLinearity linearity;      // the table in use (maybe the uncharacterised bound, see its source)
   double stage_u_um = 0.0;   // standard uncertainty of one frame's z: r / sqrt 3
 
-  // Perturbation k (0-based) of a Monte Carlo set drawn with `seed`: one realisation of all
-  // three components on depth_um's measured pixels (CV_32FC1, 0 elsewhere). The same
-  // (seed, k) always gives the same field.
-  cv::Mat SamplePerturbation(const cv::Mat& depth_um, uint64_t seed, int k) const;
+  // Perturbation k (0-based) of a Monte Carlo set of `count` drawn with `seed`: one realisation
+  // of all three components on the pixels with depth and a sigma (CV_32FC1, 0 elsewhere). The
+  // linearity phases are stratified over the set ((k + 0.5) / count plus one random offset), so
+  // the set averages the table over its phase as the analytic propagation does. The same
+  // (seed, k, count) always gives the same field.
+  cv::Mat SamplePerturbation(const cv::Mat& depth_um, uint64_t seed, int k, int count) const;
 };
 
 // Estimates the model for depth_um (CV_32FC1, NaN = no depth) from the pixels where mask

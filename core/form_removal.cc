@@ -28,7 +28,13 @@ void Monomials(int order, double u, double v, double* out) {
 std::vector<std::string> PolynomialNames(int order) {
   std::vector<std::string> names;
   for (int total = 0; total <= order; ++total) {
-    for (int a = total; a >= 0; --a) names.push_back("c" + std::to_string(a) + std::to_string(total - a) + "_um");
+    for (int a = total; a >= 0; --a) {
+      std::string name(1, 'c');  // built by appending: GCC 12 warns falsely (-Wrestrict) on "c" + string
+      name += std::to_string(a);
+      name += std::to_string(total - a);
+      name += "_um";
+      names.push_back(std::move(name));
+    }
   }
   return names;
 }
@@ -351,18 +357,20 @@ StatusOr<FormFit> FitForm(const cv::Mat& depth_um, const cv::Mat& mask, double p
   if (!(pixel_size_um > 0.0) || !std::isfinite(pixel_size_um)) {
     return Status::InvalidArgument("pixel_size_um must be > 0");
   }
-  std::vector<Sample> pts;
+  // Pass 1: count, centroid and extent of the usable pixels (nothing stored: maps reach ~1e6 pixels).
+  size_t count = 0;
   double sx = 0.0, sy = 0.0;
   int c0 = depth_um.cols, c1 = -1, r0 = depth_um.rows, r1 = -1;
+  double z_ref = 0.0;  // first usable depth: sums of z - z_ref keep their precision
   for (int row = 0; row < depth_um.rows; ++row) {
     const float* d = depth_um.ptr<float>(row);
     const uint8_t* m = mask.ptr<uint8_t>(row);
     for (int col = 0; col < depth_um.cols; ++col) {
       if (!m[col] || !std::isfinite(d[col])) continue;
-      const double x = PixelCentreUm(col, pixel_size_um), y = PixelCentreUm(row, pixel_size_um);
-      pts.push_back({x, y, double(d[col])});
-      sx += x;
-      sy += y;
+      if (count == 0) z_ref = d[col];
+      ++count;
+      sx += col;
+      sy += row;
       c0 = std::min(c0, col);
       c1 = std::max(c1, col);
       r0 = std::min(r0, row);
@@ -391,48 +399,72 @@ StatusOr<FormFit> FitForm(const cv::Mat& depth_um, const cv::Mat& mask, double p
       fit.parameter_names = {"axis_angle_rad", "axis_offset_um", "axis_z_um", "axis_slope", "radius_um"};
       break;
   }
-  if (pts.size() < size_t(np + 1)) {
+  if (count < size_t(np + 1)) {
     return Status::FailedPrecondition(std::string(FormModelName(options.model)) + " fit needs at least " +
                                       std::to_string(np + 1) + " measured pixels, the region has " +
-                                      std::to_string(pts.size()));
+                                      std::to_string(count));
   }
-  const double n = double(pts.size());
-  fit.origin_x_um = sx / n;
-  fit.origin_y_um = sy / n;
+  const double n = double(count);
+  fit.origin_x_um = PixelCentreUm(0, pixel_size_um) + sx / n * pixel_size_um;
+  fit.origin_y_um = PixelCentreUm(0, pixel_size_um) + sy / n * pixel_size_um;
   fit.scale_um = 0.5 * std::max(c1 - c0 + 1, r1 - r0 + 1) * pixel_size_um;
-  for (Sample& s : pts) {
-    s.x -= fit.origin_x_um;
-    s.y -= fit.origin_y_um;
-  }
-  fit.pixel_count = pts.size();
-  if (options.model == FormModel::kPlane || options.model == FormModel::kPolynomial) {
-    Eigen::MatrixXd ata = Eigen::MatrixXd::Zero(np, np);
-    Eigen::VectorXd atz = Eigen::VectorXd::Zero(np);
-    std::vector<double> b(np);
-    // z is taken relative to its first value so the accumulated sums keep their precision.
-    const double z_ref = pts[0].z;
-    for (const Sample& s : pts) {
-      fit.ParameterGradient(s.x + fit.origin_x_um, s.y + fit.origin_y_um, b.data());
-      const Eigen::Map<Eigen::VectorXd> bv(b.data(), np);
-      ata.selfadjointView<Eigen::Lower>().rankUpdate(bv);
-      atz += bv * (s.z - z_ref);
+  fit.pixel_count = count;
+  // Visits the usable pixels with origin-relative coordinates.
+  auto for_each = [&](auto&& f) {
+    for (int row = r0; row <= r1; ++row) {
+      const float* d = depth_um.ptr<float>(row);
+      const uint8_t* m = mask.ptr<uint8_t>(row);
+      const double y = PixelCentreUm(row, pixel_size_um) - fit.origin_y_um;
+      for (int col = c0; col <= c1; ++col) {
+        if (!m[col] || !std::isfinite(d[col])) continue;
+        f(PixelCentreUm(col, pixel_size_um) - fit.origin_x_um, y, double(d[col]));
+      }
     }
-    ata = ata.selfadjointView<Eigen::Lower>();
-    if (ReciprocalCondition(ata) < 1e-13) {
+  };
+  if (options.model == FormModel::kPlane || options.model == FormModel::kPolynomial) {
+    // Pass 2: normal equations in plain arrays (upper triangle), the hot loop of every fit.
+    double ata[10][10] = {}, atz[10] = {}, b[10];
+    const bool plane = options.model == FormModel::kPlane;
+    const double inv_scale = 1.0 / fit.scale_um;
+    for_each([&](double x, double y, double z) {
+      if (plane) {
+        b[0] = 1.0;
+        b[1] = x;
+        b[2] = y;
+      } else {
+        Monomials(fit.polynomial_order, x * inv_scale, y * inv_scale, b);
+      }
+      const double dz = z - z_ref;
+      for (int i = 0; i < np; ++i) {
+        for (int j = i; j < np; ++j) ata[i][j] += b[i] * b[j];
+        atz[i] += b[i] * dz;
+      }
+    });
+    Eigen::MatrixXd a(np, np);
+    Eigen::VectorXd v(np);
+    for (int i = 0; i < np; ++i) {
+      v[i] = atz[i];
+      for (int j = i; j < np; ++j) a(i, j) = a(j, i) = ata[i][j];
+    }
+    if (ReciprocalCondition(a) < 1e-13) {
       return Status::FailedPrecondition(std::string("the region's pixels do not determine the ") +
                                         FormModelName(options.model) + " (e.g. all on one line)");
     }
-    fit.parameters = ata.ldlt().solve(atz);
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt = a.ldlt();
+    fit.parameters = ldlt.solve(v);
     fit.parameters[0] += z_ref;  // the constant term is first in both bases
-    fit.normal_inverse = ata.ldlt().solve(Eigen::MatrixXd::Identity(np, np));
+    fit.normal_inverse = ldlt.solve(Eigen::MatrixXd::Identity(np, np));
   } else {
+    std::vector<Sample> pts;
+    pts.reserve(count);
+    for_each([&](double x, double y, double z) { pts.push_back({x, y, z}); });
     INSPECT_RETURN_IF_ERROR(FitNonlinear(pts, options, &fit));
   }
   double rss = 0.0;
-  for (const Sample& s : pts) {
-    const double r = s.z - fit.Evaluate(s.x + fit.origin_x_um, s.y + fit.origin_y_um);
+  for_each([&](double x, double y, double z) {
+    const double r = z - fit.Evaluate(x + fit.origin_x_um, y + fit.origin_y_um);
     rss += r * r;
-  }
+  });
   fit.residual_rms_um = std::sqrt(rss / n);
   fit.covariance_from_residuals = fit.normal_inverse * (rss / std::max(1.0, n - np));
   return fit;

@@ -24,13 +24,14 @@ StatusOr<ArealGroupResult> EvaluateArealGroup(const cv::Mat& depth_um, const cv:
                                               const ArealOptions& options, const DepthNoiseModel* noise,
                                               const MonteCarloOptions& monte_carlo) {
   ArealGroupResult r;
-  INSPECT_ASSIGN_OR_RETURN(ArealEvaluation e, EvaluateArealSurface(depth_um, mask, pixel_size_um, options));
+  INSPECT_ASSIGN_OR_RETURN(ArealEvaluator evaluator, ArealEvaluator::Create(depth_um, mask, pixel_size_um, options));
+  INSPECT_ASSIGN_OR_RETURN(ArealEvaluation e, evaluator.Evaluate(depth_um));
   r.values = e.parameters;
   if (noise == nullptr) return r;
   // Mean-type parameters by Monte Carlo; extremes by the bound (core/measurement_uncertainty.h).
   const std::vector<double> moments = {r.values.Sa_um, r.values.Sq_um, r.values.Ssk, r.values.Sku};
   auto measure = [&](const cv::Mat& z) -> StatusOr<std::vector<double>> {
-    INSPECT_ASSIGN_OR_RETURN(ArealEvaluation p, EvaluateArealSurface(z, mask, pixel_size_um, options));
+    INSPECT_ASSIGN_OR_RETURN(ArealEvaluation p, evaluator.Evaluate(z));
     return std::vector<double>{p.parameters.Sa_um, p.parameters.Sq_um, p.parameters.Ssk, p.parameters.Sku};
   };
   INSPECT_ASSIGN_OR_RETURN(std::vector<MonteCarloEstimate> mc,
@@ -252,6 +253,7 @@ std::vector<StatusOr<MeasuredValue>> MeasureSpecs(const std::vector<const Measur
                                                   const std::function<std::string(size_t)>& field_of) {
   std::vector<StatusOr<MeasuredValue>> out;
   std::map<std::string, StatusOr<ArealGroupResult>> areal_cache;
+  std::map<std::string, Regions> region_cache;
   for (size_t i = 0; i < specs.size(); ++i) {
     const MeasurementSpec& spec = *specs[i];
     const std::string field = field_of(i);
@@ -259,7 +261,17 @@ std::vector<StatusOr<MeasuredValue>> MeasureSpecs(const std::vector<const Measur
       out.push_back(Status::InvalidArgument(field + ": the depth map must be a non-empty CV_32FC1 image"));
       continue;
     }
-    StatusOr<Regions> regions = PrepareRegions(spec, context, field);
+    // Specs on the same region(s) share the rasterisation and the error model.
+    const std::string regions_key = RoiKey(spec.roi) + "|" + (spec.reference_roi ? RoiKey(*spec.reference_roi) : "-");
+    auto cached = region_cache.find(regions_key);
+    StatusOr<Regions> regions = Status::Internal("unset");
+    if (cached != region_cache.end()) {
+      const Status valid = spec.Validate(context.depth_um.size(), context.pixel_size_um, field);
+      regions = valid.ok() ? StatusOr<Regions>(cached->second) : StatusOr<Regions>(valid);
+    } else {
+      regions = PrepareRegions(spec, context, field);
+      if (regions.ok()) region_cache.emplace(regions_key, *regions);
+    }
     if (!regions.ok()) {
       out.push_back(regions.status());
       continue;

@@ -14,6 +14,10 @@
 //   VerdictResult verdict = v.ok() ? Judge(v->value, v->uncertainty.standard_uncertainty,
 //                                          v->coverage_percent, tolerance)
 //                                  : NotMeasured(v.status().message());
+//
+// Everything here is a pure function of its inputs (no global state), so several maps may be
+// measured on several threads at once; the Monte Carlo seed is fixed, so a map and a spec always
+// give the same value and uncertainty.
 #pragma once
 
 #include <optional>

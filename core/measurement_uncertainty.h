@@ -100,7 +100,7 @@ struct MonteCarloEstimate {
 // Budget of a Monte Carlo estimate.
 UncertaintyBudget MonteCarloBudget(const MonteCarloEstimate& e);
 
-// values = measure(depth_um); measure is re-run on depth_um + model.SamplePerturbation(k).
+// values = measure(depth_um); measure is re-run on depth_um + model.SamplePerturbation(k, samples).
 // Samples where measure fails or gives NaN are left out; FAILED_PRECONDITION when fewer than
 // half of them remain for any output.
 using DepthMeasureFunction = std::function<StatusOr<std::vector<double>>(const cv::Mat& depth_um)>;

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 
+#include <opencv2/imgproc.hpp>
+
 namespace inspection {
 namespace {
 
@@ -95,7 +97,14 @@ StatusOr<VolumeResult> MeasureVolume(const cv::Mat& depth_um, const cv::Mat& reg
   }
   const size_t region_pixels = size_t(cv::countNonZero(region_mask));
   const double area_um2 = pixel_size_um * pixel_size_um;
-  // Above and below for one depth map (also run on the Monte Carlo's perturbed maps).
+  const cv::Rect box = cv::boundingRect(region_mask);
+  // Region pixels without depth take the Gaussian-weighted mean height (above the reference) of
+  // the measured pixels around them (normalised convolution, sigma kFillSigmaPx); those with no
+  // measured pixel nearby are covered by scaling the sums to the whole region.
+  constexpr double kFillSigmaPx = 4.0, kFillMinWeight = 0.05;
+  const int pad = int(std::ceil(3.0 * kFillSigmaPx));
+  const cv::Rect work = (box + cv::Size(2 * pad, 2 * pad) - cv::Point(pad, pad)) & cv::Rect(0, 0, depth_um.cols, depth_um.rows);
+  // Above, below, and the parts of each that come from filled pixels (outputs 2 and 3).
   auto volumes = [&](const cv::Mat& z, size_t* measured) -> StatusOr<std::vector<double>> {
     FormFit plane;
     if (options.reference == VolumeReference::kRegionPlane) {
@@ -103,26 +112,51 @@ StatusOr<VolumeResult> MeasureVolume(const cv::Mat& depth_um, const cv::Mat& reg
       if (!f.ok()) return f.status().WithContext(own_plane ? "region" : "reference region");
       plane = std::move(f).value();
     }
-    double above = 0.0, below = 0.0;
+    auto reference = [&](int row, int col) {
+      return options.reference == VolumeReference::kHeight
+                 ? options.reference_height_um
+                 : plane.Evaluate(PixelCentreUm(col, pixel_size_um), PixelCentreUm(row, pixel_size_um));
+    };
+    cv::Mat h = cv::Mat::zeros(work.size(), CV_64F), m = cv::Mat::zeros(work.size(), CV_64F);
     size_t n = 0;
-    for (int row = 0; row < z.rows; ++row) {
-      const float* d = z.ptr<float>(row);
-      const uint8_t* m = region_mask.ptr<uint8_t>(row);
-      const double y = PixelCentreUm(row, pixel_size_um);
-      for (int col = 0; col < z.cols; ++col) {
-        if (!m[col] || !std::isfinite(d[col])) continue;
-        const double ref = options.reference == VolumeReference::kHeight
-                               ? options.reference_height_um
-                               : plane.Evaluate(PixelCentreUm(col, pixel_size_um), y);
-        const double h = double(d[col]) - ref;
-        (h > 0.0 ? above : below) += std::abs(h);
+    for (int r = 0; r < work.height; ++r) {
+      const float* d = z.ptr<float>(r + work.y) + work.x;
+      const uint8_t* inside = region_mask.ptr<uint8_t>(r + work.y) + work.x;
+      for (int c = 0; c < work.width; ++c) {
+        if (!inside[c] || !std::isfinite(d[c])) continue;
+        h.at<double>(r, c) = double(d[c]) - reference(r + work.y, c + work.x);
+        m.at<double>(r, c) = 1.0;
         ++n;
       }
     }
     if (n == 0) return Status::FailedPrecondition("the region has no measured pixel");
+    cv::Mat hs, ms;
+    cv::GaussianBlur(h, hs, cv::Size(2 * pad + 1, 2 * pad + 1), kFillSigmaPx, kFillSigmaPx, cv::BORDER_CONSTANT);
+    cv::GaussianBlur(m, ms, cv::Size(2 * pad + 1, 2 * pad + 1), kFillSigmaPx, kFillSigmaPx, cv::BORDER_CONSTANT);
+    double above = 0.0, below = 0.0, above_filled = 0.0, below_filled = 0.0;
+    size_t filled = 0;
+    for (int r = 0; r < work.height; ++r) {
+      const uint8_t* inside = region_mask.ptr<uint8_t>(r + work.y) + work.x;
+      for (int c = 0; c < work.width; ++c) {
+        if (!inside[c]) continue;
+        double v;
+        const bool is_measured = m.at<double>(r, c) > 0.0;
+        if (is_measured) {
+          v = h.at<double>(r, c);
+        } else if (ms.at<double>(r, c) > kFillMinWeight) {
+          v = hs.at<double>(r, c) / ms.at<double>(r, c);
+          ++filled;
+          (v > 0.0 ? above_filled : below_filled) += std::abs(v);
+        } else {
+          continue;
+        }
+        (v > 0.0 ? above : below) += std::abs(v);
+      }
+    }
     if (measured) *measured = n;
-    const double fill = double(region_pixels) / double(n);
-    return std::vector<double>{above * area_um2 * fill, below * area_um2 * fill};
+    const double scale = area_um2 * double(region_pixels) / double(n + filled);
+    return std::vector<double>{above * scale, below * scale, above_filled * scale, below_filled * scale,
+                               double(n + filled)};
   };
   VolumeResult res;
   res.region_pixels = region_pixels;
@@ -130,14 +164,19 @@ StatusOr<VolumeResult> MeasureVolume(const cv::Mat& depth_um, const cv::Mat& reg
   res.above_um3 = v[0];
   res.below_um3 = v[1];
   if (noise != nullptr) {
-    auto measure = [&](const cv::Mat& z) { return volumes(z, nullptr); };
+    auto measure = [&](const cv::Mat& z) -> StatusOr<std::vector<double>> {
+      INSPECT_ASSIGN_OR_RETURN(std::vector<double> w, volumes(z, nullptr));
+      return std::vector<double>{w[0], w[1]};
+    };
     INSPECT_ASSIGN_OR_RETURN(std::vector<MonteCarloEstimate> mc,
-                             MonteCarloUncertainty(depth_um, v, measure, *noise, monte_carlo));
-    const double filled = 1.0 - double(res.measured_pixels) / double(std::max<size_t>(region_pixels, 1));
+                             MonteCarloUncertainty(depth_um, {v[0], v[1]}, measure, *noise, monte_carlo));
+    // Filled pixels: their contribution is uncertain by +-100 % (rectangular); pixels too far from
+    // any measurement to be filled: the region's mean stands in for them, with the same bound.
+    const double unfilled = 1.0 - v[4] / double(std::max<size_t>(region_pixels, 1));
     UncertaintyBudget* budgets[2] = {&res.above_uncertainty, &res.below_uncertainty};
     for (int i = 0; i < 2; ++i) {
       *budgets[i] = MonteCarloBudget(mc[i]);
-      budgets[i]->other = filled * v[i] / std::sqrt(3.0);
+      budgets[i]->other = (v[2 + i] + unfilled * v[i]) / std::sqrt(3.0);
       budgets[i]->standard_uncertainty = std::hypot(mc[i].standard_uncertainty, budgets[i]->other);
     }
   }

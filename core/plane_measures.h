@@ -56,9 +56,10 @@ struct VolumeOptions {
 struct VolumeResult {
   // Material above the reference and space below it over the region, um^3 (1 mm^3 = 1e9 um^3):
   // sum over pixels of max(0, +-(z - reference)) times the pixel area. Pixels of the region
-  // without depth are filled with the measured pixels' mean (the sums are scaled by
-  // region / measured); that assumption enters the uncertainty as a uniform +-100 % of the
-  // filled part.
+  // without depth are filled from the measured pixels around them (Gaussian-weighted mean height
+  // above the reference, sigma 4 px); pixels with no measurement within ~10 px count as the
+  // region's mean (the sums are scaled to the whole region). Both enter the uncertainty as a
+  // rectangular +-100 % of their share (UncertaintyBudget::other).
   double above_um3 = 0.0;
   double below_um3 = 0.0;
   double above_mm3() const { return above_um3 * 1e-9; }

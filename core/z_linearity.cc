@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include <nlohmann/json.hpp>
+
 #include "core/form_removal.h"
 
 namespace inspection {
@@ -30,7 +32,7 @@ ZGrid::Position ZGrid::Locate(double z_um) const {
   if (z_um < z_[0]) {  // below the grid: continue its first step
     const double step = z_[1] - z_[0];
     const double k = std::floor((z_um - z_[0]) / step);
-    p.lower = int(k);
+    p.lower = int(std::max(k, -1e9));  // far outliers: no int overflow
     p.fraction = (z_um - z_[0]) / step - k;
     p.step_um = step;
     p.nearest = 0;
@@ -39,7 +41,7 @@ ZGrid::Position ZGrid::Locate(double z_um) const {
   if (z_um >= z_[n - 1]) {  // above: continue its last step
     const double step = z_[n - 1] - z_[n - 2];
     const double k = std::floor((z_um - z_[n - 1]) / step);
-    p.lower = n - 1 + int(k);
+    p.lower = n - 1 + int(std::min(k, 1e9));
     p.fraction = (z_um - z_[n - 1]) / step - k;
     p.step_um = step;
     p.nearest = n - 1;
@@ -100,6 +102,41 @@ double ZLinearity::MaxAbs() const {
   double m = 0.0;
   for (double v : bias_of_step) m = std::max(m, std::abs(v));
   return m;
+}
+
+std::string ZLinearityToJson(const ZLinearity& l) {
+  nlohmann::json j;
+  j["bias_of_step"] = l.bias_of_step;
+  j["characterised_step_um"] = l.characterised_step_um;
+  j["source"] = l.source;
+  return j.dump();
+}
+
+StatusOr<ZLinearity> ZLinearityFromJson(const std::string& text) {
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (j.is_discarded() || !j.is_object()) return Status::InvalidArgument("z linearity: not a JSON object");
+  ZLinearity l;
+  if (!j.contains("bias_of_step") || !j["bias_of_step"].is_array()) {
+    return Status::InvalidArgument("z linearity: 'bias_of_step' must be an array of numbers");
+  }
+  for (const auto& v : j["bias_of_step"]) {
+    if (!v.is_number() || !std::isfinite(v.get<double>()) || std::abs(v.get<double>()) > 1.0) {
+      return Status::InvalidArgument("z linearity: 'bias_of_step' entries must be numbers in [-1, 1] (fractions of a step)");
+    }
+    l.bias_of_step.push_back(v.get<double>());
+  }
+  if (l.bias_of_step.size() < 2) return Status::InvalidArgument("z linearity: 'bias_of_step' needs >= 2 entries");
+  if (j.contains("characterised_step_um")) {
+    if (!j["characterised_step_um"].is_number() || !(j["characterised_step_um"].get<double>() >= 0.0)) {
+      return Status::InvalidArgument("z linearity: 'characterised_step_um' must be a number >= 0");
+    }
+    l.characterised_step_um = j["characterised_step_um"].get<double>();
+  }
+  if (j.contains("source")) {
+    if (!j["source"].is_string()) return Status::InvalidArgument("z linearity: 'source' must be a string");
+    l.source = j["source"].get<std::string>();
+  }
+  return l;
 }
 
 Status ZLinearityOptions::Validate() const {

@@ -58,6 +58,12 @@ struct ZLinearity {
   double MaxAbs() const;
 };
 
+// JSON text for storing a characterisation (e.g. beside a calibration bundle):
+//   {"bias_of_step": [...], "characterised_step_um": 5.0, "source": "..."}
+std::string ZLinearityToJson(const ZLinearity& linearity);
+// INVALID_ARGUMENT naming the key for malformed text, fewer than 2 entries, or |entries| > 1.
+StatusOr<ZLinearity> ZLinearityFromJson(const std::string& text);
+
 struct ZLinearityOptions {
   int bins = 20;                  // table size, 4..200
   int min_pixels_per_bin = 500;   // every bin must be sampled this often (a tilt covering >= 1 step)

@@ -145,7 +145,9 @@ TEST(FormRemovalTest, CylinderRecoversRadiusAxisAndSlope) {
   // The same surface as a sphere does not fit (a cylinder has no curvature along its axis).
   o.model = FormModel::kSphere;
   auto sphere = FitForm(z, All(size), kPx, o);
-  if (sphere.ok()) EXPECT_GT(sphere->residual_rms_um, 0.1);
+  if (sphere.ok()) {
+    EXPECT_GT(sphere->residual_rms_um, 0.1);
+  }
 }
 
 TEST(FormRemovalTest, RegionsThatCannotDetermineTheFormFail) {

@@ -106,18 +106,28 @@ TEST(PlaneMeasuresTest, VolumeAboveAndBelowAReference) {
   ASSERT_TRUE(vr.ok()) << vr.status().ToString();
   EXPECT_NEAR(vr->above_um3, above, 1e-3 * above);
   EXPECT_NEAR(vr->below_um3, 0.0, 1e-3 * above);
-  // Holes in the flat land of the region are filled with the measured pixels' mean: 10 % of a
-  // region whose mean height above the reference is known gives the same total.
-  cv::Mat holed = z.clone();
+  // A hole in the disc's flat top is filled from its neighbours (all 3 um up): the same volume.
   cv::Mat region(size, CV_8UC1, cv::Scalar(0));
   region(cv::Rect(20, 30, 40, 40)).setTo(255);  // holds the whole disc
   auto full = MeasureVolume(z, region, cv::Mat(), kPx, height, nullptr);
-  holed(cv::Rect(20, 30, 4, 40)).setTo(NAN);  // flat strip (zero volume) missing
+  cv::Mat holed = z.clone();
+  holed(cv::Rect(38, 48, 3, 3)).setTo(NAN);
   auto part = MeasureVolume(holed, region, cv::Mat(), kPx, height, nullptr);
   ASSERT_TRUE(full.ok() && part.ok());
-  EXPECT_EQ(part->measured_pixels, 1440u);
-  // Filling assumes the mean: the missing strip was flat, so the filled total overestimates by 1/0.9.
-  EXPECT_NEAR(part->above_um3, full->above_um3 / 0.9, 1e-3 * above);
+  EXPECT_EQ(part->measured_pixels, 1600u - 9u);
+  EXPECT_NEAR(part->above_um3, full->above_um3, 1e-3 * above);
+  // Pixels beyond the fill's reach (> ~12 px from any depth) count as the region's mean: a
+  // region that is half disc-free flat, half missing, is scaled by 2.
+  cv::Mat half(size, CV_32FC1, cv::Scalar(NAN));
+  z(cv::Rect(20, 30, 40, 40)).copyTo(half(cv::Rect(20, 30, 40, 40)));
+  cv::Mat far(size, CV_8UC1, cv::Scalar(0));
+  far(cv::Rect(20, 30, 40, 70)).setTo(255);  // rows 30..99: rows 70..99 have no depth
+  auto scaled = MeasureVolume(half, far, cv::Mat(), kPx, height, nullptr);
+  ASSERT_TRUE(scaled.ok()) << scaled.status().ToString();
+  // 1600 measured pixels, the missing rows within the fill's reach (weight > 0.05: ~1.6 sigma =
+  // 7 rows, filled from the flat land: 0 um) and the rest scaled: full * 2800 / (1600 + filled).
+  EXPECT_GT(scaled->above_um3, full->above_um3 * 2800.0 / 2200.0);
+  EXPECT_LT(scaled->above_um3, full->above_um3 * 2800.0 / 1600.0);
 }
 
 TEST(PlaneMeasuresTest, VolumeUncertaintyCoversNoise) {

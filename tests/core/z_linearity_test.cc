@@ -78,6 +78,16 @@ TEST(ZLinearityTest, CharacterisationRecoversAKnownPeriodicBias) {
   auto bad = CharacteriseZLinearity(flat, all, px, *grid);
   EXPECT_EQ(bad.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(bad.status().message().find("tilt the flat"), std::string::npos) << bad.status().message();
+  // Stored and read back unchanged.
+  auto back = ZLinearityFromJson(ZLinearityToJson(*lin));
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  EXPECT_EQ(back->bias_of_step, lin->bias_of_step);
+  EXPECT_EQ(back->characterised_step_um, lin->characterised_step_um);
+  EXPECT_EQ(back->source, lin->source);
+  EXPECT_EQ(ZLinearityFromJson("{\"bias_of_step\": [0.1]}").status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(ZLinearityFromJson("{\"bias_of_step\": [0.1, 3]}").status().message().find("bias_of_step"),
+            std::string::npos);
+  EXPECT_EQ(ZLinearityFromJson("[").status().code(), StatusCode::kInvalidArgument);
 }
 
 }  // namespace
