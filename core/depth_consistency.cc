@@ -34,12 +34,6 @@ void CoordinateStats(int len, int r, std::vector<double>* mean, std::vector<doub
   }
 }
 
-cv::Mat BoxMean(const cv::Mat& m, int r) {
-  cv::Mat out;
-  cv::boxFilter(m, out, CV_64F, cv::Size(2 * r + 1, 2 * r + 1), cv::Point(-1, -1), true, kBorder);
-  return out;
-}
-
 }  // namespace
 
 Status DepthConsistencyOptions::Validate() const {
@@ -62,43 +56,52 @@ StatusOr<cv::Mat> LocalDepthResidual(const cv::Mat& raw_depth_um, int radius_px)
   cv::Mat out(raw_depth_um.size(), CV_32FC1, cv::Scalar(0.f));
   if (r < 1) return out;
 
-  // Centred on the mean depth, so the squared sums do not swamp the residual.
-  cv::Mat finite = raw_depth_um == raw_depth_um;
+  // Float box sums (accumulated in double by OpenCV) of d, d^2, x d and y d in one 4-channel
+  // pass; depth centred on its mean and coordinates on the image centre, so the differences of
+  // sums below keep their precision.
+  const cv::Mat finite = raw_depth_um == raw_depth_um;
+  const bool any_nan = cv::countNonZero(finite) != int(raw_depth_um.total());
   const double centre = cv::countNonZero(finite) > 0 ? cv::mean(raw_depth_um, finite)[0] : 0.0;
-  const cv::Mat not_finite = ~finite;
-  cv::Mat d, nan;
-  raw_depth_um.convertTo(d, CV_64F, 1.0, -centre);
-  d.setTo(0.0, not_finite);
-  not_finite.convertTo(nan, CV_64F, 1.0 / 255.0);
-  cv::Mat xd(d.size(), CV_64F), yd(d.size(), CV_64F);
-  for (int y = 0; y < d.rows; ++y) {
-    const double* s = d.ptr<double>(y);
-    double* px = xd.ptr<double>(y);
-    double* py = yd.ptr<double>(y);
-    for (int x = 0; x < d.cols; ++x) {
-      px[x] = x * s[x];
-      py[x] = y * s[x];
+  const float cx0 = 0.5f * float(raw_depth_um.cols - 1), cy0 = 0.5f * float(raw_depth_um.rows - 1);
+  cv::Mat sums(raw_depth_um.size(), CV_32FC4);
+  for (int y = 0; y < raw_depth_um.rows; ++y) {
+    const float* s = raw_depth_um.ptr<float>(y);
+    cv::Vec4f* o = sums.ptr<cv::Vec4f>(y);
+    const float yc = float(y) - cy0;
+    for (int x = 0; x < raw_depth_um.cols; ++x) {
+      const float d = std::isfinite(s[x]) ? float(s[x] - centre) : 0.f;
+      o[x] = cv::Vec4f(d, d * d, (float(x) - cx0) * d, yc * d);
     }
   }
   try {
-    const cv::Mat md = BoxMean(d, r), mdd = BoxMean(d.mul(d), r), mxd = BoxMean(xd, r), myd = BoxMean(yd, r);
-    const cv::Mat mnan = BoxMean(nan, r);
+    const cv::Size window(2 * r + 1, 2 * r + 1);
+    cv::boxFilter(sums, sums, CV_32F, window, cv::Point(-1, -1), true, kBorder);
+    cv::Mat nan_share;
+    if (any_nan) {
+      cv::Mat nan;
+      const cv::Mat not_finite = ~finite;
+      not_finite.convertTo(nan, CV_32F, 1.0 / 255.0);
+      cv::boxFilter(nan, nan_share, CV_32F, window, cv::Point(-1, -1), true, kBorder);
+    }
     std::vector<double> mean_x, var_x, mean_y, var_y;
-    CoordinateStats(d.cols, r, &mean_x, &var_x);
-    CoordinateStats(d.rows, r, &mean_y, &var_y);
+    CoordinateStats(raw_depth_um.cols, r, &mean_x, &var_x);
+    CoordinateStats(raw_depth_um.rows, r, &mean_y, &var_y);
     const float inf = std::numeric_limits<float>::infinity();
-    for (int y = 0; y < d.rows; ++y) {
+    for (int y = 0; y < raw_depth_um.rows; ++y) {
+      const cv::Vec4f* m4 = sums.ptr<cv::Vec4f>(y);
+      const float* ns = any_nan ? nan_share.ptr<float>(y) : nullptr;
       float* o = out.ptr<float>(y);
-      for (int x = 0; x < d.cols; ++x) {
-        if (mnan.at<double>(y, x) > 1e-9) {
+      const double my = mean_y[size_t(y)] - cy0, vy = var_y[size_t(y)];
+      for (int x = 0; x < raw_depth_um.cols; ++x) {
+        if (ns && ns[x] > 1e-6f) {
           o[x] = inf;
           continue;
         }
-        const double m = md.at<double>(y, x);
-        const double var_d = mdd.at<double>(y, x) - m * m;
-        const double cx = mxd.at<double>(y, x) - mean_x[size_t(x)] * m;
-        const double cy = myd.at<double>(y, x) - mean_y[size_t(y)] * m;
-        const double res = var_d - cx * cx / var_x[size_t(x)] - cy * cy / var_y[size_t(y)];
+        const double m = m4[x][0];
+        const double var_d = m4[x][1] - m * m;
+        const double cx = m4[x][2] - (mean_x[size_t(x)] - cx0) * m;
+        const double cy = m4[x][3] - my * m;
+        const double res = var_d - cx * cx / var_x[size_t(x)] - cy * cy / vy;
         o[x] = float(std::sqrt(std::max(res, 0.0)));
       }
     }
