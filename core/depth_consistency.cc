@@ -1,4 +1,5 @@
-// Residual of a local least-squares plane fit of the depth map, by box sums (core/depth_consistency.h).
+// Residual of a local least-squares plane fit of the depth map, by sliding box sums
+// (core/depth_consistency.h).
 // For the window W around p with n pixels: var_d = <d^2> - <d>^2, c_x = <x d> - <x><d>,
 // c_y = <y d> - <y><d>; the window is a Cartesian product of its rows and columns (also where it
 // is mirrored at the border), so cov(x, y) = 0 and the plane's residual variance is
@@ -9,7 +10,7 @@
 #include <cmath>
 #include <limits>
 
-#include <opencv2/imgproc.hpp>
+#include <opencv2/core/utility.hpp>
 
 namespace inspection {
 namespace {
@@ -56,58 +57,72 @@ StatusOr<cv::Mat> LocalDepthResidual(const cv::Mat& raw_depth_um, int radius_px)
   cv::Mat out(raw_depth_um.size(), CV_32FC1, cv::Scalar(0.f));
   if (r < 1) return out;
 
-  // Float box sums (accumulated in double by OpenCV) of d, d^2, x d and y d in one 4-channel
-  // pass; depth centred on its mean and coordinates on the image centre, so the differences of
-  // sums below keep their precision.
+  // Sliding window sums of d, d^2, x d, y d and the NaN count in double, with O(width) state:
+  // column sums over the window's rows are updated by one row in and one row out, then summed
+  // along the row with a prefix sum. Depth is centred on its mean and coordinates on the image
+  // centre, so the differences of sums below keep their precision.
+  const int w = raw_depth_um.cols, h = raw_depth_um.rows;
   const cv::Mat finite = raw_depth_um == raw_depth_um;
-  const bool any_nan = cv::countNonZero(finite) != int(raw_depth_um.total());
   const double centre = cv::countNonZero(finite) > 0 ? cv::mean(raw_depth_um, finite)[0] : 0.0;
-  const float cx0 = 0.5f * float(raw_depth_um.cols - 1), cy0 = 0.5f * float(raw_depth_um.rows - 1);
-  cv::Mat sums(raw_depth_um.size(), CV_32FC4);
-  for (int y = 0; y < raw_depth_um.rows; ++y) {
-    const float* s = raw_depth_um.ptr<float>(y);
-    cv::Vec4f* o = sums.ptr<cv::Vec4f>(y);
-    const float yc = float(y) - cy0;
-    for (int x = 0; x < raw_depth_um.cols; ++x) {
-      const float d = std::isfinite(s[x]) ? float(s[x] - centre) : 0.f;
-      o[x] = cv::Vec4f(d, d * d, (float(x) - cx0) * d, yc * d);
-    }
-  }
-  try {
-    const cv::Size window(2 * r + 1, 2 * r + 1);
-    cv::boxFilter(sums, sums, CV_32F, window, cv::Point(-1, -1), true, kBorder);
-    cv::Mat nan_share;
-    if (any_nan) {
-      cv::Mat nan;
-      const cv::Mat not_finite = ~finite;
-      not_finite.convertTo(nan, CV_32F, 1.0 / 255.0);
-      cv::boxFilter(nan, nan_share, CV_32F, window, cv::Point(-1, -1), true, kBorder);
-    }
-    std::vector<double> mean_x, var_x, mean_y, var_y;
-    CoordinateStats(raw_depth_um.cols, r, &mean_x, &var_x);
-    CoordinateStats(raw_depth_um.rows, r, &mean_y, &var_y);
-    const float inf = std::numeric_limits<float>::infinity();
-    for (int y = 0; y < raw_depth_um.rows; ++y) {
-      const cv::Vec4f* m4 = sums.ptr<cv::Vec4f>(y);
-      const float* ns = any_nan ? nan_share.ptr<float>(y) : nullptr;
+  const double cx0 = 0.5 * (w - 1), cy0 = 0.5 * (h - 1);
+  constexpr int kQ = 5;  // d, d^2, x d, y d, NaN
+  std::vector<double> mean_x, var_x, mean_y, var_y;
+  CoordinateStats(w, r, &mean_x, &var_x);
+  CoordinateStats(h, r, &mean_y, &var_y);
+  const double n = double(2 * r + 1) * (2 * r + 1);
+  const float inf = std::numeric_limits<float>::infinity();
+  std::vector<int> xmap(size_t(w + 2 * r));  // extended position -> mirrored column
+  for (int i = 0; i < w + 2 * r; ++i) xmap[size_t(i)] = cv::borderInterpolate(i - r, w, kBorder);
+
+  // Bands of rows in parallel, each with its own column sums (started at its first row).
+  cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& band) {
+    std::vector<double> col(size_t(kQ) * w, 0.0), prefix(size_t(kQ) * (w + 2 * r + 1), 0.0);
+    auto add_row = [&](int row, double sign) {
+      const float* s = raw_depth_um.ptr<float>(row);
+      const double yc = row - cy0;
+      for (int x = 0; x < w; ++x) {
+        double* c = &col[size_t(kQ) * x];
+        if (std::isfinite(s[x])) {
+          const double d = s[x] - centre;
+          c[0] += sign * d;
+          c[1] += sign * d * d;
+          c[2] += sign * (x - cx0) * d;
+          c[3] += sign * yc * d;
+        } else {
+          c[4] += sign;
+        }
+      }
+    };
+    for (int k = band.start - r; k <= band.start + r; ++k) add_row(cv::borderInterpolate(k, h, kBorder), 1.0);
+    for (int y = band.start; y < band.end; ++y) {
+      if (y > band.start) {
+        add_row(cv::borderInterpolate(y + r, h, kBorder), 1.0);
+        add_row(cv::borderInterpolate(y - r - 1, h, kBorder), -1.0);
+      }
+      for (int i = 0; i < w + 2 * r; ++i) {  // prefix[i + 1] = sum of col over extended positions 0..i
+        const double* c = &col[size_t(kQ) * xmap[size_t(i)]];
+        const double* p = &prefix[size_t(kQ) * i];
+        double* p1 = &prefix[size_t(kQ) * (i + 1)];
+        for (int q = 0; q < kQ; ++q) p1[q] = p[q] + c[q];
+      }
       float* o = out.ptr<float>(y);
       const double my = mean_y[size_t(y)] - cy0, vy = var_y[size_t(y)];
-      for (int x = 0; x < raw_depth_um.cols; ++x) {
-        if (ns && ns[x] > 1e-6f) {
+      for (int x = 0; x < w; ++x) {
+        const double* hi = &prefix[size_t(kQ) * (x + 2 * r + 1)];
+        const double* lo = &prefix[size_t(kQ) * x];
+        if (hi[4] - lo[4] > 0.5) {
           o[x] = inf;
           continue;
         }
-        const double m = m4[x][0];
-        const double var_d = m4[x][1] - m * m;
-        const double cx = m4[x][2] - (mean_x[size_t(x)] - cx0) * m;
-        const double cy = m4[x][3] - my * m;
+        const double m = (hi[0] - lo[0]) / n;
+        const double var_d = (hi[1] - lo[1]) / n - m * m;
+        const double cx = (hi[2] - lo[2]) / n - (mean_x[size_t(x)] - cx0) * m;
+        const double cy = (hi[3] - lo[3]) / n - my * m;
         const double res = var_d - cx * cx / var_x[size_t(x)] - cy * cy / vy;
         o[x] = float(std::sqrt(std::max(res, 0.0)));
       }
     }
-  } catch (const cv::Exception& e) {
-    return Status::Internal(std::string("depth residual failed: ") + e.what());
-  }
+  }, 4.0);  // 4 bands: each restarts its sums (2r + 1 rows), negligible
   return out;
 }
 
