@@ -74,7 +74,7 @@ Status AllInFocusComposer::PushFrame(const cv::Mat& frame, const cv::Mat& score)
     score.copyTo(best_);
     if (score_type_ == CV_32FC1) {
       // A NaN first score must not block every later frame.
-      cv::Mat nan_mask = best_ != best_;
+      const cv::Mat nan_mask = ~(best_ == best_);  // CMP_NE is false for NaN
       best_.setTo(-std::numeric_limits<float>::infinity(), nan_mask);
     }
     frame.copyTo(image_);

@@ -1,4 +1,5 @@
-// Residual of a local least-squares plane fit of the depth map, by box sums (core/depth_consistency.h).
+// Residual of a local least-squares plane fit of the depth map, by sliding box sums
+// (core/depth_consistency.h).
 // For the window W around p with n pixels: var_d = <d^2> - <d>^2, c_x = <x d> - <x><d>,
 // c_y = <y d> - <y><d>; the window is a Cartesian product of its rows and columns (also where it
 // is mirrored at the border), so cov(x, y) = 0 and the plane's residual variance is
@@ -9,7 +10,7 @@
 #include <cmath>
 #include <limits>
 
-#include <opencv2/imgproc.hpp>
+#include <opencv2/core/utility.hpp>
 
 namespace inspection {
 namespace {
@@ -34,12 +35,6 @@ void CoordinateStats(int len, int r, std::vector<double>* mean, std::vector<doub
   }
 }
 
-cv::Mat BoxMean(const cv::Mat& m, int r) {
-  cv::Mat out;
-  cv::boxFilter(m, out, CV_64F, cv::Size(2 * r + 1, 2 * r + 1), cv::Point(-1, -1), true, kBorder);
-  return out;
-}
-
 }  // namespace
 
 Status DepthConsistencyOptions::Validate() const {
@@ -62,49 +57,72 @@ StatusOr<cv::Mat> LocalDepthResidual(const cv::Mat& raw_depth_um, int radius_px)
   cv::Mat out(raw_depth_um.size(), CV_32FC1, cv::Scalar(0.f));
   if (r < 1) return out;
 
-  // Centred on the mean depth, so the squared sums do not swamp the residual.
-  cv::Mat finite = raw_depth_um == raw_depth_um;
+  // Sliding window sums of d, d^2, x d, y d and the NaN count in double, with O(width) state:
+  // column sums over the window's rows are updated by one row in and one row out, then summed
+  // along the row with a prefix sum. Depth is centred on its mean and coordinates on the image
+  // centre, so the differences of sums below keep their precision.
+  const int w = raw_depth_um.cols, h = raw_depth_um.rows;
+  const cv::Mat finite = raw_depth_um == raw_depth_um;
   const double centre = cv::countNonZero(finite) > 0 ? cv::mean(raw_depth_um, finite)[0] : 0.0;
-  const cv::Mat not_finite = ~finite;
-  cv::Mat d, nan;
-  raw_depth_um.convertTo(d, CV_64F, 1.0, -centre);
-  d.setTo(0.0, not_finite);
-  not_finite.convertTo(nan, CV_64F, 1.0 / 255.0);
-  cv::Mat xd(d.size(), CV_64F), yd(d.size(), CV_64F);
-  for (int y = 0; y < d.rows; ++y) {
-    const double* s = d.ptr<double>(y);
-    double* px = xd.ptr<double>(y);
-    double* py = yd.ptr<double>(y);
-    for (int x = 0; x < d.cols; ++x) {
-      px[x] = x * s[x];
-      py[x] = y * s[x];
-    }
-  }
-  try {
-    const cv::Mat md = BoxMean(d, r), mdd = BoxMean(d.mul(d), r), mxd = BoxMean(xd, r), myd = BoxMean(yd, r);
-    const cv::Mat mnan = BoxMean(nan, r);
-    std::vector<double> mean_x, var_x, mean_y, var_y;
-    CoordinateStats(d.cols, r, &mean_x, &var_x);
-    CoordinateStats(d.rows, r, &mean_y, &var_y);
-    const float inf = std::numeric_limits<float>::infinity();
-    for (int y = 0; y < d.rows; ++y) {
+  const double cx0 = 0.5 * (w - 1), cy0 = 0.5 * (h - 1);
+  constexpr int kQ = 5;  // d, d^2, x d, y d, NaN
+  std::vector<double> mean_x, var_x, mean_y, var_y;
+  CoordinateStats(w, r, &mean_x, &var_x);
+  CoordinateStats(h, r, &mean_y, &var_y);
+  const double n = double(2 * r + 1) * (2 * r + 1);
+  const float inf = std::numeric_limits<float>::infinity();
+  std::vector<int> xmap(size_t(w + 2 * r));  // extended position -> mirrored column
+  for (int i = 0; i < w + 2 * r; ++i) xmap[size_t(i)] = cv::borderInterpolate(i - r, w, kBorder);
+
+  // Bands of rows in parallel, each with its own column sums (started at its first row).
+  cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& band) {
+    std::vector<double> col(size_t(kQ) * w, 0.0), prefix(size_t(kQ) * (w + 2 * r + 1), 0.0);
+    auto add_row = [&](int row, double sign) {
+      const float* s = raw_depth_um.ptr<float>(row);
+      const double yc = row - cy0;
+      for (int x = 0; x < w; ++x) {
+        double* c = &col[size_t(kQ) * x];
+        if (std::isfinite(s[x])) {
+          const double d = s[x] - centre;
+          c[0] += sign * d;
+          c[1] += sign * d * d;
+          c[2] += sign * (x - cx0) * d;
+          c[3] += sign * yc * d;
+        } else {
+          c[4] += sign;
+        }
+      }
+    };
+    for (int k = band.start - r; k <= band.start + r; ++k) add_row(cv::borderInterpolate(k, h, kBorder), 1.0);
+    for (int y = band.start; y < band.end; ++y) {
+      if (y > band.start) {
+        add_row(cv::borderInterpolate(y + r, h, kBorder), 1.0);
+        add_row(cv::borderInterpolate(y - r - 1, h, kBorder), -1.0);
+      }
+      for (int i = 0; i < w + 2 * r; ++i) {  // prefix[i + 1] = sum of col over extended positions 0..i
+        const double* c = &col[size_t(kQ) * xmap[size_t(i)]];
+        const double* p = &prefix[size_t(kQ) * i];
+        double* p1 = &prefix[size_t(kQ) * (i + 1)];
+        for (int q = 0; q < kQ; ++q) p1[q] = p[q] + c[q];
+      }
       float* o = out.ptr<float>(y);
-      for (int x = 0; x < d.cols; ++x) {
-        if (mnan.at<double>(y, x) > 1e-9) {
+      const double my = mean_y[size_t(y)] - cy0, vy = var_y[size_t(y)];
+      for (int x = 0; x < w; ++x) {
+        const double* hi = &prefix[size_t(kQ) * (x + 2 * r + 1)];
+        const double* lo = &prefix[size_t(kQ) * x];
+        if (hi[4] - lo[4] > 0.5) {
           o[x] = inf;
           continue;
         }
-        const double m = md.at<double>(y, x);
-        const double var_d = mdd.at<double>(y, x) - m * m;
-        const double cx = mxd.at<double>(y, x) - mean_x[size_t(x)] * m;
-        const double cy = myd.at<double>(y, x) - mean_y[size_t(y)] * m;
-        const double res = var_d - cx * cx / var_x[size_t(x)] - cy * cy / var_y[size_t(y)];
+        const double m = (hi[0] - lo[0]) / n;
+        const double var_d = (hi[1] - lo[1]) / n - m * m;
+        const double cx = (hi[2] - lo[2]) / n - (mean_x[size_t(x)] - cx0) * m;
+        const double cy = (hi[3] - lo[3]) / n - my * m;
+        const double res = var_d - cx * cx / var_x[size_t(x)] - cy * cy / vy;
         o[x] = float(std::sqrt(std::max(res, 0.0)));
       }
     }
-  } catch (const cv::Exception& e) {
-    return Status::Internal(std::string("depth residual failed: ") + e.what());
-  }
+  }, 4.0);  // 4 bands: each restarts its sums (2r + 1 rows), negligible
   return out;
 }
 

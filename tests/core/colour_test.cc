@@ -168,6 +168,13 @@ TEST(AllInFocusTest, FirstOfEqualMaximaWinsAndMismatchesAreNamed) {
   EXPECT_EQ(st.code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(AllInFocusComposer::Create({2, 2}, CV_32FC3).status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(c->frames_pushed(), 2);
+
+  // A NaN score never wins, also on the first frame: the next finite score takes the pixel.
+  auto n = AllInFocusComposer::Create({1, 1}, CV_8UC1);
+  ASSERT_TRUE(n.ok());
+  ASSERT_TRUE(n->PushFrame(cv::Mat(1, 1, CV_8UC1, cv::Scalar(1)), cv::Mat(1, 1, CV_32F, cv::Scalar(std::nan("")))).ok());
+  ASSERT_TRUE(n->PushFrame(cv::Mat(1, 1, CV_8UC1, cv::Scalar(2)), cv::Mat(1, 1, CV_32F, cv::Scalar(-3.f))).ok());
+  EXPECT_EQ(n->all_in_focus().at<uint8_t>(0, 0), 2);
 }
 
 }  // namespace
