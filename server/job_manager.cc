@@ -327,7 +327,6 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::SubmitScan(const v1::ScanReques
   }
   plan.mode = mode;
   plan.params = params;
-  plan.illumination = IlluminationModeName(mode, params.hdr_exposures);
 
   std::lock_guard<std::mutex> lock(mu_);
   if (stopping_) return Status::Unavailable("server is shutting down");
