@@ -62,7 +62,6 @@ struct ScanPlan {
   std::vector<double> z_um;       // stage positions in acquisition order
   double exposure_us = 0.0;
   int uniform_grey = 128;          // STD projector pattern
-  std::string illumination = "STD";  // recorded name; RunScan sets it from `mode`
   IlluminationMode mode = IlluminationMode::kStd;
   IlluminationParams params;
   SffOptions sff;
