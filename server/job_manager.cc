@@ -54,6 +54,8 @@ bool JobRecord::EventsSince(size_t from, std::chrono::milliseconds timeout, std:
   std::unique_lock<std::mutex> lock(mu_);
   cv_.wait_for(lock, timeout, [&] { return events_.size() > from || IsTerminal(job_.state()); });
   for (size_t i = from; i < events_.size(); ++i) out->push_back(events_[i]);
+  // The terminal state and the terminal event come in one step (End), so a watcher that sees
+  // the end has the last event too.
   return IsTerminal(job_.state());
 }
 
@@ -71,22 +73,31 @@ v1::Job JobRecord::MarkRunning() {
   return job_;
 }
 
-bool JobRecord::End(const StatusOr<v1::JobResult>& outcome, v1::Job* ended) {
-  std::lock_guard<std::mutex> lock(mu_);
-  if (IsTerminal(job_.state())) return false;
-  if (outcome.ok()) {
-    job_.set_state(v1::JOB_STATE_SUCCEEDED);
-    *job_.mutable_result() = *outcome;
-  } else {
-    const Status& s = outcome.status();
-    job_.set_state(s.code() == StatusCode::kCancelled ? v1::JOB_STATE_CANCELLED : v1::JOB_STATE_FAILED);
-    job_.clear_result();  // a job that did not succeed offers no artifacts
-    job_.set_error_code(int(s.code()));
-    job_.set_error_message(s.message());
+bool JobRecord::End(const StatusOr<v1::JobResult>& outcome, const EventFill& fill, const Persist& persist) {
+  v1::Job ended;
+  v1::JobEvent e;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (IsTerminal(job_.state())) return false;
+    if (outcome.ok()) {
+      job_.set_state(v1::JOB_STATE_SUCCEEDED);
+      *job_.mutable_result() = *outcome;
+    } else {
+      const Status& s = outcome.status();
+      job_.set_state(s.code() == StatusCode::kCancelled ? v1::JOB_STATE_CANCELLED : v1::JOB_STATE_FAILED);
+      job_.clear_result();  // a job that did not succeed offers no artifacts
+      job_.set_error_code(int(s.code()));
+      job_.set_error_message(s.message());
+    }
+    job_.set_queue_position(0);
+    *job_.mutable_end_time() = TimeUtil::GetCurrentTime();
+    ended = job_;
+    e = NextEventLocked(fill);
+    *e.mutable_job() = ended;
+    events_.push_back(e);
   }
-  job_.set_queue_position(0);
-  *job_.mutable_end_time() = TimeUtil::GetCurrentTime();
-  *ended = job_;
+  persist(ended, e);
+  cv_.notify_all();
   return true;
 }
 
@@ -94,20 +105,26 @@ v1::JobEvent JobRecord::AppendEvent(const EventFill& fill, const std::function<v
   v1::JobEvent e;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    e.set_job_id(job_id_);
-    e.set_sequence(events_.size() + 1);
-    *e.mutable_time() = TimeUtil::GetCurrentTime();
-    e.set_state(job_.state());
-    e.set_remaining_seconds(-1);
-    if (started_ != Clock::time_point()) {
-      e.set_elapsed_seconds(std::chrono::duration<double>(Clock::now() - started_).count());
-    }
-    fill(e);
+    e = NextEventLocked(fill);
     events_.push_back(e);
   }
   // Persisted before watchers wake: an event a client has seen survives a restart.
   persist(e);
   cv_.notify_all();
+  return e;
+}
+
+v1::JobEvent JobRecord::NextEventLocked(const EventFill& fill) const {
+  v1::JobEvent e;
+  e.set_job_id(job_id_);
+  e.set_sequence(events_.size() + 1);
+  *e.mutable_time() = TimeUtil::GetCurrentTime();
+  e.set_state(job_.state());
+  e.set_remaining_seconds(-1);
+  if (started_ != Clock::time_point()) {
+    e.set_elapsed_seconds(std::chrono::duration<double>(Clock::now() - started_).count());
+  }
+  fill(e);
   return e;
 }
 
@@ -301,18 +318,22 @@ void JobManager::Emit(const RecordPtr& r, const EventFill& fill) {
 }
 
 void JobManager::Finish(const RecordPtr& r, const StatusOr<v1::JobResult>& outcome) {
-  v1::Job job;
-  if (!r->End(outcome, &job)) return;
   const Status status = outcome.ok() ? Status::Ok() : outcome.status();
-  Status s = store_->PutJob(job);
-  if (!s.ok()) spdlog::error("job {}: cannot persist: {}", job.job_id(), s.ToString());
-  Emit(r, [&](v1::JobEvent& e) {
+  v1::Job job;
+  auto fill = [&](v1::JobEvent& e) {
     e.set_phase(v1::JOB_PHASE_DONE);
-    e.set_progress(job.state() == v1::JOB_STATE_SUCCEEDED ? 1.0 : e.progress());
+    e.set_progress(status.ok() ? 1.0 : 0.0);
     e.set_remaining_seconds(0);
     e.set_message(status.ok() ? "done" : status.ToString());
-    *e.mutable_job() = job;
-  });
+  };
+  auto persist = [&](const v1::Job& ended, const v1::JobEvent& e) {
+    job = ended;
+    Status s = store_->PutJob(ended);
+    if (!s.ok()) spdlog::error("job {}: cannot persist: {}", ended.job_id(), s.ToString());
+    s = store_->AppendEvent(e);
+    if (!s.ok()) spdlog::error("job {}: cannot persist event: {}", e.job_id(), s.ToString());
+  };
+  if (!r->End(outcome, fill, persist)) return;
   if (status.ok()) {
     spdlog::info("job {} succeeded", job.job_id());
   } else {

@@ -53,9 +53,12 @@ class JobRecord {
   // Record keeping, for the JobManager.
   void SetQueuePosition(int position);
   v1::Job MarkRunning();
-  // Ends the job: SUCCEEDED with the result, CANCELLED or FAILED with the status's code and
-  // message. False (and nothing changes) when it had ended already.
-  bool End(const StatusOr<v1::JobResult>& outcome, v1::Job* ended);
+  // Ends the job - SUCCEEDED with the result, CANCELLED or FAILED with the status's code and
+  // message - and appends its terminal event (`fill`, then the ended job) in the same step, so a
+  // watcher never sees the end without the last event. Hands both to `persist`, then wakes the
+  // watchers. False (and nothing changes) when the job had ended already.
+  using Persist = std::function<void(const v1::Job& ended, const v1::JobEvent& terminal_event)>;
+  bool End(const StatusOr<v1::JobResult>& outcome, const EventFill& fill, const Persist& persist);
   // Appends the next event (id, sequence, time, state, elapsed time, then `fill`), hands it to
   // `persist`, then wakes the watchers; returns it.
   v1::JobEvent AppendEvent(const EventFill& fill, const std::function<void(const v1::JobEvent&)>& persist);
@@ -64,6 +67,8 @@ class JobRecord {
   const std::string job_id_;
   const v1::JobKind kind_;
   const std::string request_id_;
+
+  v1::JobEvent NextEventLocked(const EventFill& fill) const;  // caller holds mu_
 
   mutable std::mutex mu_;  // guards the members below
   mutable std::condition_variable cv_;  // signalled on every event
@@ -88,9 +93,11 @@ class JobManager {
   // Ends queued jobs (FAILED, ABORTED), asks running ones to cancel and joins the workers.
   void Shutdown();
 
-  // Builds the work of a new job and queues it. With a request id that an earlier job of this
-  // kind carries, returns that job and does not call `prepare`. Errors of `prepare` come back
-  // unchanged, and no job is created for them.
+  // Builds the work of a new job (`prepare`: request mapping and rig checks, called without the
+  // manager's lock) and queues it. With a request id that an earlier job of this kind carries,
+  // returns that job and does not call `prepare`. Errors of `prepare` come back unchanged; then,
+  // and for UNAVAILABLE (shutting down), ABORTED and RESOURCE_EXHAUSTED (see above), no job is
+  // created.
   using Prepare = std::function<StatusOr<JobWork>()>;
   StatusOr<std::shared_ptr<JobRecord>> Submit(v1::JobKind kind, const std::string& request_id,
                                               const std::string& label, const Prepare& prepare);
