@@ -7,12 +7,11 @@
 #include <cmath>
 #include <limits>
 #include <string>
-#include <system_error>
-#include <thread>
 
 #include <opencv2/imgproc.hpp>
 
 #include "core/ncc_kernel.h"
+#include "core/parallel_for.h"
 
 namespace inspection {
 namespace {
@@ -22,30 +21,6 @@ using ncc_kernel::TemplateStats;
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr int kMaxJ = 4;
-
-// Runs fn(task, worker) for task = 0..n_tasks-1 on up to `threads` threads (the caller's included).
-template <typename F>
-void ParallelFor(int n_tasks, int threads, F&& fn) {
-  threads = std::max(1, std::min(threads, n_tasks));
-  std::atomic<int> next{0};
-  auto worker = [&](int id) {
-    for (int i = next.fetch_add(1); i < n_tasks; i = next.fetch_add(1)) fn(i, id);
-  };
-  std::vector<std::thread> pool;
-  for (int t = 1; t < threads; ++t) {
-    try {
-      pool.emplace_back(worker, t);
-    } catch (const std::system_error&) {
-      break;  // fewer threads; tasks are shared out dynamically anyway
-    }
-  }
-  worker(0);
-  for (auto& t : pool) t.join();
-}
-
-int ResolveThreads(int threads) {
-  return threads > 0 ? threads : int(std::max(1u, std::thread::hardware_concurrency()));
-}
 
 bool SupportedType(int type) { return type == CV_8UC1 || type == CV_16UC1 || type == CV_32FC1; }
 

@@ -31,40 +31,14 @@ class Section {
     return j_ && j_->contains(k);
   }
 
-  Status Number(const std::string& k, double* out) {
-    if (!has(k)) return Status::Ok();
-    const json& v = (*j_)[k];
-    if (!v.is_number()) return ConfigError(key(k), "must be a number");
-    *out = v.get<double>();
-    return Status::Ok();
-  }
-  Status Int(const std::string& k, int* out) {
-    if (!has(k)) return Status::Ok();
-    const json& v = (*j_)[k];
-    if (!v.is_number_integer()) return ConfigError(key(k), "must be an integer");
-    *out = v.get<int>();
-    return Status::Ok();
-  }
+  Status Number(const std::string& k, double* out) { return Typed(k, &json::is_number, "must be a number", out); }
+  Status Int(const std::string& k, int* out) { return Typed(k, &json::is_number_integer, "must be an integer", out); }
   Status UInt64(const std::string& k, uint64_t* out) {
-    if (!has(k)) return Status::Ok();
-    const json& v = (*j_)[k];
-    if (!v.is_number_integer() || v.get<int64_t>() < 0) return ConfigError(key(k), "must be a non-negative integer");
-    *out = v.get<uint64_t>();
-    return Status::Ok();
+    return Typed(k, &json::is_number_unsigned, "must be a non-negative integer", out);  // JSON's 5, not -5 or 5.0
   }
-  Status Bool(const std::string& k, bool* out) {
-    if (!has(k)) return Status::Ok();
-    const json& v = (*j_)[k];
-    if (!v.is_boolean()) return ConfigError(key(k), "must be true or false");
-    *out = v.get<bool>();
-    return Status::Ok();
-  }
+  Status Bool(const std::string& k, bool* out) { return Typed(k, &json::is_boolean, "must be true or false", out); }
   Status String(const std::string& k, std::string* out) {
-    if (!has(k)) return Status::Ok();
-    const json& v = (*j_)[k];
-    if (!v.is_string()) return ConfigError(key(k), "must be a string");
-    *out = v.get<std::string>();
-    return Status::Ok();
+    return Typed(k, &json::is_string, "must be a string", out);
   }
   // USB ids as "0x0403" strings or integers.
   Status UsbId(const std::string& k, uint16_t* out) {
@@ -103,6 +77,15 @@ class Section {
   }
 
  private:
+  // The value of key k, when present, as T; `is_type` checks its JSON type first.
+  template <typename T>
+  Status Typed(const std::string& k, bool (json::*is_type)() const noexcept, const char* must, T* out) {
+    if (!has(k)) return Status::Ok();
+    const json& v = (*j_)[k];
+    if (!(v.*is_type)()) return ConfigError(key(k), must);
+    *out = v.get<T>();
+    return Status::Ok();
+  }
   const json* j_;
   std::string path_;
   std::set<std::string> seen_;
