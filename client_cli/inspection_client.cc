@@ -149,6 +149,20 @@ InspectionClient::InspectionClient(const ClientOptions& options) : options_(opti
       init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                                   "tls_ca_file: cannot read " + options_.tls_ca_file);
     }
+    // mTLS: a client certificate and key, both or neither.
+    if (options_.tls_client_cert_file.empty() != options_.tls_client_key_file.empty()) {
+      init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                                  "tls_client_cert_file and tls_client_key_file go together");
+    } else if (!options_.tls_client_cert_file.empty()) {
+      if (!ReadWholeFile(options_.tls_client_cert_file, &ssl.pem_cert_chain) || ssl.pem_cert_chain.empty()) {
+        init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                                    "tls_client_cert_file: cannot read " + options_.tls_client_cert_file);
+      }
+      if (!ReadWholeFile(options_.tls_client_key_file, &ssl.pem_private_key) || ssl.pem_private_key.empty()) {
+        init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                                    "tls_client_key_file: cannot read " + options_.tls_client_key_file);
+      }
+    }
     credentials = grpc::SslCredentials(ssl);
   }
   grpc::ChannelArguments args;
@@ -446,8 +460,12 @@ grpc::Status InspectionClient::DownloadArtifact(const std::string& artifact_id, 
       offset = 0;
       continue;
     }
-    // Keep the .part on RPC errors so a later --resume continues it.
-    if (!status.ok()) return status;
+    // Keep the .part on RPC errors so a later --resume continues it, unless nothing was ever
+    // received (e.g. NOT_FOUND): an empty .part would only be litter.
+    if (!status.ok()) {
+      if (written == 0) fs::remove(part, ec);
+      return status;
+    }
     break;
   }
 

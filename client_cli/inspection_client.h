@@ -22,6 +22,8 @@ namespace v1 = ::inspection::v1;
 struct ClientOptions {
   std::string target = "127.0.0.1:50051";  // host:port
   std::string tls_ca_file;                 // PEM; empty = plaintext
+  std::string tls_client_cert_file;        // PEM; with tls_client_key_file: mTLS client identity
+  std::string tls_client_key_file;
   std::string auth_token;                  // sent as "authorization: Bearer <token>" when set
   double connect_timeout_seconds = 10.0;
 };

@@ -211,7 +211,8 @@ Status CalibrationBundle::Save(const fs::path& dir) const {
     j["integral_psf"] = {{"file", "integral_psf.tiff"}, {"regularisation", IpsfRegularisationName(p.regularisation)},
                          {"regularisation_weight", p.regularisation_weight},
                          {"integral_rms_error", Num(p.integral_rms_error)},
-                         {"restored_rms_error", Num(p.restored_rms_error)}, {"stack_frames", p.stack_frames}};
+                         {"restored_rms_error", Num(p.restored_rms_error)}, {"stack_frames", p.stack_frames},
+                         {"integral_noise_sigma", Num(p.integral_noise_sigma)}};
   }
   json reps = json::array();
   for (const auto& r : reports) {
@@ -330,12 +331,13 @@ StatusOr<CalibrationBundle> CalibrationBundle::Load(const fs::path& dir) {
     if (j.contains("integral_psf")) {
       const json& p = j.at("integral_psf");
       IntegralPsf r;
-      r.regularisation = p.value("regularisation", "") == "total_variation" ? IpsfRegularisation::kTotalVariation
-                                                                           : IpsfRegularisation::kGradientL2;
+      const auto regularisation = ParseIpsfRegularisation(p.value("regularisation", "gradient_l2"));
+      r.regularisation = regularisation.ok() ? *regularisation : IpsfRegularisation::kGradientL2;
       r.regularisation_weight = p.value("regularisation_weight", 0.0);
       r.integral_rms_error = NumFrom(p.at("integral_rms_error"));
       r.restored_rms_error = NumFrom(p.at("restored_rms_error"));
       r.stack_frames = p.value("stack_frames", 0);
+      r.integral_noise_sigma = p.contains("integral_noise_sigma") ? NumFrom(p.at("integral_noise_sigma")) : 0.0;
       INSPECT_ASSIGN_OR_RETURN(r.kernel, ReadFloatTiff(dir / "integral_psf.tiff", {}));
       b.integral_psf = std::move(r);
     }
@@ -354,7 +356,7 @@ StatusOr<CalibrationBundle> CalibrationBundle::Load(const fs::path& dir) {
   } catch (const json::exception& e) {
     return Status::InvalidArgument(std::string("bundle.json: ") + e.what());
   }
-  INSPECT_RETURN_IF_ERROR(b.Validate().WithContext(manifest.string() + ": "));
+  INSPECT_RETURN_IF_ERROR(b.Validate().WithContext(manifest.string()));
   return b;
 }
 

@@ -8,7 +8,7 @@
 #include <cmath>
 #include <vector>
 
-#include "core/sff_engine.h"
+#include "core/sff_options.h"
 
 namespace inspection {
 

@@ -108,6 +108,16 @@ Status ComputeFocusMeasure(const cv::Mat& frame, FocusMeasure measure, int windo
       case FocusMeasure::kHelmliMean: {
         cv::Mat f64;
         frame.convertTo(f64, CV_64F);
+        double min_grey = 0.0;
+        cv::minMaxLoc(f64, &min_grey, nullptr);
+        if (!(min_grey >= 0.0)) {  // also NaN
+          return Status::InvalidArgument("helmli-mean needs grey values >= 0 (a ratio of intensities)");
+        }
+        // A floor relative to the frame's own scale (not an absolute grey level) keeps the
+        // measure scale-free: float frames in [0, 1] would otherwise see every ratio clamped
+        // to 1 and a constant map. The floor only matters near black, where the ratio of
+        // noise-level grey values would explode.
+        const double floor_grey = kHelmliFloorOfMean * cv::mean(f64)[0];
         const cv::Mat mu = WindowMean(f64, w);
         cv::Mat ratio(frame.size(), CV_64F);
         for (int y = 0; y < frame.rows; ++y) {
@@ -115,8 +125,9 @@ Status ComputeFocusMeasure(const cv::Mat& frame, FocusMeasure measure, int windo
           const double* m = mu.ptr<double>(y);
           double* r = ratio.ptr<double>(y);
           for (int x = 0; x < frame.cols; ++x) {
-            const double hi = std::max(std::max(i[x], m[x]), 1.0), lo = std::max(std::min(i[x], m[x]), 1.0);
-            r[x] = hi / lo;
+            const double hi = std::max(std::max(i[x], m[x]), floor_grey);
+            const double lo = std::max(std::min(i[x], m[x]), floor_grey);
+            r[x] = hi > 0.0 ? hi / lo : 1.0;  // hi = 0: an all-black frame
           }
         }
         WindowSum(ratio, w).convertTo(*focus, CV_32F);

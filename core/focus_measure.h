@@ -12,7 +12,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "core/sff_engine.h"
+#include "core/sff_options.h"
 #include "core/status.h"
 
 namespace inspection {
@@ -27,9 +27,12 @@ namespace inspection {
 //  kGreyLevelVariance     eq. 3.15: 1/(N-1) sum over U of (I - mu_U)^2, N = window_px^2.
 //  kHelmliMean            eq. 3.16 as Helmli & Scherer define it: at every pixel p the ratio
 //                         R(p) = mu(p)/I(p) if mu(p) > I(p), else I(p)/mu(p), with mu(p) the mean
-//                         of the window around p; FM = sum of R over U. A ratio's denominator is
-//                         clamped to >= 1 grey level (and its numerator too), so zero grey values
-//                         give finite values and a constant image gives exactly N.
+//                         of the window around p; FM = sum of R over U. Scale-free: both terms
+//                         of a ratio are floored at kHelmliFloorOfMean times the frame's mean
+//                         grey value (one grey level of an 8-bit frame of mean 128), so the map
+//                         of s * I equals that of I for any s > 0 (8-bit, 16-bit or float in
+//                         [0, 1] alike), zero grey values give finite ratios and a constant (or
+//                         all-zero) image gives exactly N. Grey values must be >= 0.
 //  kChebyshevMoments      Yap & Raveendran, eq. 3.17-3.22: moments T_mn of the window with the
 //                         orthonormal Chebyshev polynomials; FM = ||T_high|| / ||T_low||, low =
 //                         orders m + n <= 2 (T_00 included), high = all others. ||T_high||^2 is
@@ -40,11 +43,14 @@ namespace inspection {
 //                         eq. 3.15 whose mean is the one of the centre's window.
 Status ComputeFocusMeasure(const cv::Mat& frame, FocusMeasure measure, int window_px, cv::Mat* focus);
 
+// kHelmliMean's floor of a ratio's terms, relative to the frame's mean grey value.
+inline constexpr double kHelmliFloorOfMean = 1.0 / 128.0;
+
 // Tenengrad (eq. 3.13-3.14) of an 8-bit frame in exact integer arithmetic with the SFF engine's
 // fused SIMD kernel (CV_32SC1; fits int32 for every window up to 31). Same values as
 // ComputeFocusMeasure(kTenengrad) up to that function's float rounding. Implemented in
-// core/sff_engine.cc, where the kernel lives. use_simd = false forces the portable kernel (the
-// AVX2 one is used when the CPU has it); both give identical values.
+// core/tenengrad_kernel_dispatch.cc, beside the kernel. use_simd = false forces the portable
+// kernel (the AVX2 one is used when the CPU has it); both give identical values.
 Status ComputeTenengradU8(const cv::Mat& frame, int window_px, cv::Mat* focus, bool use_simd = true);
 
 // Normalised discrete Chebyshev polynomial t~_m(x; N) for x = 0..N-1 (eq. 3.18-3.22, normalised

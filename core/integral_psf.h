@@ -1,9 +1,12 @@
 // Integral PSF (IPSF) of thesis 5.4.1: the kernel that, convolved with the integral image of a
 // stack (the mean over all z, eq. 5.19-5.20 summed), restores the all-in-focus image (eq. 5.23).
 // Estimated by regularised least squares, eq. 5.22:
-//   argmin_k || I_int * k - I_t ||^2 + mu * R(k),
-// R = squared gradient (Tikhonov, "TV-L2" side of Fig. 5.21) or total variation (IRLS).
-// Solved matrix-free by conjugate gradients; convolutions through OpenCV (DFT for big kernels).
+//   argmin_k || I_int * k - I_t ||_p^p + mu * R(k),
+// with (Fig. 5.21) p = 2 and R = squared gradient (Tikhonov), p = 2 and R = total variation
+// (TV-L2), or p = 1 and R = total variation (TV-L1, the thesis's best: the L1 data term does not
+// let a few badly matched pixels - glints, dust, saturated spots - bend the kernel).
+// Solved matrix-free by conjugate gradients, L1 and TV through iteratively reweighted least
+// squares (IRLS); convolutions through OpenCV (DFT for big kernels).
 #pragma once
 
 #include <string>
@@ -15,7 +18,11 @@
 
 namespace inspection {
 
-enum class IpsfRegularisation { kGradientL2, kTotalVariation };
+enum class IpsfRegularisation {
+  kGradientL2,        // L2 data term + squared gradient of the kernel (Tikhonov)
+  kTotalVariation,    // L2 data term + total variation of the kernel (TV-L2)
+  kTotalVariationL1,  // L1 data term + total variation of the kernel (TV-L1)
+};
 
 // Plain data.
 struct IntegralPsf {
@@ -27,6 +34,11 @@ struct IntegralPsf {
   double integral_rms_error = 0.0;
   double restored_rms_error = 0.0;
   int stack_frames = 0;
+  // Noise (grey) of the calibration's integral image: frame noise / sqrt(stack_frames); 0 when
+  // unknown. The least-squares kernel already damps this much noise (errors in the input of
+  // eq. 5.22 shrink it like a Wiener filter), so restoration adds damping only for the noise a
+  // scan has beyond it (core/integral_sff.h).
+  double integral_noise_sigma = 0.0;
 
   Status Validate() const;
   // eq. 5.23: the restored focused image of an integral image (CV_32FC1 result, same size;
@@ -34,7 +46,10 @@ struct IntegralPsf {
   cv::Mat Apply(const cv::Mat& integral_image) const;
 };
 
+// "gradient_l2", "total_variation" (TV-L2; the name calibrations already store), "tv_l1".
 const char* IpsfRegularisationName(IpsfRegularisation r);
+// The names above; INVALID_ARGUMENT listing them otherwise.
+StatusOr<IpsfRegularisation> ParseIpsfRegularisation(const std::string& name);
 
 struct IntegralPsfOptions {
   int radius_px = 7;  // kernel is (2r+1)^2
@@ -44,8 +59,14 @@ struct IntegralPsfOptions {
   double regularisation_weight = 1e-3;
   int max_cg_iterations = 400;
   double cg_tolerance = 1e-8;        // on the relative residual norm
-  int tv_reweight_iterations = 6;    // IRLS outer loops for total variation
-  double tv_epsilon = 1e-4;          // smoothing of |grad k| in the TV weights
+  int tv_reweight_iterations = 6;    // IRLS outer loops for total variation and the L1 data term
+  double tv_epsilon = 1e-4;          // smoothing of |grad k| in the TV weights (relative to the kernel peak)
+  // TV-L1: smoothing of |residual| in the L1 weights, relative to the RMS residual of the
+  // previous iterate (|r| ~ r^2 / sqrt(r^2 + eps^2)).
+  double l1_epsilon = 0.05;
+  // Recorded in IntegralPsf::integral_noise_sigma (>= 0; the caller measures it on the
+  // calibration stack, e.g. IntegralImageAccumulator::FrameNoiseSigma() / sqrt(frames)).
+  double integral_noise_sigma = 0.0;
 
   Status Validate() const;
 };

@@ -158,7 +158,7 @@ StatusOr<ScatterMatrix> BuildScatterMatrix(const std::vector<ScatterCapture>& ca
                                            const ScatterMatrixOptions& options) {
   INSPECT_ASSIGN_OR_RETURN(ScatterMatrixBuilder b, ScatterMatrixBuilder::Create(geometry, black_radiance, options));
   for (size_t k = 0; k < captures.size(); ++k) {
-    INSPECT_RETURN_IF_ERROR(b.Add(captures[k]).WithContext("captures[" + std::to_string(k) + "]: "));
+    INSPECT_RETURN_IF_ERROR(b.Add(captures[k]).WithContext("captures[" + std::to_string(k) + "]"));
   }
   return b.Finish();
 }

@@ -4,64 +4,16 @@
 // the last frame arrives. Scans and Reconstruct both run through it.
 #pragma once
 
-#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include <opencv2/core.hpp>
 
+#include "core/sff_options.h"
 #include "core/status.h"
 
 namespace inspection {
-
-// Focus measure operators of thesis 3.1.3.
-// Exact definitions and border handling: core/focus_measure.h.
-enum class FocusMeasure {
-  kModifiedLaplacian,      // ML: |Ixx| + |Iyy| (masks of eq. 3.11, unsquared eq. 3.8) summed over the window
-  kSumModifiedLaplacian,   // SML, eq. 3.12
-  kTenengrad,              // eq. 3.14
-  kGreyLevelVariance,      // eq. 3.15
-  kHelmliMean,             // Helmli-Scherer mean ratio, eq. 3.16
-  kChebyshevMoments,       // Yap & Raveendran ratio, eq. 3.17-3.22
-  kGreyLevelLocalVariance, // GLVM: local variance from the mean
-};
-
-// Depth interpolation of thesis 3.1.4.
-enum class DepthInterpolation {
-  kMaximum,   // eq. 3.23-3.24
-  kLineFit,   // Malik & Choi, eq. 3.25-3.29
-  kGaussian,  // three-point Gaussian, eq. 3.30-3.34
-};
-
-const char* FocusMeasureName(FocusMeasure m);              // "tenengrad", "sml", ...
-StatusOr<FocusMeasure> ParseFocusMeasure(const std::string& name);
-const char* DepthInterpolationName(DepthInterpolation i);  // "maximum", "linefit", "gaussian"
-StatusOr<DepthInterpolation> ParseDepthInterpolation(const std::string& name);
-
-struct SffOptions {
-  FocusMeasure focus_measure = FocusMeasure::kTenengrad;
-  int window_px = 7;  // odd, 3..31: side of the square summation window U of eq. 3.12/3.14
-  DepthInterpolation interpolation = DepthInterpolation::kGaussian;
-  // Line fit only: samples j on each side of the maximum in DS1/DS2 (eq. 3.25-3.26), 1..4.
-  int linefit_half_width = 2;
-  // Pixels whose confidence (0..1, see FocusConfidence in core/depth_interpolation.h) is below
-  // this get NaN depth. The default keeps > 99 % of a textured specimen scanned through its
-  // focus with >= ~20 frames and rejects > 99 % of textureless (grey + noise) pixels
-  // (tests/core/sff_engine_test.cc); with fewer frames the noise level is less certain.
-  double min_confidence = 0.4;
-  // Worker threads for the per-frame pass; 0 = all hardware threads.
-  int threads = 0;
-  // AVX2 kernels when the CPU has them (chosen at run time); false forces the portable kernels.
-  // Both give bit-identical results.
-  bool use_simd = true;
-  // With use_simd: AVX-512 for the state update of 8-bit Tenengrad (maximum or Gaussian) when
-  // the CPU has it (false keeps AVX2). Bit-identical either way.
-  bool use_avx512 = true;
-
-  // INVALID_ARGUMENT naming the field when out of range.
-  Status Validate() const;
-};
 
 struct DepthResult {
   cv::Mat depth_um;      // CV_32FC1: stage z (µm) at which the pixel is sharpest; NaN = no depth
@@ -81,20 +33,22 @@ struct DepthResult {
 // (core/depth_interpolation.h) and gets its confidence; pixels below min_confidence get NaN.
 // Size (state_bytes() / pixels): 23 bytes for 8-bit frames with Tenengrad and maximum or
 // Gaussian interpolation (the scan default: exact int32 F_max, 16-bit float codes of the other
-// focus values, truncated-float sums; details in core/sff_engine.cc), and there Finish writes
+// focus values, truncated-float sums; details in core/sff_state.h), and there Finish writes
 // the result into the state's own buffers, so it adds no memory. Other measures, 16-bit frames
 // and the line fit keep exact 32-bit state: 28 + 12 j bytes (j = 1, or linefit_half_width),
 // plus the result (9 or 10 bytes per pixel) at Finish.
 //
 // Speed: 8-bit frames with Tenengrad run through a fused integer kernel (Sobel, squares, window
 // sum and state update per cache-sized tile; 16-bit AVX2 lanes chosen at run time, portable
-// fallback, bit-identical). PushFrame splits each frame into tiles over options.threads threads;
-// with the compact state it takes frames in chunks of 8 and runs each tile across the chunk, so
-// the state is streamed through memory once per 8 frames (the chunk's frames are held by
-// reference meanwhile; at most 7 frames wait, and Finish processes them); ReconstructInMemory
-// runs each tile across all frames so its state stays in cache. Other
-// measures and 16-bit frames compute the whole-frame focus map (core/focus_measure.h) and share
-// the same state update. inspect-bench measures it (tests/bench/inspect_bench.cc).
+// fallback, bit-identical: core/tenengrad_kernel.h). PushFrame splits each frame into tiles
+// over options.threads threads; with the compact state it takes frames in chunks of 8 and runs
+// each tile across the chunk, so the state is streamed through memory once per 8 frames (the
+// chunk's frames are held by reference meanwhile; at most 7 frames wait, and Finish processes
+// them); ReconstructInMemory runs each tile across all frames so its state stays in cache.
+// Other measures and 16-bit frames compute the whole-frame focus map (core/focus_measure.h) and
+// share the same state update. inspect-bench measures it (tests/bench/inspect_bench.cc).
+// Implementation: core/sff_engine.cc (Create), sff_compact_engine.cc (the scan default),
+// sff_exact_engine.cc (every other case), sff_batch.cc (ReconstructInMemory).
 class SffEngine {
  public:
   // frame_type: CV_8UC1 or CV_16UC1.
@@ -120,9 +74,5 @@ class SffEngine {
   static StatusOr<DepthResult> ReconstructInMemory(const SffOptions& options, const std::vector<cv::Mat>& frames,
                                                    const std::vector<double>& z_um);
 };
-
-// Reconstructs a stack folder (core/stack.h) by decoding and pushing its frames one at a time,
-// so memory stays O(pixels). Errors name the frame or the manifest field.
-StatusOr<DepthResult> ReconstructStack(const std::filesystem::path& dir, const SffOptions& options);
 
 }  // namespace inspection

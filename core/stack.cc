@@ -7,6 +7,8 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/colour.h"
+
 namespace inspection {
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -155,19 +157,26 @@ Status WriteStackManifest(const fs::path& dir, const StackManifest& m) {
   return Status::Ok();
 }
 
-StatusOr<cv::Mat> LoadStackFrame(const fs::path& dir, const StackManifest& m, size_t index) {
+namespace {
+
+std::string FrameName(const StackManifest& m, size_t index) {
+  return "frame " + std::to_string(index) + " (" + m.frames[index].file + ")";
+}
+
+// Decodes a frame as stored: CV_8U or CV_16U, 1 or 3 channels.
+StatusOr<cv::Mat> DecodeFrame(const fs::path& dir, const StackManifest& m, size_t index) {
   if (index >= m.frames.size()) return Status::OutOfRange("frame index " + std::to_string(index));
-  const std::string name = "frame " + std::to_string(index) + " (" + m.frames[index].file + ")";
+  const std::string name = FrameName(m, index);
   cv::Mat img;
   try {
     img = cv::imread((dir / m.frames[index].file).string(), cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
     return Status::InvalidArgument(name + ": cannot decode: " + e.what());
   }
-  if (img.empty()) return Status::InvalidArgument(name + ": cannot decode image (expected PNG or TIFF)");
-  if (img.channels() != 1) {
+  if (img.empty()) return Status::InvalidArgument(name + ": cannot decode image (expected PNG, TIFF or JPEG)");
+  if (img.channels() != 1 && img.channels() != 3) {
     return Status::InvalidArgument(name + ": has " + std::to_string(img.channels()) +
-                                   " channels; frames must be single-channel grey");
+                                   " channels; frames must be grey (1 channel) or colour (3 channels)");
   }
   if (img.depth() != CV_8U && img.depth() != CV_16U) {
     return Status::InvalidArgument(name + ": pixel type must be 8- or 16-bit unsigned");
@@ -175,29 +184,56 @@ StatusOr<cv::Mat> LoadStackFrame(const fs::path& dir, const StackManifest& m, si
   return img;
 }
 
+const char* ChannelsName(int channels) { return channels == 3 ? "colour (3 channels)" : "grey"; }
+
+}  // namespace
+
+StatusOr<StackFrameImage> LoadStackFrameImage(const fs::path& dir, const StackManifest& m, size_t index) {
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat img, DecodeFrame(dir, m, index));
+  StackFrameImage out;
+  if (img.channels() == 3) {
+    out.colour = img;
+    INSPECT_ASSIGN_OR_RETURN(out.grey, LuminanceOf(img));
+  } else {
+    out.grey = img;
+  }
+  return out;
+}
+
+StatusOr<cv::Mat> LoadStackFrame(const fs::path& dir, const StackManifest& m, size_t index) {
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat img, DecodeFrame(dir, m, index));
+  if (img.channels() == 1) return img;
+  return LuminanceOf(img);
+}
+
 Status ValidateStackFrames(const fs::path& dir, const StackManifest& m) {
   cv::Size size0;
-  int type0 = -1;
+  int depth0 = -1, channels0 = 0;
   for (size_t i = 0; i < m.frames.size(); ++i) {
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat img, LoadStackFrame(dir, m, i));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat img, DecodeFrame(dir, m, i));
     if (i == 0) {
       size0 = img.size();
-      type0 = img.type();
-      if (m.bit_depth > 8 && type0 == CV_8UC1) {
-        return Status::InvalidArgument("frame 0 (" + m.frames[0].file + "): 8-bit image but stack.json bit_depth is " +
+      depth0 = img.depth();
+      channels0 = img.channels();
+      if (m.bit_depth > 8 && depth0 == CV_8U) {
+        return Status::InvalidArgument(FrameName(m, 0) + ": 8-bit image but stack.json bit_depth is " +
                                        std::to_string(m.bit_depth));
       }
       continue;
     }
-    const std::string name = "frame " + std::to_string(i) + " (" + m.frames[i].file + ")";
+    const std::string name = FrameName(m, i);
     if (img.size() != size0) {
       return Status::InvalidArgument(name + ": size " + std::to_string(img.cols) + "x" + std::to_string(img.rows) +
                                      " differs from frame 0 (" + std::to_string(size0.width) + "x" +
                                      std::to_string(size0.height) + ")");
     }
-    if (img.type() != type0) {
+    if (img.channels() != channels0) {
+      return Status::InvalidArgument(name + ": " + ChannelsName(img.channels()) + " differs from frame 0 (" +
+                                     ChannelsName(channels0) + ")");
+    }
+    if (img.depth() != depth0) {
       return Status::InvalidArgument(name + ": bit depth " + (img.depth() == CV_8U ? "8" : "16") +
-                                     " differs from frame 0 (" + (type0 == CV_8UC1 ? "8" : "16") + ")");
+                                     " differs from frame 0 (" + (depth0 == CV_8U ? "8" : "16") + ")");
     }
   }
   return Status::Ok();

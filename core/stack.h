@@ -2,7 +2,8 @@
 // writes it), Reconstruct (reads it) and the CLI (uploads it). Format (README "Stack format"):
 //
 //   <dir>/stack.json          manifest, see StackManifest
-//   <dir>/<frame files>       8- or 16-bit single-channel PNG or TIFF, one per z position
+//   <dir>/<frame files>       8- or 16-bit PNG, TIFF or JPEG, one per z position: grey (1 channel)
+//                             or colour (3 channels); all frames alike
 //   <dir>/ground_truth_depth.tiff   optional, float32 µm, written by the simulated rig
 //
 // stack.json:
@@ -55,12 +56,26 @@ StatusOr<StackManifest> ParseStackManifest(const std::string& json_text);
 // Writes <dir>/stack.json atomically (temporary file + rename).
 Status WriteStackManifest(const std::filesystem::path& dir, const StackManifest& manifest);
 
-// Decodes one frame as stored (CV_8UC1 or CV_16UC1); colour images are rejected.
+// One decoded frame: what focus is measured on, and the colour for the all-in-focus image.
+struct StackFrameImage {
+  cv::Mat grey;    // CV_8UC1 / CV_16UC1: a grey frame as stored, or a colour frame's luminance
+                   // (core/colour.h, BT.709 weights)
+  cv::Mat colour;  // CV_8UC3 / CV_16UC3 in OpenCV's BGR order; empty for grey frames
+  bool is_colour() const { return !colour.empty(); }
+};
+
+// Decodes one frame (8- or 16-bit, 1 or 3 channels). Errors name the frame.
+StatusOr<StackFrameImage> LoadStackFrameImage(const std::filesystem::path& dir, const StackManifest& manifest,
+                                              size_t index);
+
+// The grey image focus is measured on (CV_8UC1 or CV_16UC1): the frame as stored, or the
+// luminance of a colour frame. Grey stacks give exactly what they did before colour support.
 StatusOr<cv::Mat> LoadStackFrame(const std::filesystem::path& dir, const StackManifest& manifest,
                                  size_t index);
 
-// Decodes every frame header and checks that all frames share size and pixel depth.
-// Errors name the frame: "frame 3 (frame_0003.png): size 640x480 differs from frame 0 (1024x768)".
+// Decodes every frame and checks that all frames share size, channel count (grey or colour) and
+// bit depth. Errors name the frame: "frame 3 (frame_0003.png): size 640x480 differs from frame 0
+// (1024x768)", "frame 2 (b.png): colour (3 channels) differs from frame 0 (grey)".
 Status ValidateStackFrames(const std::filesystem::path& dir, const StackManifest& manifest);
 
 // Returns INVALID_ARGUMENT unless z is strictly monotonic; names the first offending frame.

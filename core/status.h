@@ -29,6 +29,7 @@ enum class StatusCode {
   kInternal = 13,
   kUnavailable = 14,
   kDataLoss = 15,
+  kUnauthenticated = 16,
 };
 
 const char* StatusCodeName(StatusCode code);
@@ -58,7 +59,9 @@ class [[nodiscard]] Status {
   // "INVALID_ARGUMENT: frame 3 (img_003.png): size 640x480 differs from 1024x768"
   std::string ToString() const;
 
-  // Returns a copy whose message is prefixed with context, e.g. "stack.json: ".
+  // Returns a copy whose message is prefixed with context and ": ", e.g.
+  // WithContext("stack.json") turns "frames[4].z_um is missing" into
+  // "stack.json: frames[4].z_um is missing". Pass the context without a trailing ": ".
   Status WithContext(const std::string& context) const;
 
   // Marks the status as inspected when the caller deliberately drops it.

@@ -23,6 +23,7 @@ packages=(
   libspdlog-dev libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libtiff-dev libzip-dev libsqlite3-dev libssl-dev
   gwyddion  # a real x3p reader: tests open our x3p with gwyddion-thumbnailer
+  python3 python3-yaml  # deploy/validate_manifests.sh, tests/fault/kill9_test.sh (Debian's /usr/bin/python3)
 )
 
 install_missing() {

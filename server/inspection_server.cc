@@ -7,7 +7,6 @@
 #include <grpcpp/health_check_service_interface.h>
 #include <spdlog/spdlog.h>
 
-
 namespace inspection {
 
 namespace {
@@ -30,19 +29,19 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
     INSPECT_ASSIGN_OR_RETURN(rig, CreateSimulatedRig(options.simulation));
   }
   s->rig_ = std::make_unique<RigController>(std::move(rig), rig_startup);
+  s->calibrations_ = std::make_unique<CalibrationStore>(s->store_.get());
+  s->calibrations_->LoadActive().IgnoreError();  // logged; the server still serves without it
+  s->runner_ = std::make_unique<ProcedureRunner>(s->store_.get(), s->rig_.get(), s->calibrations_.get());
   JobManagerOptions jo;
   jo.rig_queue_capacity = options.rig_queue_capacity;
-  s->jobs_ = std::make_unique<JobManager>(jo, s->store_.get(), s->rig_.get());
-  s->calibrations_ = std::make_unique<CalibrationStore>(s->store_.get());
-  (void)s->calibrations_->LoadActive();  // logged; the server still serves without it
-  s->jobs_->SetCalibrationRunner([cal = s->calibrations_.get()](const CalibrationContext& ctx) { return cal->Run(ctx); });
-  s->jobs_->SetActiveCalibrationProvider([cal = s->calibrations_.get()] { return cal->active(); });
+  s->jobs_ = std::make_unique<JobManager>(jo, s->store_.get(), s->runner_.get());
   INSPECT_RETURN_IF_ERROR(s->jobs_->Start());
 
   ServiceOptions so;
   so.server_version = INSPECT_VERSION;
   so.auth_token = options.auth_token;
-  s->service_ = std::make_unique<InspectionServiceImpl>(so, s->store_.get(), s->jobs_.get(), s->rig_.get());
+  s->service_ = std::make_unique<InspectionServiceImpl>(so, s->store_.get(), s->jobs_.get(), s->rig_.get(),
+                                                        s->calibrations_.get());
   s->sim_service_ = std::make_unique<SimulationServiceImpl>(so, s->rig_.get());
 
   grpc::EnableDefaultHealthCheckService(true);

@@ -1,6 +1,6 @@
-// InspectionServer: the whole service in one object - data store, rig controller, job manager,
-// gRPC services, health and reflection - as inspectd runs it and as the end-to-end tests start
-// it on loopback.
+// InspectionServer: the whole service in one object - data store, rig controller, calibration
+// store, job manager with its procedure runner, gRPC services, health and reflection - as
+// inspectd runs it and as the end-to-end tests start it on loopback.
 #pragma once
 
 #include <memory>
@@ -15,6 +15,7 @@
 #include "server/data_store.h"
 #include "server/inspection_service.h"
 #include "server/job_manager.h"
+#include "server/procedure_runner.h"
 #include "server/rig_controller.h"
 
 namespace inspection {
@@ -59,7 +60,8 @@ class InspectionServer {
   std::unique_ptr<DataStore> store_;
   std::unique_ptr<RigController> rig_;
   std::unique_ptr<CalibrationStore> calibrations_;
-  std::unique_ptr<JobManager> jobs_;
+  std::unique_ptr<ProcedureRunner> runner_;
+  std::unique_ptr<JobManager> jobs_;  // declared after what its jobs use: destroyed (joined) first
   std::unique_ptr<InspectionServiceImpl> service_;
   std::unique_ptr<SimulationServiceImpl> sim_service_;
   std::unique_ptr<grpc::Server> server_;

@@ -1,11 +1,13 @@
-// gRPC handlers of inspection.v1.InspectionService and SimulationService. Thin: they validate
-// requests, hand work to the JobManager and stream a JobRecord's events. Every error leaves as
-// a gRPC status built by ToGrpcStatus; no exception crosses this boundary.
+// gRPC handlers of inspection.v1.InspectionService and SimulationService. Thin: requests go
+// through the request mapping (request_mapping.h, which validates and names the field), work
+// goes to the JobManager, and a JobRecord's events are streamed back. Every error leaves as a
+// gRPC status built by ToGrpcStatus (grpc_status.h); no exception crosses this boundary.
 #pragma once
 
 #include <string>
 
 #include "inspection/v1/inspection.grpc.pb.h"
+#include "server/calibration_store.h"
 #include "server/data_store.h"
 #include "server/job_manager.h"
 #include "server/rig_controller.h"
@@ -20,8 +22,9 @@ struct ServiceOptions {
 
 class InspectionServiceImpl final : public v1::InspectionService::Service {
  public:
-  InspectionServiceImpl(const ServiceOptions& options, DataStore* store, JobManager* jobs, RigController* rig)
-      : options_(options), store_(store), jobs_(jobs), rig_(rig) {}
+  InspectionServiceImpl(const ServiceOptions& options, DataStore* store, JobManager* jobs, RigController* rig,
+                        CalibrationStore* calibrations)
+      : options_(options), store_(store), jobs_(jobs), rig_(rig), calibrations_(calibrations) {}
 
   grpc::Status GetRigStatus(grpc::ServerContext*, const v1::GetRigStatusRequest*, v1::RigStatus*) override;
   grpc::Status Calibrate(grpc::ServerContext*, const v1::CalibrateRequest*, grpc::ServerWriter<v1::JobEvent>*) override;
@@ -47,6 +50,7 @@ class InspectionServiceImpl final : public v1::InspectionService::Service {
   DataStore* store_;
   JobManager* jobs_;
   RigController* rig_;
+  CalibrationStore* calibrations_;
 };
 
 class SimulationServiceImpl final : public v1::SimulationService::Service {

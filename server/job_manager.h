@@ -1,8 +1,11 @@
-// JobManager: every job of this server, from submission to its terminal event.
-//  - Rig jobs (scan, calibrate) run one at a time on the rig worker, from a bounded FIFO queue
-//    (RESOURCE_EXHAUSTED when `rig_queue_capacity` jobs already wait). A calibration is refused
-//    with ABORTED while a scan runs or waits, and the reverse, so the two never interleave.
-//  - Reconstruct jobs do not need the rig and run on their own worker.
+// JobManager: schedules, records and emits - every job of this server from submission to its
+// terminal event, whatever the job does (that is the JobRunner's, see job_runner.h).
+//  - Rig jobs (scan, calibrate) run one at a time from a bounded FIFO queue (RESOURCE_EXHAUSTED
+//    when `rig_queue_capacity` jobs already wait). A calibration is refused with ABORTED while a
+//    scan runs or waits, and the reverse, so the two never interleave.
+//  - Reconstruct jobs do not need the rig and run on their own worker and queue.
+//  - A request id makes a submission idempotent: the earlier job of that kind is returned, from
+//    this run or an earlier one.
 //  - Each job's events are persisted as they happen; a job that was queued or running when the
 //    server stopped is marked FAILED (ABORTED) at the next start.
 // Thread-safe.
@@ -12,11 +15,11 @@
 #include <chrono>
 #include <condition_variable>
 #include <deque>
-#include <filesystem>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -24,15 +27,20 @@
 #include "core/status.h"
 #include "inspection/v1/inspection.pb.h"
 #include "server/data_store.h"
-#include "server/procedures/scan_procedure.h"
-#include "server/rig_controller.h"
+#include "server/job_runner.h"
+#include "server/job_work.h"
 
 namespace inspection {
 
-// One job as seen by the workers and by any number of watchers.
+// One job's record (the Job message and its events) as seen by the workers and by any number
+// of watchers. Thread-safe.
 class JobRecord {
  public:
-  explicit JobRecord(v1::Job job) : job_(std::move(job)) {}
+  JobRecord(v1::Job job, std::vector<v1::JobEvent> events = {});
+
+  const std::string& job_id() const { return job_id_; }
+  v1::JobKind kind() const { return kind_; }
+  const std::string& request_id() const { return request_id_; }
 
   v1::Job Snapshot() const;
   bool terminal() const;
@@ -42,20 +50,31 @@ class JobRecord {
 
   std::atomic<bool> cancel_requested{false};
 
+  // Record keeping, for the JobManager.
+  void SetQueuePosition(int position);
+  v1::Job MarkRunning();
+  // Ends the job - SUCCEEDED with the result, CANCELLED or FAILED with the status's code and
+  // message - and appends its terminal event (`fill`, then the ended job) in the same step, so a
+  // watcher never sees the end without the last event. Hands both to `persist`, then wakes the
+  // watchers. False (and nothing changes) when the job had ended already.
+  using Persist = std::function<void(const v1::Job& ended, const v1::JobEvent& terminal_event)>;
+  bool End(const StatusOr<v1::JobResult>& outcome, const EventFill& fill, const Persist& persist);
+  // Appends the next event (id, sequence, time, state, elapsed time, then `fill`), hands it to
+  // `persist`, then wakes the watchers; returns it.
+  v1::JobEvent AppendEvent(const EventFill& fill, const std::function<void(const v1::JobEvent&)>& persist);
+
  private:
-  friend class JobManager;
-  mutable std::mutex mu_;
-  mutable std::condition_variable cv_;
+  const std::string job_id_;
+  const v1::JobKind kind_;
+  const std::string request_id_;
+
+  v1::JobEvent NextEventLocked(const EventFill& fill) const;  // caller holds mu_
+
+  mutable std::mutex mu_;  // guards the members below
+  mutable std::condition_variable cv_;  // signalled on every event
   v1::Job job_;
   std::vector<v1::JobEvent> events_;
   std::chrono::steady_clock::time_point started_;
-  // What to run.
-  ScanPlan scan_plan_;
-  std::vector<int> extra_exports_;
-  v1::CalibrateRequest calibrate_;
-  std::filesystem::path stack_dir_;   // reconstruct input
-  bool owns_stack_dir_ = false;        // an upload, removed when the job ends
-  SffOptions sff_;
 };
 
 struct JobManagerOptions {
@@ -63,87 +82,72 @@ struct JobManagerOptions {
   int reconstruct_queue_capacity = 8;
 };
 
-// Hook for calibration jobs (implemented with server/procedures/calibration_procedure).
-// Given the rig (held exclusively), the request, a progress reporter and the cancel flag, it
-// returns the new calibration's record (already stored) or an error.
-struct CalibrationContext {
-  Rig* rig;
-  const v1::CalibrateRequest* request;
-  std::function<void(const std::string& step, double progress, const std::string& message)> progress;
-  const std::atomic<bool>* cancel;
-  std::string job_id;
-};
-using CalibrationRunner = std::function<StatusOr<v1::Calibration>(const CalibrationContext&)>;
-
 class JobManager {
  public:
-  JobManager(const JobManagerOptions& options, DataStore* store, RigController* rig);
+  // `runner` does the work of every job; it must outlive the manager's Shutdown.
+  JobManager(const JobManagerOptions& options, DataStore* store, JobRunner* runner);
   ~JobManager();
 
   // Marks jobs left unfinished by a previous run, then starts the workers.
   Status Start();
-  // Cancels queued and running jobs and joins the workers.
+  // Ends queued jobs (FAILED, ABORTED), asks running ones to cancel and joins the workers.
   void Shutdown();
 
-  void SetCalibrationRunner(CalibrationRunner runner) { calibration_runner_ = std::move(runner); }
-  // Source of the active calibration bundle for scans in calibrated illumination modes (null
-  // or returning null = no calibration: only STD scans).
-  void SetActiveCalibrationProvider(std::function<std::shared_ptr<const CalibrationBundle>()> provider) {
-    active_calibration_ = std::move(provider);
-  }
-
-  StatusOr<std::shared_ptr<JobRecord>> SubmitScan(const v1::ScanRequest& request);
-  StatusOr<std::shared_ptr<JobRecord>> SubmitCalibrate(const v1::CalibrateRequest& request);
-  // stack_dir must hold a stack already validated by the caller. With owns_stack_dir the folder
-  // (an upload) is removed when the job ends.
-  StatusOr<std::shared_ptr<JobRecord>> SubmitReconstruct(const v1::ReconstructStart& start,
-                                                         const std::filesystem::path& stack_dir, bool owns_stack_dir);
+  // Builds the work of a new job (`prepare`: request mapping and rig checks, called without the
+  // manager's lock) and queues it. With a request id that an earlier job of this kind carries,
+  // returns that job and does not call `prepare`. Errors of `prepare` come back unchanged; then,
+  // and for UNAVAILABLE (shutting down), ABORTED and RESOURCE_EXHAUSTED (see above), no job is
+  // created.
+  using Prepare = std::function<StatusOr<JobWork>()>;
+  StatusOr<std::shared_ptr<JobRecord>> Submit(v1::JobKind kind, const std::string& request_id,
+                                              const std::string& label, const Prepare& prepare);
 
   // A live record, or one rebuilt from the store (events included) for a job of an earlier run.
   StatusOr<std::shared_ptr<JobRecord>> Find(const std::string& job_id);
+  // The record of a job of this run still held in memory; null otherwise.
+  std::shared_ptr<JobRecord> FindLive(const std::string& job_id);
+  // Cancels a queued job at once; a running job is asked to stop (its runner sees the flag).
   StatusOr<v1::Job> Cancel(const std::string& job_id);
 
   int queued_rig_jobs() const;
   int rig_queue_capacity() const { return options_.rig_queue_capacity; }
   std::string running_rig_job() const;
-  std::string active_calibration_id() const;
-
-  // For reconstruct requests naming a stored scan.
-  std::filesystem::path ScanDir(const std::string& scan_id) const;
 
  private:
   using RecordPtr = std::shared_ptr<JobRecord>;
+  struct QueuedJob {
+    RecordPtr record;
+    JobWork work;
+  };
+  using Queue = std::deque<QueuedJob>;
 
-  StatusOr<RecordPtr> Dedupe(v1::JobKind kind, const std::string& request_id);
-  RecordPtr NewRecord(v1::JobKind kind, const std::string& request_id, const std::string& label);
-  void Emit(const RecordPtr& r, const std::function<void(v1::JobEvent&)>& fill);
-  void Finish(const RecordPtr& r, const Status& status);
-  // Blocks until `queue` has a job (returned, removed from the queue) or the manager stops (nullptr).
-  RecordPtr WaitForWork(std::deque<RecordPtr>& queue, bool mark_running_rig);
-  void RigWorker();
-  void ReconstructWorker();
-  // Rig jobs return their final status; the rig worker finishes the job after releasing the rig.
-  Status RunScan(const RecordPtr& r);
-  Status RunCalibrate(const RecordPtr& r);
-  void RunReconstruct(const RecordPtr& r);
-  // Moves a finished result into the store: artifacts get ids, sizes and sha256.
-  Status PublishArtifacts(const RecordPtr& r, const std::filesystem::path& tmp_dir,
-                          const std::vector<std::pair<v1::ArtifactKind, std::filesystem::path>>& files,
-                          v1::JobResult* result);
+  static bool IsRigJob(v1::JobKind kind) { return kind != v1::JOB_KIND_RECONSTRUCT; }
+  Queue& QueueFor(v1::JobKind kind) { return IsRigJob(kind) ? rig_queue_ : reconstruct_queue_; }
+  // The earlier job with this request id: live ones first (they may not have ended), then the
+  // store. Null when there is none. Caller holds mu_.
+  StatusOr<RecordPtr> FindDuplicate(v1::JobKind kind, const std::string& request_id);
+  // ABORTED (scan/calibration interleave) or RESOURCE_EXHAUSTED (queue full). Caller holds mu_.
+  Status Admit(v1::JobKind kind) const;
+  void Emit(const RecordPtr& r, const EventFill& fill);
+  void Finish(const RecordPtr& r, const StatusOr<v1::JobResult>& outcome);
+  // Blocks until `queue` has a job (returned, removed from the queue) or the manager stops
+  // (nullopt). With `rig`, the job becomes the running rig job.
+  std::optional<QueuedJob> WaitForWork(Queue& queue, bool rig);
+  // Runs the jobs of one queue, one at a time, until the manager stops.
+  void Worker(Queue* queue, bool rig);
 
-  JobManagerOptions options_;
-  DataStore* store_;
-  RigController* rig_;
-  CalibrationRunner calibration_runner_;
-  std::function<std::shared_ptr<const CalibrationBundle>()> active_calibration_;
+  const JobManagerOptions options_;
+  DataStore* const store_;
+  JobRunner* const runner_;
 
-  mutable std::mutex mu_;
-  std::condition_variable work_cv_;
+  mutable std::mutex mu_;  // guards the members below
+  std::condition_variable work_cv_;  // a job was queued, or the manager stops
   bool stopping_ = false;
-  std::map<std::string, RecordPtr> live_;  // jobs of this run
-  std::deque<RecordPtr> rig_queue_;
-  std::deque<RecordPtr> reconstruct_queue_;
+  std::map<std::string, RecordPtr> live_;  // jobs of this run (finished ones trimmed)
+  Queue rig_queue_;
+  Queue reconstruct_queue_;
   RecordPtr running_rig_;
+
   std::thread rig_thread_, reconstruct_thread_;
 };
 

@@ -1,70 +1,98 @@
 // inspectd: the inspection service beside one microscope rig. Runs the simulated rig unless a
 // rig configuration names real devices.
 #include <csignal>
-#include <fstream>
 #include <iostream>
+#include <map>
 #include <thread>
+#include <type_traits>
+#include <variant>
 
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
 #include "devices/rig_config.h"
 #include "server/inspection_server.h"
+#include "server/server_config.h"
 
 using namespace inspection;
 
 namespace {
 
-bool ParseSize(const std::string& s, cv::Size* out) {
-  int w = 0, h = 0;
-  if (std::sscanf(s.c_str(), "%dx%d", &w, &h) != 2 || w < 16 || h < 16) return false;
-  *out = {w, h};
-  return true;
+// The value a setting has before any file, variable or flag, for --help.
+std::string DefaultText(const ConfigKey& key) {
+  static const InspectdConfig defaults;
+  return std::visit(
+      [](auto InspectdConfig::*f) -> std::string {
+        const auto& value = defaults.*f;
+        using T = std::decay_t<decltype(value)>;
+        if constexpr (std::is_same_v<T, std::string>) return value;
+        else if constexpr (std::is_same_v<T, bool>) return value ? "on" : "off";
+        else return std::to_string(value);
+      },
+      key.field);
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"inspectd: shape-from-focus inspection service for one microscope rig"};
-  ServerOptions opt;
-  std::string data_dir = opt.data_dir.string();
-  std::string camera_size = "1024x768";
-  std::string log_level = "info";
-  std::string token_file;
-  bool no_reflection = false;
-  std::string rig_config;
-  bool degraded = false;
-  app.add_option("--listen", opt.listen_address, "host:port to listen on (port 0 = any free port)")->capture_default_str();
-  app.add_option("--data-dir", data_dir, "where scans, artifacts, calibrations and the job database live")->capture_default_str();
-  app.add_option("--queue-capacity", opt.rig_queue_capacity, "rig jobs that may wait behind the running one")->capture_default_str();
-  app.add_flag("--no-reflection", no_reflection, "disable gRPC server reflection");
-  app.add_option("--tls-cert", opt.tls_cert_file, "PEM certificate chain; enables TLS with --tls-key");
-  app.add_option("--tls-key", opt.tls_key_file, "PEM private key");
-  app.add_option("--auth-token-file", token_file, "file holding a bearer token that every call must present");
-  app.add_option("--rig-config", rig_config, "rig configuration file (JSON, devices/README.md); default: the simulated rig");
-  app.add_flag("--degraded", degraded, "start even when configured devices are absent (health NOT_SERVING until ResetRig)");
-  app.add_option("--specimen", opt.simulation.specimen, "simulated rig: specimen name or file:/path/scene.json")->capture_default_str();
-  app.add_option("--seed", opt.simulation.seed, "simulated rig: random seed")->capture_default_str();
-  app.add_option("--camera-size", camera_size, "simulated rig: camera WIDTHxHEIGHT")->capture_default_str();
-  app.add_option("--log-level", log_level, "trace, debug, info, warn, error")->capture_default_str();
+  CLI::App app{"inspectd: shape-from-focus inspection service for one microscope rig.\n"
+               "Every setting is also a key of the --config file and an INSPECTD_* environment variable;\n"
+               "flags > environment > file > defaults. --print-config shows the result."};
+  std::string config_path;
+  bool print_config = false;
+  app.add_option("--config", config_path, "JSON configuration file (env INSPECTD_CONFIG)");
+  app.add_flag("--print-config", print_config, "print the effective configuration as JSON and exit");
+  // Flags from the settings table; std::map keeps the bound strings in place while it grows.
+  std::map<std::string, std::string> flag_text;
+  std::map<std::string, bool> flag_bool;
+  std::vector<std::pair<const ConfigKey*, CLI::Option*>> flag_options;
+  for (const auto& key : InspectdConfigKeys()) {
+    const std::string name(key.name);
+    const std::string help = std::string(key.help) + " (key " + name + ", env " + key.EnvironmentName() + ")";
+    CLI::Option* option = nullptr;
+    if (key.is_bool()) {
+      const std::string flags = key.FlagName() + ",!--no-" + key.FlagName().substr(2);
+      option = app.add_flag(flags, flag_bool[name], help + " [default: " + DefaultText(key) + "]");
+    } else {
+      const char* type = std::holds_alternative<std::string InspectdConfig::*>(key.field) ? "TEXT" : "INT";
+      option = app.add_option(key.FlagName(), flag_text[name], help)->type_name(type)->default_str(DefaultText(key));
+    }
+    flag_options.emplace_back(&key, option);
+  }
   app.set_version_flag("--version", INSPECT_VERSION);
   CLI11_PARSE(app, argc, argv);
 
-  spdlog::set_level(spdlog::level::from_str(log_level));
-  spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e%z %l inspectd: %v");
-  opt.data_dir = data_dir;
-  opt.reflection = !no_reflection;
-  if (!ParseSize(camera_size, &opt.simulation.camera_size)) {
-    std::cerr << "inspectd: --camera-size '" << camera_size << "' must be WIDTHxHEIGHT, e.g. 1024x768\n";
+  ConfigLayers layers;
+  layers.config_flag = config_path;
+  layers.environment = ProcessEnvironment();
+  for (const auto& [key, option] : flag_options) {
+    if (option->count() == 0) continue;
+    const std::string name(key->name);
+    layers.flags.emplace_back(name, key->is_bool() ? (flag_bool[name] ? "true" : "false") : flag_text[name]);
+  }
+  auto resolved = ResolveInspectdConfig(layers);
+  if (!resolved.ok()) {
+    std::cerr << "inspectd: " << resolved.status().message() << "\n";
     return 2;
   }
-  if (!token_file.empty()) {
-    std::ifstream in(token_file);
-    if (!std::getline(in, opt.auth_token) || opt.auth_token.empty()) {
-      std::cerr << "inspectd: --auth-token-file '" << token_file << "' is unreadable or empty\n";
-      return 2;
-    }
+  const InspectdConfig& config = resolved->config;
+  if (print_config) {
+    std::cout << ConfigToJson(config);
+    return 0;
   }
+
+  spdlog::set_level(spdlog::level::from_str(config.log_level));
+  spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e%z %l inspectd: %v");
+  for (const auto& name : resolved->unknown_environment) {
+    spdlog::warn("environment variable {} names no setting; ignored", name);
+  }
+  for (const auto& [name, source] : resolved->sources) spdlog::debug("setting {} from {}", name, source);
+  auto options = ToServerOptions(config);
+  if (!options.ok()) {
+    std::cerr << "inspectd: " << options.status().message() << "\n";
+    return 2;
+  }
+  ServerOptions opt = std::move(*options);
 
   // Block termination signals in every thread; one thread waits for them and shuts down.
   sigset_t signals;
@@ -75,15 +103,15 @@ int main(int argc, char** argv) {
 
   std::unique_ptr<Rig> rig;
   Status rig_startup;
-  if (!rig_config.empty()) {
-    auto config = LoadRigConfig(rig_config);
-    if (!config.ok()) {
-      std::cerr << "inspectd: " << config.status().message() << "\n";
+  if (!config.rig_config.empty()) {
+    auto rig_config = LoadRigConfig(config.rig_config);
+    if (!rig_config.ok()) {
+      std::cerr << "inspectd: " << rig_config.status().message() << "\n";
       return 2;
     }
     RigStartOptions start;
-    start.allow_degraded = degraded;
-    auto created = CreateRig(*config, start);
+    start.allow_degraded = config.degraded;
+    auto created = CreateRig(*rig_config, start);
     if (!created.ok()) {
       std::cerr << "inspectd: cannot start the rig: " << created.status().message() << "\n";
       return 1;

@@ -29,6 +29,13 @@ bool RigController::usable() const {
   return state_ == v1::RIG_STATE_READY || state_ == v1::RIG_STATE_BUSY;
 }
 
+Status RigController::CheckUsable() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (state_ == v1::RIG_STATE_READY || state_ == v1::RIG_STATE_BUSY) return Status::Ok();
+  return Status::FailedPrecondition("rig is not ready (state " + v1::RigState_Name(state_) + ": " + detail_ +
+                                    "); fix the cause and call ResetRig");
+}
+
 void RigController::SetStateLocked(v1::RigState state, std::string detail) {
   const bool was_usable = state_ == v1::RIG_STATE_READY || state_ == v1::RIG_STATE_BUSY;
   const bool now_usable = state == v1::RIG_STATE_READY || state == v1::RIG_STATE_BUSY;

@@ -24,6 +24,8 @@ class RigController {
   Rig& rig() { return *rig_; }
   bool simulated() const { return rig_->simulation() != nullptr; }
   bool usable() const;  // Ready or Busy
+  // OK when usable; else FAILED_PRECONDITION with the state and its cause (rig jobs are refused).
+  Status CheckUsable() const;
 
   // Exclusive use of the rig. TryAcquire returns an unlocked lock when a job holds the rig.
   std::unique_lock<std::mutex> Acquire() { return std::unique_lock<std::mutex>(rig_mu_); }

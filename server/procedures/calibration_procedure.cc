@@ -617,7 +617,7 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
       case CalibrationStep::kScatterMatrix: st = RunScatter(session, targeting, options, b, rep); break;
       case CalibrationStep::kIntegralPsf: st = RunIntegralPsf(session, targeting, options, b, rep); break;
     }
-    if (!st.ok()) return st.WithContext(std::string(CalibrationStepName(step)) + ": ");
+    if (!st.ok()) return st.WithContext(CalibrationStepName(step));
     rep.duration_s = std::chrono::duration<double>(Clock::now() - t0).count();
     rep.frames_captured = session.frames() - frames_before;
     rep.finished_utc = UtcNow();

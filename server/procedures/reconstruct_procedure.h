@@ -1,35 +1,25 @@
-// Reconstruct procedure: runs a stored stack folder through the streaming SFF engine, frame by
-// frame as if from the camera, and writes the depth artifacts of a result.
+// Reconstruct procedure: a stored stack folder runs through the streaming SFF engine frame by
+// frame (ReconstructStackFolder, core/stack_reconstruct.h); this writes the result's artifacts.
 #pragma once
 
-#include <atomic>
 #include <filesystem>
-#include <functional>
 #include <string>
 #include <vector>
 
 #include "core/depth_export.h"
-#include "core/frame_statistics.h"
 #include "core/sff_engine.h"
 #include "core/stack.h"
+#include "core/stack_reconstruct.h"  // ReconstructStackFolder: the stack folder -> engine loop
 #include "core/status.h"
 
 namespace inspection {
-
-// (frame index, frame count, z_um, statistics)
-using StackFrameCallback = std::function<void(int, int, double, const FrameStatistics&)>;
-
-StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, const StackManifest& manifest,
-                                             const SffOptions& options, const StackFrameCallback& on_frame,
-                                             const std::atomic<bool>& cancel);
 
 enum class DepthExportKind { kDepthTiff, kConfidenceTiff, kAllInFocusPng, kDepthPreviewPng, kDepthPng16, kDepthPly,
                              kDepthX3p, kGroundTruthTiff };
 
 struct DepthArtifactFile {
   DepthExportKind kind;
-  std::filesystem::path path;
-  std::string media_type;
+  std::filesystem::path path;  // media types: server/result_publisher.h
 };
 
 // Writes depth.tiff, confidence.tiff, all_in_focus.png, depth_preview.png and the requested

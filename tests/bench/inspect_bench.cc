@@ -67,6 +67,7 @@ struct Args {
   double dz_um = 0.5;
   int repeat = 3;
   bool engine_only = false;  // profiling: skip the streaming pass and the baseline
+  std::string dump_depth;    // raw bytes of the results, for bit-identity checks across builds
   SffOptions options;
 };
 
@@ -83,6 +84,9 @@ bool ParseArgs(int argc, char** argv, Args* a) {
     else if (k == "--dz") a->dz_um = std::stod(next());
     else if (k == "--repeat") a->repeat = std::max(1, std::stoi(next()));
     else if (k == "--engine-only") a->engine_only = true;
+    else if (k == "--dump-depth") a->dump_depth = next();
+    else if (k == "--no-simd") a->options.use_simd = false;      // portable kernels
+    else if (k == "--no-avx512") a->options.use_avx512 = false;  // AVX2 kernels only
     else if (k == "--threads") a->options.threads = std::stoi(next());
     else if (k == "--window") a->options.window_px = std::stoi(next());
     else if (k == "--measure") {
@@ -96,7 +100,8 @@ bool ParseArgs(int argc, char** argv, Args* a) {
     } else {
       std::fprintf(stderr,
                    "usage: inspect-bench [--stack DIR | --keep DIR] [--width 1600 --height 1200 --frames 60 --dz 0.5]\n"
-                   "                     [--measure tenengrad --window 7 --interp gaussian --threads 2 --repeat 3]\n");
+                   "                     [--measure tenengrad --window 7 --interp gaussian --threads 2 --repeat 3]\n"
+                   "                     [--dump-depth FILE] [--no-simd | --no-avx512]\n");
       return false;
     }
   }
@@ -210,6 +215,20 @@ cv::Mat BaselineTenengradGaussian(const std::vector<cv::Mat>& frames, const std:
   return depth;
 }
 
+// --dump-depth: depth_um, confidence and all_in_focus of each result, raw row-major bytes one
+// after the other (batch result first, then the first streaming pass unless --engine-only), so
+// that two builds can be compared with cmp or sha256sum.
+bool DumpResults(const std::string& path, const std::vector<const DepthResult*>& results) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  for (const DepthResult* r : results) {
+    for (const cv::Mat* m : {&r->depth_um, &r->confidence, &r->all_in_focus}) {
+      const cv::Mat c = m->isContinuous() ? *m : m->clone();
+      out.write(reinterpret_cast<const char*>(c.data), std::streamsize(c.total() * c.elemSize()));
+    }
+  }
+  return bool(out.flush());
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -272,7 +291,15 @@ int main(int argc, char** argv) {
     result = std::move(res).value();
   }
   const long engine_peak_kb = ProcStatusKb("VmHWM");
+  std::vector<const DepthResult*> dumped = {&result};
+  DepthResult first_streamed;
+  auto dump = [&]() {
+    if (a.dump_depth.empty() || DumpResults(a.dump_depth, dumped)) return true;
+    std::fprintf(stderr, "cannot write %s\n", a.dump_depth.c_str());
+    return false;
+  };
   if (a.engine_only) {
+    if (!dump()) return 1;
     std::printf("{\"engine_seconds\": %.4f, \"engine_cpu_seconds\": %.4f}\n", engine_s, engine_cpu_s);
     return 0;
   }
@@ -302,12 +329,17 @@ int main(int argc, char** argv) {
       push_max_s = worst;
     }
     if (r > 0) continue;
+    if (!a.dump_depth.empty()) {  // kept only when dumped: it would count in the streaming peak RSS
+      first_streamed = *streamed;
+      dumped.push_back(&first_streamed);
+    }
     cv::Mat diff = streamed->depth_um != result.depth_um;
     cv::Mat both_nan = (streamed->depth_um != streamed->depth_um) & (result.depth_um != result.depth_um);
     const int differing = cv::countNonZero(diff & ~both_nan);
     if (differing) std::fprintf(stderr, "WARNING: streaming and batch differ at %d pixels\n", differing);
   }
   const long streaming_peak_kb = ProcStatusKb("VmHWM");
+  if (!dump()) return 1;
 
   // Baseline: straightforward per-frame OpenCV, best of `repeat` (OpenCV's own threading).
   double baseline_s = 1e9, baseline_cpu_s = 1e9;

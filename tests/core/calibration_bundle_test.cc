@@ -147,6 +147,8 @@ TEST_F(CalibrationBundleTest, RefusesNewerVersionMissingFilesAndBadCurves) {
   auto l = CalibrationBundle::Load(dir_);
   EXPECT_EQ(l.status().code(), StatusCode::kInvalidArgument);
   EXPECT_NE(l.status().message().find("log_exposure"), std::string::npos);
+  EXPECT_EQ(l.status().message().rfind(manifest.string() + ": ", 0), 0u) << l.status().message();
+  EXPECT_EQ(l.status().message().find(": :"), std::string::npos) << l.status().message();
 
   write(j);
   fs::remove(dir_ / "scatter_matrix.bin");

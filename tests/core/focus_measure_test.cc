@@ -84,11 +84,46 @@ TEST(FocusMeasureTest, HelmliMeanByHand) {
   EXPECT_NEAR(At(FocusMeasure::kHelmliMean, img, 3, 4, 4), 190.0 / 110.0 + 8 * 1.1, 1e-5);
   // A constant image gives R = 1 everywhere: FM = N.
   EXPECT_NEAR(At(FocusMeasure::kHelmliMean, cv::Mat(9, 9, CV_8U, cv::Scalar(77)), 5, 4, 4), 25.0, 1e-5);
-  // Zero grey values: the denominator is clamped to 1 grey level. Impulse 9 on 0: centre
-  // mu = 1, I = 9 -> 9; neighbours mu = 1, I = 0 -> 1/1 = 1. FM = 9 + 8.
-  EXPECT_NEAR(At(FocusMeasure::kHelmliMean, Impulse(CV_8U, 0, 9), 3, 4, 4), 17.0, 1e-5);
+  // Zero grey values: both terms are floored at mean / 128 = (9 / 81) / 128. Impulse 9 on 0:
+  // centre mu = 1, I = 9 -> 9; neighbours mu = 1, I = 0 -> 1 / floor = 1152. FM = 9 + 8 * 1152.
+  EXPECT_NEAR(At(FocusMeasure::kHelmliMean, Impulse(CV_8U, 0, 9), 3, 4, 4), 9.0 + 8 * 1152.0, 1e-2);
   // All zero: 1 everywhere (no division by zero).
   EXPECT_NEAR(At(FocusMeasure::kHelmliMean, cv::Mat(9, 9, CV_8U, cv::Scalar(0)), 3, 4, 4), 9.0, 1e-5);
+}
+
+TEST(FocusMeasureTest, HelmliMeanIsScaleFree) {
+  // The same texture as 8-bit grey levels, as 16-bit (x 257) and as float in [0, 1] (/ 255):
+  // the ratios of eq. 3.16 do not depend on the unit, so the maps agree. With the former floor of
+  // one absolute grey level every ratio of the float frame was 1 and its map the constant N.
+  cv::Mat u8(24, 24, CV_8U);
+  std::mt19937 rng(5);
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 24; ++x) u8.at<uint8_t>(y, x) = uint8_t(rng() % 200);  // includes 0
+  cv::Mat u16, f32;
+  u8.convertTo(u16, CV_16U, 257.0);
+  u8.convertTo(f32, CV_32F, 1.0 / 255.0);
+  cv::Mat m8, m16, m32;
+  ASSERT_TRUE(ComputeFocusMeasure(u8, FocusMeasure::kHelmliMean, 5, &m8).ok());
+  ASSERT_TRUE(ComputeFocusMeasure(u16, FocusMeasure::kHelmliMean, 5, &m16).ok());
+  ASSERT_TRUE(ComputeFocusMeasure(f32, FocusMeasure::kHelmliMean, 5, &m32).ok());
+  double lo = 0, hi = 0;
+  cv::minMaxLoc(m32, &lo, &hi);
+  EXPECT_GT(hi, 1.5 * 25.0);  // far from the constant N = 25 of the clamped float frame
+  EXPECT_LT(cv::norm(m8, m16, cv::NORM_INF), 1e-5 * hi);
+  EXPECT_LT(cv::norm(m8, m32, cv::NORM_INF), 1e-4 * hi);  // float frame: rounded to float first
+
+  // On a float frame, a sharp texture scores higher than its blurred copy, pixel by pixel on
+  // average: the measure sees focus, not the unit.
+  cv::Mat blurred;
+  cv::GaussianBlur(f32, blurred, cv::Size(0, 0), 1.5, 1.5, cv::BORDER_REFLECT_101);
+  cv::Mat mb;
+  ASSERT_TRUE(ComputeFocusMeasure(blurred, FocusMeasure::kHelmliMean, 5, &mb).ok());
+  EXPECT_GT(cv::mean(m32)[0], 1.2 * cv::mean(mb)[0]);
+
+  // Negative grey values have no intensity ratio.
+  cv::Mat neg = f32 - 0.5;
+  cv::Mat out;
+  EXPECT_EQ(ComputeFocusMeasure(neg, FocusMeasure::kHelmliMean, 5, &out).code(), StatusCode::kInvalidArgument);
 }
 
 TEST(FocusMeasureTest, GreyLevelLocalVarianceByHand) {

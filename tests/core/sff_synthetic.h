@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <vector>
 
@@ -128,6 +129,14 @@ inline DepthError CompareDepth(const cv::Mat& depth, const cv::Mat& truth, int b
   e.rmse_um = n ? std::sqrt(sq / n) : 0;
   e.valid_fraction = total ? double(n) / total : 0;
   return e;
+}
+
+// Same size, type and bytes (NaN payloads included): the engines' paths promise this.
+inline bool BitIdentical(const cv::Mat& a, const cv::Mat& b) {
+  if (a.size() != b.size() || a.type() != b.type()) return false;
+  for (int y = 0; y < a.rows; ++y)
+    if (std::memcmp(a.ptr(y), b.ptr(y), a.cols * a.elemSize()) != 0) return false;
+  return true;
 }
 
 }  // namespace inspection::testing

@@ -1,10 +1,17 @@
 // Stack folder format: manifest parsing and frame validation name the field or frame at fault.
 #include "core/stack.h"
 
+#include <atomic>
+#include <cstring>
 #include <fstream>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
+
+#include "core/colour.h"
+#include "core/sff_engine.h"
+#include "core/stack_reconstruct.h"
+#include "tests/core/sff_synthetic.h"
 
 namespace inspection {
 namespace {
@@ -114,6 +121,132 @@ TEST_F(StackTest, UnreadableFrameNamesTheFrame) {
   Status s = ValidateStackFrames(dir_, m);
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("frame 1 (frame_1.png): cannot decode"), std::string::npos) << s.message();
+}
+
+// Colour frames: 8-bit PNG, 16-bit TIFF and JPEG are read; focus is measured on the luminance
+// and the colour stays available.
+TEST_F(StackTest, ColourFramesGiveLuminanceAndKeepColour) {
+  StackManifest m;
+  m.pixel_size_um = 1.0;
+  const cv::Vec3b bgr8(30, 200, 90);  // Y = 0.2126 * 90 + 0.7152 * 200 + 0.0722 * 30 = 164.4
+  const cv::Vec3w bgr16(3000, 50000, 9000);  // Y = 0.2126 * 9000 + 0.7152 * 50000 + 0.0722 * 3000 = 37890.0
+  cv::imwrite((dir_ / "a.png").string(), cv::Mat(8, 6, CV_8UC3, cv::Scalar(bgr8)));
+  cv::imwrite((dir_ / "b.tiff").string(), cv::Mat(8, 6, CV_16UC3, cv::Scalar(bgr16)));
+  cv::imwrite((dir_ / "c.jpg").string(), cv::Mat(8, 6, CV_8UC3, cv::Scalar(bgr8)));
+  m.frames = {{"a.png", 0.0, 0.0, ""}, {"b.tiff", 1.0, 0.0, ""}, {"c.jpg", 2.0, 0.0, ""}};
+
+  auto a = LoadStackFrameImage(dir_, m, 0);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  ASSERT_TRUE(a->is_colour());
+  EXPECT_EQ(a->colour.type(), CV_8UC3);
+  EXPECT_EQ(a->colour.at<cv::Vec3b>(3, 2), bgr8);
+  EXPECT_EQ(a->grey.type(), CV_8UC1);
+  EXPECT_EQ(a->grey.at<uint8_t>(3, 2), 164);
+  auto a_grey = LoadStackFrame(dir_, m, 0);
+  ASSERT_TRUE(a_grey.ok());
+  EXPECT_EQ(a_grey->at<uint8_t>(3, 2), 164);
+
+  auto b = LoadStackFrameImage(dir_, m, 1);
+  ASSERT_TRUE(b.ok()) << b.status().ToString();
+  EXPECT_EQ(b->colour.type(), CV_16UC3);
+  EXPECT_EQ(b->colour.at<cv::Vec3w>(0, 0), bgr16);
+  EXPECT_EQ(b->grey.type(), CV_16UC1);
+  EXPECT_EQ(b->grey.at<uint16_t>(0, 0), 37890);
+
+  // JPEG is lossy, but a flat colour survives within a few code values.
+  auto c = LoadStackFrameImage(dir_, m, 2);
+  ASSERT_TRUE(c.ok()) << c.status().ToString();
+  EXPECT_EQ(c->colour.type(), CV_8UC3);
+  EXPECT_NEAR(c->grey.at<uint8_t>(4, 3), 164, 3);
+
+  // Grey frames: exactly as stored, no colour.
+  StackManifest g = WriteFrames(3);
+  auto f = LoadStackFrameImage(dir_, g, 1);
+  ASSERT_TRUE(f.ok());
+  EXPECT_FALSE(f->is_colour());
+  EXPECT_EQ(f->grey.type(), CV_8UC1);
+  EXPECT_EQ(f->grey.at<uint8_t>(0, 0), 10);
+}
+
+TEST_F(StackTest, MixedGreyAndColourNamesTheFrame) {
+  StackManifest m = WriteFrames(4);
+  ASSERT_TRUE(ValidateStackFrames(dir_, m).ok());
+  cv::imwrite((dir_ / m.frames[2].file).string(), cv::Mat(cv::Size(32, 24), CV_8UC3, cv::Scalar(1, 2, 3)));
+  Status s = ValidateStackFrames(dir_, m);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("frame 2 (frame_2.png): colour (3 channels) differs from frame 0 (grey)"),
+            std::string::npos)
+      << s.message();
+}
+
+TEST_F(StackTest, MixedColourBitDepthsNameTheFrame) {
+  StackManifest m;
+  m.pixel_size_um = 1.0;
+  for (int i = 0; i < 3; ++i) {
+    const std::string name = "f" + std::to_string(i) + (i == 1 ? ".tiff" : ".png");
+    if (i == 1) cv::imwrite((dir_ / name).string(), cv::Mat(5, 5, CV_16UC3, cv::Scalar(1, 2, 3)));
+    else cv::imwrite((dir_ / name).string(), cv::Mat(5, 5, CV_8UC3, cv::Scalar(1, 2, 3)));
+    m.frames.push_back({name, double(i), 0.0, ""});
+  }
+  Status s = ValidateStackFrames(dir_, m);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("frame 1 (f1.tiff): bit depth 16 differs from frame 0 (8)"), std::string::npos)
+      << s.message();
+}
+
+TEST_F(StackTest, FourChannelFrameNamesTheFrame) {
+  StackManifest m = WriteFrames(3);
+  cv::imwrite((dir_ / m.frames[1].file).string(), cv::Mat(cv::Size(32, 24), CV_8UC4, cv::Scalar(1, 2, 3, 255)));
+  Status s = ValidateStackFrames(dir_, m);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("frame 1 (frame_1.png): has 4 channels"), std::string::npos) << s.message();
+  EXPECT_EQ(LoadStackFrameImage(dir_, m, 1).status().code(), StatusCode::kInvalidArgument);
+}
+
+// A colour stack reconstructs to the same depth map as the grey stack of its luminance.
+TEST_F(StackTest, ColourStackReconstructsLikeItsLuminance) {
+  const cv::Size size(40, 32);
+  const auto synthetic = testing::TiltedPlaneStack(size, testing::UniformZ(12, 0.0, 2.0), 6.0, 0.3, 0.1);
+  StackManifest colour, grey;
+  colour.pixel_size_um = grey.pixel_size_um = 1.0;
+  for (size_t k = 0; k < synthetic.frames.size(); ++k) {
+    // A colour frame whose channels differ (so the weights matter) and its luminance.
+    cv::Mat c;
+    cv::Mat chans[3] = {255 - synthetic.frames[k], synthetic.frames[k], synthetic.frames[k] / 2};
+    cv::merge(chans, 3, c);
+    const std::string cname = "c" + std::to_string(k) + ".png", gname = "g" + std::to_string(k) + ".png";
+    cv::imwrite((dir_ / cname).string(), c);
+    cv::imwrite((dir_ / gname).string(), LuminanceOf(c).value());
+    colour.frames.push_back({cname, synthetic.z_um[k], 0.0, ""});
+    grey.frames.push_back({gname, synthetic.z_um[k], 0.0, ""});
+  }
+  ASSERT_TRUE(ValidateStackFrames(dir_, colour).ok());
+  const fs::path cdir = dir_ / "colour", gdir = dir_ / "grey";
+  fs::create_directories(cdir);
+  fs::create_directories(gdir);
+  for (size_t k = 0; k < colour.frames.size(); ++k) {
+    fs::rename(dir_ / colour.frames[k].file, cdir / colour.frames[k].file);
+    fs::rename(dir_ / grey.frames[k].file, gdir / grey.frames[k].file);
+  }
+  ASSERT_TRUE(WriteStackManifest(cdir, colour).ok());
+  ASSERT_TRUE(WriteStackManifest(gdir, grey).ok());
+  const std::atomic<bool> no_cancel{false};
+  auto reconstruct = [&](const fs::path& d) -> StatusOr<DepthResult> {
+    auto manifest = ReadStackManifest(d);
+    if (!manifest.ok()) return manifest.status();
+    return ReconstructStackFolder(d, *manifest, SffOptions{}, nullptr, no_cancel);
+  };
+  auto rc = reconstruct(cdir);
+  auto rg = reconstruct(gdir);
+  ASSERT_TRUE(rc.ok()) << rc.status().ToString();
+  ASSERT_TRUE(rg.ok()) << rg.status().ToString();
+  EXPECT_GT(rc->valid_fraction, 0.9);
+  ASSERT_EQ(rc->depth_um.size(), rg->depth_um.size());
+  EXPECT_EQ(std::memcmp(rc->depth_um.data, rg->depth_um.data, rc->depth_um.total() * sizeof(float)), 0);
+  EXPECT_EQ(cv::norm(rc->all_in_focus, rg->all_in_focus, cv::NORM_INF), 0.0);
 }
 
 }  // namespace

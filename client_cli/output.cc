@@ -1,0 +1,206 @@
+// inspectctl output: exit codes, error lines, JSON Lines, summaries and the progress display
+// (USAGE.md "Progress display", "Exit codes", "JSON output").
+#include "client_cli/output.h"
+
+#include <sys/ioctl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cstdarg>
+#include <cstdio>
+#include <iostream>
+#include <map>
+
+#include <google/protobuf/util/json_util.h>
+#include <google/protobuf/util/time_util.h>
+
+namespace inspection::client::cli {
+
+std::string Format(const char* fmt, ...) {
+  char buf[512];
+  va_list args;
+  va_start(args, fmt);
+  std::vsnprintf(buf, sizeof buf, fmt, args);
+  va_end(args);
+  return buf;
+}
+
+std::string Lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return s;
+}
+
+std::string Short(const std::string& enum_name, const std::string& prefix) {
+  return enum_name.rfind(prefix, 0) == 0 ? enum_name.substr(prefix.size()) : enum_name;
+}
+
+const char* CodeName(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::OK: return "OK";
+    case grpc::StatusCode::CANCELLED: return "CANCELLED";
+    case grpc::StatusCode::UNKNOWN: return "UNKNOWN";
+    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
+    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
+    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
+    case grpc::StatusCode::ALREADY_EXISTS: return "ALREADY_EXISTS";
+    case grpc::StatusCode::PERMISSION_DENIED: return "PERMISSION_DENIED";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::FAILED_PRECONDITION: return "FAILED_PRECONDITION";
+    case grpc::StatusCode::ABORTED: return "ABORTED";
+    case grpc::StatusCode::OUT_OF_RANGE: return "OUT_OF_RANGE";
+    case grpc::StatusCode::UNIMPLEMENTED: return "UNIMPLEMENTED";
+    case grpc::StatusCode::INTERNAL: return "INTERNAL";
+    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
+    case grpc::StatusCode::DATA_LOSS: return "DATA_LOSS";
+    case grpc::StatusCode::UNAUTHENTICATED: return "UNAUTHENTICATED";
+    default: return "UNKNOWN";
+  }
+}
+
+std::string TimeText(const google::protobuf::Timestamp& t) {
+  if (t.seconds() == 0 && t.nanos() == 0) return "-";
+  google::protobuf::Timestamp whole = t;
+  whole.set_nanos(0);  // seconds are enough for people
+  return google::protobuf::util::TimeUtil::ToString(whole);
+}
+
+void PrintErrorLine(const grpc::Status& status) {
+  std::cerr << "inspectctl: " << CodeName(status.error_code()) << ": " << status.error_message() << '\n';
+}
+
+int ExitCodeFor(const grpc::Status& status) {
+  if (status.error_code() == grpc::StatusCode::UNAVAILABLE) return kExitUnreachable;
+  if (status.error_code() == grpc::StatusCode::DATA_LOSS) return kExitIntegrity;
+  if (status.error_code() == grpc::StatusCode::CANCELLED) return kExitCancelled;
+  return kExitFailed;
+}
+
+int ReportError(const grpc::Status& status) {
+  PrintErrorLine(status);
+  return ExitCodeFor(status);
+}
+
+json ProtoJson(const google::protobuf::Message& message) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.preserve_proto_field_names = true;
+  options.always_print_primitive_fields = true;
+  std::string text;
+  if (!google::protobuf::util::MessageToJsonString(message, &text, options).ok()) return json::object();
+  return json::parse(text, nullptr, false);
+}
+
+void PrintJsonLine(const json& j) { std::cout << j.dump() << '\n' << std::flush; }
+
+void PrintDepthSummary(const v1::DepthSummary& d) {
+  std::cout << Format("depth: %dx%d px (%.3f um/px), %d frames, valid %.1f %%, z %.2f .. %.2f um", d.width(),
+                      d.height(), d.pixel_size_um(), d.frame_count(), d.valid_percent(), d.z_min_um(), d.z_max_um());
+  if (d.engine_seconds() > 0.0) std::cout << Format(", engine %.3f s", d.engine_seconds());
+  std::cout << '\n';
+  if (d.has_ground_truth()) {
+    std::cout << Format("vs ground truth: RMSE %.3f um, mean |error| %.3f um\n", d.rmse_um(), d.mean_abs_error_um());
+  }
+}
+
+void PrintFigures(const v1::CalibrationSummary& summary, const std::string& indent) {
+  if (summary.steps_size() > 0) {
+    std::cout << indent << "steps:";
+    for (const auto& s : summary.steps()) std::cout << ' ' << s;
+    std::cout << '\n';
+  }
+  std::map<std::string, double> sorted(summary.figures().begin(), summary.figures().end());
+  for (const auto& [name, value] : sorted) std::cout << indent << name << " = " << Format("%.6g", value) << '\n';
+}
+
+// ---------------------------------------------------------------------------------------------
+// Progress display
+
+namespace {
+
+int TerminalWidth() {
+  winsize ws{};
+  if (ioctl(STDOUT_FILENO, TIOCGWINSZ, &ws) == 0 && ws.ws_col > 10) return ws.ws_col;
+  return 80;
+}
+
+std::string Bar(double fraction, int width = 10) {
+  fraction = std::clamp(fraction, 0.0, 1.0);
+  const int filled = static_cast<int>(fraction * width + 0.5);
+  return "[" + std::string(filled, '#') + std::string(width - filled, '-') + "]";
+}
+
+std::string Megabytes(int64_t bytes) { return Format("%.1f MB", static_cast<double>(bytes) / 1e6); }
+
+}  // namespace
+
+void ProgressPrinter::OnEvent(const v1::JobEvent& event) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (out_.json) {
+    PrintJsonLine(json{{"type", "event"}, {"event", ProtoJson(event)}});
+    return;
+  }
+  if (out_.quiet) return;
+  std::string line = EventText(event, out_.tty);
+  if (out_.tty) {
+    Redraw(Bar(event.progress()) + " " + line);
+    // Keep the line of a terminal event on screen.
+    if (event.state() >= v1::JOB_STATE_SUCCEEDED) EndLine();
+  } else {
+    std::cout << event.job_id() << " #" << event.sequence() << " " << line << '\n' << std::flush;
+  }
+}
+
+void ProgressPrinter::OnBytes(const std::string& what, int64_t done, int64_t total) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (out_.json || out_.quiet) return;
+  const double fraction = total > 0 ? static_cast<double>(done) / static_cast<double>(total) : 0.0;
+  // Only on a terminal: in logs the list of written files says enough.
+  if (out_.tty) Redraw(Bar(fraction) + " " + what + " " + Megabytes(done) + " / " + Megabytes(total));
+}
+
+void ProgressPrinter::Finish() {
+  std::lock_guard<std::mutex> lock(mu_);
+  EndLine();
+}
+
+std::string ProgressPrinter::EventText(const v1::JobEvent& e, bool terminal) {
+  std::string text;
+  const bool frame = e.has_frame() && e.frame().frame_count() > 0;
+  // On a terminal a frame line leaves out the phase (it is always acquiring) to fit 80 columns.
+  if (e.state() >= v1::JOB_STATE_SUCCEEDED) {
+    text = Short(v1::JobState_Name(e.state()), "JOB_STATE_");
+  } else if (!(frame && terminal)) {
+    text = Short(v1::JobPhase_Name(e.phase()), "JOB_PHASE_");
+  }
+  if (frame) {
+    const auto& f = e.frame();
+    const auto& s = f.statistics();
+    if (!text.empty()) text += ' ';
+    text += Format("%d/%d z=%.1fum mean=%.0f sd=%.0f sat=%.1f%% under=%.1f%%", f.frame_index() + 1, f.frame_count(),
+                   f.z_um(), s.mean_grey(), s.stddev_grey(), s.saturated_percent(), s.underexposed_percent());
+    // HDR exposures and ADAPT initialisation / iteration captures that are not stack frames.
+    if (!f.stack_frame()) text += Format(" (capture %d, not kept)", f.acquisition_index() + 1);
+  } else {
+    text += Format(" %3.0f%%", 100.0 * e.progress());
+  }
+  if (!e.step().empty()) text += " step=" + e.step();
+  if (e.remaining_seconds() >= 0.0 && e.state() < v1::JOB_STATE_SUCCEEDED) {
+    text += Format(" %.1fs left", e.remaining_seconds());
+  }
+  if (!e.message().empty()) text += " " + e.message();
+  return text;
+}
+
+void ProgressPrinter::Redraw(std::string line) {
+  const size_t width = static_cast<size_t>(TerminalWidth() - 1);
+  if (line.size() > width) line.resize(width);
+  std::cout << '\r' << line << "\x1b[K" << std::flush;
+  line_open_ = true;
+}
+
+void ProgressPrinter::EndLine() {
+  if (line_open_) std::cout << '\n' << std::flush;
+  line_open_ = false;
+}
+
+}  // namespace inspection::client::cli

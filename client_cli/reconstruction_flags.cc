@@ -1,0 +1,71 @@
+// Reconstruction options of `scan` and `reconstruct`: names accepted on the command line for
+// the proto's focus measures (thesis 3.1.3), depth interpolations (thesis 3.1.4) and exports.
+#include "client_cli/reconstruction_flags.h"
+
+#include <map>
+
+#include "client_cli/cli_context.h"
+#include "client_cli/output.h"
+
+namespace inspection::client::cli {
+namespace {
+
+const std::map<std::string, v1::FocusMeasure>& FocusMeasures() {
+  static const std::map<std::string, v1::FocusMeasure> m = {
+      {"tenengrad", v1::FOCUS_MEASURE_TENENGRAD},
+      {"modified-laplacian", v1::FOCUS_MEASURE_MODIFIED_LAPLACIAN},
+      {"ml", v1::FOCUS_MEASURE_MODIFIED_LAPLACIAN},
+      {"sum-modified-laplacian", v1::FOCUS_MEASURE_SUM_MODIFIED_LAPLACIAN},
+      {"sml", v1::FOCUS_MEASURE_SUM_MODIFIED_LAPLACIAN},
+      {"grey-level-variance", v1::FOCUS_MEASURE_GREY_LEVEL_VARIANCE},
+      {"glv", v1::FOCUS_MEASURE_GREY_LEVEL_VARIANCE},
+      {"helmli-mean", v1::FOCUS_MEASURE_HELMLI_MEAN},
+      {"chebyshev-moments", v1::FOCUS_MEASURE_CHEBYSHEV_MOMENTS},
+      {"grey-level-local-variance", v1::FOCUS_MEASURE_GREY_LEVEL_LOCAL_VARIANCE},
+      {"gllv", v1::FOCUS_MEASURE_GREY_LEVEL_LOCAL_VARIANCE},
+  };
+  return m;
+}
+
+const std::map<std::string, v1::DepthInterpolation>& Interpolations() {
+  static const std::map<std::string, v1::DepthInterpolation> m = {
+      {"maximum", v1::DEPTH_INTERPOLATION_MAXIMUM},
+      {"line-fit", v1::DEPTH_INTERPOLATION_LINE_FIT},
+      {"gaussian", v1::DEPTH_INTERPOLATION_GAUSSIAN},
+  };
+  return m;
+}
+
+const std::map<std::string, v1::ArtifactKind>& Exports() {
+  static const std::map<std::string, v1::ArtifactKind> m = {
+      {"png16", v1::ARTIFACT_KIND_DEPTH_PNG16},
+      {"ply", v1::ARTIFACT_KIND_DEPTH_PLY},
+      {"x3p", v1::ARTIFACT_KIND_DEPTH_X3P},
+  };
+  return m;
+}
+
+}  // namespace
+
+void ReconstructionFlags::Add(CLI::App* cmd) {
+  cmd->add_option("--focus-measure", focus_measure, "Focus measure (default tenengrad)")
+      ->check(CLI::IsMember(Keys(FocusMeasures()), CLI::ignore_case));
+  cmd->add_option("--window", window_px, "Focus measure window, odd 3..31 px (default 7)");
+  cmd->add_option("--interpolation", interpolation, "Depth interpolation between frames (default gaussian)")
+      ->check(CLI::IsMember(Keys(Interpolations()), CLI::ignore_case));
+  cmd->add_option("--min-confidence", min_confidence, "Pixels below this confidence get no depth (0..1)");
+  cmd->add_option("--export", exports, "Extra export, repeatable: png16, ply, x3p")
+      ->check(CLI::IsMember(Keys(Exports()), CLI::ignore_case));
+}
+
+v1::ReconstructionOptions ReconstructionFlags::ToProto() const {
+  v1::ReconstructionOptions o;
+  if (!focus_measure.empty()) o.set_focus_measure(FocusMeasures().at(Lower(focus_measure)));
+  if (window_px) o.set_window_px(*window_px);
+  if (!interpolation.empty()) o.set_interpolation(Interpolations().at(Lower(interpolation)));
+  if (min_confidence) o.set_min_confidence(*min_confidence);
+  for (const auto& e : exports) o.add_extra_exports(Exports().at(Lower(e)));
+  return o;
+}
+
+}  // namespace inspection::client::cli

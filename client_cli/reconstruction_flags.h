@@ -1,0 +1,29 @@
+// The reconstruction options shared by `scan` and `reconstruct` (--focus-measure, --window,
+// --interpolation, --min-confidence, --export) and their mapping to ReconstructionOptions.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "client_cli/inspection_client.h"
+
+namespace inspection::client::cli {
+
+// Unset flags stay unset in the proto, so the server's defaults apply (README "Reconstruction
+// options and defaults").
+struct ReconstructionFlags {
+  std::string focus_measure;
+  std::optional<int> window_px;
+  std::string interpolation;
+  std::optional<double> min_confidence;
+  std::vector<std::string> exports;
+
+  // Adds the options to `cmd`, writing into this object (which must outlive the parse).
+  void Add(CLI::App* cmd);
+  v1::ReconstructionOptions ToProto() const;
+};
+
+}  // namespace inspection::client::cli

@@ -1,0 +1,113 @@
+// Standard uncertainty of measurements on an SFF depth map (GUM, JCGM 100): the depth error model
+// of core/depth_noise_model.h propagated
+//  - exactly through linear functionals of the depth map (least-squares fits, step heights,
+//    mean heights): L = sum_p a(p) z(p), var L from the correlated noise, the z-linearity table
+//    averaged over its unknown phase, and the per-frame stage error;
+//  - by Monte Carlo (JCGM 101 style, fixed sample count and seed, so results are repeatable) for
+//    non-linear values (Sa..Sku, flatness, volumes): each sample re-runs the whole measurement on
+//    depth + one draw of the error model.
+// Extremes (Sp, Sv, Sz, flatness) and norms (Sa, Sq) of a noisy surface are biased upwards by the
+// noise itself, and that bias, not the spread, dominates when the surface is smooth: the reported
+// value is not corrected (ISO 25178 values are reported as measured), and the bias estimate
+// enters the uncertainty (u^2 = spread^2 + bias^2). The bias is estimated by noise doubling:
+// adding a second draw e_k shifts the value by d = mean_k f(z + e_k) - f(z); for a surface made
+// of noise only (value proportional to the noise level) the first draw's shift is
+// d / (sqrt 2 - 1), and for a surface well above the noise it is smaller than that, so
+// d / (sqrt 2 - 1) is used: exact in the worst case, conservative otherwise.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <functional>
+#include <vector>
+
+#include <Eigen/Dense>
+#include <opencv2/core.hpp>
+
+#include "core/depth_noise_model.h"
+#include "core/form_removal.h"
+#include "core/status.h"
+
+namespace inspection {
+
+// The standard uncertainty (k = 1) of one measured value and where it comes from. Fields that a
+// method does not produce stay NaN.
+struct UncertaintyBudget {
+  double standard_uncertainty = std::nan("");  // combined u
+  // Analytic (linear functionals): components, u^2 = random^2 + linearity^2 + stage^2 (+ other).
+  double random = std::nan("");
+  double linearity = std::nan("");
+  double stage = std::nan("");
+  double other = std::nan("");  // e.g. volume: pixels without depth filled by the region's mean
+  // Monte Carlo: spread of the perturbed values and the noise-bias estimate.
+  double monte_carlo_spread = std::nan("");
+  double noise_bias = std::nan("");
+  int monte_carlo_samples = 0;
+  std::string method;  // "analytic" or "monte-carlo"; empty without a noise model
+};
+
+// Extremes (Sp, Sv, Sz, flatness): heavy-tailed SFF errors make a Gaussian Monte Carlo
+// overconfident, so their expanded uncertainty (k = 2) is a documented bound on how far the
+// error field can move an extreme: U = extremes * E + R, with E = model.extreme_error_um (the
+// largest plausible single-pixel error) and R the largest range of the z-linearity error over the
+// region's pixels for any phase of the table (0 for a region at one height, where it is a common
+// offset that the form removal takes out). extremes = 1 for Sp and Sv (one extreme moves),
+// 2 for Sz and flatness (peak and valley can move apart). The budget's standard uncertainty is U / 2.
+UncertaintyBudget ExtremeValueBudget(int extremes, double linearity_range_um, const DepthNoiseModel& model);
+// R of ExtremeValueBudget over the pixels where mask is non-zero and depth finite.
+double LinearityRangeUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model);
+
+// Covariance of linear functionals, by error component (add them for the total).
+struct FunctionalCovariance {
+  Eigen::MatrixXd random;     // correlated per-pixel noise
+  Eigen::MatrixXd linearity;  // z-linearity table, mean over its phase
+  Eigen::MatrixXd stage;      // per-frame stage error
+  Eigen::MatrixXd Total() const { return random + linearity + stage; }
+};
+
+// Budget of the functional c^T L (c over the functionals of cov).
+UncertaintyBudget AnalyticBudget(const FunctionalCovariance& cov, const Eigen::VectorXd& c);
+
+// L_i = sum_p weights[i](p) z(p). weights: CV_64FC1 images of depth_um's size, zero where a
+// functional does not use a pixel (it must be zero wherever the model's sigma is NaN).
+StatusOr<FunctionalCovariance> LinearFunctionalCovariance(const std::vector<cv::Mat>& weights, const cv::Mat& depth_um,
+                                                          const DepthNoiseModel& model);
+
+// The weights of a least-squares fit's parameters: row j of (J^T J)^-1 J^T as an image over the
+// fitted pixels (mask and finite depth), i.e. d(parameter j) / d(z(p)) (linearised at the
+// solution for sphere/cylinder).
+std::vector<cv::Mat> FormFitWeights(const FormFit& fit, const cv::Mat& depth_um, const cv::Mat& mask,
+                                    double pixel_size_um);
+
+// Covariance of a fit's parameters under the model: (J^T J)^-1 J^T Sigma J (J^T J)^-1.
+StatusOr<FunctionalCovariance> FormFitCovariance(const FormFit& fit, const cv::Mat& depth_um, const cv::Mat& mask,
+                                                 double pixel_size_um, const DepthNoiseModel& model);
+
+struct MonteCarloOptions {
+  int samples = 32;               // 8..10000; 32 gives the spread to ~13 % (1 / sqrt(2 (n - 1)))
+  uint64_t seed = 0x25178u;       // fixed: the same map and measurement give the same uncertainty
+  Status Validate() const;
+};
+
+struct MonteCarloEstimate {
+  double spread = 0.0;  // standard deviation of f(z + e_k) over the samples
+  double bias = 0.0;    // noise-bias estimate (mean_k f(z + e_k) - f(z)) / (sqrt 2 - 1), signed
+  double standard_uncertainty = 0.0;  // sqrt(spread^2 + bias^2)
+  int samples = 0;      // samples that gave a finite value
+};
+
+// Budget of a Monte Carlo estimate.
+UncertaintyBudget MonteCarloBudget(const MonteCarloEstimate& e);
+
+// values = measure(depth_um); measure is re-run on depth_um + model.SamplePerturbation(k, samples).
+// Samples where measure fails or gives NaN are left out; FAILED_PRECONDITION when fewer than
+// half of them remain for any output.
+using DepthMeasureFunction = std::function<StatusOr<std::vector<double>>(const cv::Mat& depth_um)>;
+StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& depth_um,
+                                                                const std::vector<double>& values,
+                                                                const DepthMeasureFunction& measure,
+                                                                const DepthNoiseModel& model,
+                                                                const MonteCarloOptions& options);
+
+}  // namespace inspection

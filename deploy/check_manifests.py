@@ -1,0 +1,390 @@
+#!/usr/bin/python3
+"""Offline checks of inspectd's deployment files: rendered Kubernetes manifests (deploy/k8s, after
+`kubectl kustomize`) and the compose files. deploy/validate_manifests.sh runs it.
+
+  check_manifests.py k8s RENDERED.yaml [--placeholders] [--inspectd BIN]
+  check_manifests.py compose FILE.yaml [--real-rig] [--inspectd BIN]
+  check_manifests.py self-test RENDERED.yaml [--inspectd BIN]   (each rule breaks a copy of a valid render once
+                                                and must be caught: the checks can fail)
+
+k8s: references between the objects (volumes, ConfigMaps, PVCs, Secrets, Service selectors and
+ports) and the rules of deploy/README.md "Kubernetes": a rig is one pod (replicas 1, Recreate) on
+its node (nodeSelector), host network, /dev/bus/usb, a PVC; the reconstruct pool runs --no-rig
+with several replicas; liveness asks the health service "" and readiness
+inspection.v1.InspectionService (kubelet gRPC probe or exec inspect-health-probe). With
+--inspectd, every inspectd.json is loaded by the real binary (`inspectd --print-config`) with the
+container's INSPECTD_* variables, so a wrong key or value fails here, not at a rig.
+--placeholders accepts the rig base's nodeSelector value RIG (set by each rig's overlay).
+"""
+import copy
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+
+import yaml
+
+EXTERNAL_SECRETS = {"inspectd-auth", "inspectd-tls"}  # created by the admin, never committed
+RIG_HEALTH = "inspection.v1.InspectionService"
+NAME_RE = re.compile(r"^[a-z0-9]([-a-z0-9]*[a-z0-9])?$")
+
+
+class Checker:
+    def __init__(self, inspectd=None):
+        self.inspectd = inspectd
+        self.failures = []
+        self.lines = []
+        self._keys = None
+
+    def fail(self, where, message):
+        self.failures.append(f"{where}: {message}")
+
+    def done(self, where):
+        bad = any(f.startswith(where + ":") or f.startswith(where + " ") for f in self.failures)
+        self.lines.append(f"{'FAIL' if bad else 'ok  '} {where}")
+
+    # --- inspectd itself ---------------------------------------------------------------------
+    def setting_names(self):
+        """The configuration keys, from the binary's own --print-config (the defaults)."""
+        if self._keys is None:
+            out = subprocess.run([self.inspectd, "--print-config"], env={}, capture_output=True, text=True, check=True)
+            self._keys = list(json.loads(out.stdout))
+        return self._keys
+
+    def check_with_inspectd(self, where, config_text, env):
+        """inspectd loads config_text with the container's INSPECTD_* variables."""
+        if not self.inspectd:
+            return
+        known = {"INSPECTD_" + k.upper() for k in self.setting_names()} | {"INSPECTD_CONFIG"}
+        for name in env:
+            if name.startswith("INSPECTD_") and name not in known:
+                self.fail(where, f"environment variable {name} names no inspectd setting")
+        with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
+            f.write(config_text)
+        try:
+            run_env = {k: v for k, v in env.items() if k.startswith("INSPECTD_") and k != "INSPECTD_CONFIG"}
+            out = subprocess.run([self.inspectd, "--config", f.name, "--print-config"], env=run_env,
+                                 capture_output=True, text=True)
+            if out.returncode != 0:
+                self.fail(where, f"inspectd rejects its configuration: {out.stderr.strip()}")
+        finally:
+            os.unlink(f.name)
+
+    def check_config_values(self, where, text):
+        try:
+            doc = json.loads(text)
+        except ValueError as e:
+            self.fail(where, f"inspectd.json is not JSON: {e}")
+            return
+        if not isinstance(doc, dict):
+            self.fail(where, "inspectd.json must be an object")
+            return
+        if not str(doc.get("listen", "")).startswith("0.0.0.0:"):
+            self.fail(where, "inspectd.json must listen on 0.0.0.0 (probes and clients come from outside)")
+        if doc.get("data_dir") != "/var/lib/inspection":
+            self.fail(where, "inspectd.json data_dir must be the volume /var/lib/inspection")
+
+    # --- Kubernetes --------------------------------------------------------------------------
+    def probe_service(self, where, probe, container):
+        """The health service a probe asks for: kubelet gRPC, or exec inspect-health-probe."""
+        if not probe:
+            self.fail(where, "missing")
+            return None
+        handlers = [h for h in ("grpc", "exec", "httpGet", "tcpSocket") if h in probe]
+        if len(handlers) != 1:
+            self.fail(where, f"needs exactly one handler, has {handlers}")
+            return None
+        if "grpc" in probe:
+            ports = {p.get("containerPort") for p in container.get("ports", [])}
+            if probe["grpc"].get("port") not in ports:
+                self.fail(where, f"gRPC port {probe['grpc'].get('port')} is not a container port {sorted(ports)}")
+            return probe["grpc"].get("service", "")
+        if "exec" in probe:
+            cmd = probe["exec"].get("command", [])
+            if not cmd or not cmd[0].endswith("inspect-health-probe"):
+                self.fail(where, f"exec probe must run inspect-health-probe, runs {cmd}")
+                return None
+            return cmd[cmd.index("--service") + 1] if "--service" in cmd else ""
+        self.fail(where, f"must use the gRPC health service, uses {handlers[0]}")
+        return None
+
+    def check_k8s(self, docs, placeholders=False):
+        by_kind = {}
+        for d in docs:
+            name = (d.get("metadata") or {}).get("name", "")
+            for field in ("apiVersion", "kind"):
+                if field not in d:
+                    self.fail(f"document {name}", f"no {field}")
+            if not NAME_RE.match(name) or len(name) > 63:
+                self.fail(f"{d.get('kind')}/{name}", "name is not a DNS-1123 label of at most 63 characters")
+            by_kind.setdefault(d.get("kind"), {})[name] = d
+        configmaps = by_kind.get("ConfigMap", {})
+        claims = by_kind.get("PersistentVolumeClaim", {})
+        deployments = by_kind.get("Deployment", {})
+        if not deployments:
+            self.fail("manifests", "no Deployment rendered")
+        templates = []
+        for name, dep in deployments.items():
+            self.check_deployment(f"Deployment/{name}", dep, configmaps, claims, placeholders)
+            templates.append(dep)
+        for name, svc in by_kind.get("Service", {}).items():
+            self.check_service(f"Service/{name}", svc, templates)
+        for name, cm in configmaps.items():
+            rig = cm.get("data", {}).get("rig.json")
+            if rig is not None:
+                try:
+                    missing = [k for k in ("camera", "stage", "projector") if k not in json.loads(rig)]
+                    if missing:
+                        self.fail(f"ConfigMap/{name}", f"rig.json lacks {missing}")
+                except ValueError as e:
+                    self.fail(f"ConfigMap/{name}", f"rig.json is not JSON: {e}")
+            self.done(f"ConfigMap/{name}")
+
+    def check_deployment(self, where, dep, configmaps, claims, placeholders):
+        spec = dep["spec"]
+        labels = spec["template"].get("metadata", {}).get("labels", {})
+        selector = spec.get("selector", {}).get("matchLabels", {})
+        if not selector or any(labels.get(k) != v for k, v in selector.items()):
+            self.fail(where, f"selector {selector} does not match template labels {labels}")
+        pod = spec["template"]["spec"]
+        volumes = {v["name"]: v for v in pod.get("volumes", [])}
+        inspectd = [c for c in pod.get("containers", []) if c.get("name") == "inspectd"]
+        if len(inspectd) != 1:
+            self.fail(where, "needs one container named inspectd")
+            return self.done(where)
+        c = inspectd[0]
+        if not c.get("image"):
+            self.fail(where, "container has no image")
+        if pod.get("enableServiceLinks") is not False:
+            self.fail(where, "enableServiceLinks must be false (Service links add INSPECTD_* variables)")
+        if (pod.get("securityContext") or {}).get("runAsUser") != 10001:
+            self.fail(where, "must run as the image's user 10001")
+        mounts = {m["mountPath"]: m for m in c.get("volumeMounts", [])}
+        for m in mounts.values():
+            if m["name"] not in volumes:
+                self.fail(where, f"volumeMount {m['mountPath']} names no volume '{m['name']}'")
+        env = {e["name"]: e.get("value", "") for e in c.get("env", [])}
+        config_path = env.get("INSPECTD_CONFIG", "")
+        config_dir, config_file = config_path.rsplit("/", 1) if "/" in config_path else ("", "")
+        config_volume = volumes.get(mounts.get(config_dir, {}).get("name"), {})
+        if "configMap" not in config_volume:
+            self.fail(where, f"INSPECTD_CONFIG {config_path!r} is not in a mounted ConfigMap")
+        for v in volumes.values():
+            if "configMap" in v and v["configMap"]["name"] not in configmaps:
+                self.fail(where, f"volume {v['name']}: ConfigMap {v['configMap']['name']} is not in the manifests")
+            if "secret" in v and v["secret"]["secretName"] not in EXTERNAL_SECRETS:
+                self.fail(where, f"volume {v['name']}: Secret {v['secret']['secretName']} is not a documented one")
+            if "persistentVolumeClaim" in v and v["persistentVolumeClaim"]["claimName"] not in claims:
+                self.fail(where, f"volume {v['name']}: PVC {v['persistentVolumeClaim']['claimName']} is not in the manifests")
+        cm = configmaps.get(config_volume.get("configMap", {}).get("name"), {})
+        config_text = cm.get("data", {}).get(config_file)
+        if "configMap" in config_volume and config_text is None:
+            self.fail(where, f"ConfigMap {config_volume['configMap']['name']} has no {config_file}")
+        elif config_text is not None:
+            self.check_config_values(where, config_text)
+            self.check_with_inspectd(where, config_text, env)
+        for key in ("INSPECTD_TLS_CERT", "INSPECTD_TLS_KEY", "INSPECT_TLS_CA"):
+            if key in env and env[key].rsplit("/", 1)[0] not in mounts:
+                self.fail(where, f"{key} {env[key]!r} is not in a mounted volume")
+        data_mount = mounts.get("/var/lib/inspection")
+        if not data_mount:
+            self.fail(where, "no volume at /var/lib/inspection")
+        live = self.probe_service(f"{where} livenessProbe", c.get("livenessProbe"), c)
+        ready = self.probe_service(f"{where} readinessProbe", c.get("readinessProbe"), c)
+        if live not in (None, ""):
+            self.fail(where, f"livenessProbe must ask for service \"\", asks for {live!r}")
+        if ready is not None and ready != RIG_HEALTH:
+            self.fail(where, f"readinessProbe must ask for {RIG_HEALTH}, asks for {ready!r}")
+
+        component = labels.get("app.kubernetes.io/component")
+        if component == "rig":
+            if spec.get("replicas") != 1:
+                self.fail(where, f"a rig has exactly one pod, replicas is {spec.get('replicas')}")
+            if spec.get("strategy", {}).get("type") != "Recreate":
+                self.fail(where, "a rig's pod must be replaced with strategy Recreate")
+            node = list((pod.get("nodeSelector") or {}).values())
+            if not node:
+                self.fail(where, "a rig's pod needs a nodeSelector (the node wired to the rig)")
+            elif "RIG" in node and not placeholders:
+                self.fail(where, "nodeSelector still has the placeholder RIG: set it in the rig's overlay")
+            if pod.get("hostNetwork") is not True or pod.get("dnsPolicy") != "ClusterFirstWithHostNet":
+                self.fail(where, "a rig needs hostNetwork (GigE Vision) with dnsPolicy ClusterFirstWithHostNet")
+            usb = mounts.get("/dev/bus/usb")
+            if not usb or volumes.get(usb["name"], {}).get("hostPath", {}).get("path") != "/dev/bus/usb":
+                self.fail(where, "a rig needs the host's /dev/bus/usb (the stage)")
+            if data_mount and "persistentVolumeClaim" not in volumes.get(data_mount["name"], {}):
+                self.fail(where, "a rig's data directory must be a PersistentVolumeClaim")
+            if "startupProbe" in c and self.probe_service(f"{where} startupProbe", c["startupProbe"], c) != "":
+                self.fail(where, "startupProbe must ask for service \"\"")
+        elif component == "reconstruct":
+            if "--no-rig" not in c.get("args", []):
+                self.fail(where, "the reconstruct pool runs inspectd --no-rig")
+            if (spec.get("replicas") or 1) < 2:
+                self.fail(where, "the reconstruct pool needs several replicas")
+            if pod.get("hostNetwork"):
+                self.fail(where, "the reconstruct pool needs no host network")
+            if any(m.startswith("/dev") for m in mounts):
+                self.fail(where, "the reconstruct pool needs no devices")
+        else:
+            self.fail(where, f"label app.kubernetes.io/component must be rig or reconstruct, is {component!r}")
+        self.done(where)
+
+    def check_service(self, where, svc, deployments):
+        selector = svc["spec"].get("selector", {})
+        ns = svc.get("metadata", {}).get("namespace")
+        matched = [d for d in deployments
+                   if d.get("metadata", {}).get("namespace") == ns and selector and
+                   all(d["spec"]["template"]["metadata"].get("labels", {}).get(k) == v for k, v in selector.items())]
+        if len(matched) != 1:
+            self.fail(where, f"selector {selector} matches {len(matched)} Deployments, expected 1")
+            return self.done(where)
+        ports = {p.get("name"): p.get("containerPort")
+                 for c in matched[0]["spec"]["template"]["spec"]["containers"] for p in c.get("ports", [])}
+        for p in svc["spec"].get("ports", []):
+            t = p.get("targetPort")
+            if (isinstance(t, str) and t not in ports) or (isinstance(t, int) and t not in ports.values()):
+                self.fail(where, f"targetPort {t!r} is not a port of the selected pods {ports}")
+        self.done(where)
+
+    # --- compose -----------------------------------------------------------------------------
+    def check_compose(self, path, real_rig):
+        doc = yaml.safe_load(open(path))
+        base = os.path.dirname(os.path.abspath(path))
+        svc = (doc.get("services") or {}).get("inspectd")
+        where = f"{os.path.basename(path)} service inspectd"
+        if not svc:
+            self.fail(where, "missing")
+            return self.done(where)
+        volumes = svc.get("volumes", [])
+        named = [v.split(":")[0] for v in volumes if ":/var/lib/inspection" in v]
+        if not named or named[0] not in (doc.get("volumes") or {}):
+            self.fail(where, "needs a named volume at /var/lib/inspection")
+        env = {k: str(v) for k, v in (svc.get("environment") or {}).items()}
+        config_text = None
+        for v in volumes:
+            parts = v.split(":")
+            if len(parts) >= 2 and parts[1] == "/etc/inspection/inspectd.json":
+                config_text = open(os.path.join(base, parts[0])).read()
+        if config_text is not None:
+            self.check_config_values(where, config_text)
+        else:  # the image's own file
+            config_text = open(os.path.join(base, "config", "inspectd.json")).read()
+        self.check_with_inspectd(where, config_text, env)
+        declared = doc.get("secrets") or {}
+        for s in svc.get("secrets", []):
+            if (s if isinstance(s, str) else s.get("source")) not in declared:
+                self.fail(where, f"secret {s} is not declared")
+        if real_rig:
+            if svc.get("network_mode") != "host":
+                self.fail(where, "a real rig needs network_mode host (GigE Vision)")
+            if not any(str(d).startswith("/dev/bus/usb") for d in svc.get("devices", [])):
+                self.fail(where, "a real rig needs the device /dev/bus/usb (the stage)")
+            config = json.loads(config_text)
+            paths = {f"/run/secrets/{(s if isinstance(s, str) else s.get('source'))}" for s in svc.get("secrets", [])}
+            for key in ("tls_cert", "tls_key", "auth_token_file"):
+                if config.get(key) not in paths:
+                    self.fail(where, f"{key} {config.get(key)!r} is not a mounted secret")
+            if config.get("rig_config") not in [v.split(":")[1] for v in volumes if v.count(":") >= 1]:
+                self.fail(where, f"rig_config {config.get('rig_config')!r} is not mounted")
+        elif svc.get("network_mode") == "host" or svc.get("devices"):
+            self.fail(where, "the simulated rig needs neither host network nor devices")
+        self.done(where)
+
+
+def self_test(path, inspectd=None):
+    """Every rule must catch one broken copy of a valid render."""
+    docs = [d for d in yaml.safe_load_all(open(path)) if d]
+    valid = Checker(inspectd)
+    valid.check_k8s(docs)
+    if valid.failures:
+        print("self-test needs a render that passes:", valid.failures)
+        return 1
+
+    def dep(ds, component):
+        return next(d for d in ds if d["kind"] == "Deployment" and
+                    d["spec"]["template"]["metadata"]["labels"].get("app.kubernetes.io/component") == component)
+
+    def pod(ds, component):
+        return dep(ds, component)["spec"]["template"]["spec"]
+
+    def cm(ds, key):
+        return next(d for d in ds if d["kind"] == "ConfigMap" and key in d.get("data", {}))
+
+    breaks = {
+        "Recreate": lambda ds: dep(ds, "rig")["spec"]["strategy"].update(type="RollingUpdate"),
+        "exactly one pod": lambda ds: dep(ds, "rig")["spec"].update(replicas=2),
+        "needs a nodeSelector": lambda ds: pod(ds, "rig").pop("nodeSelector"),
+        "placeholder RIG": lambda ds: pod(ds, "rig")["nodeSelector"].update({"x": "RIG"}),
+        "needs hostNetwork": lambda ds: pod(ds, "rig").pop("hostNetwork"),
+        "/dev/bus/usb": lambda ds: pod(ds, "rig")["containers"][0]["volumeMounts"].pop(
+            next(i for i, m in enumerate(pod(ds, "rig")["containers"][0]["volumeMounts"]) if m["mountPath"] == "/dev/bus/usb")),
+        "must be a PersistentVolumeClaim": lambda ds: _pvc_to_empty_dir(pod(ds, "rig")),
+        "readinessProbe must ask": lambda ds: _set_probe_service(pod(ds, "rig")["containers"][0]["readinessProbe"], ""),
+        "livenessProbe must ask": lambda ds: _set_probe_service(pod(ds, "reconstruct")["containers"][0]["livenessProbe"], RIG_HEALTH),
+        "livenessProbe: missing": lambda ds: pod(ds, "rig")["containers"][0].pop("livenessProbe"),
+        "--no-rig": lambda ds: pod(ds, "reconstruct")["containers"][0].update(args=[]),
+        "several replicas": lambda ds: dep(ds, "reconstruct")["spec"].update(replicas=1),
+        "enableServiceLinks": lambda ds: pod(ds, "reconstruct").pop("enableServiceLinks"),
+        "targetPort": lambda ds: next(d for d in ds if d["kind"] == "Service")["spec"]["ports"][0].update(targetPort="http"),
+        "matches 0 Deployments": lambda ds: next(d for d in ds if d["kind"] == "Service")["spec"].update(selector={"app": "x"}),
+        "is not in the manifests": lambda ds: [d for d in ds if d["kind"] == "ConfigMap"][0]["metadata"].update(name="renamed"),
+        "must listen on 0.0.0.0": lambda ds: cm(ds, "inspectd.json")["data"].update(
+            {"inspectd.json": json.dumps({"listen": "127.0.0.1:50051", "data_dir": "/var/lib/inspection"})}),
+        "is not a documented one": lambda ds: next(v for v in pod(ds, "rig")["volumes"] if "secret" in v)["secret"].update(
+            secretName="committed-secret"),
+    }
+    if inspectd:
+        breaks["inspectd rejects its configuration"] = lambda ds: cm(ds, "inspectd.json")["data"].update(
+            {"inspectd.json": json.dumps({"listen": "0.0.0.0:50051", "data_dir": "/var/lib/inspection", "lissten": 1})})
+        breaks["names no inspectd setting"] = lambda ds: pod(ds, "rig")["containers"][0]["env"].append(
+            {"name": "INSPECTD_TLS_CRT", "value": "/x"})
+    failed = 0
+    for expected, breaker in breaks.items():
+        broken = copy.deepcopy(docs)
+        breaker(broken)
+        c = Checker(inspectd)
+        c.check_k8s(broken)
+        caught = [f for f in c.failures if expected in f]
+        print(f"{'caught' if caught else 'MISSED'}  {expected}: {caught[0] if caught else c.failures}")
+        failed += not caught
+    print(f"self-test: {len(breaks) - failed} of {len(breaks)} broken manifests caught")
+    return 1 if failed else 0
+
+
+def _pvc_to_empty_dir(pod):
+    volume = next(v for v in pod["volumes"] if "persistentVolumeClaim" in v)
+    volume.pop("persistentVolumeClaim")
+    volume["emptyDir"] = {}
+
+
+def _set_probe_service(probe, service):
+    if "grpc" in probe:
+        probe["grpc"]["service"] = service
+    else:
+        cmd = [a for a in probe["exec"]["command"] if a not in ("--service", RIG_HEALTH)]
+        probe["exec"]["command"] = cmd + (["--service", service] if service else [])
+
+
+def main(argv):
+    if len(argv) < 3 or argv[1] not in ("k8s", "compose", "self-test"):
+        print(__doc__)
+        return 2
+    inspectd = argv[argv.index("--inspectd") + 1] if "--inspectd" in argv else None
+    if argv[1] == "self-test":
+        return self_test(argv[2], inspectd)
+    c = Checker(inspectd)
+    if argv[1] == "k8s":
+        c.check_k8s([d for d in yaml.safe_load_all(open(argv[2])) if d], "--placeholders" in argv)
+    else:
+        c.check_compose(argv[2], "--real-rig" in argv)
+    for line in c.lines:
+        print(line)
+    for f in c.failures:
+        print(f"  {f}")
+    return 1 if c.failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))

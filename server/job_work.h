@@ -1,0 +1,54 @@
+// JobWork: what one job does, as validated domain values (no proto beyond the job kind). The
+// request mapping (request_mapping.h) builds it from a request, the JobManager queues it, and a
+// JobRunner (job_runner.h) runs it. One alternative per job kind.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "core/sff_engine.h"
+#include "inspection/v1/inspection.pb.h"
+#include "server/owned_folder.h"
+#include "server/procedures/calibration_procedure.h"
+#include "server/procedures/reconstruct_procedure.h"
+#include "server/procedures/scan_procedure.h"
+
+namespace inspection {
+
+// Acquire a stack through focus on the rig and reconstruct it (thesis 3.1.2, 5, 6.2).
+struct ScanWork {
+  ScanPlan plan;  // calibration_id is filled in when the scan starts (the bundle active then)
+  std::vector<DepthExportKind> extra_exports;
+};
+
+// Run calibration steps on the rig (thesis 4.3, 5.4.1).
+struct CalibrateWork {
+  CalibrationOptions options;
+};
+
+// Reconstruct a stack folder that has already been validated (core/stack.h format).
+struct ReconstructWork {
+  std::filesystem::path stack_dir;
+  std::string source_scan_id;  // the stored scan read; empty for an upload
+  // Set for an uploaded stack: the folder goes when the last copy of the work does (the job
+  // ended, was cancelled while queued, or never got queued).
+  std::shared_ptr<const OwnedFolder> upload;
+  SffOptions sff;
+  std::vector<DepthExportKind> extra_exports;
+};
+
+using JobWork = std::variant<ScanWork, CalibrateWork, ReconstructWork>;
+
+v1::JobKind KindOf(const JobWork& work);
+
+// What a job shows while it waits, beyond its kind and ids: a reconstruction of a stored scan
+// names that scan in its result from the start.
+void FillQueuedJob(const JobWork& work, v1::Job* job);
+
+// One line for the log, e.g. "scan of 41 frames, z 0..200 um, HF+ADAPT".
+std::string DescribeWork(const JobWork& work);
+
+}  // namespace inspection

@@ -1,0 +1,192 @@
+// ProcedureRunner: scan, calibrate and reconstruct jobs through server/procedures, with their
+// progress events and their results published into the data store.
+#include "server/procedure_runner.h"
+
+#include <algorithm>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include <spdlog/spdlog.h>
+
+#include "core/depth_export.h"
+#include "core/stack.h"
+#include "server/owned_folder.h"
+#include "server/result_publisher.h"
+
+namespace inspection {
+namespace fs = std::filesystem;
+
+namespace {
+
+template <class... Ts>
+struct Overloaded : Ts... {
+  using Ts::operator()...;
+};
+
+// Runs a rig job holding the rig exclusively, with the rig Busy meanwhile; the job's status
+// then moves the rig back to Ready, or to Error on a device failure.
+template <typename Job>
+StatusOr<v1::JobResult> OnRig(RigController* rig, Job&& job) {
+  auto rig_lock = rig->Acquire();
+  rig->SetBusy(true);
+  StatusOr<v1::JobResult> result = job();
+  rig->ReportJobStatus(result.ok() ? Status::Ok() : result.status());
+  return result;
+}
+
+// A per-frame progress event: frame i of n with its statistics; the frames make up 90 % of a
+// job, the remaining time is extrapolated from the frame rate so far.
+void FillFrameEvent(v1::JobPhase phase, int index, int count, double z_um, double exposure_us,
+                    const FrameStatistics& st, v1::JobEvent* e) {
+  e->set_phase(phase);
+  v1::FrameProgress* fp = e->mutable_frame();
+  fp->set_frame_index(index);
+  fp->set_frame_count(count);
+  fp->set_z_um(z_um);
+  fp->set_exposure_us(exposure_us);
+  fp->set_acquisition_index(index);  // scans with extra captures overwrite both
+  fp->set_stack_frame(true);
+  fp->mutable_statistics()->set_mean_grey(st.mean_grey);
+  fp->mutable_statistics()->set_stddev_grey(st.stddev_grey);
+  fp->mutable_statistics()->set_saturated_percent(st.saturated_percent);
+  fp->mutable_statistics()->set_underexposed_percent(st.underexposed_percent);
+  const double done = index + 1;
+  e->set_progress(0.9 * done / count);
+  e->set_remaining_seconds(e->elapsed_seconds() / done * (count - done));
+}
+
+void EmitPhase(const JobContext& context, v1::JobPhase phase, double progress = 0.0, const std::string& message = "") {
+  context.emit([&](v1::JobEvent& e) {
+    e.set_phase(phase);
+    if (progress > 0.0) e.set_progress(progress);
+    if (!message.empty()) e.set_message(message);
+  });
+}
+
+}  // namespace
+
+StatusOr<v1::JobResult> ProcedureRunner::Run(const JobWork& work, const JobContext& context) {
+  return std::visit(
+      Overloaded{
+          [&](const ScanWork& w) { return OnRig(rig_, [&] { return RunScan(w, context); }); },
+          [&](const CalibrateWork& w) { return OnRig(rig_, [&] { return RunCalibrate(w, context); }); },
+          [&](const ReconstructWork& w) { return RunReconstruct(w, context); },
+      },
+      work);
+}
+
+StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const JobContext& context) {
+  const std::string& job_id = context.job_id;
+  // The calibration is the one active now (a calibration may have finished since submission);
+  // RunScan re-checks that it holds the mode's models.
+  ScanPlan plan = work.plan;
+  plan.calibration_id = calibrations_->active_id();
+  const std::shared_ptr<const CalibrationBundle> bundle = calibrations_->active();
+  EmitPhase(context, v1::JOB_PHASE_PREPARING, 0.0, "scan of " + std::to_string(plan.z_um.size()) + " frames");
+
+  OwnedFolder stack(store_->tmp_dir() / (job_id + ".stack"));
+  auto on_frame = [&](const ScanFrameEvent& f) {
+    context.emit([&](v1::JobEvent& e) {
+      FillFrameEvent(v1::JOB_PHASE_ACQUIRING, f.index, f.count, f.z_um, f.exposure_us, f.statistics, &e);
+      e.mutable_frame()->set_acquisition_index(f.acquisition);
+      e.mutable_frame()->set_stack_frame(f.stack_frame);
+    });
+  };
+  INSPECT_ASSIGN_OR_RETURN(ScanOutcome outcome,
+                           inspection::RunScan(rig_->rig(), plan, stack.path(), on_frame, *context.cancel, bundle.get()));
+  EmitPhase(context, v1::JOB_PHASE_STORING, 0.92);
+
+  INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher, ResultPublisher::Create(store_, job_id));
+  DepthExportMeta meta;
+  meta.pixel_size_um = outcome.manifest.pixel_size_um;
+  meta.description = "depth (um) of scan " + job_id;
+  INSPECT_RETURN_IF_ERROR(publisher.WriteDepth(outcome.depth, meta, work.extra_exports));
+  if (!outcome.ground_truth_um.empty()) {
+    INSPECT_RETURN_IF_ERROR(publisher.CopyFile(v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF, stack.path() / kGroundTruthDepthName));
+  }
+  INSPECT_RETURN_IF_ERROR(publisher.Zip(v1::ARTIFACT_KIND_STACK_ZIP, stack.path(), "stack.zip"));
+  if (context.cancel->load()) return Status::Cancelled("scan cancelled while storing");  // a cancel's last chance
+
+  v1::JobResult result;
+  result.set_scan_id(job_id);
+  result.set_calibration_id(plan.calibration_id);
+  *result.mutable_depth() =
+      SummariseDepth(outcome.depth, outcome.manifest.pixel_size_um, outcome.ground_truth_um, plan.sff.window_px);
+  result.mutable_depth()->set_engine_seconds(outcome.engine_finish_seconds);
+  const fs::path scan_dir = store_->scans_dir() / job_id;
+  std::error_code ec;
+  fs::rename(stack.path(), scan_dir, ec);
+  if (ec) return Status::Internal("cannot store the scan: " + ec.message());
+  stack = OwnedFolder(scan_dir);  // a scan without its published result is removed again
+  INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
+  stack.Release();
+  return result;
+}
+
+StatusOr<v1::JobResult> ProcedureRunner::RunCalibrate(const CalibrateWork& work, const JobContext& context) {
+  Rig& rig = rig_->rig();
+  std::shared_ptr<const CalibrationBundle> previous = calibrations_->active();
+  // A bundle from a camera or projector of another size cannot be extended: start afresh.
+  if (previous && (previous->camera_size != rig.camera().frame_size() ||
+                   previous->projector_size != rig.projector().resolution())) {
+    previous.reset();
+  }
+  auto on_progress = [&](const CalibrationProgress& p) {
+    const double per_step = 1.0 / std::max(1, p.step_count);
+    const double within = p.item_count > 0 ? double(p.item) / p.item_count : 0.0;
+    context.emit([&](v1::JobEvent& e) {
+      e.set_phase(v1::JOB_PHASE_CALIBRATING);
+      e.set_step(p.step);
+      e.set_progress(per_step * (p.step_index + within));
+      e.set_message(p.message);
+    });
+  };
+  INSPECT_ASSIGN_OR_RETURN(CalibrationBundle bundle,
+                           RunCalibration(rig, work.options, previous.get(), on_progress, *context.cancel));
+  INSPECT_ASSIGN_OR_RETURN(v1::Calibration record, calibrations_->Save(&bundle, context.job_id));
+  INSPECT_RETURN_IF_ERROR(calibrations_->Activate(std::make_shared<const CalibrationBundle>(std::move(bundle))));
+  v1::JobResult result;
+  result.set_calibration_id(record.calibration_id());
+  *result.mutable_calibration() = record.summary();
+  return result;
+}
+
+StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& work, const JobContext& context) {
+  EmitPhase(context, v1::JOB_PHASE_PREPARING);
+  INSPECT_ASSIGN_OR_RETURN(StackManifest m, ReadStackManifest(work.stack_dir));
+  auto on_frame = [&](int i, int n, double z, const FrameStatistics& st) {
+    context.emit([&](v1::JobEvent& e) {
+      FillFrameEvent(v1::JOB_PHASE_RECONSTRUCTING, i, n, z, m.frames[i].exposure_us, st, &e);
+    });
+  };
+  INSPECT_ASSIGN_OR_RETURN(DepthResult depth,
+                           ReconstructStackFolder(work.stack_dir, m, work.sff, on_frame, *context.cancel));
+  EmitPhase(context, v1::JOB_PHASE_STORING, 0.92);
+
+  INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher, ResultPublisher::Create(store_, context.job_id));
+  DepthExportMeta meta;
+  meta.pixel_size_um = m.pixel_size_um;
+  meta.description = "depth (um) from reconstruct job " + context.job_id;
+  INSPECT_RETURN_IF_ERROR(publisher.WriteDepth(depth, meta, work.extra_exports));
+  // Ground truth travels with simulated stacks; without it (or unreadable) the summary has no
+  // error figures, and the depth result stands on its own.
+  cv::Mat truth;
+  const fs::path truth_path = work.stack_dir / kGroundTruthDepthName;
+  if (fs::exists(truth_path)) {
+    auto t = ReadDepthTiff(truth_path);
+    if (t.ok()) {
+      truth = *t;
+    } else {
+      spdlog::warn("job {}: ground truth not used: {}", context.job_id, t.status().ToString());
+    }
+  }
+  if (context.cancel->load()) return Status::Cancelled("reconstruction cancelled while storing");
+  v1::JobResult result;
+  result.set_scan_id(work.source_scan_id);
+  *result.mutable_depth() = SummariseDepth(depth, m.pixel_size_um, truth, work.sff.window_px);
+  INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
+  return result;
+}
+
+}  // namespace inspection

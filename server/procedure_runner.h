@@ -1,0 +1,37 @@
+// ProcedureRunner: the server's JobRunner. Runs a job's work through server/procedures and
+// publishes what it produced:
+//  - scan: holds the rig, RunScan with the active calibration (thesis 3.1.2, 5, 6.2), stores
+//    the stack under scans/<job_id>/ and publishes the depth artifacts, ground truth and stack;
+//  - calibrate: holds the rig, RunCalibration carrying over the active bundle's other models
+//    (thesis 4.3, 5.4.1), saves the new bundle and activates it;
+//  - reconstruct: no rig; replays a stack folder through the SFF engine and publishes.
+// Rig jobs move the rig Busy while they run and report their status to the RigController
+// (device errors put it into Error). Called by the JobManager's workers; the JobManager runs
+// one rig job at a time.
+#pragma once
+
+#include "server/calibration_store.h"
+#include "server/data_store.h"
+#include "server/job_runner.h"
+#include "server/rig_controller.h"
+
+namespace inspection {
+
+class ProcedureRunner final : public JobRunner {
+ public:
+  ProcedureRunner(DataStore* store, RigController* rig, CalibrationStore* calibrations)
+      : store_(store), rig_(rig), calibrations_(calibrations) {}
+
+  StatusOr<v1::JobResult> Run(const JobWork& work, const JobContext& context) override;
+
+ private:
+  StatusOr<v1::JobResult> RunScan(const ScanWork& work, const JobContext& context);
+  StatusOr<v1::JobResult> RunCalibrate(const CalibrateWork& work, const JobContext& context);
+  StatusOr<v1::JobResult> RunReconstruct(const ReconstructWork& work, const JobContext& context);
+
+  DataStore* store_;
+  RigController* rig_;
+  CalibrationStore* calibrations_;
+};
+
+}  // namespace inspection

@@ -1,0 +1,274 @@
+// Request mapping: proto requests -> validated domain values; errors name the request field.
+#include "server/request_mapping.h"
+
+#include <algorithm>
+#include <cctype>
+#include <string>
+
+#include "core/texture_pattern.h"
+
+namespace inspection {
+namespace fs = std::filesystem;
+
+namespace {
+
+StatusOr<FocusMeasure> MapFocusMeasure(v1::FocusMeasure m) {
+  switch (m) {
+    case v1::FOCUS_MEASURE_UNSPECIFIED:
+    case v1::FOCUS_MEASURE_TENENGRAD: return FocusMeasure::kTenengrad;
+    case v1::FOCUS_MEASURE_MODIFIED_LAPLACIAN: return FocusMeasure::kModifiedLaplacian;
+    case v1::FOCUS_MEASURE_SUM_MODIFIED_LAPLACIAN: return FocusMeasure::kSumModifiedLaplacian;
+    case v1::FOCUS_MEASURE_GREY_LEVEL_VARIANCE: return FocusMeasure::kGreyLevelVariance;
+    case v1::FOCUS_MEASURE_HELMLI_MEAN: return FocusMeasure::kHelmliMean;
+    case v1::FOCUS_MEASURE_CHEBYSHEV_MOMENTS: return FocusMeasure::kChebyshevMoments;
+    case v1::FOCUS_MEASURE_GREY_LEVEL_LOCAL_VARIANCE: return FocusMeasure::kGreyLevelLocalVariance;
+    default: return Status::InvalidArgument("focus_measure " + std::to_string(int(m)) + " is unknown");
+  }
+}
+
+StatusOr<DepthInterpolation> MapInterpolation(v1::DepthInterpolation i, const std::string& field) {
+  switch (i) {
+    case v1::DEPTH_INTERPOLATION_UNSPECIFIED:
+    case v1::DEPTH_INTERPOLATION_GAUSSIAN: return DepthInterpolation::kGaussian;
+    case v1::DEPTH_INTERPOLATION_MAXIMUM: return DepthInterpolation::kMaximum;
+    case v1::DEPTH_INTERPOLATION_LINE_FIT: return DepthInterpolation::kLineFit;
+    default: return Status::InvalidArgument(field + ".interpolation " + std::to_string(int(i)) + " is unknown");
+  }
+}
+
+StatusOr<DepthExportKind> MapExtraExport(int kind, const std::string& field) {
+  switch (kind) {
+    case v1::ARTIFACT_KIND_DEPTH_PNG16: return DepthExportKind::kDepthPng16;
+    case v1::ARTIFACT_KIND_DEPTH_PLY: return DepthExportKind::kDepthPly;
+    case v1::ARTIFACT_KIND_DEPTH_X3P: return DepthExportKind::kDepthX3p;
+    default: return Status::InvalidArgument(field + " must be ARTIFACT_KIND_DEPTH_PNG16, _PLY or _X3P");
+  }
+}
+
+StatusOr<CalibrationStep> MapCalibrationStep(int step, const std::string& field) {
+  switch (step) {
+    case v1::CALIBRATION_STEP_CAMERA_RESPONSE: return CalibrationStep::kCameraResponse;
+    case v1::CALIBRATION_STEP_PROJECTOR_RESPONSE: return CalibrationStep::kProjectorResponse;
+    case v1::CALIBRATION_STEP_GEOMETRY: return CalibrationStep::kGeometry;
+    case v1::CALIBRATION_STEP_PSF: return CalibrationStep::kPsf;
+    case v1::CALIBRATION_STEP_SCATTER_MATRIX: return CalibrationStep::kScatterMatrix;
+    case v1::CALIBRATION_STEP_INTEGRAL_PSF: return CalibrationStep::kIntegralPsf;
+    default: return Status::InvalidArgument(field + " is not a calibration step");
+  }
+}
+
+bool IsCheckerboardMode(IlluminationMode mode) {
+  return mode == IlluminationMode::kTexture || mode == IlluminationMode::kHfAdapt ||
+         mode == IlluminationMode::kAdaptedHf;
+}
+
+// The checkerboard period of eq. 5.15 for this bundle and focus window; the bundle must hold
+// psf and geometry.
+StatusOr<TexturePeriod> CheckerboardPeriod(const CalibrationBundle& calibration, int window_px) {
+  return ChooseTexturePeriod(calibration.psf->influence_radius_px, calibration.geometry->camera_px_per_projector_px,
+                             window_px);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Shared messages
+
+StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::ReconstructionOptions& o,
+                                                          const std::string& field) {
+  ReconstructionSettings out;
+  SffOptions& s = out.sff;
+  auto fm = MapFocusMeasure(o.focus_measure());
+  if (!fm.ok()) return fm.status().WithContext(field);
+  s.focus_measure = *fm;
+  if (o.window_px() != 0) s.window_px = o.window_px();
+  INSPECT_ASSIGN_OR_RETURN(s.interpolation, MapInterpolation(o.interpolation(), field));
+  if (o.has_min_confidence()) s.min_confidence = o.min_confidence();
+  INSPECT_RETURN_IF_ERROR(s.Validate().WithContext(field));
+  for (int i = 0; i < o.extra_exports_size(); ++i) {
+    INSPECT_ASSIGN_OR_RETURN(DepthExportKind k,
+                             MapExtraExport(o.extra_exports(i), field + ".extra_exports[" + std::to_string(i) + "]"));
+    out.extra_exports.push_back(k);
+  }
+  return out;
+}
+
+StatusOr<std::optional<IlluminationMode>> MapIlluminationMode(v1::IlluminationMode mode) {
+  switch (mode) {
+    case v1::ILLUMINATION_MODE_UNSPECIFIED: return std::optional<IlluminationMode>();
+    case v1::ILLUMINATION_MODE_STD: return std::optional(IlluminationMode::kStd);
+    case v1::ILLUMINATION_MODE_HDR: return std::optional(IlluminationMode::kHdr);
+    case v1::ILLUMINATION_MODE_ADAPT_IT: return std::optional(IlluminationMode::kAdaptIterative);
+    case v1::ILLUMINATION_MODE_ADAPT: return std::optional(IlluminationMode::kAdapt);
+    case v1::ILLUMINATION_MODE_TEXTURE: return std::optional(IlluminationMode::kTexture);
+    case v1::ILLUMINATION_MODE_HF_ADAPT: return std::optional(IlluminationMode::kHfAdapt);
+    case v1::ILLUMINATION_MODE_ADAPTED_HF: return std::optional(IlluminationMode::kAdaptedHf);
+    default: return Status::InvalidArgument("illumination " + std::to_string(int(mode)) + " is unknown");
+  }
+}
+
+StatusOr<IlluminationParams> MapIlluminationParameters(const v1::IlluminationParameters& ip) {
+  IlluminationParams params;
+  if (ip.has_hdr_exposures()) params.hdr_exposures = ip.hdr_exposures();
+  if (ip.has_lambda()) params.lambda = ip.lambda();
+  if (ip.has_gamma()) params.gamma = ip.gamma();
+  if (ip.has_psi()) params.psi = ip.psi();
+  if (ip.has_max_iterations()) params.max_iterations = ip.max_iterations();
+  if (ip.has_target_grey()) params.target_grey = ip.target_grey();
+  // Validate's messages start with the field name ("lambda must be in [0, 2]").
+  Status v = params.Validate();
+  if (!v.ok()) return Status::InvalidArgument("illumination_parameters." + v.message());
+  return params;
+}
+
+IlluminationMode DefaultIlluminationMode(const CalibrationBundle* calibration, int window_px) {
+  // CheckCalibrationFor and the period choice answer "can this mode run?"; their messages only
+  // matter when the client asked for the mode itself.
+  const bool hf_adapt_ready = CheckCalibrationFor(IlluminationMode::kHfAdapt, calibration).ok() &&
+                              CheckerboardPeriod(*calibration, window_px).ok();
+  if (hf_adapt_ready) return IlluminationMode::kHfAdapt;
+  if (CheckCalibrationFor(IlluminationMode::kAdapt, calibration).ok()) return IlluminationMode::kAdapt;
+  return IlluminationMode::kStd;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Job requests
+
+StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& req, const ScanContext& context) {
+  INSPECT_ASSIGN_OR_RETURN(std::optional<IlluminationMode> requested, MapIlluminationMode(req.illumination()));
+  INSPECT_ASSIGN_OR_RETURN(IlluminationParams params, MapIlluminationParameters(req.illumination_parameters()));
+  if (requested) INSPECT_RETURN_IF_ERROR(CheckCalibrationFor(*requested, context.calibration));
+
+  // Range unset (both ends zero) = the rig's default range; step zero = the rig's default step.
+  const ScanDefaults& defaults = context.defaults;
+  const bool default_range = req.z_start_um() == 0.0 && req.z_end_um() == 0.0;
+  const double z0 = default_range ? defaults.z_start_um : req.z_start_um();
+  const double z1 = default_range ? defaults.z_end_um : req.z_end_um();
+  const double dz = req.z_step_um() == 0.0 ? defaults.z_step_um : req.z_step_um();
+  if (req.exposure_us() < 0) return Status::InvalidArgument("exposure_us must be >= 0 (0 = rig default)");
+  const double exposure = req.exposure_us() > 0 ? req.exposure_us() : defaults.exposure_us;
+
+  ScanWork work;
+  INSPECT_ASSIGN_OR_RETURN(work.plan, MakeScanPlan(z0, z1, dz, exposure, *context.stage));
+  INSPECT_ASSIGN_OR_RETURN(ReconstructionSettings rec, MapReconstructionOptions(req.reconstruction(), "reconstruction"));
+  work.plan.sff = rec.sff;
+  work.extra_exports = std::move(rec.extra_exports);
+
+  const int window_px = work.plan.sff.window_px;
+  IlluminationMode mode = requested ? *requested : DefaultIlluminationMode(context.calibration, window_px);
+  if (requested && IsCheckerboardMode(mode)) {
+    auto period = CheckerboardPeriod(*context.calibration, window_px);
+    if (!period.ok()) return period.status().WithContext("reconstruction.window_px " + std::to_string(window_px));
+  }
+  work.plan.mode = mode;
+  work.plan.params = params;
+  return work;
+}
+
+StatusOr<CalibrateWork> MapCalibrateRequest(const v1::CalibrateRequest& req) {
+  CalibrateWork work;
+  for (int i = 0; i < req.steps_size(); ++i) {
+    INSPECT_ASSIGN_OR_RETURN(CalibrationStep step, MapCalibrationStep(req.steps(i), "steps[" + std::to_string(i) + "]"));
+    work.options.steps.push_back(step);
+  }
+  return work;
+}
+
+StatusOr<ReconstructSource> MapReconstructSource(const v1::ReconstructStart& start, int64_t max_upload_bytes) {
+  ReconstructSource source;
+  if (start.has_scan_id()) {
+    if (!IsSafeId(start.scan_id())) {
+      return Status::InvalidArgument("start.scan_id '" + start.scan_id() + "' is malformed");
+    }
+    source.scan_id = start.scan_id();
+    return source;
+  }
+  if (!start.has_upload()) return Status::InvalidArgument("start.source must be scan_id or upload");
+  const v1::StackUpload& upload = start.upload();
+  if (upload.total_bytes() < 0 || upload.total_bytes() > max_upload_bytes) {
+    return Status::InvalidArgument("start.upload.total_bytes must be between 0 and " + std::to_string(max_upload_bytes));
+  }
+  if (upload.file_count() < 0) return Status::InvalidArgument("start.upload.file_count must be >= 0");
+  source.upload = true;
+  source.upload_total_bytes = upload.total_bytes();
+  source.upload_file_count = upload.file_count();
+  return source;
+}
+
+Status CheckUploadChunk(const v1::StackFileChunk& chunk) {
+  const std::string& path = chunk.path();
+  if (path.empty()) return Status::InvalidArgument("file_chunk.path is empty");
+  const fs::path p(path);
+  if (p.is_absolute()) return Status::InvalidArgument("file_chunk.path '" + path + "' must be relative");
+  for (const auto& part : p) {
+    if (part == ".." || part == ".") {
+      return Status::InvalidArgument("file_chunk.path '" + path + "' must not contain '.' or '..'");
+    }
+  }
+  if (int64_t(chunk.data().size()) > kMaxChunkBytes) {
+    return Status::InvalidArgument("file_chunk.data of '" + path + "' exceeds 1 MiB");
+  }
+  return Status::Ok();
+}
+
+StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start, const fs::path& stack_dir,
+                                              std::shared_ptr<const OwnedFolder> upload) {
+  ReconstructWork work;
+  INSPECT_ASSIGN_OR_RETURN(ReconstructionSettings rec, MapReconstructionOptions(start.options(), "options"));
+  work.stack_dir = stack_dir;
+  work.source_scan_id = start.has_scan_id() ? start.scan_id() : std::string();
+  work.upload = std::move(upload);
+  work.sff = rec.sff;
+  work.extra_exports = std::move(rec.extra_exports);
+  return work;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Other requests
+
+bool IsSafeId(const std::string& id) {
+  if (id.empty() || id.size() > 128) return false;
+  for (char c : id) {
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_')) return false;
+  }
+  return true;
+}
+
+Status CheckJobId(const std::string& job_id) {
+  if (job_id.empty()) return Status::InvalidArgument("job_id is empty");
+  return Status::Ok();
+}
+
+StatusOr<JobListQuery> MapListJobsRequest(const v1::ListJobsRequest& req) {
+  if (req.page_size() < 0) return Status::InvalidArgument("page_size must be >= 0");
+  JobListQuery q;
+  q.kind = req.kind();
+  q.state = req.state();
+  q.limit = req.page_size() == 0 ? 50 : std::min(req.page_size(), 500);
+  if (!req.page_token().empty()) {
+    try {
+      q.before_create_ns = std::stoll(req.page_token());
+    } catch (...) {
+      return Status::InvalidArgument("page_token is malformed");
+    }
+  }
+  return q;
+}
+
+std::string NextPageToken(const google::protobuf::Timestamp& t) {
+  return std::to_string(t.seconds() * 1000000000LL + t.nanos());
+}
+
+StatusOr<ArtifactRange> MapDownloadRequest(const v1::DownloadArtifactRequest& req) {
+  if (req.artifact_id().empty()) return Status::InvalidArgument("artifact_id is empty");
+  if (req.offset() < 0) return Status::InvalidArgument("offset must be >= 0");
+  if (req.limit() < 0) return Status::InvalidArgument("limit must be >= 0 (0 = to the end)");
+  return ArtifactRange{req.artifact_id(), req.offset(), req.limit()};
+}
+
+Status CheckSpecimenName(const std::string& specimen) {
+  if (specimen.empty()) return Status::InvalidArgument("specimen is empty");
+  return Status::Ok();
+}
+
+}  // namespace inspection

@@ -1,0 +1,111 @@
+// Request mapping: the one place where API requests (proto) are validated and become domain
+// values (JobWork, engine options, queries). Errors are INVALID_ARGUMENT naming the request field
+// ("reconstruction.window_px", "steps[2]", "start.upload.total_bytes"), or FAILED_PRECONDITION
+// naming the calibration step a mode lacks. No gRPC types and no server state beyond what the
+// caller passes in, so every rule is unit-testable (tests/server/request_mapping_test.cc).
+// Also holds the default-illumination policy (thesis 5.3, 6.2.3).
+//
+// Extending: a new request field gets a Map* helper for its message (or a line in the one that
+// owns it), called from the request's Map*Request function in field order, with its field path
+// in every error.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/calibration_bundle.h"
+#include "core/sff_engine.h"
+#include "core/status.h"
+#include "devices/rig.h"
+#include "inspection/v1/inspection.pb.h"
+#include "server/job_work.h"
+
+namespace inspection {
+
+// ---------------------------------------------------------------------------------------------
+// Shared messages
+
+// ReconstructionOptions -> engine options and the extra exports. `field` is the options' path
+// in the request ("reconstruction" in ScanRequest, "options" in ReconstructStart).
+struct ReconstructionSettings {
+  SffOptions sff;
+  std::vector<DepthExportKind> extra_exports;
+};
+StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::ReconstructionOptions& options,
+                                                          const std::string& field);
+
+// nullopt for ILLUMINATION_MODE_UNSPECIFIED (the server picks, see DefaultIlluminationMode).
+StatusOr<std::optional<IlluminationMode>> MapIlluminationMode(v1::IlluminationMode mode);
+// Unset fields keep IlluminationParams' defaults; errors name "illumination_parameters.<field>".
+StatusOr<IlluminationParams> MapIlluminationParameters(const v1::IlluminationParameters& parameters);
+
+// Default illumination when a scan names none, for an unknown specimen: HF+ADAPT, which handles
+// both high dynamic range and missing texture (thesis 5.3, 6.2.3), when `calibration` holds its
+// models and a checkerboard period fits the focus window (eq. 5.15); else ADAPT when calibrated
+// for it; else STD. `calibration` may be null (uncalibrated rig: STD).
+IlluminationMode DefaultIlluminationMode(const CalibrationBundle* calibration, int window_px);
+
+// ---------------------------------------------------------------------------------------------
+// Job requests
+
+// What a scan request is checked against: the rig's defaults and travel, and the active
+// calibration (may be null).
+struct ScanContext {
+  ScanDefaults defaults;
+  const Stage* stage = nullptr;
+  const CalibrationBundle* calibration = nullptr;
+};
+// Checks, in order: illumination, illumination_parameters, the mode's calibration models,
+// exposure_us, the z range (z_start_um, z_end_um, z_step_um), reconstruction, and for the
+// checkerboard modes the focus window against the texture period.
+StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& request, const ScanContext& context);
+
+StatusOr<CalibrateWork> MapCalibrateRequest(const v1::CalibrateRequest& request);
+
+// Where a Reconstruct request's stack comes from, checked before any byte is received.
+struct ReconstructSource {
+  std::string scan_id;     // a stored scan (an id NewId could have made), or
+  bool upload = false;     // the stack follows as file chunks
+  int64_t upload_total_bytes = 0;  // 0 = not announced
+  int upload_file_count = 0;       // 0 = not announced
+};
+StatusOr<ReconstructSource> MapReconstructSource(const v1::ReconstructStart& start, int64_t max_upload_bytes);
+// One chunk of an uploaded stack on its own (path relative and plain, data at most
+// kMaxChunkBytes); the order of chunks is the receiver's to check.
+inline constexpr int64_t kMaxChunkBytes = 1 << 20;  // 1 MiB: far below gRPC's 4 MiB message limit
+Status CheckUploadChunk(const v1::StackFileChunk& chunk);
+// The work for a stack folder that is in place and validated; `upload` owns it when uploaded.
+StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start,
+                                              const std::filesystem::path& stack_dir,
+                                              std::shared_ptr<const OwnedFolder> upload);
+
+// ---------------------------------------------------------------------------------------------
+// Other requests
+
+// An id that becomes a folder name: what NewId produces (letters, digits, '-', '_').
+bool IsSafeId(const std::string& id);
+// GetJob, WatchJob, CancelJob.
+Status CheckJobId(const std::string& job_id);
+
+struct JobListQuery {
+  v1::JobKind kind = v1::JOB_KIND_UNSPECIFIED;    // UNSPECIFIED = all
+  v1::JobState state = v1::JOB_STATE_UNSPECIFIED;  // UNSPECIFIED = all
+  int limit = 50;
+  int64_t before_create_ns = 0;  // 0 = from the newest
+};
+StatusOr<JobListQuery> MapListJobsRequest(const v1::ListJobsRequest& request);
+// The page token of a page that ends with the job created at `last_create_time`.
+std::string NextPageToken(const google::protobuf::Timestamp& last_create_time);
+
+struct ArtifactRange {
+  std::string artifact_id;
+  int64_t offset = 0;
+  int64_t limit = 0;  // 0 = to the end
+};
+StatusOr<ArtifactRange> MapDownloadRequest(const v1::DownloadArtifactRequest& request);
+
+Status CheckSpecimenName(const std::string& specimen);
+
+}  // namespace inspection

@@ -1,0 +1,360 @@
+// Uncertainty coverage on the simulated rig (issue 13): does the expanded uncertainty (k = 2) of
+// every measurement cover >= 95 % of its deviations from the truth over repeated scans?
+// Scans each specimen with different seeds (texture, camera noise, stage errors differ), measures
+// it through core/measurement.h with the error model of core/depth_noise_model.h, and compares
+// with the same measurement on the ground-truth depth map. The rig's z linearity is characterised
+// first, once, on a scan of the SKEW10 plane with a seed no test scan uses (as a real rig would be
+// on a tilted optical flat). Prints per specimen and measurement: bias and sigma of the
+// deviations, mean U, coverage; then the coverage per parameter and overall, also with the
+// uncharacterised linearity bound for comparison.
+//
+//   uncertainty-coverage [--seeds N] [--camera WxH] [--samples N]
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/measurement.h"
+#include "core/z_linearity.h"
+#include "devices/sim/simulated_rig.h"
+#include "server/procedures/scan_procedure.h"
+
+namespace fs = std::filesystem;
+using namespace inspection;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+struct Args {
+  int seeds = 20;
+  cv::Size camera{256, 192};
+  int samples = 32;
+};
+
+struct Case {
+  std::string specimen;  // built-in or file: scene
+  std::vector<std::pair<std::string, MeasurementSpec>> specs;  // label, spec
+};
+
+struct Scan {
+  cv::Mat depth_um, truth_um;
+  std::vector<double> z_um;
+  int window_px = 7;
+};
+
+StatusOr<Scan> ScanOnce(Rig& rig, const std::string& specimen, const fs::path& work) {
+  INSPECT_RETURN_IF_ERROR(rig.simulation()->SetSpecimen(specimen));
+  const ScanDefaults d = rig.scan_defaults();
+  INSPECT_ASSIGN_OR_RETURN(ScanPlan plan, MakeScanPlan(d.z_start_um, d.z_end_um, d.z_step_um, d.exposure_us, rig.stage()));
+  std::atomic<bool> cancel{false};
+  const fs::path dir = work / "stack";
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+  INSPECT_ASSIGN_OR_RETURN(ScanOutcome out, RunScan(rig, plan, dir, nullptr, cancel));
+  fs::remove_all(dir, ec);
+  return Scan{out.depth.depth_um, out.ground_truth_um, plan.z_um, plan.sff.window_px};
+}
+
+// Mean-1 log-normal texture like the built-in specimens' (fine grain plus mottling), 16-bit PNG.
+void WriteTexture(const fs::path& path, cv::Size size, unsigned seed) {
+  cv::Mat fine(size, CV_32F), coarse(size, CV_32F);
+  cv::RNG rng(seed);
+  rng.fill(fine, cv::RNG::NORMAL, 0.0, 1.0);
+  rng.fill(coarse, cv::RNG::NORMAL, 0.0, 1.0);
+  cv::GaussianBlur(fine, fine, cv::Size(0, 0), 1.0);
+  cv::GaussianBlur(coarse, coarse, cv::Size(0, 0), 8.0);
+  cv::Scalar m, s;
+  cv::meanStdDev(fine, m, s);
+  fine = (fine - m[0]) / s[0];
+  cv::meanStdDev(coarse, m, s);
+  coarse = (coarse - m[0]) / s[0];
+  cv::Mat t = 0.35 * fine + 0.15 * coarse;
+  cv::exp(t, t);
+  t *= 20000.0 / cv::mean(t)[0];
+  cv::Mat t16;
+  t.convertTo(t16, CV_16U);
+  cv::imwrite(path.string(), t16);
+}
+
+// A user scene (devices/sim/specimen.h) with height z(x_um, y_um) at the camera size.
+std::string WriteScene(const fs::path& dir, const std::string& name, cv::Size size, double px,
+                       const std::function<double(double, double)>& z, unsigned texture_seed) {
+  fs::create_directories(dir);
+  cv::Mat h(size, CV_32F);
+  for (int r = 0; r < size.height; ++r)
+    for (int c = 0; c < size.width; ++c) h.at<float>(r, c) = float(z((c + 0.5) * px, (r + 0.5) * px));
+  cv::imwrite((dir / (name + "_height.tiff")).string(), h);
+  WriteTexture(dir / (name + "_texture.png"), size, texture_seed);
+  std::ofstream((dir / (name + ".json")).string())
+      << "{\"height\": \"" << name << "_height.tiff\", \"texture\": \"" << name << "_texture.png\"}\n";
+  return "file:" + (dir / (name + ".json")).string();
+}
+
+MeasurementSpec Spec(MeasurementKind kind, RegionOfInterest roi) {
+  MeasurementSpec s;
+  s.kind = kind;
+  s.roi = roi;
+  return s;
+}
+
+std::vector<Case> Cases(const Args& a, const fs::path& work, double px, int border) {
+  const int w = a.camera.width, h = a.camera.height, b = border;
+  const RegionOfInterest inner = RegionOfInterest::Rectangle(b, b, w - 2 * b, h - 2 * b);
+  std::vector<Case> cases;
+  {
+    Case c{"plane", {}};
+    for (MeasurementKind k : {MeasurementKind::kSa, MeasurementKind::kSq, MeasurementKind::kSp, MeasurementKind::kSv,
+                              MeasurementKind::kSz, MeasurementKind::kFlatness, MeasurementKind::kTilt}) {
+      c.specs.push_back({MeasurementKindName(k), Spec(k, inner)});
+    }
+    cases.push_back(c);
+  }
+  {
+    Case c{"skew5", {}};
+    for (MeasurementKind k : {MeasurementKind::kTilt, MeasurementKind::kFlatness, MeasurementKind::kSq}) {
+      c.specs.push_back({MeasurementKindName(k), Spec(k, inner)});
+    }
+    cases.push_back(c);
+  }
+  {
+    // The 1 um step runs down the image centre; 12 px either side are left out (the focus window
+    // straddles the edge there), as ISO 5436-1 leaves out the edge zones.
+    Case c{"step1um", {}};
+    const RegionOfInterest left = RegionOfInterest::Rectangle(b, b, w / 2 - 12 - b, h - 2 * b);
+    const RegionOfInterest right = RegionOfInterest::Rectangle(w / 2 + 12, b, w / 2 - 12 - b, h - 2 * b);
+    MeasurementSpec step = Spec(MeasurementKind::kStepHeight, right);
+    step.reference_roi = left;
+    c.specs.push_back({"step_height", step});
+    MeasurementSpec sep = step;
+    sep.step.fit = StepHeightFit::kSeparatePlanes;
+    c.specs.push_back({"step_height(sep)", sep});
+    c.specs.push_back({"Sa", Spec(MeasurementKind::kSa, left)});
+    cases.push_back(c);
+  }
+  {
+    // 2 um cosine, 4 periods across the field, along x; the region holds 3 whole periods.
+    const double lambda_px = w / 4.0;
+    const std::string scene = WriteScene(work / "scenes", "cosine", a.camera, px, [&](double x, double) {
+      return 210.0 + 2.0 * std::cos(2 * kPi * x / (lambda_px * px));
+    }, 101);
+    Case c{scene, {}};
+    const RegionOfInterest periods = RegionOfInterest::Rectangle(lambda_px / 2, b, 3 * lambda_px, h - 2 * b);
+    for (MeasurementKind k : {MeasurementKind::kSa, MeasurementKind::kSq, MeasurementKind::kSp, MeasurementKind::kSv,
+                              MeasurementKind::kSz, MeasurementKind::kSsk, MeasurementKind::kSku}) {
+      c.specs.push_back({MeasurementKindName(k), Spec(k, periods)});
+    }
+    cases.push_back(c);
+  }
+  {
+    // Convex sphere cap (lens), R = 8 fields, and a cylinder (axis along y), R = 4 fields.
+    const double field = w * px, rs = 8 * field, cx = 0.5 * w * px, cy = 0.5 * h * px;
+    const std::string sphere = WriteScene(work / "scenes", "sphere", a.camera, px, [&](double x, double y) {
+      return 200.0 + std::sqrt(rs * rs - (x - cx) * (x - cx) - (y - cy) * (y - cy)) - (rs - 12.0);
+    }, 102);
+    Case c{sphere, {}};
+    c.specs.push_back({"radius", Spec(MeasurementKind::kRadius, inner)});
+    MeasurementSpec vol = Spec(MeasurementKind::kVolumeAbove, inner);
+    vol.volume.reference = VolumeReference::kHeight;
+    vol.volume.reference_height_um = 209.0;  // the cap's top 3 um
+    c.specs.push_back({"volume_above", vol});
+    cases.push_back(c);
+    const double rc = 4 * field;
+    const std::string cyl = WriteScene(work / "scenes", "cylinder", a.camera, px, [&](double x, double) {
+      return 200.0 + std::sqrt(rc * rc - (x - cx) * (x - cx)) - (rc - 12.0);
+    }, 103);
+    Case k{cyl, {}};
+    MeasurementSpec r = Spec(MeasurementKind::kRadius, inner);
+    r.form.model = FormModel::kCylinder;
+    k.specs.push_back({"radius", r});
+    cases.push_back(k);
+  }
+  return cases;
+}
+
+struct Tally {
+  std::vector<double> dev, u;
+  void Add(double d, double uu) {
+    dev.push_back(d);
+    u.push_back(uu);
+  }
+  int Covered() const {
+    int n = 0;
+    for (size_t i = 0; i < dev.size(); ++i) n += std::abs(dev[i]) <= 2.0 * u[i];
+    return n;
+  }
+};
+
+std::string Short(const std::string& specimen) {
+  const size_t slash = specimen.find_last_of('/');
+  if (slash == std::string::npos) return specimen;
+  std::string s = specimen.substr(slash + 1);
+  return s.substr(0, s.find('.'));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Args a;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--seeds" && i + 1 < argc) a.seeds = std::atoi(argv[++i]);
+    else if (arg == "--samples" && i + 1 < argc) a.samples = std::atoi(argv[++i]);
+    else if (arg == "--camera" && i + 1 < argc && std::sscanf(argv[++i], "%dx%d", &a.camera.width, &a.camera.height) == 2) {
+    } else {
+      std::fprintf(stderr, "usage: uncertainty-coverage [--seeds N] [--camera WxH] [--samples N]\n");
+      return 2;
+    }
+  }
+  const fs::path work = fs::temp_directory_path() / ("uncertainty_coverage_" + std::to_string(::getpid()));
+  fs::create_directories(work);
+  SimulatedRigOptions rig_options;
+  rig_options.camera_size = a.camera;
+  const double px = rig_options.pixel_size_um;
+
+  // 1. Characterise the z linearity on SKEW10 (seed 100000: not a test seed).
+  rig_options.seed = 100000;
+  rig_options.specimen = "skew10";
+  auto cal_rig = CreateSimulatedRig(rig_options);
+  if (!cal_rig.ok()) {
+    std::fprintf(stderr, "%s\n", cal_rig.status().ToString().c_str());
+    return 1;
+  }
+  auto cal = ScanOnce(**cal_rig, "skew10", work);
+  if (!cal.ok()) {
+    std::fprintf(stderr, "calibration scan: %s\n", cal.status().ToString().c_str());
+    return 1;
+  }
+  const int border = cal->window_px + 1;
+  cv::Mat inner(a.camera, CV_8UC1, cv::Scalar(0));
+  inner(cv::Rect(border, border, a.camera.width - 2 * border, a.camera.height - 2 * border)).setTo(255);
+  auto linearity = CharacteriseZLinearity(cal->depth_um, inner, px, *ZGrid::Create(cal->z_um));
+  if (!linearity.ok()) {
+    std::fprintf(stderr, "z linearity: %s\n", linearity.status().ToString().c_str());
+    return 1;
+  }
+  std::printf("z linearity (SKEW10, seed 100000, %dx%d): max %.4f, rms %.4f of the step (%.3f / %.3f um at %.1f um)\n  table:",
+              a.camera.width, a.camera.height, linearity->MaxAbs(), linearity->Rms(),
+              linearity->MaxAbs() * linearity->characterised_step_um, linearity->Rms() * linearity->characterised_step_um,
+              linearity->characterised_step_um);
+  for (double v : linearity->bias_of_step) std::printf(" %+.3f", v);
+  std::printf("\n\n");
+
+  // 2. Repeated scans of each specimen.
+  const std::vector<Case> cases = Cases(a, work, px, border);
+  std::map<std::string, Tally> by_case, by_case_unchar;  // "specimen|label"
+  std::map<std::string, std::string> truth_of;
+  double scan_s = 0, measure_s = 0;
+  int scans = 0, failures = 0;
+  for (int seed = 1; seed <= a.seeds; ++seed) {
+    rig_options.seed = uint64_t(seed);
+    rig_options.specimen = "plane";
+    auto rig = CreateSimulatedRig(rig_options);
+    if (!rig.ok()) return 1;
+    for (const Case& c : cases) {
+      const auto t0 = std::chrono::steady_clock::now();
+      auto scan = ScanOnce(**rig, c.specimen, work);
+      const auto t1 = std::chrono::steady_clock::now();
+      if (!scan.ok()) {
+        std::fprintf(stderr, "%s seed %d: %s\n", Short(c.specimen).c_str(), seed, scan.status().ToString().c_str());
+        return 1;
+      }
+      ++scans;
+      scan_s += std::chrono::duration<double>(t1 - t0).count();
+      std::vector<MeasurementSpec> specs;
+      for (const auto& s : c.specs) specs.push_back(s.second);
+      MeasurementContext ctx;
+      ctx.depth_um = scan->depth_um;
+      ctx.pixel_size_um = px;
+      ctx.noise.window_px = scan->window_px;
+      ctx.noise.z_positions_um = scan->z_um;
+      ctx.noise.linearity = *linearity;
+      ctx.noise.stage_repeatability_um = rig_options.stage_repeatability_um;
+      ctx.monte_carlo.samples = a.samples;
+      const auto t2 = std::chrono::steady_clock::now();
+      const auto measured = MeasureAll(specs, ctx);
+      measure_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t2).count();
+      MeasurementContext unchar = ctx;
+      unchar.noise.linearity = ZLinearity::Uncharacterised();
+      const auto measured_unchar = MeasureAll(specs, unchar);
+      MeasurementContext truth_ctx = ctx;
+      truth_ctx.depth_um = scan->truth_um;
+      truth_ctx.with_uncertainty = false;
+      const auto truth = MeasureAll(specs, truth_ctx);
+      for (size_t i = 0; i < specs.size(); ++i) {
+        const std::string key = Short(c.specimen) + "|" + c.specs[i].first;
+        if (!measured[i].ok() || !truth[i].ok() || !measured_unchar[i].ok()) {
+          ++failures;
+          std::fprintf(stderr, "%s seed %d: %s\n", key.c_str(), seed,
+                       (!measured[i].ok() ? measured[i].status() : !truth[i].ok() ? truth[i].status()
+                                                                                  : measured_unchar[i].status())
+                           .ToString().c_str());
+          continue;
+        }
+        if (!std::isfinite(truth[i]->value)) continue;  // e.g. Ssk of a perfect plane (Sq = 0)
+        const double dev = measured[i]->value - truth[i]->value;
+        by_case[key].Add(dev, measured[i]->uncertainty.standard_uncertainty);
+        by_case_unchar[key].Add(measured_unchar[i]->value - truth[i]->value,
+                                measured_unchar[i]->uncertainty.standard_uncertainty);
+        char buf[64];
+        std::snprintf(buf, sizeof buf, "%.5g %s", truth[i]->value, measured[i]->unit.c_str());
+        truth_of[key] = buf;
+      }
+    }
+    std::fprintf(stderr, "seed %d/%d done\n", seed, a.seeds);
+  }
+
+  // 3. Report.
+  std::printf("%d seeds x %zu specimens (%dx%d camera, STD, %d Monte Carlo samples): scan %.2f s, measurements %.2f s per scan\n\n",
+              a.seeds, cases.size(), a.camera.width, a.camera.height, a.samples, scan_s / scans, measure_s / scans);
+  std::printf("%-10s %-17s %14s %11s %11s %11s %8s %9s | %10s %8s\n", "specimen", "measurement", "truth", "bias",
+              "sigma", "mean U", "covered", "max|d|/U", "U uncharac", "covered");
+  std::map<std::string, std::pair<int, int>> by_param, by_param_unchar;
+  int all_cov = 0, all_n = 0, all_cov_u = 0;
+  for (const auto& [key, t] : by_case) {
+    const Tally& tu = by_case_unchar[key];
+    const size_t bar = key.find('|');
+    const std::string specimen = key.substr(0, bar), label = key.substr(bar + 1);
+    double m = 0, s2 = 0, um = 0, umu = 0, worst = 0;
+    const int n = int(t.dev.size());
+    for (int i = 0; i < n; ++i) {
+      m += t.dev[i] / n;
+      um += 2.0 * t.u[i] / n;
+      umu += 2.0 * tu.u[i] / n;
+      worst = std::max(worst, std::abs(t.dev[i]) / (2.0 * t.u[i]));
+    }
+    for (int i = 0; i < n; ++i) s2 += (t.dev[i] - m) * (t.dev[i] - m);
+    const double sd = n > 1 ? std::sqrt(s2 / (n - 1)) : 0.0;
+    std::printf("%-10s %-17s %14s %+11.4g %11.4g %11.4g %3d/%-3d %9.2f | %10.4g %3d/%-3d\n", specimen.c_str(),
+                label.c_str(), truth_of[key].c_str(), m, sd, um, t.Covered(), n, worst, umu, tu.Covered(), n);
+    const std::string param = label.substr(0, label.find('('));
+    by_param[param].first += t.Covered();
+    by_param[param].second += n;
+    by_param_unchar[param].first += tu.Covered();
+    by_param_unchar[param].second += n;
+    all_cov += t.Covered();
+    all_cov_u += tu.Covered();
+    all_n += n;
+  }
+  std::printf("\ncoverage of |deviation| <= U (k = 2) per parameter, all specimens:\n");
+  for (const auto& [param, c] : by_param) {
+    std::printf("  %-14s %5.1f %%  (%d/%d)   uncharacterised linearity: %5.1f %%\n", param.c_str(),
+                100.0 * c.first / c.second, c.first, c.second,
+                100.0 * by_param_unchar[param].first / by_param_unchar[param].second);
+  }
+  std::printf("  %-14s %5.1f %%  (%d/%d)   uncharacterised linearity: %5.1f %%\n", "all", 100.0 * all_cov / all_n,
+              all_cov, all_n, 100.0 * all_cov_u / all_n);
+  if (failures) std::printf("measurement failures: %d\n", failures);
+  std::error_code ec;
+  fs::remove_all(work, ec);
+  return 0;
+}

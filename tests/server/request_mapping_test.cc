@@ -1,0 +1,328 @@
+// Request mapping without a server: requests become the work and options the engine and the
+// procedures get, every bad field is INVALID_ARGUMENT naming it, and the default illumination
+// falls back HF+ADAPT -> ADAPT -> STD with what the active calibration holds (thesis 5.3, 6.2.3,
+// eq. 5.15).
+#include "server/request_mapping.h"
+
+#include <string>
+
+#include <gtest/gtest.h>
+
+namespace inspection {
+namespace {
+
+// Travel 0..400 um; never moves (mapping only reads the limits).
+class TravelOnlyStage final : public Stage {
+ public:
+  DeviceInfo info() const override { return {"stage", "test", "", "", true, ""}; }
+  double min_z_um() const override { return 0.0; }
+  double max_z_um() const override { return 400.0; }
+  Status Home() override { return Status::Ok(); }
+  Status MoveTo(double) override { return Status::Ok(); }
+  StatusOr<double> position_um() override { return 0.0; }
+};
+
+void ExpectInvalidNaming(const Status& s, const std::string& field) {
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << field << ": " << s.ToString();
+  EXPECT_NE(s.message().find(field), std::string::npos) << field << ": " << s.message();
+}
+
+// A bundle holding the models of `steps` (placeholders: the mapping only asks which models are
+// present), with sigma_p 3 px and 2 camera px per projector px: the checkerboard of eq. 5.15
+// then needs t/2 = 8 px, which fits window 7 (8 < 7 + 2) but not window 5.
+CalibrationBundle BundleWith(std::initializer_list<CalibrationStep> steps) {
+  CalibrationBundle b;
+  for (CalibrationStep s : steps) {
+    switch (s) {
+      case CalibrationStep::kCameraResponse: b.camera_response.emplace(); break;
+      case CalibrationStep::kProjectorResponse: b.projector_response.emplace(); break;
+      case CalibrationStep::kGeometry:
+        b.geometry.emplace();
+        b.geometry->camera_px_per_projector_px = 2.0;
+        break;
+      case CalibrationStep::kPsf:
+        b.psf.emplace();
+        b.psf->influence_radius_px = 3.0;
+        break;
+      case CalibrationStep::kScatterMatrix: b.scatter.emplace(); break;
+      case CalibrationStep::kIntegralPsf: b.integral_psf.emplace(); break;
+    }
+  }
+  return b;
+}
+
+const std::initializer_list<CalibrationStep> kAdaptSteps = {
+    CalibrationStep::kCameraResponse, CalibrationStep::kProjectorResponse, CalibrationStep::kScatterMatrix};
+const std::initializer_list<CalibrationStep> kHfAdaptSteps = {
+    CalibrationStep::kCameraResponse, CalibrationStep::kProjectorResponse, CalibrationStep::kScatterMatrix,
+    CalibrationStep::kGeometry, CalibrationStep::kPsf};
+
+class ScanMappingTest : public ::testing::Test {
+ protected:
+  ScanContext Context(const CalibrationBundle* calibration = nullptr) {
+    ScanContext c;
+    c.defaults.z_start_um = 100.0;
+    c.defaults.z_end_um = 200.0;
+    c.defaults.z_step_um = 10.0;
+    c.defaults.exposure_us = 5000.0;
+    c.stage = &stage_;
+    c.calibration = calibration;
+    return c;
+  }
+  TravelOnlyStage stage_;
+};
+
+TEST_F(ScanMappingTest, EmptyRequestTakesTheRigDefaults) {
+  auto work = MapScanRequest(v1::ScanRequest(), Context());
+  ASSERT_TRUE(work.ok()) << work.status().ToString();
+  const ScanPlan& plan = work->plan;
+  ASSERT_EQ(plan.z_um.size(), 11u);  // 100, 110, ..., 200
+  EXPECT_DOUBLE_EQ(plan.z_um.front(), 100.0);
+  EXPECT_DOUBLE_EQ(plan.z_um.back(), 200.0);
+  EXPECT_DOUBLE_EQ(plan.exposure_us, 5000.0);
+  EXPECT_EQ(plan.mode, IlluminationMode::kStd);  // uncalibrated default
+  EXPECT_EQ(plan.sff.focus_measure, FocusMeasure::kTenengrad);
+  EXPECT_EQ(plan.sff.interpolation, DepthInterpolation::kGaussian);
+  EXPECT_EQ(plan.sff.window_px, SffOptions().window_px);
+  EXPECT_TRUE(work->extra_exports.empty());
+  EXPECT_TRUE(plan.calibration_id.empty());  // filled in when the scan starts
+}
+
+TEST_F(ScanMappingTest, RequestFieldsReachThePlan) {
+  v1::ScanRequest r;
+  r.set_z_start_um(300.0);
+  r.set_z_end_um(280.0);
+  r.set_z_step_um(5.0);
+  r.set_exposure_us(1234.0);
+  r.set_illumination(v1::ILLUMINATION_MODE_HDR);
+  r.mutable_illumination_parameters()->set_hdr_exposures(4);
+  r.mutable_reconstruction()->set_focus_measure(v1::FOCUS_MEASURE_SUM_MODIFIED_LAPLACIAN);
+  r.mutable_reconstruction()->set_window_px(9);
+  r.mutable_reconstruction()->set_interpolation(v1::DEPTH_INTERPOLATION_LINE_FIT);
+  r.mutable_reconstruction()->set_min_confidence(0.3);
+  r.mutable_reconstruction()->add_extra_exports(v1::ARTIFACT_KIND_DEPTH_X3P);
+  r.mutable_reconstruction()->add_extra_exports(v1::ARTIFACT_KIND_DEPTH_PLY);
+  const CalibrationBundle camera_only = BundleWith({CalibrationStep::kCameraResponse});
+  auto work = MapScanRequest(r, Context(&camera_only));
+  ASSERT_TRUE(work.ok()) << work.status().ToString();
+  EXPECT_EQ(work->plan.z_um, (std::vector<double>{300.0, 295.0, 290.0, 285.0, 280.0}));
+  EXPECT_DOUBLE_EQ(work->plan.exposure_us, 1234.0);
+  EXPECT_EQ(work->plan.mode, IlluminationMode::kHdr);
+  EXPECT_EQ(work->plan.params.hdr_exposures, 4);
+  EXPECT_EQ(work->plan.sff.focus_measure, FocusMeasure::kSumModifiedLaplacian);
+  EXPECT_EQ(work->plan.sff.window_px, 9);
+  EXPECT_EQ(work->plan.sff.interpolation, DepthInterpolation::kLineFit);
+  EXPECT_DOUBLE_EQ(work->plan.sff.min_confidence, 0.3);
+  EXPECT_EQ(work->extra_exports, (std::vector<DepthExportKind>{DepthExportKind::kDepthX3p, DepthExportKind::kDepthPly}));
+}
+
+TEST_F(ScanMappingTest, BadFieldsAreNamed) {
+  struct Case {
+    void (*mutate)(v1::ScanRequest&);
+    const char* field;
+  };
+  const Case cases[] = {
+      {[](v1::ScanRequest& r) { r.set_illumination(static_cast<v1::IlluminationMode>(42)); }, "illumination"},
+      {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_lambda(2.5); }, "illumination_parameters.lambda"},
+      {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_target_grey(0); },
+       "illumination_parameters.target_grey"},
+      {[](v1::ScanRequest& r) { r.set_exposure_us(-1); }, "exposure_us"},
+      {[](v1::ScanRequest& r) { r.set_z_step_um(-2); }, "z_step_um"},
+      {[](v1::ScanRequest& r) {
+         r.set_z_start_um(-50);
+         r.set_z_end_um(100);
+       },
+       "z_start_um"},
+      {[](v1::ScanRequest& r) {
+         r.set_z_start_um(100);
+         r.set_z_end_um(500);
+       },
+       "z_end_um"},
+      {[](v1::ScanRequest& r) { r.mutable_reconstruction()->set_window_px(4); }, "reconstruction: window_px"},
+      {[](v1::ScanRequest& r) { r.mutable_reconstruction()->set_focus_measure(static_cast<v1::FocusMeasure>(99)); },
+       "reconstruction: focus_measure"},
+      {[](v1::ScanRequest& r) {
+         r.mutable_reconstruction()->set_interpolation(static_cast<v1::DepthInterpolation>(9));
+       },
+       "reconstruction.interpolation"},
+      {[](v1::ScanRequest& r) { r.mutable_reconstruction()->set_min_confidence(1.5); },
+       "reconstruction: min_confidence"},
+      {[](v1::ScanRequest& r) {
+         r.mutable_reconstruction()->add_extra_exports(v1::ARTIFACT_KIND_DEPTH_PLY);
+         r.mutable_reconstruction()->add_extra_exports(v1::ARTIFACT_KIND_STACK_ZIP);
+       },
+       "reconstruction.extra_exports[1]"},
+  };
+  for (const Case& c : cases) {
+    v1::ScanRequest r;
+    c.mutate(r);
+    auto work = MapScanRequest(r, Context());
+    ASSERT_FALSE(work.ok()) << c.field;
+    ExpectInvalidNaming(work.status(), c.field);
+  }
+}
+
+TEST_F(ScanMappingTest, RequestedModeWithoutItsModelsNamesTheMissingStep) {
+  const CalibrationBundle adapt_only = BundleWith(kAdaptSteps);
+  v1::ScanRequest r;
+  r.set_illumination(v1::ILLUMINATION_MODE_TEXTURE);
+  auto work = MapScanRequest(r, Context(&adapt_only));
+  ASSERT_FALSE(work.ok());
+  EXPECT_EQ(work.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(work.status().message().find("geometry, psf"), std::string::npos) << work.status().message();
+
+  // Calibrated, but the focus window is too small for the checkerboard (eq. 5.15).
+  const CalibrationBundle full = BundleWith(kHfAdaptSteps);
+  r.set_illumination(v1::ILLUMINATION_MODE_HF_ADAPT);
+  r.mutable_reconstruction()->set_window_px(5);
+  work = MapScanRequest(r, Context(&full));
+  ASSERT_FALSE(work.ok());
+  EXPECT_EQ(work.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_EQ(work.status().message().rfind("reconstruction.window_px 5: ", 0), 0u) << work.status().message();
+}
+
+TEST_F(ScanMappingTest, DefaultIlluminationFallsBackByCalibrationContents) {
+  const CalibrationBundle none;
+  const CalibrationBundle camera_only = BundleWith({CalibrationStep::kCameraResponse});
+  const CalibrationBundle adapt = BundleWith(kAdaptSteps);
+  const CalibrationBundle full = BundleWith(kHfAdaptSteps);
+  struct Case {
+    const CalibrationBundle* calibration;
+    int window_px;
+    IlluminationMode expected;
+  };
+  const Case cases[] = {
+      {nullptr, 7, IlluminationMode::kStd},      {&none, 7, IlluminationMode::kStd},
+      {&camera_only, 7, IlluminationMode::kStd}, {&adapt, 7, IlluminationMode::kAdapt},
+      {&full, 7, IlluminationMode::kHfAdapt},    {&full, 5, IlluminationMode::kAdapt},  // window too small
+  };
+  for (const Case& c : cases) {
+    EXPECT_EQ(DefaultIlluminationMode(c.calibration, c.window_px), c.expected)
+        << "window " << c.window_px << ", expected " << IlluminationModeName(c.expected);
+    // The scan request with no mode gets the same, and never an error for the fallback.
+    v1::ScanRequest r;
+    r.mutable_reconstruction()->set_window_px(c.window_px);
+    auto work = MapScanRequest(r, Context(c.calibration));
+    ASSERT_TRUE(work.ok()) << work.status().ToString();
+    EXPECT_EQ(work->plan.mode, c.expected);
+  }
+}
+
+TEST(CalibrateMappingTest, StepsMapInOrderAndBadOnesAreNamed) {
+  v1::CalibrateRequest r;
+  auto all = MapCalibrateRequest(r);
+  ASSERT_TRUE(all.ok());
+  EXPECT_TRUE(all->options.steps.empty());  // empty = all six (RunCalibration)
+
+  r.add_steps(v1::CALIBRATION_STEP_SCATTER_MATRIX);
+  r.add_steps(v1::CALIBRATION_STEP_CAMERA_RESPONSE);
+  auto two = MapCalibrateRequest(r);
+  ASSERT_TRUE(two.ok());
+  EXPECT_EQ(two->options.steps,
+            (std::vector<CalibrationStep>{CalibrationStep::kScatterMatrix, CalibrationStep::kCameraResponse}));
+
+  r.add_steps(v1::CALIBRATION_STEP_UNSPECIFIED);
+  ExpectInvalidNaming(MapCalibrateRequest(r).status(), "steps[2]");
+  r.set_steps(2, static_cast<v1::CalibrationStep>(77));
+  ExpectInvalidNaming(MapCalibrateRequest(r).status(), "steps[2]");
+}
+
+TEST(ReconstructMappingTest, SourceIsAStoredScanOrAnAnnouncedUpload) {
+  v1::ReconstructStart s;
+  ExpectInvalidNaming(MapReconstructSource(s, 1000).status(), "start.source");
+  s.set_scan_id("scan-0123abcd");
+  auto scan = MapReconstructSource(s, 1000);
+  ASSERT_TRUE(scan.ok());
+  EXPECT_EQ(scan->scan_id, "scan-0123abcd");
+  EXPECT_FALSE(scan->upload);
+  for (const char* bad : {"../scans/x", "a/b", "", "scan id"}) {
+    s.set_scan_id(bad);
+    ExpectInvalidNaming(MapReconstructSource(s, 1000).status(), "start.scan_id");
+  }
+
+  s.mutable_upload()->set_file_count(3);
+  s.mutable_upload()->set_total_bytes(1000);
+  auto upload = MapReconstructSource(s, 1000);
+  ASSERT_TRUE(upload.ok());
+  EXPECT_TRUE(upload->upload);
+  EXPECT_EQ(upload->upload_total_bytes, 1000);
+  EXPECT_EQ(upload->upload_file_count, 3);
+  s.mutable_upload()->set_total_bytes(1001);
+  ExpectInvalidNaming(MapReconstructSource(s, 1000).status(), "start.upload.total_bytes");
+  s.mutable_upload()->set_total_bytes(10);
+  s.mutable_upload()->set_file_count(-1);
+  ExpectInvalidNaming(MapReconstructSource(s, 1000).status(), "start.upload.file_count");
+}
+
+TEST(ReconstructMappingTest, UploadChunksStayInsideTheStackFolder) {
+  v1::StackFileChunk c;
+  c.set_path("frames/frame_0001.png");
+  c.set_data(std::string(kMaxChunkBytes, 'x'));
+  EXPECT_TRUE(CheckUploadChunk(c).ok());
+  c.set_data(std::string(kMaxChunkBytes + 1, 'x'));
+  ExpectInvalidNaming(CheckUploadChunk(c), "file_chunk.data");
+  c.clear_data();
+  for (const char* bad : {"", "/etc/passwd", "../x.png", "frames/../../x.png", "./stack.json"}) {
+    c.set_path(bad);
+    ExpectInvalidNaming(CheckUploadChunk(c), "file_chunk.path");
+  }
+}
+
+TEST(ReconstructMappingTest, OptionsAreNamedUnderOptions) {
+  v1::ReconstructStart s;
+  s.set_scan_id("scan-1");
+  s.mutable_options()->set_window_px(11);
+  s.mutable_options()->add_extra_exports(v1::ARTIFACT_KIND_DEPTH_PNG16);
+  auto work = MapReconstructStart(s, "/data/scans/scan-1", nullptr);
+  ASSERT_TRUE(work.ok());
+  EXPECT_EQ(work->stack_dir, "/data/scans/scan-1");
+  EXPECT_EQ(work->source_scan_id, "scan-1");
+  EXPECT_EQ(work->sff.window_px, 11);
+  EXPECT_EQ(work->extra_exports, std::vector<DepthExportKind>{DepthExportKind::kDepthPng16});
+  s.mutable_options()->add_extra_exports(v1::ARTIFACT_KIND_DEPTH_TIFF);  // always written, not an extra
+  ExpectInvalidNaming(MapReconstructStart(s, "/data/scans/scan-1", nullptr).status(), "options.extra_exports[1]");
+}
+
+TEST(OtherRequestsTest, ListJobsPagesAndDownloadRanges) {
+  v1::ListJobsRequest l;
+  auto q = MapListJobsRequest(l);
+  ASSERT_TRUE(q.ok());
+  EXPECT_EQ(q->limit, 50);
+  EXPECT_EQ(q->before_create_ns, 0);
+  l.set_page_size(10000);
+  l.set_kind(v1::JOB_KIND_SCAN);
+  google::protobuf::Timestamp t;
+  t.set_seconds(1700000000);
+  t.set_nanos(42);
+  l.set_page_token(NextPageToken(t));
+  q = MapListJobsRequest(l);
+  ASSERT_TRUE(q.ok());
+  EXPECT_EQ(q->limit, 500);
+  EXPECT_EQ(q->kind, v1::JOB_KIND_SCAN);
+  EXPECT_EQ(q->before_create_ns, 1700000000LL * 1000000000LL + 42);
+  l.set_page_token("yesterday");
+  ExpectInvalidNaming(MapListJobsRequest(l).status(), "page_token");
+  l.set_page_size(-1);
+  ExpectInvalidNaming(MapListJobsRequest(l).status(), "page_size");
+
+  v1::DownloadArtifactRequest d;
+  ExpectInvalidNaming(MapDownloadRequest(d).status(), "artifact_id");
+  d.set_artifact_id("art-1");
+  d.set_offset(-1);
+  ExpectInvalidNaming(MapDownloadRequest(d).status(), "offset");
+  d.set_offset(5);
+  d.set_limit(-1);
+  ExpectInvalidNaming(MapDownloadRequest(d).status(), "limit");
+  d.set_limit(7);
+  auto range = MapDownloadRequest(d);
+  ASSERT_TRUE(range.ok());
+  EXPECT_EQ(range->offset, 5);
+  EXPECT_EQ(range->limit, 7);
+
+  ExpectInvalidNaming(CheckJobId(""), "job_id");
+  EXPECT_TRUE(CheckJobId("scan-1").ok());
+  ExpectInvalidNaming(CheckSpecimenName(""), "specimen");
+}
+
+}  // namespace
+}  // namespace inspection
