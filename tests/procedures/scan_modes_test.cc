@@ -131,14 +131,26 @@ TEST_F(ScanModesTest, BiasWithinBoundForEveryModeOnTexturedSpecimens) {
     EXPECT_GE(r->error.valid_percent, 95.0) << what;
     EXPECT_LE(std::abs(r->error.mean_error_um), BiasBoundUm(r->z_step_um)) << what;
   };
-  // Specimens whose heights span many z steps. (On the chamfer's two plateaus or a flat mirror,
-  // all pixels share the same few frames, so their stage errors and the sub-step error of the
-  // three-point interpolation do not average out: STD itself reaches 0.09 um there.)
+  // Specimens whose heights span many z steps. (On a flat specimen, step1um or the mirror, all
+  // pixels share the same few frames, so the stage errors and the sub-step error of the
+  // three-point interpolation do not average out: STD itself reaches -0.16 um on step1um, and the
+  // bias follows where the surface lies between two frames in every mode: README.)
   for (const char* specimen : {"wedge", "skew5", "skew10"}) {
-    for (IlluminationMode m : all) check(std::string(specimen) + " " + IlluminationModeName(m), Scan(specimen, m));
+    double best_std_texture_rmse = 1e9, default_rmse = 0;
+    for (IlluminationMode m : all) {
+      auto r = Scan(specimen, m);
+      check(std::string(specimen) + " " + IlluminationModeName(m), r);
+      if (!r.ok()) continue;
+      if (m == IlluminationMode::kStd || m == IlluminationMode::kTexture) {
+        best_std_texture_rmse = std::min(best_std_texture_rmse, r->error.rmse_um);
+      }
+      if (m == IlluminationMode::kHfAdapt) default_rmse = r->error.rmse_um;
+    }
+    // The default mode when calibrated (HF+ADAPT) is within 10 % of the better of STD and TEXTURE.
+    EXPECT_LE(default_rmse, 1.1 * best_std_texture_rmse) << specimen;
   }
   // The saturating cutter, where STD and HDR3 leave pixels without depth: the adaptive modes.
-  // (TEXTURE's bias there, -0.14 um, comes from pixels its checkerboard saturates: README.)
+  // (TEXTURE's bias there, -0.08 to -0.11 um, comes from pixels its checkerboard saturates.)
   for (IlluminationMode m : {IlluminationMode::kAdaptIterative, IlluminationMode::kAdapt, IlluminationMode::kHfAdapt,
                              IlluminationMode::kAdaptedHf}) {
     check("cutter " + IlluminationModeName(m), Scan("cutter", m));
@@ -146,6 +158,21 @@ TEST_F(ScanModesTest, BiasWithinBoundForEveryModeOnTexturedSpecimens) {
   // The lag's signature was a bias whose sign followed the scan direction.
   check("wedge HF+ADAPT downwards", Scan("wedge", IlluminationMode::kHfAdapt, {}, 9, 0, nullptr, true));
   check("wedge ADAPT downwards", Scan("wedge", IlluminationMode::kAdapt, {}, 9, 0, nullptr, true));
+}
+
+// The cause, kept as a regression guard: with the thesis's per-pixel eq. 5.5 for corrections
+// shown at the next z (reflectance window 1), HF+ADAPT's depth is shifted towards the start of
+// the scan, whichever its direction (-0.4 um up, +0.4 um down on the wedge; windowed: ~0).
+TEST_F(ScanModesTest, PerPixelReflectanceForTheNextZShiftsDepthAgainstTheScanDirection) {
+  ASSERT_NE(bundle_, nullptr);
+  IlluminationParams per_pixel;
+  per_pixel.compensation.reflectance_window_px = 1;
+  auto up = Scan("wedge", IlluminationMode::kHfAdapt, per_pixel);
+  auto down = Scan("wedge", IlluminationMode::kHfAdapt, per_pixel, 9, 0, nullptr, true);
+  ASSERT_TRUE(up.ok()) << up.status().ToString();
+  ASSERT_TRUE(down.ok()) << down.status().ToString();
+  EXPECT_LT(up->error.mean_error_um, -0.25);
+  EXPECT_GT(down->error.mean_error_um, 0.25);
 }
 
 TEST_F(ScanModesTest, AdaptiveModesMeasureSaturatingCutterWithFewFrames) {
