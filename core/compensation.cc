@@ -1,5 +1,5 @@
-// Radiometric compensation (thesis 5.1, eq. 5.5-5.6, 5.11, 5.12): reflectance estimate, desired
-// scene radiance and the projector irradiance solved with LSCG on the sparse A U.
+// Radiometric compensation (thesis 5.1, eq. 5.5-5.6, 5.11, 5.12): reflectance estimate (ratio of
+// local means), desired scene radiance and the projector irradiance solved with LSCG on A U.
 #include "core/compensation.h"
 
 #include <algorithm>
@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <Eigen/IterativeLinearSolvers>
+#include <opencv2/imgproc.hpp>
 
 namespace inspection {
 
@@ -21,6 +22,13 @@ Status CompensationOptions::Validate() const {
   if (!(solver_tolerance > 0 && solver_tolerance < 1)) return Status::InvalidArgument("solver_tolerance must be in (0, 1)");
   if (!(min_lit_fraction >= 0 && min_lit_fraction < 1)) return Status::InvalidArgument("min_lit_fraction must be in [0, 1)");
   if (!(saturated_reflectance_factor >= 1)) return Status::InvalidArgument("saturated_reflectance_factor must be >= 1");
+  if (reflectance_window_px < 0 || reflectance_window_px > 63 ||
+      (reflectance_window_px > 0 && reflectance_window_px % 2 == 0)) {
+    return Status::InvalidArgument("reflectance_window_px must be 0 (automatic) or odd in [1, 63]");
+  }
+  if (!(texture_period_camera_px >= 0 && texture_period_camera_px <= 63)) {
+    return Status::InvalidArgument("texture_period_camera_px must be in [0, 63]");
+  }
   return Status::Ok();
 }
 
@@ -32,7 +40,32 @@ inline void Bilinear(int x, int s, int n, int& i0, int& i1, float& w1) {
   i1 = std::min(i0 + 1, n - 1);
   w1 = (i1 == i0) ? 0.0f : t - float(i0);
 }
+
+// The odd number nearest to x (ties go down), at least 1 and at most 63.
+int NearestOdd(double x) {
+  const int n = int(std::lround(x));
+  const int odd = n % 2 != 0 ? n : (x > double(n) ? n + 1 : n - 1);
+  return std::clamp(odd, 1, 63);
+}
 }  // namespace
+
+double CameraPxPerProjectorPx(const ScatterMatrix& scatter) {
+  const Eigen::SparseMatrix<float, Eigen::ColMajor, int>& a = scatter.a;
+  std::vector<char> lit(size_t(a.rows()), 0);
+  long projector_px = 0;
+  for (int k = 0; k < a.outerSize(); ++k) {
+    bool any = false;
+    for (Eigen::SparseMatrix<float, Eigen::ColMajor, int>::InnerIterator it(a, k); it; ++it) {
+      if (it.value() > 0) {
+        lit[size_t(it.row())] = 1;
+        any = true;
+      }
+    }
+    projector_px += any;
+  }
+  const long camera_px = long(std::count(lit.begin(), lit.end(), 1));
+  return projector_px > 0 ? std::sqrt(double(camera_px) / double(projector_px)) : 0.0;
+}
 
 StatusOr<std::unique_ptr<Compensator>> Compensator::Create(const CameraResponseFunction& crf,
                                                            const ProjectorResponseFunction& prf,
@@ -93,6 +126,12 @@ StatusOr<std::unique_ptr<Compensator>> Compensator::Create(const CameraResponseF
   c->solver_->setMaxIterations(options.solver_iterations);
   c->solver_->setTolerance(float(options.solver_tolerance));
   c->solver_->compute(c->au_);
+  if (options.reflectance_window_px > 0) {
+    c->reflectance_window_px_ = options.reflectance_window_px;
+  } else {
+    const double grid_period_px = 2.0 * options.pattern_cell_px * CameraPxPerProjectorPx(scatter);
+    c->reflectance_window_px_ = NearestOdd(std::max(grid_period_px, options.texture_period_camera_px));
+  }
   const int top = crf.levels - 1;
   c->exposure_table_.resize(size_t(top) * 16 + 2);
   for (size_t k = 0; k < c->exposure_table_.size(); ++k) {
@@ -190,7 +229,8 @@ StatusOr<cv::Mat> Compensator::SolveIrradiance(const cv::Mat& scene_radiance, co
 }
 
 StatusOr<CompensationStep> Compensator::Step(const cv::Mat& irradiance, const cv::Mat& frame, double exposure_us,
-                                             const cv::Mat& desired_grey, const cv::Mat& warm_start) const {
+                                             const cv::Mat& desired_grey, const cv::Mat& warm_start,
+                                             ShownAt shown_at) const {
   if (frame.size() != scatter_->camera_size || (frame.type() != CV_8UC1 && frame.type() != CV_16UC1)) {
     return Status::InvalidArgument("frame must be CV_8UC1/CV_16UC1 of the camera size");
   }
@@ -204,34 +244,55 @@ StatusOr<CompensationStep> Compensator::Step(const cv::Mat& irradiance, const cv
   cv::minMaxLoc(predicted, nullptr, &max_pred);
   const float lit = float(options_.min_lit_fraction * max_pred);
   const int top = crf_->levels - 1;
+  cv::Mat z;
+  frame.convertTo(z, CV_32F);
+  // Eq. 5.5 over the lit pixels: per pixel for the same z, else as a ratio of local means over
+  // the reflectance window, sum E_c / sum A e_p (file comment in compensation.h).
+  const bool same_z = shown_at == ShownAt::kSameZ;
+  cv::Mat measured(frame.size(), CV_32FC1), predicted_lit(frame.size(), CV_32FC1);
+  const float saturated_factor = same_z ? float(options_.saturated_reflectance_factor) : 1.0f;
+  for (int y = 0; y < frame.rows; ++y) {
+    const float* p = predicted.ptr<float>(y);
+    const float* ec = e_c.ptr<float>(y);
+    const float* zr = z.ptr<float>(y);
+    float* m = measured.ptr<float>(y);
+    float* q = predicted_lit.ptr<float>(y);
+    for (int x = 0; x < frame.cols; ++x) {
+      const bool is_lit = p[x] > lit;
+      m[x] = is_lit ? (zr[x] >= float(top) ? ec[x] * saturated_factor : ec[x]) : 0.0f;
+      q[x] = is_lit ? p[x] : 0.0f;
+    }
+  }
+  if (!same_z && reflectance_window_px_ > 1) {
+    const cv::Size w(reflectance_window_px_, reflectance_window_px_);
+    cv::boxFilter(measured, measured, CV_32F, w, cv::Point(-1, -1), false, cv::BORDER_REFLECT);
+    cv::boxFilter(predicted_lit, predicted_lit, CV_32F, w, cv::Point(-1, -1), false, cv::BORDER_REFLECT);
+  }
   // Desired camera radiance per grey level (eq. 5.4 inverted) from the 1/16-grey table.
   const float inv_dt = float(1.0 / exposure_us);
   CompensationStep out;
   out.reflectance = cv::Mat(frame.size(), CV_32FC1);
   cv::Mat target(frame.size(), CV_32FC1);
-  cv::Mat z;
-  frame.convertTo(z, CV_32F);
   double err = 0;
   long n = 0;
   const float nan = std::numeric_limits<float>::quiet_NaN();
   for (int y = 0; y < frame.rows; ++y) {
     const float* p = predicted.ptr<float>(y);
-    const float* ec = e_c.ptr<float>(y);
+    const float* m = measured.ptr<float>(y);
+    const float* q = predicted_lit.ptr<float>(y);
     const float* zr = z.ptr<float>(y);
     const float* d = desired_grey.ptr<float>(y);
     float* r = out.reflectance.ptr<float>(y);
     float* t = target.ptr<float>(y);
     for (int x = 0; x < frame.cols; ++x) {
-      if (!(p[x] > lit)) {
+      if (!(p[x] > lit) || !(q[x] > 0)) {
         // Unlit: no reflectance estimate; the pixel keeps the radiance it has now, so it pulls
         // nothing (SolveIrradiance's NaN rule, without a second prediction A e_p).
         r[x] = nan;
         t[x] = p[x];
         continue;
       }
-      float refl = ec[x] / p[x];  // eq. 5.5
-      if (zr[x] >= float(top)) refl *= float(options_.saturated_reflectance_factor);
-      refl = std::max(refl, 1e-6f);
+      const float refl = std::max(m[x] / q[x], 1e-6f);  // eq. 5.5
       r[x] = refl;
       const float g = std::clamp(d[x], 0.0f, float(top)) * 16.0f;
       const int k = int(g);

@@ -81,6 +81,38 @@ StatusOr<cv::Mat> AddHfPattern(const cv::Mat& adapted, const cv::Mat& cb, double
   return out;
 }
 
+StatusOr<cv::Mat> AddHfPatternToIrradiance(const cv::Mat& adapted_irradiance, const cv::Mat& cb, double psi,
+                                           const ProjectorResponseFunction& prf) {
+  if (!(psi >= 0.0 && psi <= 1.0)) return Status::InvalidArgument("psi must be in [0, 1]");
+  if (adapted_irradiance.empty() || adapted_irradiance.type() != CV_32FC1) {
+    return Status::InvalidArgument("adapted irradiance must be CV_32FC1");
+  }
+  if (cb.size() != adapted_irradiance.size() || cb.type() != CV_8UC1) {
+    return Status::InvalidArgument("checkerboard mask must be CV_8UC1 of the irradiance's size");
+  }
+  INSPECT_RETURN_IF_ERROR(prf.Validate());
+  // Mean irradiance of the grey pair around g; non-decreasing in g since the prf is.
+  const int d = int(std::lround(255.0 * psi));
+  double pair_mean[256];
+  for (int g = 0; g < 256; ++g) {
+    pair_mean[g] = 0.5 * (prf.relative_irradiance[size_t(std::min(g + d, 255))] +
+                          prf.relative_irradiance[size_t(std::max(g - d, 0))]);
+  }
+  cv::Mat out(adapted_irradiance.size(), CV_8UC1);
+  for (int y = 0; y < out.rows; ++y) {
+    const float* e = adapted_irradiance.ptr<float>(y);
+    const uint8_t* c = cb.ptr<uint8_t>(y);
+    uint8_t* o = out.ptr<uint8_t>(y);
+    for (int x = 0; x < out.cols; ++x) {
+      const double* hi = std::lower_bound(pair_mean, pair_mean + 256, double(e[x]));
+      int g = int(hi - pair_mean);
+      if (g == 256 || (g > 0 && double(e[x]) - pair_mean[g - 1] <= *hi - double(e[x]))) --g;  // nearer neighbour
+      o[x] = uint8_t(std::clamp(c[x] ? g + d : g - d, 0, 255));
+    }
+  }
+  return out;
+}
+
 cv::Mat CameraCheckerboard(cv::Size camera_size, double half_period_camera_px, double low_grey, double high_grey) {
   cv::Mat out(camera_size, CV_32FC1);
   const double h = std::max(half_period_camera_px, 1.0);

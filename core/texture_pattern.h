@@ -1,10 +1,12 @@
 // High-frequency texture projection (thesis 5.2): the checkerboard period chosen from the
 // projector influence radius sigma_p and the focus window (eq. 5.15), the checkerboard of
-// eq. 5.16, and the modified pattern added to an adapted pattern (eq. 5.17-5.18).
+// eq. 5.16, and the modified pattern added to an adapted pattern (eq. 5.17-5.18), in grey levels or
+// mean-preserving for an adapted irradiance.
 #pragma once
 
 #include <opencv2/core.hpp>
 
+#include "core/projector_response.h"
 #include "core/status.h"
 
 namespace inspection {
@@ -35,6 +37,16 @@ StatusOr<cv::Mat> MakeHfPattern(cv::Size projector_size, int cell_projector_px, 
 // adapted: CV_8UC1 or CV_32FC1 (grey levels); cb: CheckerboardMask of the same size; psi in
 // [0, 1]. Returns CV_8UC1.
 StatusOr<cv::Mat> AddHfPattern(const cv::Mat& adapted, const cv::Mat& cb, double psi);
+
+// Eq. 5.17-5.18 for an adapted projector irradiance (CV_32FC1, prf units; e.g. the output of
+// the compensation): per pixel the grey g + 255 psi where CB = 1 and g - 255 psi where CB = 0
+// (clamped to [0, 255]), with g chosen so that the pair's mean irradiance,
+// (prf(g + 255 psi) + prf(g - 255 psi)) / 2, is the adapted irradiance. Adding the same grey
+// offsets to prf^-1(adapted) instead (AddHfPattern) adds mean light through the convex prf, so the
+// camera image misses the compensation's target (mean grey 160-180 for a target of 140 with the
+// simulated gamma-2 projector) and texture peaks saturate at focus. Returns CV_8UC1.
+StatusOr<cv::Mat> AddHfPatternToIrradiance(const cv::Mat& adapted_irradiance, const cv::Mat& cb, double psi,
+                                           const ProjectorResponseFunction& prf);
 
 // Section 5.3.2: the desired camera image for ADAPTED-HF, a checkerboard in camera pixels with
 // half period half_period_camera_px at low / high grey (thesis: 25 % / 75 % of full scale,

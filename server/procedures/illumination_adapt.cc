@@ -16,14 +16,18 @@ Status AdaptiveCompensation::Init(const CalibrationBundle& bundle, const Compens
 }
 
 StatusOr<cv::Mat> AdaptiveCompensation::Shown(const cv::Mat& irradiance) const {
-  cv::Mat p = compensator_->PatternFor(irradiance);
-  if (!target_.added_checkerboard.empty()) return AddHfPattern(p, target_.added_checkerboard, target_.psi);
-  return p;
+  if (!target_.added_checkerboard.empty()) {
+    // Eq. 5.17-5.18 around the adapted irradiance, so the checkerboard adds texture, not light.
+    return AddHfPatternToIrradiance(irradiance, target_.added_checkerboard, target_.psi, *prf_);
+  }
+  return compensator_->PatternFor(irradiance);
 }
 
 StatusOr<CompensationStep> AdaptiveCompensation::Correct(const cv::Mat& pattern, const cv::Mat& frame,
-                                                         double exposure_us, const cv::Mat& warm_start) const {
-  return compensator_->Step(prf_->IrradianceImage(pattern), frame, exposure_us, target_.desired_grey, warm_start);
+                                                         double exposure_us, const cv::Mat& warm_start,
+                                                         ShownAt shown_at) const {
+  return compensator_->Step(prf_->IrradianceImage(pattern), frame, exposure_us, target_.desired_grey, warm_start,
+                            shown_at);
 }
 
 CompensationTargetFactory UniformGreyTarget(const ScanPlan& plan, const IlluminationSetup& setup) {
@@ -52,21 +56,25 @@ class PredictiveAdaptIllumination : public IlluminationStrategy {
     const cv::Mat uniform(setup_.projector_size, CV_8UC1, cv::Scalar(plan_.uniform_grey));
     irr_next_ = comp_.prf().IrradianceImage(uniform);
     // Two initialisation frames at the first z (thesis 5.1.3): uniform, then once corrected.
+    // Their corrections light the first z again (the second one its stack frame).
     for (int k = 0; k < 2; ++k) {
       INSPECT_ASSIGN_OR_RETURN(cv::Mat p, k == 0 ? StatusOr<cv::Mat>(uniform) : comp_.Shown(irr_next_));
       INSPECT_ASSIGN_OR_RETURN(cv::Mat f, rig.Capture(0, p, plan_.exposure_us, CaptureRole::kRawFrame,
                                                       RawFrameName(0, "init", k)));
-      INSPECT_ASSIGN_OR_RETURN(CompensationStep st, comp_.Correct(p, f, plan_.exposure_us, irr_next_));
+      INSPECT_ASSIGN_OR_RETURN(CompensationStep st,
+                               comp_.Correct(p, f, plan_.exposure_us, irr_next_, ShownAt::kSameZ));
       irr_next_ = st.projector_irradiance;
     }
     return Status::Ok();
   }
 
-  // Shows the prediction, captures the stack frame, corrects once and predicts the next z.
+  // Shows the prediction, captures the stack frame, corrects once and predicts the next z. The
+  // correction lights the next z, so it must not depend on how focused this frame is.
   StatusOr<CapturedStackFrame> CaptureStackFrame(int i, ScanCaptureContext& rig) override {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat pattern, comp_.Shown(irr_next_));
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, rig.Capture(i, pattern, plan_.exposure_us, CaptureRole::kStackFrame, ""));
-    INSPECT_ASSIGN_OR_RETURN(CompensationStep st, comp_.Correct(pattern, frame, plan_.exposure_us, irr_next_));
+    INSPECT_ASSIGN_OR_RETURN(CompensationStep st,
+                             comp_.Correct(pattern, frame, plan_.exposure_us, irr_next_, ShownAt::kNextZ));
     irr_prev_ = irr_cur_.empty() ? st.projector_irradiance : irr_cur_;
     irr_cur_ = st.projector_irradiance;
     INSPECT_ASSIGN_OR_RETURN(irr_next_, PredictIrradiance(irr_cur_, irr_prev_, plan_.params.lambda,

@@ -25,7 +25,7 @@ struct CompensationTarget {
   CompensationOptions options;  // solver options (ADAPTED-HF: full resolution)
   cv::Mat desired_grey;         // CV_32FC1 camera size, camera grey levels
   // HF+ADAPT: the checkerboard of eq. 5.17 (CheckerboardMask) added to every shown pattern with
-  // weight psi (eq. 5.18); empty otherwise.
+  // weight psi (eq. 5.18) around the adapted irradiance (AddHfPatternToIrradiance); else empty.
   cv::Mat added_checkerboard;
   double psi = 0.0;
 };
@@ -58,9 +58,10 @@ class AdaptiveCompensation {
   // The pattern shown for an adapted projector irradiance (HF+ADAPT adds the checkerboard).
   StatusOr<cv::Mat> Shown(const cv::Mat& irradiance) const;
   // Eq. 5.5, 5.6, 5.11 on `frame`, captured while `pattern` was shown at exposure_us; the solve
-  // starts from warm_start (the adapted irradiance without any added checkerboard).
+  // starts from warm_start (the adapted irradiance without any added checkerboard). shown_at:
+  // where the correction will be shown (core/compensation.h).
   StatusOr<CompensationStep> Correct(const cv::Mat& pattern, const cv::Mat& frame, double exposure_us,
-                                     const cv::Mat& warm_start) const;
+                                     const cv::Mat& warm_start, ShownAt shown_at) const;
   const ProjectorResponseFunction& prf() const { return *prf_; }
 
  private:

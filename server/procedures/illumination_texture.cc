@@ -67,6 +67,8 @@ CompensationTargetFactory HfAdaptTarget(const ScanPlan& plan, const CalibrationB
     INSPECT_ASSIGN_OR_RETURN(TexturePeriod period, PlanTexturePeriod(plan, bundle));
     CompensationTarget t;
     t.options = plan.params.compensation;
+    // The reflectance estimate averages over one checkerboard period (core/compensation.h).
+    t.options.texture_period_camera_px = 2.0 * period.half_period_camera_px;
     t.desired_grey = cv::Mat(setup.camera_size, CV_32FC1, cv::Scalar(plan.params.target_grey * LevelScale(setup)));
     t.added_checkerboard = CheckerboardMask(setup.projector_size, period.cell_projector_px);
     t.psi = plan.params.psi;
@@ -84,6 +86,7 @@ CompensationTargetFactory AdaptedHfTarget(const ScanPlan& plan, const Calibratio
     t.options = plan.params.compensation;
     t.options.pattern_cell_px = 1;
     t.options.camera_bin_px = 1;
+    t.options.texture_period_camera_px = 2.0 * period.half_period_camera_px;
     const double level_scale = LevelScale(setup);
     // Thesis: 25 % / 75 % of full scale, 60 and 190 for 8 bit.
     t.desired_grey = CameraCheckerboard(setup.camera_size, period.half_period_camera_px, 60.0 * level_scale,

@@ -1,12 +1,15 @@
 // Radiometric compensation on a synthetic projector-camera pair with an exact scatter matrix
 // (each projector pixel lights a 3x3 camera block): eq. 5.11 recovers a known pattern, the
 // iteration of eq. 5.5-5.6 brings a two-reflectance scene (one half saturating) to the target
-// grey, and the prediction of eq. 5.12 extrapolates linearly.
+// grey, the reflectance estimate over its window does not depend on how sharp the pattern is,
+// and the prediction of eq. 5.12 extrapolates linearly.
 #include "core/compensation.h"
 
 #include <cmath>
+#include <utility>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
 
 namespace inspection {
 namespace {
@@ -134,6 +137,66 @@ TEST(CompensationTest, IterationReachesTargetOnHighDynamicRangeScene) {
       ASSERT_LE(dev.at<uint8_t>(y, x), 4) << "at " << x << "," << y;
     }
   }
+}
+
+// The root of the ADAPT family's depth bias (README "Illumination modes"): A is the in-focus
+// transport, but a defocused frame shows the pattern blurred. Per pixel, the reflectance of a
+// uniform surface under a checkerboard then comes out with the checkerboard inverted (blur(P) / P);
+// over the reflectance window (one pattern period) it is the same sharp or blurred.
+TEST(CompensationTest, ReflectanceEstimateIsTheSameForASharpAndABlurredPattern) {
+  const auto crf = LinearCrf();
+  const auto prf = SquarePrf();
+  const auto s = BlockScatter();
+  EXPECT_NEAR(CameraPxPerProjectorPx(s), double(kRatio), 1e-12);
+  // Checkerboard of 2-projector-pixel cells (period 12 camera px) at irradiance 0.15 / 0.45.
+  cv::Mat irr(kProj, CV_32FC1);
+  for (int v = 0; v < kProj.height; ++v) {
+    for (int u = 0; u < kProj.width; ++u) irr.at<float>(v, u) = ((u / 2 + v / 2) % 2 == 0) ? 0.45f : 0.15f;
+  }
+  const double dt = 1.0, reflectance = 2.0;
+  const cv::Mat scene = s.PredictRadiance(irr).value();
+  auto expose = [&](const cv::Mat& radiance) {
+    cv::Mat out;
+    cv::Mat(radiance * (128.0 * reflectance * dt)).convertTo(out, CV_8UC1);
+    return out;
+  };
+  cv::Mat defocused;
+  cv::GaussianBlur(scene, defocused, cv::Size(0, 0), 3.0, 3.0, cv::BORDER_REFLECT);
+  const cv::Mat sharp_frame = expose(scene), blurred_frame = expose(defocused);
+  const cv::Mat desired(kCam, CV_32FC1, cv::Scalar(128.0f));
+  const cv::Rect inner(12, 12, kCam.width - 24, kCam.height - 24);
+  auto estimate_range = [&](const Compensator& c, const cv::Mat& frame, ShownAt shown_at) {
+    auto st = c.Step(irr, frame, dt, desired, cv::Mat(), shown_at);
+    EXPECT_TRUE(st.ok()) << st.status().ToString();
+    double lo = 0, hi = 0;
+    cv::minMaxLoc(st->reflectance(inner), &lo, &hi);
+    return std::pair{lo, hi};
+  };
+  CompensationOptions o;  // automatic window: two 2-px cells at 3 camera px per projector px
+  auto comp = Compensator::Create(crf, prf, s, o);
+  ASSERT_TRUE(comp.ok());
+  EXPECT_EQ((*comp)->reflectance_window_px(), 11);  // nearest odd to 12
+  for (const cv::Mat* frame : {&sharp_frame, &blurred_frame}) {
+    const auto [lo, hi] = estimate_range(**comp, *frame, ShownAt::kNextZ);
+    EXPECT_NEAR(lo, reflectance, 0.04 * reflectance);
+    EXPECT_NEAR(hi, reflectance, 0.04 * reflectance);
+  }
+  // The thesis's per-pixel eq. 5.5 (a correction shown at the same z): right for the frame whose
+  // focus state the pattern will light again, the pattern inverted for a blurred one.
+  const auto [sharp_lo, sharp_hi] = estimate_range(**comp, sharp_frame, ShownAt::kSameZ);
+  EXPECT_NEAR(sharp_lo, reflectance, 0.04 * reflectance);
+  EXPECT_NEAR(sharp_hi, reflectance, 0.04 * reflectance);
+  const auto [blur_lo, blur_hi] = estimate_range(**comp, blurred_frame, ShownAt::kSameZ);
+  EXPECT_LT(blur_lo, 0.8 * reflectance);  // bright cells: blur(P) / P < 1
+  EXPECT_GT(blur_hi, 1.4 * reflectance);  // dark cells
+  // An explicit window; an even one is refused.
+  o.reflectance_window_px = 1;
+  auto per_pixel = Compensator::Create(crf, prf, s, o);
+  ASSERT_TRUE(per_pixel.ok());
+  EXPECT_EQ((*per_pixel)->reflectance_window_px(), 1);
+  EXPECT_LT(estimate_range(**per_pixel, blurred_frame, ShownAt::kNextZ).first, 0.8 * reflectance);
+  o.reflectance_window_px = 8;
+  EXPECT_EQ(Compensator::Create(crf, prf, s, o).status().code(), StatusCode::kInvalidArgument);
 }
 
 TEST(CompensationTest, PredictionIsLinearExtrapolation) {

@@ -1,5 +1,6 @@
 // Texture patterns of thesis 5.2-5.3: period choice of eq. 5.15 with the thesis's own figures,
-// checkerboard grey levels of eq. 5.16 and the modified addition of eq. 5.17-5.18.
+// checkerboard grey levels of eq. 5.16 and the modified addition of eq. 5.17-5.18 (in grey levels
+// and mean-preserving for an adapted irradiance).
 #include "core/texture_pattern.h"
 
 #include <gtest/gtest.h>
@@ -57,6 +58,41 @@ TEST(TexturePatternTest, AddedHfPatternIsClamped) {
   EXPECT_EQ(out->at<uint8_t>(0, 3), 0);
   EXPECT_EQ(out->at<uint8_t>(1, 0), 64);   // row 1 starts with CB = 0
   EXPECT_EQ(out->at<uint8_t>(1, 1), 192);
+}
+
+TEST(TexturePatternTest, AddedHfPatternKeepsTheAdaptedMeanIrradiance) {
+  ProjectorResponseFunction prf;  // prf(i) = 0.002 + 0.998 (i / 255)^2
+  for (int i = 0; i < 256; ++i) prf.relative_irradiance.push_back(0.002 + 0.998 * (i / 255.0) * (i / 255.0));
+  const cv::Size size(8, 4);
+  const cv::Mat cb = CheckerboardMask(size, 1);
+  for (float e : {0.05f, 0.3f, 0.6f}) {
+    const cv::Mat adapted(size, CV_32FC1, cv::Scalar(e));
+    auto out = AddHfPatternToIrradiance(adapted, cb, 0.25, prf);
+    ASSERT_TRUE(out.ok()) << out.status().ToString();
+    const int hi = out->at<uint8_t>(0, 0), lo = out->at<uint8_t>(0, 1);  // CB = 1, CB = 0
+    if (lo > 0 && hi < 255) {
+      EXPECT_EQ(hi - lo, 2 * 64) << e;  // 255 psi = 63.75 -> 64
+    }
+    // One grey step of g changes the pair mean by at most ~0.008 here: nearest within half of it.
+    EXPECT_NEAR(0.5 * (prf.Irradiance(hi) + prf.Irradiance(lo)), e, 0.004) << e;
+    EXPECT_NEAR(cv::mean(prf.IrradianceImage(*out))[0], e, 0.004) << e;
+    // The grey-level addition of eq. 5.18 to prf^-1(e) adds light through the convex prf.
+    const cv::Mat grey(size, CV_8UC1, cv::Scalar(prf.GreyForIrradiance(e)));
+    auto plain = AddHfPattern(grey, cb, 0.25);
+    ASSERT_TRUE(plain.ok());
+    if (e == 0.3f) {
+      EXPECT_GT(cv::mean(prf.IrradianceImage(*plain))[0], e + 0.05);
+    }
+  }
+  // Beyond the brightest pair the pattern stays at g = 255 (255 / 191).
+  auto top = AddHfPatternToIrradiance(cv::Mat(size, CV_32FC1, cv::Scalar(1.0f)), cb, 0.25, prf);
+  ASSERT_TRUE(top.ok());
+  EXPECT_EQ(top->at<uint8_t>(0, 0), 255);
+  EXPECT_EQ(top->at<uint8_t>(0, 1), 191);
+  EXPECT_EQ(AddHfPatternToIrradiance(cv::Mat(size, CV_8UC1), cb, 0.25, prf).status().code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(AddHfPatternToIrradiance(cv::Mat(size, CV_32FC1, cv::Scalar(0.3f)), cb, 1.5, prf).status().code(),
+            StatusCode::kInvalidArgument);
 }
 
 TEST(TexturePatternTest, CameraCheckerboardPeriod) {
