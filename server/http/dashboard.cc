@@ -2,6 +2,7 @@
 #include "server/http/dashboard.h"
 
 #include <algorithm>
+#include <charconv>
 #include <cstdio>
 #include <filesystem>
 
@@ -152,12 +153,11 @@ void Dashboard::AddRoutes(HttpEndpoint& endpoint) {
   endpoint.AddDataRoute("/api/jobs", [this](const httplib::Request& req, httplib::Response& res) {
     int limit = 20;
     if (req.has_param("limit")) {
-      try {
-        limit = std::stoi(req.get_param_value("limit"));
-      } catch (const std::exception&) {
-        limit = 0;
+      const std::string text = req.get_param_value("limit");
+      const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), limit);
+      if (ec != std::errc() || end != text.data() + text.size() || limit < 1 || limit > 100) {
+        return SendError(res, 400, "limit must be a whole number 1..100");
       }
-      if (limit < 1 || limit > 100) return SendError(res, 400, "limit must be 1..100");
     }
     SendJson(res, JobsJson(limit));
   });

@@ -57,7 +57,8 @@ class HttpEndpoint {
   std::string address() const;  // host:port actually bound
 
  private:
-  // OK, or the HTTP status (401/403) and message to answer with.
+  // True when the call may proceed; otherwise `response` holds 401 (no or unknown token) or
+  // 403 (role too low) with the reason.
   bool Authorized(const httplib::Request& request, httplib::Response& response) const;
 
   HttpEndpointOptions options_;

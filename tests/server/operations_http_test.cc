@@ -174,6 +174,7 @@ TEST_F(OperationsHttpTest, DashboardServesPageStatusJobsAndPreview) {
   EXPECT_LE(preview.cols, 480);
 
   EXPECT_EQ(http_->Get("/api/jobs?limit=0")->status, 400);
+  EXPECT_EQ(http_->Get("/api/jobs?limit=5x")->status, 400);
   EXPECT_EQ(http_->Get("/api/jobs/scan-0000/preview.png")->status, 404);
   EXPECT_EQ(http_->Get("/api/jobs/" + job.job_id() + "/frame.png")->status, 404) << "not running";
   EXPECT_EQ(http_->Get("/api/jobs/..%2F..%2Fetc/preview.png")->status, 404);

@@ -158,10 +158,10 @@ async function previewImage(job) {
   if (!hasPreview) return null;
   if (!previewUrls.has(job.jobId)) {
     const res = await get("/api/jobs/" + encodeURIComponent(job.jobId) + "/preview.png");
-    previewUrls.set(job.jobId, res.ok ? URL.createObjectURL(await res.blob()) : null);
+    if (!res.ok) return null;  // asked again at the next refresh
+    previewUrls.set(job.jobId, URL.createObjectURL(await res.blob()));
   }
   const url = previewUrls.get(job.jobId);
-  if (!url) return null;
   const img = document.createElement("img");
   img.src = url;
   img.alt = "depth preview of " + job.jobId;
