@@ -43,6 +43,7 @@ def main():
         return 77
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
+    from selenium.common.exceptions import StaleElementReferenceException
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
@@ -79,7 +80,10 @@ def main():
         driver.get(url)
         # Survives only as long as the page is not reloaded: checked at the end.
         driver.execute_script("window.inspectTestMarker = 'loaded once';")
-        wait = WebDriverWait(driver, DEADLINE_S, poll_frequency=0.1)
+        # The page redraws its tables on every poll, so an element found a moment ago may be gone:
+        # checks read the page in one script where they can, and a stale element is retried.
+        wait = WebDriverWait(driver, DEADLINE_S, poll_frequency=0.1,
+                             ignored_exceptions=[StaleElementReferenceException])
 
         # Without the token the data endpoints answer 401 and the page asks for it.
         token_input = wait.until(lambda d: d.find_element(By.ID, "token-input")
@@ -87,9 +91,10 @@ def main():
         token_input.send_keys(token)
         driver.find_element(By.ID, "token-submit").click()
         wait.until(lambda d: d.find_element(By.ID, "rig-state").text == "READY")
-        devices = driver.find_elements(By.CSS_SELECTOR, "#devices tbody tr")
-        assert len(devices) == 3, f"expected camera, projector and stage, saw {len(devices)} rows"
-        print("rig READY, devices: " + "; ".join(r.text for r in devices))
+        devices = driver.execute_script(
+            "return Array.from(document.querySelectorAll('#devices tbody tr'), r => r.innerText.replace(/\\s+/g, ' '));")
+        assert len(devices) == 3, f"expected camera, projector and stage, saw {devices}"
+        print("rig READY, devices: " + "; ".join(devices))
 
         # A long scan through gRPC (a fine z step at 1024x768), so the browser's polls see it run.
         scan = subprocess.Popen([inspectctl, "--server", grpc_addr, "--token-file", token_file, "scan", "--out",
@@ -112,12 +117,13 @@ def main():
         out, err = scan.communicate(timeout=DEADLINE_S * 3)
         assert scan.returncode == 0, f"inspectctl scan exited {scan.returncode}:\n{out}\n{err}"
         row_selector = f'#jobs tbody tr[data-job-id="{job_id}"]'
-        wait.until(lambda d: any(r.get_attribute("data-state") == "SUCCEEDED"
-                                 for r in d.find_elements(By.CSS_SELECTOR, row_selector)))
-        preview = wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, row_selector + " img"))
-        wait.until(lambda d: d.execute_script("return arguments[0].complete && arguments[0].naturalWidth", preview[0]))
-        row = driver.find_element(By.CSS_SELECTOR, row_selector)
-        print("finished job row: " + row.text.replace("\n", " | "))
+        wait.until(lambda d: d.execute_script(
+            "const r = document.querySelector(arguments[0]); return r && r.dataset.state;", row_selector) == "SUCCEEDED")
+        wait.until(lambda d: d.execute_script(
+            "const i = document.querySelector(arguments[0] + ' img'); return !!i && i.complete && i.naturalWidth > 0;",
+            row_selector))
+        row_text = driver.execute_script("return document.querySelector(arguments[0]).innerText;", row_selector)
+        print("finished job row: " + row_text.replace("\n", " | ").replace("\t", " | "))
         wait.until(lambda d: not d.find_element(By.ID, "live-view").is_displayed())
         path = os.path.join(out_dir, "dashboard_done.png")
         driver.save_screenshot(path)
