@@ -53,8 +53,8 @@ class Checker:
             self._keys = list(json.loads(out.stdout))
         return self._keys
 
-    def check_with_inspectd(self, where, config_text, env):
-        """inspectd loads config_text with the container's INSPECTD_* variables."""
+    def check_with_inspectd(self, where, config_text, env, args=()):
+        """inspectd loads config_text with the container's INSPECTD_* variables and arguments."""
         if not self.inspectd:
             return
         known = {"INSPECTD_" + k.upper() for k in self.setting_names()} | {"INSPECTD_CONFIG"}
@@ -65,7 +65,7 @@ class Checker:
             f.write(config_text)
         try:
             run_env = {k: v for k, v in env.items() if k.startswith("INSPECTD_") and k != "INSPECTD_CONFIG"}
-            out = subprocess.run([self.inspectd, "--config", f.name, "--print-config"], env=run_env,
+            out = subprocess.run([self.inspectd, "--config", f.name, *args, "--print-config"], env=run_env,
                                  capture_output=True, text=True)
             if out.returncode != 0:
                 self.fail(where, f"inspectd rejects its configuration: {out.stderr.strip()}")
@@ -184,7 +184,7 @@ class Checker:
             self.fail(where, f"ConfigMap {config_volume['configMap']['name']} has no {config_file}")
         elif config_text is not None:
             self.check_config_values(where, config_text)
-            self.check_with_inspectd(where, config_text, env)
+            self.check_with_inspectd(where, config_text, env, c.get("args", []))
         for key in ("INSPECTD_TLS_CERT", "INSPECTD_TLS_KEY", "INSPECT_TLS_CA"):
             if key in env and env[key].rsplit("/", 1)[0] not in mounts:
                 self.fail(where, f"{key} {env[key]!r} is not in a mounted volume")
@@ -327,7 +327,7 @@ def self_test(path, inspectd=None):
         "--no-rig": lambda ds: pod(ds, "reconstruct")["containers"][0].update(args=[]),
         "several replicas": lambda ds: dep(ds, "reconstruct")["spec"].update(replicas=1),
         "enableServiceLinks": lambda ds: pod(ds, "reconstruct").pop("enableServiceLinks"),
-        "targetPort": lambda ds: next(d for d in ds if d["kind"] == "Service")["spec"]["ports"][0].update(targetPort="http"),
+        "targetPort": lambda ds: next(d for d in ds if d["kind"] == "Service")["spec"]["ports"][0].update(targetPort="grcp"),
         "matches 0 Deployments": lambda ds: next(d for d in ds if d["kind"] == "Service")["spec"].update(selector={"app": "x"}),
         "is not in the manifests": lambda ds: [d for d in ds if d["kind"] == "ConfigMap"][0]["metadata"].update(name="renamed"),
         "must listen on 0.0.0.0": lambda ds: cm(ds, "inspectd.json")["data"].update(

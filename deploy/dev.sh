@@ -24,6 +24,8 @@ packages=(
   libcli11-dev nlohmann-json3-dev libtiff-dev libzip-dev libsqlite3-dev libssl-dev
   gwyddion  # a real x3p reader: tests open our x3p with gwyddion-thumbnailer
   python3 python3-yaml  # deploy/validate_manifests.sh, tests/fault/kill9_test.sh (Debian's /usr/bin/python3)
+  libcpp-httplib-dev  # inspectd's HTTP port: /metrics and the dashboard
+  prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
 )
 
 install_missing() {

@@ -13,8 +13,10 @@
 #include "devices/sim/simulated_rig.h"
 #include "server/calibration_store.h"
 #include "server/data_store.h"
+#include "server/http/operations_http.h"
 #include "server/inspection_service.h"
 #include "server/job_manager.h"
+#include "server/no_rig_service.h"
 #include "server/procedure_runner.h"
 #include "server/rig_controller.h"
 
@@ -29,6 +31,10 @@ struct ServerOptions {
   std::string tls_key_file;
   std::string auth_token;     // empty = no authentication
   SimulatedRigOptions simulation;  // used when no rig is given to Start
+  // Reconstruct only (the scale-out pool): no rig is opened; rig calls answer FAILED_PRECONDITION.
+  bool no_rig = false;
+  // Prometheus /metrics and the web dashboard (host:port, port 0 = any); empty = no HTTP port.
+  std::string http_listen_address;
 };
 
 // Health service names: "" is SERVING while the process runs; this one is SERVING only while
@@ -45,18 +51,22 @@ class InspectionServer {
   ~InspectionServer();
 
   int port() const { return port_; }
+  int http_port() const { return ops_->port(); }  // 0 without an HTTP port
+  std::string http_address() const { return ops_->address(); }
   std::string address() const;  // host:port actually bound
   // Stops accepting calls, cancels jobs, waits for the workers.
   void Shutdown();
   void Wait();
 
   JobManager& jobs() { return *jobs_; }
-  RigController& rig() { return *rig_; }
+  RigController& rig() { return *rig_; }  // not with no_rig
+  OperationsHttp& operations() { return *ops_; }
 
  private:
   InspectionServer() = default;
 
   ServerOptions options_;
+  std::unique_ptr<OperationsHttp> ops_;  // outlives the JobManager and the gRPC server that feed it
   std::unique_ptr<DataStore> store_;
   std::unique_ptr<RigController> rig_;
   std::unique_ptr<CalibrationStore> calibrations_;
@@ -64,6 +74,8 @@ class InspectionServer {
   std::unique_ptr<JobManager> jobs_;  // declared after what its jobs use: destroyed (joined) first
   std::unique_ptr<InspectionServiceImpl> service_;
   std::unique_ptr<SimulationServiceImpl> sim_service_;
+  std::unique_ptr<NoRigInspectionService> no_rig_service_;
+  std::unique_ptr<NoRigSimulationService> no_rig_sim_service_;
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;
   bool shut_down_ = false;

@@ -7,6 +7,8 @@
 #include <google/protobuf/util/time_util.h>
 #include <spdlog/spdlog.h>
 
+#include "server/log_format.h"
+
 namespace inspection {
 using google::protobuf::util::TimeUtil;
 using Clock = std::chrono::steady_clock;
@@ -314,10 +316,12 @@ void JobManager::Emit(const RecordPtr& r, const EventFill& fill) {
   r->AppendEvent(fill, [&](const v1::JobEvent& e) {
     Status s = store_->AppendEvent(e);
     if (!s.ok()) spdlog::error("job {}: cannot persist event: {}", e.job_id(), s.ToString());
+    if (options_.on_event) options_.on_event(e);
   });
 }
 
 void JobManager::Finish(const RecordPtr& r, const StatusOr<v1::JobResult>& outcome) {
+  const ScopedLogJob log_job(r->job_id());
   const Status status = outcome.ok() ? Status::Ok() : outcome.status();
   v1::Job job;
   auto fill = [&](v1::JobEvent& e) {
@@ -332,6 +336,7 @@ void JobManager::Finish(const RecordPtr& r, const StatusOr<v1::JobResult>& outco
     if (!s.ok()) spdlog::error("job {}: cannot persist: {}", ended.job_id(), s.ToString());
     s = store_->AppendEvent(e);
     if (!s.ok()) spdlog::error("job {}: cannot persist event: {}", e.job_id(), s.ToString());
+    if (options_.on_event) options_.on_event(e);
   };
   if (!r->End(outcome, fill, persist)) return;
   if (status.ok()) {
@@ -377,6 +382,7 @@ void JobManager::Worker(Queue* queue, bool rig) {
         context.job_id = r->job_id();
         context.cancel = &r->cancel_requested;
         context.emit = [this, &r](const EventFill& fill) { Emit(r, fill); };
+        const ScopedLogJob log_job(r->job_id());  // log lines of the work name the job
         outcome = runner_->Run(job->work, context);
       }
     }  // the work (an uploaded stack with it) is gone before the job ends

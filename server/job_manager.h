@@ -80,6 +80,9 @@ class JobRecord {
 struct JobManagerOptions {
   int rig_queue_capacity = 4;          // jobs waiting behind the running rig job
   int reconstruct_queue_capacity = 8;
+  // Sees every event once it is persisted (metrics, dashboard). Called on the emitting thread,
+  // sometimes under the manager's lock: it must be quick and must not call the manager.
+  std::function<void(const v1::JobEvent&)> on_event;
 };
 
 class JobManager {

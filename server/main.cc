@@ -12,6 +12,7 @@
 
 #include "devices/rig_config.h"
 #include "server/inspection_server.h"
+#include "server/log_format.h"
 #include "server/server_config.h"
 
 using namespace inspection;
@@ -51,7 +52,9 @@ int main(int argc, char** argv) {
     const std::string help = std::string(key.help) + " (key " + name + ", env " + key.EnvironmentName() + ")";
     CLI::Option* option = nullptr;
     if (key.is_bool()) {
-      const std::string flags = key.FlagName() + ",!--no-" + key.FlagName().substr(2);
+      // A setting named no_x is its own negation: --no-x, without a --no-no-x.
+      const bool negative = key.name.substr(0, 3) == "no_";
+      const std::string flags = negative ? key.FlagName() : key.FlagName() + ",!--no-" + key.FlagName().substr(2);
       option = app.add_flag(flags, flag_bool[name], help + " [default: " + DefaultText(key) + "]");
     } else {
       const char* type = std::holds_alternative<std::string InspectdConfig::*>(key.field) ? "TEXT" : "INT";
@@ -81,8 +84,7 @@ int main(int argc, char** argv) {
     return 0;
   }
 
-  spdlog::set_level(spdlog::level::from_str(config.log_level));
-  spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e%z %l inspectd: %v");
+  ConfigureLogging(config.log_format, config.log_level);
   for (const auto& name : resolved->unknown_environment) {
     spdlog::warn("environment variable {} names no setting; ignored", name);
   }
@@ -103,7 +105,7 @@ int main(int argc, char** argv) {
 
   std::unique_ptr<Rig> rig;
   Status rig_startup;
-  if (!config.rig_config.empty()) {
+  if (!config.rig_config.empty() && !config.no_rig) {
     auto rig_config = LoadRigConfig(config.rig_config);
     if (!rig_config.ok()) {
       std::cerr << "inspectd: " << rig_config.status().message() << "\n";
@@ -125,7 +127,11 @@ int main(int argc, char** argv) {
     std::cerr << "inspectd: " << server.status().ToString() << "\n";
     return 1;
   }
-  std::cout << "inspectd listening on " << (*server)->address() << std::endl;
+  PrintAnnouncement(config.log_format, "inspectd listening on " + (*server)->address());
+  if ((*server)->http_port() != 0) {
+    const char* scheme = config.tls_cert.empty() ? "http" : "https";
+    PrintAnnouncement(config.log_format, std::string("inspectd http on ") + scheme + "://" + (*server)->http_address() + "/");
+  }
   std::thread waiter([&] {
     int sig = 0;
     sigwait(&signals, &sig);

@@ -11,6 +11,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "server/http/http_endpoint.h"
+#include "server/log_format.h"
+
 extern char** environ;
 
 namespace inspection {
@@ -156,6 +159,10 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
       {"seed", &C::seed, "simulated rig: random seed"},
       {"camera_size", &C::camera_size, "simulated rig: camera WIDTHxHEIGHT"},
       {"log_level", &C::log_level, "trace, debug, info, warn, error, critical or off"},
+      {"log_format", &C::log_format, "text, or json for one JSON object per line (time, level, message, job_id)"},
+      {"no_rig", &C::no_rig,
+       "reconstruct only: open no rig; Scan, Calibrate, GetRigStatus, ResetRig and specimens answer FAILED_PRECONDITION"},
+      {"http_listen", &C::http_listen, "host:port for Prometheus /metrics and the web dashboard (port 0 = any); empty: off"},
   };
   return keys;
 }
@@ -287,6 +294,18 @@ Status ValidateConfig(const InspectdConfig& c) {
   if (std::none_of(std::begin(kLevels), std::end(kLevels), [&](const char* l) { return c.log_level == l; })) {
     return bad("log_level", c.log_level, "must be one of trace, debug, info, warn, error, critical, off");
   }
+  if (Status s = CheckLogFormat(c.log_format); !s.ok()) return s;
+  if (!c.http_listen.empty()) {
+    std::string host;
+    int port = 0;
+    INSPECT_RETURN_IF_ERROR(SplitHostPort(c.http_listen, "http_listen", &host, &port));
+    if (c.http_listen == c.listen && port != 0) {
+      return bad("http_listen", c.http_listen, "must differ from listen (gRPC and HTTP need their own ports)");
+    }
+  }
+  if (c.no_rig && !c.rig_config.empty()) {
+    return Status::InvalidArgument("no_rig and rig_config exclude each other (rig_config '" + c.rig_config + "')");
+  }
   if (c.tls_cert.empty() != c.tls_key.empty()) {
     return Status::InvalidArgument("TLS needs both tls_cert and tls_key (only " +
                                    std::string(c.tls_cert.empty() ? "tls_key" : "tls_cert") + " is set)");
@@ -311,6 +330,8 @@ StatusOr<ServerOptions> ToServerOptions(const InspectdConfig& c) {
   o.reflection = c.reflection;
   o.tls_cert_file = c.tls_cert;
   o.tls_key_file = c.tls_key;
+  o.no_rig = c.no_rig;
+  o.http_listen_address = c.http_listen;
   o.simulation.specimen = c.specimen;
   o.simulation.seed = c.seed;
   (void)ParseCameraSize(c.camera_size, &o.simulation.camera_size);  // checked by ValidateConfig

@@ -32,6 +32,9 @@ struct InspectdConfig {
   uint64_t seed = SimulatedRigOptions{}.seed;
   std::string camera_size = "1024x768";  // simulated rig: WIDTHxHEIGHT
   std::string log_level = "info";
+  std::string log_format = "text";  // text or json (one object per line)
+  bool no_rig = false;              // reconstruct only: no rig is opened
+  std::string http_listen;          // host:port for /metrics and the dashboard; empty = none
 
   bool operator==(const InspectdConfig&) const = default;
 };
@@ -95,7 +98,8 @@ struct ResolvedConfig {
 // defaults < file (--config, else INSPECTD_CONFIG) < environment < flags, then ValidateConfig.
 StatusOr<ResolvedConfig> ResolveInspectdConfig(const ConfigLayers& layers);
 
-// Checks values no type can express: camera_size, log_level, listen, TLS cert and key together.
+// Checks values no type can express: camera_size, log_level, log_format, listen, http_listen,
+// TLS cert and key together, no_rig without rig_config.
 Status ValidateConfig(const InspectdConfig& config);
 
 // The configuration as a JSON object, every key in table order; ApplyConfigJson reads it back.

@@ -54,7 +54,41 @@ TEST(ServerConfig, NamesDerivedFromTheKey) {
   EXPECT_EQ(key->FlagName(), "--auth-token-file");
   EXPECT_EQ(key->EnvironmentName(), "INSPECTD_AUTH_TOKEN_FILE");
   EXPECT_EQ(FindConfigKey("auth-token-file"), nullptr);  // file keys use '_' only
-  EXPECT_EQ(InspectdConfigKeys().size(), 13u);  // every inspectd flag before --config
+  EXPECT_EQ(InspectdConfigKeys().size(), 16u);  // every inspectd flag before --config
+}
+
+TEST(ServerConfig, OperationsSettingsAreCheckedAndReachServerOptions) {
+  ConfigLayers layers;
+  layers.environment = {{"INSPECTD_NO_RIG", "true"}, {"INSPECTD_LOG_FORMAT", "json"}};
+  layers.flags = {{"http_listen", "0.0.0.0:9464"}};
+  auto r = ResolveInspectdConfig(layers);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  EXPECT_TRUE(r->config.no_rig);
+  EXPECT_EQ(r->config.log_format, "json");
+  auto options = ToServerOptions(r->config);
+  ASSERT_TRUE(options.ok());
+  EXPECT_TRUE(options->no_rig);
+  EXPECT_EQ(options->http_listen_address, "0.0.0.0:9464");
+
+  auto rejected = [](InspectdConfig c, const std::string& needle) {
+    const Status s = ValidateConfig(c);
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << needle;
+    EXPECT_NE(s.message().find(needle), std::string::npos) << s.message();
+  };
+  InspectdConfig c;
+  c.log_format = "xml";
+  rejected(c, "log_format 'xml' must be text or json");
+  c = InspectdConfig();
+  c.http_listen = "9464";
+  rejected(c, "http_listen '9464' must be host:port");
+  c.http_listen = "127.0.0.1:99999";
+  rejected(c, "http_listen '127.0.0.1:99999' must be host:port");
+  c.http_listen = c.listen;
+  rejected(c, "must differ from listen");
+  c = InspectdConfig();
+  c.no_rig = true;
+  c.rig_config = "/etc/inspection/rig.json";
+  rejected(c, "no_rig and rig_config exclude each other");
 }
 
 TEST_F(ConfigFileTest, FlagsOverrideEnvironmentOverrideFileOverrideDefaults) {

@@ -1,0 +1,86 @@
+// The gRPC services of `inspectd --no-rig`: a reconstruct-only server for the scale-out pool
+// (deploy/k8s/reconstruct). Job, artifact, calibration and Reconstruct calls go to the ordinary
+// handlers; the calls that need a rig (GetRigStatus, Scan, Calibrate, ResetRig and the
+// simulation's specimen calls) answer FAILED_PRECONDITION saying why, after the same
+// authentication as every call.
+#pragma once
+
+#include <array>
+#include <string_view>
+
+#include "inspection/v1/inspection.grpc.pb.h"
+#include "server/inspection_service.h"
+
+namespace inspection {
+
+// The message of every refused rig call, e.g. "Scan needs a rig; this inspectd runs with
+// --no-rig (reconstruct only): send it to the rig's inspectd".
+std::string NoRigMessage(std::string_view method);
+
+// InspectionService methods by what --no-rig does with them. Together they are every method of
+// the service (a test checks this against the proto, so a new RPC cannot fall through as
+// UNIMPLEMENTED unnoticed).
+inline constexpr std::array<std::string_view, 4> kRigOnlyMethods = {"GetRigStatus", "Calibrate", "Scan", "ResetRig"};
+inline constexpr std::array<std::string_view, 8> kNoRigServedMethods = {
+    "Reconstruct", "WatchJob", "GetJob", "ListJobs", "CancelJob", "DownloadArtifact", "GetCalibration",
+    "ListCalibrations"};
+
+class NoRigInspectionService final : public v1::InspectionService::Service {
+ public:
+  // `served` handles the calls a reconstruct server answers; it was built without a rig.
+  NoRigInspectionService(const ServiceOptions& options, InspectionServiceImpl* served)
+      : options_(options), served_(served) {}
+
+  grpc::Status GetRigStatus(grpc::ServerContext*, const v1::GetRigStatusRequest*, v1::RigStatus*) override;
+  grpc::Status Calibrate(grpc::ServerContext*, const v1::CalibrateRequest*, grpc::ServerWriter<v1::JobEvent>*) override;
+  grpc::Status Scan(grpc::ServerContext*, const v1::ScanRequest*, grpc::ServerWriter<v1::JobEvent>*) override;
+  grpc::Status ResetRig(grpc::ServerContext*, const v1::ResetRigRequest*, v1::RigStatus*) override;
+
+  grpc::Status Reconstruct(grpc::ServerContext* c,
+                           grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructRequest>* s) override {
+    return served_->Reconstruct(c, s);
+  }
+  grpc::Status WatchJob(grpc::ServerContext* c, const v1::WatchJobRequest* r,
+                        grpc::ServerWriter<v1::JobEvent>* w) override {
+    return served_->WatchJob(c, r, w);
+  }
+  grpc::Status GetJob(grpc::ServerContext* c, const v1::GetJobRequest* r, v1::Job* o) override {
+    return served_->GetJob(c, r, o);
+  }
+  grpc::Status ListJobs(grpc::ServerContext* c, const v1::ListJobsRequest* r, v1::ListJobsResponse* o) override {
+    return served_->ListJobs(c, r, o);
+  }
+  grpc::Status CancelJob(grpc::ServerContext* c, const v1::CancelJobRequest* r, v1::Job* o) override {
+    return served_->CancelJob(c, r, o);
+  }
+  grpc::Status DownloadArtifact(grpc::ServerContext* c, const v1::DownloadArtifactRequest* r,
+                                grpc::ServerWriter<v1::ArtifactChunk>* w) override {
+    return served_->DownloadArtifact(c, r, w);
+  }
+  grpc::Status GetCalibration(grpc::ServerContext* c, const v1::GetCalibrationRequest* r, v1::Calibration* o) override {
+    return served_->GetCalibration(c, r, o);
+  }
+  grpc::Status ListCalibrations(grpc::ServerContext* c, const v1::ListCalibrationsRequest* r,
+                                v1::ListCalibrationsResponse* o) override {
+    return served_->ListCalibrations(c, r, o);
+  }
+
+ private:
+  grpc::Status Refuse(grpc::ServerContext* ctx, std::string_view method) const;
+
+  ServiceOptions options_;
+  InspectionServiceImpl* served_;
+};
+
+// SimulationService without a rig: both calls refused the same way.
+class NoRigSimulationService final : public v1::SimulationService::Service {
+ public:
+  explicit NoRigSimulationService(const ServiceOptions& options) : options_(options) {}
+  grpc::Status ListSpecimens(grpc::ServerContext*, const v1::ListSpecimensRequest*, v1::ListSpecimensResponse*) override;
+  grpc::Status SetSpecimen(grpc::ServerContext*, const v1::SetSpecimenRequest*, v1::ListSpecimensResponse*) override;
+
+ private:
+  ServiceOptions options_;
+};
+
+}  // namespace inspection
