@@ -3,13 +3,12 @@
 // the one parsed command once the server is reachable (USAGE.md "Global options").
 #pragma once
 
+#include <CLI/CLI.hpp>
 #include <functional>
 #include <map>
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <CLI/CLI.hpp>
 
 #include "client_cli/inspection_client.h"
 #include "client_cli/output.h"

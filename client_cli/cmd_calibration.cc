@@ -76,11 +76,16 @@ int RunList(Session& session) {
 void RegisterCalibrationCommands(CLI::App& app, CliContext& context) {
   auto* calibrate_cmd = app.add_subcommand("calibrate", "Run calibration steps on the rig (all when none given)");
   auto calibrate = std::make_shared<CalibrateFlags>();
-  calibrate_cmd->add_option("--step", calibrate->steps, "Repeatable: " + [] {
-    std::string s;
-    for (const auto& k : Keys(Steps())) s += (s.empty() ? "" : ", ") + k;
-    return s;
-  }())->check(CLI::IsMember(Keys(Steps()), CLI::ignore_case));
+  calibrate_cmd
+      ->add_option(
+          "--step", calibrate->steps,
+          "Repeatable: " +
+              [] {
+                std::string s;
+                for (const auto& k : Keys(Steps())) s += (s.empty() ? "" : ", ") + k;
+                return s;
+              }())
+      ->check(CLI::IsMember(Keys(Steps()), CLI::ignore_case));
   calibrate_cmd->add_option("--label", calibrate->label, "Free text kept with the job");
   calibrate_cmd->add_option("--request-id", calibrate->request_id, "Idempotency key");
   context.AddCommand(calibrate_cmd, [calibrate](Session& session) { return RunCalibrate(*calibrate, session); });

@@ -24,20 +24,19 @@ const std::map<std::string, v1::JobKind>& Kinds() {
 
 const std::map<std::string, v1::JobState>& States() {
   static const std::map<std::string, v1::JobState> m = {
-      {"queued", v1::JOB_STATE_QUEUED},       {"running", v1::JOB_STATE_RUNNING},
-      {"succeeded", v1::JOB_STATE_SUCCEEDED}, {"failed", v1::JOB_STATE_FAILED},
-      {"cancelled", v1::JOB_STATE_CANCELLED},
+      {"queued", v1::JOB_STATE_QUEUED}, {"running", v1::JOB_STATE_RUNNING},     {"succeeded", v1::JOB_STATE_SUCCEEDED},
+      {"failed", v1::JOB_STATE_FAILED}, {"cancelled", v1::JOB_STATE_CANCELLED},
   };
   return m;
 }
 
 // One job per line: id, kind, state, creation time, then what matters for its state.
 std::string JobLine(const v1::Job& job) {
-  std::string line = Format("%-24s %-12s %-10s %-20s", job.job_id().c_str(),
-                            Lower(Short(v1::JobKind_Name(job.kind()), "JOB_KIND_")).c_str(),
-                            Lower(Short(v1::JobState_Name(job.state()), "JOB_STATE_")).c_str(),
-                            TimeText(job.create_time()).c_str());
-  if (job.state() == v1::JOB_STATE_QUEUED && job.queue_position() > 0) line += Format(" queue#%d", job.queue_position());
+  std::string line = Format(
+      "%-24s %-12s %-10s %-20s", job.job_id().c_str(), Lower(Short(v1::JobKind_Name(job.kind()), "JOB_KIND_")).c_str(),
+      Lower(Short(v1::JobState_Name(job.state()), "JOB_STATE_")).c_str(), TimeText(job.create_time()).c_str());
+  if (job.state() == v1::JOB_STATE_QUEUED && job.queue_position() > 0)
+    line += Format(" queue#%d", job.queue_position());
   if (!job.label().empty()) line += " label=" + job.label();
   if (job.state() == v1::JOB_STATE_FAILED) {
     line += std::string(" ") + CodeName(static_cast<grpc::StatusCode>(job.error_code())) + ": " + job.error_message();
@@ -88,9 +87,8 @@ struct WatchFlags {
 };
 
 int RunWatch(const WatchFlags& f, Session& session) {
-  FollowOutcome outcome = Follow(session.printer, [&](const EventCallback& cb, v1::Job* job) {
-    return session.client.Watch(f.job_id, cb, job);
-  });
+  FollowOutcome outcome = Follow(
+      session.printer, [&](const EventCallback& cb, v1::Job* job) { return session.client.Watch(f.job_id, cb, job); });
   std::optional<fs::path> dir;
   if (!f.out_dir.empty()) dir = fs::path(f.out_dir);
   return FinishJob(session.client, session.out, session.printer, outcome, dir, f.include_stack);
@@ -129,9 +127,8 @@ int RunDownload(const DownloadFlags& f, Session& session) {
     fs::path dest(f.out);
     std::error_code ec;
     if (fs::is_directory(dest, ec)) dest /= f.id;
-    s = session.client.DownloadArtifact(f.id, dest, f.resume, [&](int64_t done, int64_t total) {
-      session.printer.OnBytes(f.id, done, total);
-    });
+    s = session.client.DownloadArtifact(
+        f.id, dest, f.resume, [&](int64_t done, int64_t total) { session.printer.OnBytes(f.id, done, total); });
     session.printer.Finish();
     if (s.error_code() == grpc::StatusCode::NOT_FOUND) {
       s = grpc::Status(grpc::StatusCode::NOT_FOUND, "no job or artifact with id " + f.id);

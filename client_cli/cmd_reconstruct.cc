@@ -67,7 +67,8 @@ int RunReconstruct(const ReconstructFlags& f, Session& session) {
 }  // namespace
 
 void RegisterReconstructCommand(CLI::App& app, CliContext& context) {
-  auto* cmd = app.add_subcommand("reconstruct", "Depth map from an uploaded stack folder, a folder of images or a stored scan");
+  auto* cmd =
+      app.add_subcommand("reconstruct", "Depth map from an uploaded stack folder, a folder of images or a stored scan");
   auto f = std::make_shared<ReconstructFlags>();
   // Exactly one source: a stack folder, a plain folder (or glob) of images, or a stored scan.
   auto* source = cmd->add_option_group("source", "Exactly one of");
@@ -79,9 +80,12 @@ void RegisterReconstructCommand(CLI::App& app, CliContext& context) {
   source->add_option("--scan-id", f->scan_id, "A stored scan (JobResult.scan_id)");
   source->require_option(1);
   auto* z_step = cmd->add_option("--z-step", f->images.z_step_um, "With --images: z step between frames, um (> 0)");
-  auto* z_start = cmd->add_option("--z-start", f->images.z_start_um, "With --images: z of the first frame, um (default 0)");
-  auto* z_csv = cmd->add_option("--z-csv", f->images.z_csv, "With --images: CSV of file,z_um lines instead of --z-step");
-  auto* pixel = cmd->add_option("--pixel-size", f->images.pixel_size_um, "With --images: pixel size on the specimen, um");
+  auto* z_start =
+      cmd->add_option("--z-start", f->images.z_start_um, "With --images: z of the first frame, um (default 0)");
+  auto* z_csv =
+      cmd->add_option("--z-csv", f->images.z_csv, "With --images: CSV of file,z_um lines instead of --z-step");
+  auto* pixel =
+      cmd->add_option("--pixel-size", f->images.pixel_size_um, "With --images: pixel size on the specimen, um");
   auto* keep = cmd->add_option("--keep-stack", f->keep_stack)->group("");  // hidden
   for (auto* o : {z_step, z_start, z_csv, pixel, keep}) o->needs(images);
   z_csv->excludes(z_step)->excludes(z_start);

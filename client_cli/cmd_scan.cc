@@ -15,11 +15,13 @@ namespace {
 namespace fs = std::filesystem;
 
 const std::map<std::string, v1::IlluminationMode>& IlluminationModes() {
-  static const std::map<std::string, v1::IlluminationMode> m = {
-      {"std", v1::ILLUMINATION_MODE_STD},           {"hdr", v1::ILLUMINATION_MODE_HDR},
-      {"adapt-it", v1::ILLUMINATION_MODE_ADAPT_IT}, {"adapt", v1::ILLUMINATION_MODE_ADAPT},
-      {"texture", v1::ILLUMINATION_MODE_TEXTURE},   {"hf+adapt", v1::ILLUMINATION_MODE_HF_ADAPT},
-      {"adapted-hf", v1::ILLUMINATION_MODE_ADAPTED_HF}};
+  static const std::map<std::string, v1::IlluminationMode> m = {{"std", v1::ILLUMINATION_MODE_STD},
+                                                                {"hdr", v1::ILLUMINATION_MODE_HDR},
+                                                                {"adapt-it", v1::ILLUMINATION_MODE_ADAPT_IT},
+                                                                {"adapt", v1::ILLUMINATION_MODE_ADAPT},
+                                                                {"texture", v1::ILLUMINATION_MODE_TEXTURE},
+                                                                {"hf+adapt", v1::ILLUMINATION_MODE_HF_ADAPT},
+                                                                {"adapted-hf", v1::ILLUMINATION_MODE_ADAPTED_HF}};
   return m;
 }
 
@@ -61,9 +63,8 @@ int RunScan(const ScanFlags& f, Session& session) {
   if (f.max_iterations) ip->set_max_iterations(*f.max_iterations);
   if (f.target_grey) ip->set_target_grey(*f.target_grey);
   *request.mutable_reconstruction() = f.reconstruction.ToProto();
-  FollowOutcome outcome = Follow(session.printer, [&](const EventCallback& cb, v1::Job* job) {
-    return session.client.Scan(request, cb, job);
-  });
+  FollowOutcome outcome = Follow(
+      session.printer, [&](const EventCallback& cb, v1::Job* job) { return session.client.Scan(request, cb, job); });
   return FinishJob(session.client, session.out, session.printer, outcome, fs::path(f.out_dir), f.include_stack);
 }
 

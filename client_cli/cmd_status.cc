@@ -22,8 +22,7 @@ int PrintRigStatus(const v1::RigStatus& rig, const Output& out) {
     if (!d.detail().empty()) std::cout << " - " << d.detail();
     std::cout << '\n';
   }
-  std::cout << "calibration: " << (rig.active_calibration_id().empty() ? "none" : rig.active_calibration_id())
-            << '\n';
+  std::cout << "calibration: " << (rig.active_calibration_id().empty() ? "none" : rig.active_calibration_id()) << '\n';
   std::cout << "running job: " << (rig.running_job_id().empty() ? "none" : rig.running_job_id()) << ", queue "
             << rig.queued_jobs() << "/" << rig.queue_capacity() << '\n';
   if (rig.simulated()) std::cout << "simulated rig, specimen: " << rig.specimen() << '\n';

@@ -102,10 +102,9 @@ FollowOutcome Follow(ProgressPrinter& printer, const FollowCall& call) {
 
 grpc::Status FetchResults(InspectionClient& client, const v1::Job& job, const fs::path& dir, bool include_stack,
                           bool resume, ProgressPrinter& printer, std::vector<fs::path>* written) {
-  grpc::Status s = client.DownloadResults(job, dir, include_stack, written, resume,
-                                          [&](const std::string& name, int64_t done, int64_t total) {
-                                            printer.OnBytes(name, done, total);
-                                          });
+  grpc::Status s = client.DownloadResults(
+      job, dir, include_stack, written, resume,
+      [&](const std::string& name, int64_t done, int64_t total) { printer.OnBytes(name, done, total); });
   printer.Finish();
   return s;
 }

@@ -11,11 +11,10 @@
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 #include <system_error>
-
-#include <nlohmann/json.hpp>
 
 namespace inspection::client::cli {
 namespace {
@@ -133,7 +132,7 @@ bool NaturalLess(const std::string& a, const std::string& b) {
     ++j;
   }
   if (i < a.size() || j < b.size()) return j < b.size();  // the shorter remainder first
-  return a < b;                                            // "f01" vs "f1", "A" vs "a": still total
+  return a < b;                                           // "f01" vs "f1", "A" vs "a": still total
 }
 
 grpc::Status BuildImageStack(const ImageFolderOptions& options, std::vector<ImageFrame>* frames) {
@@ -232,7 +231,8 @@ grpc::Status StackFolder::Create(const std::vector<ImageFrame>& frames, const st
     fs::create_hard_link(target, link, ec);
     if (ec) fs::create_symlink(target, link, ec);
     if (ec) fs::copy_file(target, link, ec);
-    if (ec) return Invalid("--images: cannot place " + f.source.string() + " in " + path_.string() + ": " + ec.message());
+    if (ec)
+      return Invalid("--images: cannot place " + f.source.string() + " in " + path_.string() + ": " + ec.message());
   }
   std::ofstream out(path_ / "stack.json", std::ios::binary);
   out << manifest_json;

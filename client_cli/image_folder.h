@@ -5,12 +5,12 @@
 // server's to check).
 #pragma once
 
+#include <grpcpp/grpcpp.h>
+
 #include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <grpcpp/grpcpp.h>
 
 namespace inspection::client::cli {
 

@@ -2,16 +2,16 @@
 // chunked stack upload and resumable, sha256-verified artifact download for inspection.v1.
 #include "client_cli/inspection_client.h"
 
+#include <openssl/evp.h>
+
 #include <algorithm>
 #include <cctype>
 #include <chrono>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <system_error>
 #include <thread>
-
-#include <nlohmann/json.hpp>
-#include <openssl/evp.h>
 
 namespace inspection::client {
 namespace {
@@ -60,8 +60,8 @@ struct UploadFile {
   int64_t size_bytes = 0;
 };
 
-// Lists stack.json, every frame file it names and ground_truth_depth.tiff if present, with sizes. Only reads the manifest's file
-// list; the server validates the rest (z monotonic, image formats).
+// Lists stack.json, every frame file it names and ground_truth_depth.tiff if present, with sizes. Only reads the
+// manifest's file list; the server validates the rest (z monotonic, image formats).
 grpc::Status ListStackFiles(const fs::path& stack_dir, std::vector<UploadFile>* files) {
   const fs::path manifest_path = stack_dir / "stack.json";
   std::string text;
@@ -146,13 +146,13 @@ InspectionClient::InspectionClient(const ClientOptions& options) : options_(opti
   } else {
     grpc::SslCredentialsOptions ssl;
     if (!ReadWholeFile(options_.tls_ca_file, &ssl.pem_root_certs) || ssl.pem_root_certs.empty()) {
-      init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                                  "tls_ca_file: cannot read " + options_.tls_ca_file);
+      init_status_ =
+          grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "tls_ca_file: cannot read " + options_.tls_ca_file);
     }
     // mTLS: a client certificate and key, both or neither.
     if (options_.tls_client_cert_file.empty() != options_.tls_client_key_file.empty()) {
-      init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                                  "tls_client_cert_file and tls_client_key_file go together");
+      init_status_ =
+          grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "tls_client_cert_file and tls_client_key_file go together");
     } else if (!options_.tls_client_cert_file.empty()) {
       if (!ReadWholeFile(options_.tls_client_cert_file, &ssl.pem_cert_chain) || ssl.pem_cert_chain.empty()) {
         init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
@@ -293,7 +293,8 @@ grpc::Status InspectionClient::ReconstructUpload(const std::filesystem::path& st
     const UploadFile& file = files[i];
     std::ifstream in(file.path, std::ios::binary);
     if (!in) {
-      local_error = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, file.relative + ": cannot open " + file.path.string());
+      local_error =
+          grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, file.relative + ": cannot open " + file.path.string());
       break;
     }
     int64_t offset = 0;
@@ -435,9 +436,9 @@ grpc::Status InspectionClient::DownloadArtifact(const std::string& artifact_id, 
     grpc::Status local_error = grpc::Status::OK;
     while (reader->Read(&chunk)) {
       if (chunk.offset() != written) {
-        local_error = grpc::Status(grpc::StatusCode::DATA_LOSS,
-                                   "artifact " + artifact_id + ": chunk at offset " + std::to_string(chunk.offset()) +
-                                       ", expected " + std::to_string(written));
+        local_error = grpc::Status(grpc::StatusCode::DATA_LOSS, "artifact " + artifact_id + ": chunk at offset " +
+                                                                    std::to_string(chunk.offset()) + ", expected " +
+                                                                    std::to_string(written));
         ctx.TryCancel();
         break;
       }
@@ -488,13 +489,15 @@ grpc::Status InspectionClient::DownloadArtifact(const std::string& artifact_id, 
     return {grpc::StatusCode::DATA_LOSS, msg.str()};
   }
   fs::rename(part, dest, ec);
-  if (ec) return {grpc::StatusCode::INTERNAL, "cannot rename " + part.string() + " to " + dest.string() + ": " + ec.message()};
+  if (ec)
+    return {grpc::StatusCode::INTERNAL,
+            "cannot rename " + part.string() + " to " + dest.string() + ": " + ec.message()};
   return grpc::Status::OK;
 }
 
-grpc::Status InspectionClient::DownloadResults(const v1::Job& job, const std::filesystem::path& dir,
-                                               bool include_stack, std::vector<std::filesystem::path>* written,
-                                               bool resume, const FileProgress& on_progress) {
+grpc::Status InspectionClient::DownloadResults(const v1::Job& job, const std::filesystem::path& dir, bool include_stack,
+                                               std::vector<std::filesystem::path>* written, bool resume,
+                                               const FileProgress& on_progress) {
   if (!init_status_.ok()) return init_status_;
   if (job.state() != v1::JOB_STATE_SUCCEEDED) {
     return {grpc::StatusCode::FAILED_PRECONDITION,

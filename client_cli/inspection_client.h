@@ -4,14 +4,14 @@
 // Thread-compatible: one instance per thread, or external locking.
 #pragma once
 
+#include <grpcpp/grpcpp.h>
+
 #include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <grpcpp/grpcpp.h>
 
 #include "inspection/v1/inspection.grpc.pb.h"
 
@@ -24,7 +24,7 @@ struct ClientOptions {
   std::string tls_ca_file;                 // PEM; empty = plaintext
   std::string tls_client_cert_file;        // PEM; with tls_client_key_file: mTLS client identity
   std::string tls_client_key_file;
-  std::string auth_token;                  // sent as "authorization: Bearer <token>" when set
+  std::string auth_token;  // sent as "authorization: Bearer <token>" when set
   double connect_timeout_seconds = 10.0;
 };
 

@@ -2,12 +2,12 @@
 // progress display while following a job (USAGE.md "Progress display", "Exit codes", "JSON output").
 #pragma once
 
+#include <grpcpp/grpcpp.h>
+
 #include <cstdint>
 #include <mutex>
-#include <string>
-
-#include <grpcpp/grpcpp.h>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "client_cli/inspection_client.h"
 

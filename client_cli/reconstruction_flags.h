@@ -2,11 +2,10 @@
 // --interpolation, --min-confidence, --export) and their mapping to ReconstructionOptions.
 #pragma once
 
+#include <CLI/CLI.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <CLI/CLI.hpp>
 
 #include "client_cli/inspection_client.h"
 

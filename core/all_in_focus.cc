@@ -20,9 +20,7 @@ StatusOr<AllInFocusComposer> AllInFocusComposer::Create(cv::Size frame_size, int
   return c;
 }
 
-size_t AllInFocusComposer::state_bytes() const {
-  return image_.total() * (4 + 4 + image_.elemSize());
-}
+size_t AllInFocusComposer::state_bytes() const { return image_.total() * (4 + 4 + image_.elemSize()); }
 
 template <typename P>
 void AllInFocusComposer::Update(const cv::Mat& frame, const cv::Mat& score) {
@@ -85,8 +83,10 @@ Status AllInFocusComposer::PushFrame(const cv::Mat& frame, const cv::Mat& score)
   if (score.type() != score_type_) {
     return Status::InvalidArgument(at + "score type differs from the first frame's (all integer or all float)");
   }
-  if (frame.depth() == CV_8U) Update<uint8_t>(frame, score);
-  else Update<uint16_t>(frame, score);
+  if (frame.depth() == CV_8U)
+    Update<uint8_t>(frame, score);
+  else
+    Update<uint16_t>(frame, score);
   ++frames_pushed_;
   return Status::Ok();
 }

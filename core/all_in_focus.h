@@ -10,7 +10,6 @@
 #pragma once
 
 #include <cstddef>
-
 #include <opencv2/core.hpp>
 
 #include "core/sff_engine.h"
@@ -44,7 +43,7 @@ class AllInFocusComposer {
   template <typename P>
   void Update(const cv::Mat& frame, const cv::Mat& score);
 
-  cv::Mat best_;   // CV_32FC1, or CV_32SC1 for integer scores (exact: no rounding of int32 sums)
+  cv::Mat best_;  // CV_32FC1, or CV_32SC1 for integer scores (exact: no rounding of int32 sums)
   cv::Mat image_;
   cv::Mat index_;
   int score_type_ = -1;

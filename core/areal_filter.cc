@@ -2,9 +2,8 @@
 #include "core/areal_filter.h"
 
 #include <cmath>
-#include <string>
-
 #include <opencv2/imgproc.hpp>
+#include <string>
 
 namespace inspection {
 namespace {
@@ -73,8 +72,8 @@ StatusOr<GaussianAreaFilter> GaussianAreaFilter::Create(const cv::Mat& usable, d
   if (box.empty()) return f;
   const int radius = f.kernel_.rows / 2;
   // Only the usable pixels' bounding box matters: outside it the weights see zeros.
-  f.pad_box_ = (box + cv::Size(2 * radius, 2 * radius) - cv::Point(radius, radius)) &
-               cv::Rect(0, 0, usable.cols, usable.rows);
+  f.pad_box_ =
+      (box + cv::Size(2 * radius, 2 * radius) - cv::Point(radius, radius)) & cv::Rect(0, 0, usable.cols, usable.rows);
   cv::Mat m;
   usable(f.pad_box_).convertTo(m, CV_64F, 1.0 / 255.0);
   cv::threshold(m, m, 0.0, 1.0, cv::THRESH_BINARY);  // any non-zero mask value counts as 1

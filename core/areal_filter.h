@@ -32,9 +32,9 @@ class GaussianAreaFilter {
 
  private:
   cv::Mat usable_;
-  cv::Mat kernel_;       // CV_64F column, normalised
-  cv::Rect pad_box_;     // usable pixels' bounding box grown by the kernel radius
-  cv::Mat weight_sum_;   // CV_64F: G * m over pad_box_
+  cv::Mat kernel_;      // CV_64F column, normalised
+  cv::Rect pad_box_;    // usable pixels' bounding box grown by the kernel radius
+  cv::Mat weight_sum_;  // CV_64F: G * m over pad_box_
 };
 
 // The Gaussian mean (smoothed) surface with cut-off cutoff_um of surface_um (CV_32FC1, NaN =

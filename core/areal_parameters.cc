@@ -49,13 +49,20 @@ StatusOr<ArealHeightParameters> ComputeHeightParameters(const cv::Mat& surface_u
 
 const char* HeightParameterName(HeightParameter p) {
   switch (p) {
-    case HeightParameter::kSa: return "Sa";
-    case HeightParameter::kSq: return "Sq";
-    case HeightParameter::kSp: return "Sp";
-    case HeightParameter::kSv: return "Sv";
-    case HeightParameter::kSz: return "Sz";
-    case HeightParameter::kSsk: return "Ssk";
-    case HeightParameter::kSku: return "Sku";
+    case HeightParameter::kSa:
+      return "Sa";
+    case HeightParameter::kSq:
+      return "Sq";
+    case HeightParameter::kSp:
+      return "Sp";
+    case HeightParameter::kSv:
+      return "Sv";
+    case HeightParameter::kSz:
+      return "Sz";
+    case HeightParameter::kSsk:
+      return "Ssk";
+    case HeightParameter::kSku:
+      return "Sku";
   }
   return "unknown";
 }
@@ -74,13 +81,20 @@ StatusOr<HeightParameter> ParseHeightParameter(const std::string& name) {
 
 double HeightParameterValue(const ArealHeightParameters& v, HeightParameter p) {
   switch (p) {
-    case HeightParameter::kSa: return v.Sa_um;
-    case HeightParameter::kSq: return v.Sq_um;
-    case HeightParameter::kSp: return v.Sp_um;
-    case HeightParameter::kSv: return v.Sv_um;
-    case HeightParameter::kSz: return v.Sz_um;
-    case HeightParameter::kSsk: return v.Ssk;
-    case HeightParameter::kSku: return v.Sku;
+    case HeightParameter::kSa:
+      return v.Sa_um;
+    case HeightParameter::kSq:
+      return v.Sq_um;
+    case HeightParameter::kSp:
+      return v.Sp_um;
+    case HeightParameter::kSv:
+      return v.Sv_um;
+    case HeightParameter::kSz:
+      return v.Sz_um;
+    case HeightParameter::kSsk:
+      return v.Ssk;
+    case HeightParameter::kSku:
+      return v.Sku;
   }
   return std::nan("");
 }

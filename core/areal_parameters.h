@@ -5,10 +5,9 @@
 // Gaussian mean surface), as ISO 25178-2 defines them; they are not re-centred on their mean.
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <optional>
 #include <string>
-
-#include <opencv2/core.hpp>
 
 #include "core/areal_filter.h"
 #include "core/form_removal.h"

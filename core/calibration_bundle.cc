@@ -5,10 +5,9 @@
 #include <cmath>
 #include <fstream>
 #include <limits>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <sstream>
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -16,26 +15,34 @@ using nlohmann::json;
 
 const char* CalibrationStepName(CalibrationStep step) {
   switch (step) {
-    case CalibrationStep::kCameraResponse: return "camera_response";
-    case CalibrationStep::kProjectorResponse: return "projector_response";
-    case CalibrationStep::kGeometry: return "geometry";
-    case CalibrationStep::kPsf: return "psf";
-    case CalibrationStep::kScatterMatrix: return "scatter_matrix";
-    case CalibrationStep::kIntegralPsf: return "integral_psf";
+    case CalibrationStep::kCameraResponse:
+      return "camera_response";
+    case CalibrationStep::kProjectorResponse:
+      return "projector_response";
+    case CalibrationStep::kGeometry:
+      return "geometry";
+    case CalibrationStep::kPsf:
+      return "psf";
+    case CalibrationStep::kScatterMatrix:
+      return "scatter_matrix";
+    case CalibrationStep::kIntegralPsf:
+      return "integral_psf";
   }
   return "unknown";
 }
 
 std::vector<CalibrationStep> AllCalibrationSteps() {
-  return {CalibrationStep::kCameraResponse, CalibrationStep::kProjectorResponse, CalibrationStep::kGeometry,
-          CalibrationStep::kPsf, CalibrationStep::kScatterMatrix, CalibrationStep::kIntegralPsf};
+  return {CalibrationStep::kCameraResponse, CalibrationStep::kProjectorResponse,
+          CalibrationStep::kGeometry,       CalibrationStep::kPsf,
+          CalibrationStep::kScatterMatrix,  CalibrationStep::kIntegralPsf};
 }
 
 StatusOr<CalibrationStep> ParseCalibrationStep(const std::string& name) {
   for (CalibrationStep s : AllCalibrationSteps())
     if (name == CalibrationStepName(s)) return s;
-  return Status::InvalidArgument("unknown calibration step '" + name +
-                                 "' (camera_response, projector_response, geometry, psf, scatter_matrix, integral_psf)");
+  return Status::InvalidArgument(
+      "unknown calibration step '" + name +
+      "' (camera_response, projector_response, geometry, psf, scatter_matrix, integral_psf)");
 }
 
 const CalibrationStepReport* CalibrationBundle::Report(CalibrationStep step) const {
@@ -46,26 +53,36 @@ const CalibrationStepReport* CalibrationBundle::Report(CalibrationStep step) con
 
 void CalibrationBundle::SetReport(CalibrationStepReport report) {
   for (auto& r : reports)
-    if (r.step == report.step) { r = std::move(report); return; }
+    if (r.step == report.step) {
+      r = std::move(report);
+      return;
+    }
   reports.push_back(std::move(report));
   std::sort(reports.begin(), reports.end(), [](const auto& a, const auto& b) { return a.step < b.step; });
 }
 
 bool CalibrationBundle::HasModel(CalibrationStep step) const {
   switch (step) {
-    case CalibrationStep::kCameraResponse: return camera_response.has_value();
-    case CalibrationStep::kProjectorResponse: return projector_response.has_value();
-    case CalibrationStep::kGeometry: return geometry.has_value();
-    case CalibrationStep::kPsf: return psf.has_value();
-    case CalibrationStep::kScatterMatrix: return scatter.has_value();
-    case CalibrationStep::kIntegralPsf: return integral_psf.has_value();
+    case CalibrationStep::kCameraResponse:
+      return camera_response.has_value();
+    case CalibrationStep::kProjectorResponse:
+      return projector_response.has_value();
+    case CalibrationStep::kGeometry:
+      return geometry.has_value();
+    case CalibrationStep::kPsf:
+      return psf.has_value();
+    case CalibrationStep::kScatterMatrix:
+      return scatter.has_value();
+    case CalibrationStep::kIntegralPsf:
+      return integral_psf.has_value();
   }
   return false;
 }
 
 Status CalibrationBundle::Validate() const {
   if (version < 1 || version > kCalibrationBundleVersion) {
-    return Status::FailedPrecondition("bundle version " + std::to_string(version) + " is not supported (this build reads up to " +
+    return Status::FailedPrecondition("bundle version " + std::to_string(version) +
+                                      " is not supported (this build reads up to " +
                                       std::to_string(kCalibrationBundleVersion) + ")");
   }
   if (camera_response) INSPECT_RETURN_IF_ERROR(camera_response->Validate());
@@ -160,14 +177,19 @@ Status CalibrationBundle::Save(const fs::path& dir) const {
   j["camera_bit_depth"] = camera_bit_depth;
   if (camera_response) {
     const auto& c = *camera_response;
-    j["camera_response"] = {{"levels", c.levels}, {"log_exposure", c.log_exposure},
-                            {"smoothness_lambda", c.smoothness_lambda}, {"sample_pixel_count", c.sample_pixel_count},
-                            {"image_count", c.image_count}, {"fit_rms_residual", Num(c.fit_rms_residual)}};
+    j["camera_response"] = {{"levels", c.levels},
+                            {"log_exposure", c.log_exposure},
+                            {"smoothness_lambda", c.smoothness_lambda},
+                            {"sample_pixel_count", c.sample_pixel_count},
+                            {"image_count", c.image_count},
+                            {"fit_rms_residual", Num(c.fit_rms_residual)}};
   }
   if (projector_response) {
     const auto& p = *projector_response;
-    j["projector_response"] = {{"relative_irradiance", p.relative_irradiance}, {"measured_levels", p.measured_levels},
-                               {"exposure_min_us", p.exposure_min_us}, {"exposure_max_us", p.exposure_max_us},
+    j["projector_response"] = {{"relative_irradiance", p.relative_irradiance},
+                               {"measured_levels", p.measured_levels},
+                               {"exposure_min_us", p.exposure_min_us},
+                               {"exposure_max_us", p.exposure_max_us},
                                {"pixel_ratio_cv", Num(p.pixel_ratio_cv)}};
   }
   if (geometry) {
@@ -177,7 +199,8 @@ Status CalibrationBundle::Save(const fs::path& dir) const {
     std::vector<double> h;
     for (int r = 0; r < 3; ++r)
       for (int c = 0; c < 3; ++c) h.push_back(g.homography(r, c));
-    j["geometry"] = {{"homography", h}, {"grid_spacing_px", g.grid_spacing_px},
+    j["geometry"] = {{"homography", h},
+                     {"grid_spacing_px", g.grid_spacing_px},
                      {"valid_projector_pixels", g.valid_projector_pixels},
                      {"camera_px_per_projector_px", Num(g.camera_px_per_projector_px)},
                      {"projector_rotation_deg", Num(g.projector_rotation_deg)},
@@ -191,8 +214,8 @@ Status CalibrationBundle::Save(const fs::path& dir) const {
       const auto& s = psf->steps[k];
       const std::string file = "psf_" + std::to_string(k) + ".tiff";
       INSPECT_RETURN_IF_ERROR(WriteFloatTiff(dir / file, s.psf));
-      steps.push_back({{"defocus_um", s.defocus_um}, {"sigma_px", Num(s.sigma_px)}, {"dot_count", s.dot_count},
-                       {"file", file}});
+      steps.push_back(
+          {{"defocus_um", s.defocus_um}, {"sigma_px", Num(s.sigma_px)}, {"dot_count", s.dot_count}, {"file", file}});
     }
     j["psf"] = {{"steps", steps}, {"influence_radius_px", psf->influence_radius_px}};
   }
@@ -200,27 +223,35 @@ Status CalibrationBundle::Save(const fs::path& dir) const {
     const auto& s = *scatter;
     INSPECT_RETURN_IF_ERROR(WriteSparseMatrix(dir / "scatter_matrix.bin", s.a));
     INSPECT_RETURN_IF_ERROR(WriteFloatTiff(dir / "scatter_black_radiance.tiff", s.black_radiance));
-    j["scatter_matrix"] = {{"file", "scatter_matrix.bin"}, {"black_radiance_file", "scatter_black_radiance.tiff"},
+    j["scatter_matrix"] = {{"file", "scatter_matrix.bin"},
+                           {"black_radiance_file", "scatter_black_radiance.tiff"},
                            {"projector_black_irradiance", s.projector_black_irradiance},
-                           {"patch_radius_px", s.patch_radius_px}, {"grid_spacing_px", s.grid_spacing_px},
-                           {"non_zeros", static_cast<int64_t>(s.a.nonZeros())}, {"density", s.Density()}};
+                           {"patch_radius_px", s.patch_radius_px},
+                           {"grid_spacing_px", s.grid_spacing_px},
+                           {"non_zeros", static_cast<int64_t>(s.a.nonZeros())},
+                           {"density", s.Density()}};
   }
   if (integral_psf) {
     const auto& p = *integral_psf;
     INSPECT_RETURN_IF_ERROR(WriteFloatTiff(dir / "integral_psf.tiff", p.kernel));
-    j["integral_psf"] = {{"file", "integral_psf.tiff"}, {"regularisation", IpsfRegularisationName(p.regularisation)},
+    j["integral_psf"] = {{"file", "integral_psf.tiff"},
+                         {"regularisation", IpsfRegularisationName(p.regularisation)},
                          {"regularisation_weight", p.regularisation_weight},
                          {"integral_rms_error", Num(p.integral_rms_error)},
-                         {"restored_rms_error", Num(p.restored_rms_error)}, {"stack_frames", p.stack_frames},
+                         {"restored_rms_error", Num(p.restored_rms_error)},
+                         {"stack_frames", p.stack_frames},
                          {"integral_noise_sigma", Num(p.integral_noise_sigma)}};
   }
   json reps = json::array();
   for (const auto& r : reports) {
     json f = json::object();
     for (const auto& [k, v] : r.figures) f[k] = Num(v);
-    reps.push_back({{"step", CalibrationStepName(r.step)}, {"duration_s", r.duration_s},
-                    {"finished_utc", r.finished_utc}, {"frames_captured", r.frames_captured},
-                    {"figures", f}, {"note", r.note}});
+    reps.push_back({{"step", CalibrationStepName(r.step)},
+                    {"duration_s", r.duration_s},
+                    {"finished_utc", r.finished_utc},
+                    {"frames_captured", r.frames_captured},
+                    {"figures", f},
+                    {"note", r.note}});
   }
   j["reports"] = reps;
 

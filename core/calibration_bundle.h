@@ -15,11 +15,10 @@
 
 #include <filesystem>
 #include <map>
+#include <opencv2/core.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/camera_response.h"
 #include "core/geometric_calibration.h"
@@ -58,7 +57,7 @@ struct CalibrationStepReport {
   std::string finished_utc;  // ISO 8601, e.g. "2026-11-22T01:02:03Z"
   int frames_captured = 0;
   std::map<std::string, double> figures;
-  std::string note;          // free text, e.g. which true-parameter checks were possible
+  std::string note;  // free text, e.g. which true-parameter checks were possible
 };
 
 struct CalibrationBundle {

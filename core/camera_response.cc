@@ -2,31 +2,27 @@
 // weighted least squares with a second-derivative smoothness term, solved through CHOLMOD.
 #include "core/camera_response.h"
 
+#include <Eigen/CholmodSupport>
+#include <Eigen/Sparse>
 #include <algorithm>
 #include <cmath>
 #include <numeric>
 #include <string>
-
-#include <Eigen/CholmodSupport>
-#include <Eigen/Sparse>
 
 namespace inspection {
 
 Status CameraResponseFunction::Validate() const {
   if (levels < 2) return Status::InvalidArgument("camera_response.levels must be >= 2");
   if (static_cast<int>(log_exposure.size()) != levels) {
-    return Status::InvalidArgument("camera_response.log_exposure has " +
-                                   std::to_string(log_exposure.size()) + " entries, expected " +
-                                   std::to_string(levels));
+    return Status::InvalidArgument("camera_response.log_exposure has " + std::to_string(log_exposure.size()) +
+                                   " entries, expected " + std::to_string(levels));
   }
   for (int z = 0; z < levels; ++z) {
     if (!std::isfinite(log_exposure[z])) {
-      return Status::InvalidArgument("camera_response.log_exposure[" + std::to_string(z) +
-                                     "] is not finite");
+      return Status::InvalidArgument("camera_response.log_exposure[" + std::to_string(z) + "] is not finite");
     }
     if (z > 0 && log_exposure[z] < log_exposure[z - 1]) {
-      return Status::InvalidArgument("camera_response.log_exposure decreases at grey " +
-                                     std::to_string(z));
+      return Status::InvalidArgument("camera_response.log_exposure decreases at grey " + std::to_string(z));
     }
   }
   return Status::Ok();
@@ -85,8 +81,8 @@ Status CameraResponseOptions::Validate() const {
 }
 
 StatusOr<CameraResponseFunction> SolveCameraResponse(const std::vector<std::vector<int>>& z_in,
-                                             const std::vector<double>& exposure_us,
-                                             const CameraResponseOptions& options) {
+                                                     const std::vector<double>& exposure_us,
+                                                     const CameraResponseOptions& options) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
   const int levels = options.levels;
   const int p = static_cast<int>(exposure_us.size());
@@ -101,15 +97,14 @@ StatusOr<CameraResponseFunction> SolveCameraResponse(const std::vector<std::vect
   std::vector<const std::vector<int>*> samples;
   for (size_t i = 0; i < z_in.size(); ++i) {
     if (static_cast<int>(z_in[i].size()) != p) {
-      return Status::InvalidArgument("z[" + std::to_string(i) + "] has " +
-                                     std::to_string(z_in[i].size()) + " values, expected " +
-                                     std::to_string(p));
+      return Status::InvalidArgument("z[" + std::to_string(i) + "] has " + std::to_string(z_in[i].size()) +
+                                     " values, expected " + std::to_string(p));
     }
     double wsum = 0;
     for (int v : z_in[i]) {
       if (v < 0 || v >= levels) {
-        return Status::InvalidArgument("z[" + std::to_string(i) + "] holds grey " +
-                                       std::to_string(v) + " outside 0.." + std::to_string(levels - 1));
+        return Status::InvalidArgument("z[" + std::to_string(i) + "] holds grey " + std::to_string(v) + " outside 0.." +
+                                       std::to_string(levels - 1));
       }
       wsum += DebevecWeight(v, levels);
     }
@@ -165,8 +160,9 @@ StatusOr<CameraResponseFunction> SolveCameraResponse(const std::vector<std::vect
   Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>> solver;
   solver.compute(ata);
   if (solver.info() != Eigen::Success) {
-    return Status::InvalidArgument("camera response: normal equations are singular (too few "
-                                   "distinct grey values or exposures)");
+    return Status::InvalidArgument(
+        "camera response: normal equations are singular (too few "
+        "distinct grey values or exposures)");
   }
   const Eigen::VectorXd x = solver.solve(atb);
   if (solver.info() != Eigen::Success || !x.allFinite()) {
@@ -196,9 +192,7 @@ StatusOr<CameraResponseFunction> SolveCameraResponse(const std::vector<std::vect
 
 namespace {
 
-int PixelAt(const cv::Mat& m, int idx) {
-  return m.depth() == CV_8U ? m.ptr<uint8_t>()[idx] : m.ptr<uint16_t>()[idx];
-}
+int PixelAt(const cv::Mat& m, int idx) { return m.depth() == CV_8U ? m.ptr<uint8_t>()[idx] : m.ptr<uint16_t>()[idx]; }
 
 Status CheckSeries(const std::vector<cv::Mat>& images, const std::vector<double>& exposure_us) {
   if (images.size() != exposure_us.size()) {
@@ -222,8 +216,8 @@ Status CheckSeries(const std::vector<cv::Mat>& images, const std::vector<double>
 }  // namespace
 
 StatusOr<CameraResponseFunction> EstimateCameraResponse(const std::vector<cv::Mat>& images,
-                                                const std::vector<double>& exposure_us,
-                                                const CameraResponseOptions& options) {
+                                                        const std::vector<double>& exposure_us,
+                                                        const CameraResponseOptions& options) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
   INSPECT_RETURN_IF_ERROR(CheckSeries(images, exposure_us));
   // Reference: the image of median exposure. Candidates on a regular grid (at most ~40000),
@@ -250,7 +244,8 @@ StatusOr<CameraResponseFunction> EstimateCameraResponse(const std::vector<cv::Ma
     size_t pos;
     if (g1 > g0) {
       const double target = g0 + (g1 - g0) * (k + 0.5) / want;
-      pos = std::lower_bound(cand.begin(), cand.end(), std::make_pair(static_cast<int>(std::lround(target)), -1)) - cand.begin();
+      pos = std::lower_bound(cand.begin(), cand.end(), std::make_pair(static_cast<int>(std::lround(target)), -1)) -
+            cand.begin();
       pos = std::min(pos, cand.size() - 1);
       // Distinct pixels: walk to the next unused candidate.
       size_t q = pos;
@@ -273,8 +268,7 @@ StatusOr<CameraResponseFunction> EstimateCameraResponse(const std::vector<cv::Ma
   return SolveCameraResponse(z, exposure_us, options);
 }
 
-StatusOr<cv::Mat> MergeRadiance(const std::vector<cv::Mat>& images,
-                                const std::vector<double>& exposure_us,
+StatusOr<cv::Mat> MergeRadiance(const std::vector<cv::Mat>& images, const std::vector<double>& exposure_us,
                                 const CameraResponseFunction& response) {
   INSPECT_RETURN_IF_ERROR(CheckSeries(images, exposure_us));
   INSPECT_RETURN_IF_ERROR(response.Validate());
@@ -293,7 +287,10 @@ StatusOr<cv::Mat> MergeRadiance(const std::vector<cv::Mat>& images,
       num += w * le;
       den += w;
       const double dist = std::abs(z - levels / 2.0);
-      if (dist < best_dist) { best_dist = dist; best = static_cast<int>(j); }
+      if (dist < best_dist) {
+        best_dist = dist;
+        best = static_cast<int>(j);
+      }
     }
     if (den > 0) {
       o[idx] = static_cast<float>(std::exp(num / den));

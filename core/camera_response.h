@@ -6,9 +6,8 @@
 // model can be loaded and checked (Validate) without the images it came from.
 #pragma once
 
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/status.h"
 
@@ -56,20 +55,19 @@ struct CameraResponseOptions {
 // exposure_us[j] the exposure of image j. Weighted least squares, sparse normal equations
 // (CHOLMOD), gauge crf(levels/2) = 0.
 StatusOr<CameraResponseFunction> SolveCameraResponse(const std::vector<std::vector<int>>& z,
-                                             const std::vector<double>& exposure_us,
-                                             const CameraResponseOptions& options);
+                                                     const std::vector<double>& exposure_us,
+                                                     const CameraResponseOptions& options);
 
 // Picks sample pixels whose grey values in the middle image of the series spread evenly over
 // the grey range (thesis 3.2.1), then solves eq. 4.4. images: same size, CV_8UC1 or CV_16UC1,
 // of a static scene; exposure_us strictly positive.
 StatusOr<CameraResponseFunction> EstimateCameraResponse(const std::vector<cv::Mat>& images,
-                                                const std::vector<double>& exposure_us,
-                                                const CameraResponseOptions& options);
+                                                        const std::vector<double>& exposure_us,
+                                                        const CameraResponseOptions& options);
 
 // HDR irradiance image, eq. 3.44 (weighted mean of crf(Z) - ln dt), returned as E (CV_32FC1,
 // not the log). Pixels with zero total weight get the estimate from the least-saturated frame.
-StatusOr<cv::Mat> MergeRadiance(const std::vector<cv::Mat>& images,
-                                const std::vector<double>& exposure_us,
+StatusOr<cv::Mat> MergeRadiance(const std::vector<cv::Mat>& images, const std::vector<double>& exposure_us,
                                 const CameraResponseFunction& response);
 
 }  // namespace inspection

@@ -2,14 +2,13 @@
 // local means), desired scene radiance and the projector irradiance solved with LSCG on A U.
 #include "core/compensation.h"
 
+#include <Eigen/IterativeLinearSolvers>
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
-
-#include <Eigen/IterativeLinearSolvers>
-#include <opencv2/imgproc.hpp>
 
 namespace inspection {
 
@@ -19,8 +18,10 @@ Status CompensationOptions::Validate() const {
   if (solver_iterations < 1 || solver_iterations > 1000) {
     return Status::InvalidArgument("solver_iterations must be in [1, 1000]");
   }
-  if (!(solver_tolerance > 0 && solver_tolerance < 1)) return Status::InvalidArgument("solver_tolerance must be in (0, 1)");
-  if (!(min_lit_fraction >= 0 && min_lit_fraction < 1)) return Status::InvalidArgument("min_lit_fraction must be in [0, 1)");
+  if (!(solver_tolerance > 0 && solver_tolerance < 1))
+    return Status::InvalidArgument("solver_tolerance must be in (0, 1)");
+  if (!(min_lit_fraction >= 0 && min_lit_fraction < 1))
+    return Status::InvalidArgument("min_lit_fraction must be in [0, 1)");
   if (!(saturated_reflectance_factor >= 1)) return Status::InvalidArgument("saturated_reflectance_factor must be >= 1");
   if (reflectance_window_px < 0 || reflectance_window_px > 63 ||
       (reflectance_window_px > 0 && reflectance_window_px % 2 == 0)) {
@@ -116,7 +117,8 @@ StatusOr<std::unique_ptr<Compensator>> Compensator::Create(const CameraResponseF
   std::vector<Eigen::Triplet<float, int>> tb;
   tb.reserve(size_t(cam.area()));
   for (int y = 0; y < cam.height; ++y) {
-    for (int x = 0; x < cam.width; ++x) tb.emplace_back((y / bin) * c->bin_size_.width + x / bin, y * cam.width + x, 1.0f);
+    for (int x = 0; x < cam.width; ++x)
+      tb.emplace_back((y / bin) * c->bin_size_.width + x / bin, y * cam.width + x, 1.0f);
   }
   Eigen::SparseMatrix<float, Eigen::ColMajor, int> bm(c->bin_size_.area(), cam.area());
   bm.setFromTriplets(tb.begin(), tb.end());
@@ -304,8 +306,9 @@ StatusOr<CompensationStep> Compensator::Step(const cv::Mat& irradiance, const cv
     }
   }
   out.mean_abs_error_grey = n ? err / double(n) : 0.0;
-  INSPECT_ASSIGN_OR_RETURN(out.projector_irradiance,
-                           SolveIrradiance(target, warm_start.empty() ? irradiance : warm_start, &out.solver_iterations, &out.solver_error));
+  INSPECT_ASSIGN_OR_RETURN(
+      out.projector_irradiance,
+      SolveIrradiance(target, warm_start.empty() ? irradiance : warm_start, &out.solver_iterations, &out.solver_error));
   out.pattern = PatternFor(out.projector_irradiance);
   return out;
 }

@@ -27,12 +27,11 @@
 // keeps the thesis's per-pixel estimate: it lights the focus state it was estimated from.
 #pragma once
 
-#include <memory>
-#include <vector>
-
 #include <Eigen/IterativeLinearSolvers>
 #include <Eigen/SparseCore>
+#include <memory>
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/camera_response.h"
 #include "core/projector_response.h"
@@ -46,9 +45,9 @@ struct CompensationOptions {
   // per projector px) dims glints of a few camera pixels; 4 flattens less texture on specimens
   // that never saturate but leaves the glints' halos (README, "Illumination modes").
   int pattern_cell_px = 2;
-  int camera_bin_px = 4;            // camera rows summed in bin x bin blocks (1..16)
-  int solver_iterations = 12;       // LSCG iterations per solve (warm-started), 1..1000
-  double solver_tolerance = 1e-3;   // relative residual at which LSCG stops early
+  int camera_bin_px = 4;           // camera rows summed in bin x bin blocks (1..16)
+  int solver_iterations = 12;      // LSCG iterations per solve (warm-started), 1..1000
+  double solver_tolerance = 1e-3;  // relative residual at which LSCG stops early
   // Pixels whose predicted scene radiance is below this share of the maximum are not lit by
   // the projector: they do not enter the reflectance estimate.
   double min_lit_fraction = 0.02;
@@ -70,12 +69,12 @@ struct CompensationOptions {
 
 // The outcome of one compensation step.
 struct CompensationStep {
-  cv::Mat projector_irradiance;  // CV_32FC1 projector size, relative irradiance (prf units)
-  cv::Mat pattern;               // CV_8UC1 projector size: prf^-1 of projector_irradiance
-  cv::Mat reflectance;           // CV_32FC1 camera size, eq. 5.5 (per pixel or windowed; NaN = not lit)
+  cv::Mat projector_irradiance;    // CV_32FC1 projector size, relative irradiance (prf units)
+  cv::Mat pattern;                 // CV_8UC1 projector size: prf^-1 of projector_irradiance
+  cv::Mat reflectance;             // CV_32FC1 camera size, eq. 5.5 (per pixel or windowed; NaN = not lit)
   double mean_abs_error_grey = 0;  // |Z_c - Z_c^| over lit pixels of the frame given, camera levels
   int solver_iterations = 0;
-  double solver_error = 0;       // LSCG relative residual
+  double solver_error = 0;  // LSCG relative residual
 };
 
 // Where a correction's pattern will be shown (see the file comment).
@@ -105,8 +104,8 @@ class Compensator {
   // Eq. 5.11 alone: the projector irradiance whose predicted scene radiance is closest to
   // scene_radiance (CV_32FC1 camera size; NaN entries are unconstrained -> keep warm start),
   // low-passed and clamped to [prf(0), 1]. warm_start: CV_32FC1 projector size.
-  StatusOr<cv::Mat> SolveIrradiance(const cv::Mat& scene_radiance, const cv::Mat& warm_start,
-                                    int* iterations = nullptr, double* error = nullptr) const;
+  StatusOr<cv::Mat> SolveIrradiance(const cv::Mat& scene_radiance, const cv::Mat& warm_start, int* iterations = nullptr,
+                                    double* error = nullptr) const;
 
   // Irradiance -> 8-bit projector pattern through the inverse prf.
   cv::Mat PatternFor(const cv::Mat& irradiance) const;

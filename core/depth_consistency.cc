@@ -9,7 +9,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
 #include <opencv2/core/utility.hpp>
 
 namespace inspection {
@@ -75,54 +74,57 @@ StatusOr<cv::Mat> LocalDepthResidual(const cv::Mat& raw_depth_um, int radius_px)
   for (int i = 0; i < w + 2 * r; ++i) xmap[size_t(i)] = cv::borderInterpolate(i - r, w, kBorder);
 
   // Bands of rows in parallel, each with its own column sums (started at its first row).
-  cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& band) {
-    std::vector<double> col(size_t(kQ) * w, 0.0), prefix(size_t(kQ) * (w + 2 * r + 1), 0.0);
-    auto add_row = [&](int row, double sign) {
-      const float* s = raw_depth_um.ptr<float>(row);
-      const double yc = row - cy0;
-      for (int x = 0; x < w; ++x) {
-        double* c = &col[size_t(kQ) * x];
-        if (std::isfinite(s[x])) {
-          const double d = s[x] - centre;
-          c[0] += sign * d;
-          c[1] += sign * d * d;
-          c[2] += sign * (x - cx0) * d;
-          c[3] += sign * yc * d;
-        } else {
-          c[4] += sign;
+  cv::parallel_for_(
+      cv::Range(0, h),
+      [&](const cv::Range& band) {
+        std::vector<double> col(size_t(kQ) * w, 0.0), prefix(size_t(kQ) * (w + 2 * r + 1), 0.0);
+        auto add_row = [&](int row, double sign) {
+          const float* s = raw_depth_um.ptr<float>(row);
+          const double yc = row - cy0;
+          for (int x = 0; x < w; ++x) {
+            double* c = &col[size_t(kQ) * x];
+            if (std::isfinite(s[x])) {
+              const double d = s[x] - centre;
+              c[0] += sign * d;
+              c[1] += sign * d * d;
+              c[2] += sign * (x - cx0) * d;
+              c[3] += sign * yc * d;
+            } else {
+              c[4] += sign;
+            }
+          }
+        };
+        for (int k = band.start - r; k <= band.start + r; ++k) add_row(cv::borderInterpolate(k, h, kBorder), 1.0);
+        for (int y = band.start; y < band.end; ++y) {
+          if (y > band.start) {
+            add_row(cv::borderInterpolate(y + r, h, kBorder), 1.0);
+            add_row(cv::borderInterpolate(y - r - 1, h, kBorder), -1.0);
+          }
+          for (int i = 0; i < w + 2 * r; ++i) {  // prefix[i + 1] = sum of col over extended positions 0..i
+            const double* c = &col[size_t(kQ) * xmap[size_t(i)]];
+            const double* p = &prefix[size_t(kQ) * i];
+            double* p1 = &prefix[size_t(kQ) * (i + 1)];
+            for (int q = 0; q < kQ; ++q) p1[q] = p[q] + c[q];
+          }
+          float* o = out.ptr<float>(y);
+          const double my = mean_y[size_t(y)] - cy0, vy = var_y[size_t(y)];
+          for (int x = 0; x < w; ++x) {
+            const double* hi = &prefix[size_t(kQ) * (x + 2 * r + 1)];
+            const double* lo = &prefix[size_t(kQ) * x];
+            if (hi[4] - lo[4] > 0.5) {
+              o[x] = inf;
+              continue;
+            }
+            const double m = (hi[0] - lo[0]) / n;
+            const double var_d = (hi[1] - lo[1]) / n - m * m;
+            const double cx = (hi[2] - lo[2]) / n - (mean_x[size_t(x)] - cx0) * m;
+            const double cy = (hi[3] - lo[3]) / n - my * m;
+            const double res = var_d - cx * cx / var_x[size_t(x)] - cy * cy / vy;
+            o[x] = float(std::sqrt(std::max(res, 0.0)));
+          }
         }
-      }
-    };
-    for (int k = band.start - r; k <= band.start + r; ++k) add_row(cv::borderInterpolate(k, h, kBorder), 1.0);
-    for (int y = band.start; y < band.end; ++y) {
-      if (y > band.start) {
-        add_row(cv::borderInterpolate(y + r, h, kBorder), 1.0);
-        add_row(cv::borderInterpolate(y - r - 1, h, kBorder), -1.0);
-      }
-      for (int i = 0; i < w + 2 * r; ++i) {  // prefix[i + 1] = sum of col over extended positions 0..i
-        const double* c = &col[size_t(kQ) * xmap[size_t(i)]];
-        const double* p = &prefix[size_t(kQ) * i];
-        double* p1 = &prefix[size_t(kQ) * (i + 1)];
-        for (int q = 0; q < kQ; ++q) p1[q] = p[q] + c[q];
-      }
-      float* o = out.ptr<float>(y);
-      const double my = mean_y[size_t(y)] - cy0, vy = var_y[size_t(y)];
-      for (int x = 0; x < w; ++x) {
-        const double* hi = &prefix[size_t(kQ) * (x + 2 * r + 1)];
-        const double* lo = &prefix[size_t(kQ) * x];
-        if (hi[4] - lo[4] > 0.5) {
-          o[x] = inf;
-          continue;
-        }
-        const double m = (hi[0] - lo[0]) / n;
-        const double var_d = (hi[1] - lo[1]) / n - m * m;
-        const double cx = (hi[2] - lo[2]) / n - (mean_x[size_t(x)] - cx0) * m;
-        const double cy = (hi[3] - lo[3]) / n - my * m;
-        const double res = var_d - cx * cx / var_x[size_t(x)] - cy * cy / vy;
-        o[x] = float(std::sqrt(std::max(res, 0.0)));
-      }
-    }
-  }, 4.0);  // 4 bands: each restarts its sums (2r + 1 rows), negligible
+      },
+      4.0);  // 4 bands: each restarts its sums (2r + 1 rows), negligible
   return out;
 }
 

@@ -14,9 +14,8 @@
 // RMSE of Tenengrad 11x11 from ~5.9 to ~0.7 frames at 43 % coverage (from 79 %).
 #pragma once
 
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/status.h"
 

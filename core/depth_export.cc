@@ -16,13 +16,12 @@
 #include <ctime>
 #include <fstream>
 #include <limits>
-#include <sstream>
-#include <system_error>
-#include <vector>
-
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
+#include <system_error>
+#include <vector>
 
 namespace inspection {
 namespace {
@@ -190,8 +189,8 @@ StatusOr<cv::Mat> ReadDepthTiff(const fs::path& path, DepthExportMeta* meta) {
                                    " samples per pixel; a depth map has one");
   }
   if (fmt != SAMPLEFORMAT_IEEEFP || (bps != 32 && bps != 64)) {
-    return Status::InvalidArgument(path.string() + ": not a floating-point TIFF (SampleFormat " +
-                                   std::to_string(fmt) + ", BitsPerSample " + std::to_string(bps) + ")");
+    return Status::InvalidArgument(path.string() + ": not a floating-point TIFF (SampleFormat " + std::to_string(fmt) +
+                                   ", BitsPerSample " + std::to_string(bps) + ")");
   }
   const int cv_type = bps == 32 ? CV_32FC1 : CV_64FC1;
   cv::Mat m(int(height), int(width), cv_type);
@@ -211,8 +210,7 @@ StatusOr<cv::Mat> ReadDepthTiff(const fs::path& path, DepthExportMeta* meta) {
         }
         const uint32_t cw = std::min(tw, width - tx), ch = std::min(th, height - ty);
         for (uint32_t r = 0; r < ch; ++r) {
-          std::memcpy(m.ptr<uint8_t>(int(ty + r)) + size_t(tx) * elem, tile.data() + size_t(r) * tw * elem,
-                      cw * elem);
+          std::memcpy(m.ptr<uint8_t>(int(ty + r)) + size_t(tx) * elem, tile.data() + size_t(r) * tw * elem, cw * elem);
         }
       }
     }
@@ -234,8 +232,10 @@ StatusOr<cv::Mat> ReadDepthTiff(const fs::path& path, DepthExportMeta* meta) {
     uint16_t unit = RESUNIT_INCH;
     if (TIFFGetField(tif, TIFFTAG_XRESOLUTION, &xres) == 1 && xres > 0.f) {
       TIFFGetFieldDefaulted(tif, TIFFTAG_RESOLUTIONUNIT, &unit);
-      if (unit == RESUNIT_CENTIMETER) meta->pixel_size_um = 1e4 / double(xres);
-      else if (unit == RESUNIT_INCH) meta->pixel_size_um = 25400.0 / double(xres);
+      if (unit == RESUNIT_CENTIMETER)
+        meta->pixel_size_um = 1e4 / double(xres);
+      else if (unit == RESUNIT_INCH)
+        meta->pixel_size_um = 25400.0 / double(xres);
     }
   }
   if (cv_type != CV_32FC1) m.convertTo(m, CV_32FC1);
@@ -435,12 +435,23 @@ std::string XmlEscape(const std::string& s) {
   std::string out;
   for (char c : s) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      case '\'': out += "&apos;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      case '\'':
+        out += "&apos;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -512,7 +523,8 @@ Status WriteDepthPng16(const fs::path& path, const cv::Mat& depth_um, const Dept
     std::vector<uchar> png;
     if (!cv::imencode(".png", q, png)) return Status::Internal("PNG encoding failed");
     // tEXt chunk "inspection-depth" right after IHDR (8-byte signature + 25-byte IHDR).
-    if (png.size() < 33 || std::memcmp(png.data() + 12, "IHDR", 4) != 0) return Status::Internal("unexpected PNG layout");
+    if (png.size() < 33 || std::memcmp(png.data() + 12, "IHDR", 4) != 0)
+      return Status::Internal("unexpected PNG layout");
     std::string body = "inspection-depth";
     body.push_back('\0');
     body += text;
@@ -579,29 +591,34 @@ Status WriteDepthX3p(const fs::path& path, const cv::Mat& depth_um, const DepthE
   const std::string now = UtcNowIso8601();
   std::string xml;
   xml += "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n";
-  xml += "<p:ISO5436_2 xmlns:p=\"http://www.opengps.eu/2008/ISO5436_2\" "
-         "xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\" "
-         "xsi:schemaLocation=\"http://www.opengps.eu/2008/ISO5436_2 "
-         "http://www.opengps.eu/2008/ISO5436_2/ISO5436_2.xsd\">\n";
+  xml +=
+      "<p:ISO5436_2 xmlns:p=\"http://www.opengps.eu/2008/ISO5436_2\" "
+      "xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\" "
+      "xsi:schemaLocation=\"http://www.opengps.eu/2008/ISO5436_2 "
+      "http://www.opengps.eu/2008/ISO5436_2/ISO5436_2.xsd\">\n";
   xml += "  <Record1>\n    <Revision>ISO5436 - 2000</Revision>\n    <FeatureType>SUR</FeatureType>\n    <Axes>\n";
   xml += "      <CX>\n        <AxisType>I</AxisType>\n        <DataType>D</DataType>\n        <Increment>" + px_m +
          "</Increment>\n        <Offset>0</Offset>\n      </CX>\n";
   xml += "      <CY>\n        <AxisType>I</AxisType>\n        <DataType>D</DataType>\n        <Increment>" + px_m +
          "</Increment>\n        <Offset>0</Offset>\n      </CY>\n";
-  xml += "      <CZ>\n        <AxisType>A</AxisType>\n        <DataType>D</DataType>\n        <Increment>1</Increment>\n"
-         "        <Offset>0</Offset>\n      </CZ>\n";
+  xml +=
+      "      <CZ>\n        <AxisType>A</AxisType>\n        <DataType>D</DataType>\n        <Increment>1</Increment>\n"
+      "        <Offset>0</Offset>\n      </CZ>\n";
   xml += "    </Axes>\n  </Record1>\n";
   xml += "  <Record2>\n    <Date>" + now + "</Date>\n    <Creator>inspection</Creator>\n";
-  xml += "    <Instrument>\n      <Manufacturer>inspection</Manufacturer>\n      <Model>SFF microscope</Model>\n"
-         "      <Serial>not available</Serial>\n      <Version>0.1</Version>\n    </Instrument>\n";
+  xml +=
+      "    <Instrument>\n      <Manufacturer>inspection</Manufacturer>\n      <Model>SFF microscope</Model>\n"
+      "      <Serial>not available</Serial>\n      <Version>0.1</Version>\n    </Instrument>\n";
   xml += "    <CalibrationDate>" + now + "</CalibrationDate>\n";
-  xml += "    <ProbingSystem>\n      <Type>NonContacting</Type>\n      <Identification>shape from focus</Identification>\n"
-         "    </ProbingSystem>\n";
+  xml +=
+      "    <ProbingSystem>\n      <Type>NonContacting</Type>\n      <Identification>shape from focus</Identification>\n"
+      "    </ProbingSystem>\n";
   xml += "    <Comment>" + XmlEscape(meta.description) + "</Comment>\n  </Record2>\n";
-  xml += "  <Record3>\n    <MatrixDimension>\n      <SizeX>" + std::to_string(depth_um.cols) + "</SizeX>\n      <SizeY>" +
-         std::to_string(depth_um.rows) + "</SizeY>\n      <SizeZ>1</SizeZ>\n    </MatrixDimension>\n";
-  xml += "    <DataLink>\n      <PointDataLink>bindata/data.bin</PointDataLink>\n      <MD5ChecksumPointData>" + data_md5 +
-         "</MD5ChecksumPointData>\n    </DataLink>\n  </Record3>\n";
+  xml += "  <Record3>\n    <MatrixDimension>\n      <SizeX>" + std::to_string(depth_um.cols) +
+         "</SizeX>\n      <SizeY>" + std::to_string(depth_um.rows) +
+         "</SizeY>\n      <SizeZ>1</SizeZ>\n    </MatrixDimension>\n";
+  xml += "    <DataLink>\n      <PointDataLink>bindata/data.bin</PointDataLink>\n      <MD5ChecksumPointData>" +
+         data_md5 + "</MD5ChecksumPointData>\n    </DataLink>\n  </Record3>\n";
   xml += "  <Record4>\n    <ChecksumFile>md5checksum.hex</ChecksumFile>\n  </Record4>\n</p:ISO5436_2>\n";
   // As "md5sum main.xml" prints it (binary mode marker), so "md5sum -c" can check it.
   const std::string checksum = Md5Hex(xml.data(), xml.size()) + " *main.xml\n";
@@ -610,7 +627,8 @@ Status WriteDepthX3p(const fs::path& path, const cv::Mat& depth_um, const DepthE
   RemoveQuietly(tmp);
   int err = 0;
   zip_t* z = zip_open(tmp.c_str(), ZIP_CREATE | ZIP_TRUNCATE, &err);
-  if (!z) return Status::InvalidArgument(path.string() + ": cannot create zip (libzip error " + std::to_string(err) + ")");
+  if (!z)
+    return Status::InvalidArgument(path.string() + ": cannot create zip (libzip error " + std::to_string(err) + ")");
   auto add = [&](const char* name, const void* bytes, size_t n) -> bool {
     zip_source_t* src = zip_source_buffer(z, bytes, n, 0);
     if (!src) return false;

@@ -166,7 +166,8 @@ StatusOr<cv::Mat> FillDepth(const cv::Mat& depth_um, const cv::Mat& confidence, 
   }
   // The 1x1 top holds the weighted mean of everything measured: complete by construction.
   levels.back().weight[0] = 1.f;
-  for (int l = int(levels.size()) - 2; l >= 0; --l) Pull(levels[size_t(l) + 1], options.guide_sigma, &levels[size_t(l)]);
+  for (int l = int(levels.size()) - 2; l >= 0; --l)
+    Pull(levels[size_t(l) + 1], options.guide_sigma, &levels[size_t(l)]);
 
   cv::Mat out = depth_um.clone();
   for (int y = 0; y < out.rows; ++y) {

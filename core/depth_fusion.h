@@ -6,9 +6,8 @@
 // confident map can be trusted most.
 #pragma once
 
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/status.h"
 

@@ -80,8 +80,10 @@ FocusPeak LineFitPeak(const double* z, const double* f, int before, int after) {
 
 FocusPeak InterpolatePeak(DepthInterpolation method, const double* z, const double* f, int before, int after) {
   switch (method) {
-    case DepthInterpolation::kMaximum: break;
-    case DepthInterpolation::kLineFit: return LineFitPeak(z, f, before, after);
+    case DepthInterpolation::kMaximum:
+      break;
+    case DepthInterpolation::kLineFit:
+      return LineFitPeak(z, f, before, after);
     case DepthInterpolation::kGaussian:
       if (before >= 1 && after >= 1) {
         const int m = before;

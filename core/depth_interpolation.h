@@ -13,9 +13,9 @@
 namespace inspection {
 
 struct FocusPeak {
-  double z_um = 0.0;      // interpolated peak position
-  double sigma_um = 0.0;  // Gaussian: standard deviation sigma_F (eq. 3.33); 0 for other methods
-  double height = 0.0;    // Gaussian: F_max of eq. 3.34; otherwise the sampled maximum
+  double z_um = 0.0;          // interpolated peak position
+  double sigma_um = 0.0;      // Gaussian: standard deviation sigma_F (eq. 3.33); 0 for other methods
+  double height = 0.0;        // Gaussian: F_max of eq. 3.34; otherwise the sampled maximum
   bool interpolated = false;  // false when the method fell back to the discrete maximum
 };
 
@@ -60,13 +60,13 @@ FocusPeak InterpolateFocusCurve(DepthInterpolation method, const std::vector<dou
 // What the streaming engine knows about a pixel's focus curve at the end of a stack, all from
 // O(1) state: the peak, the mean, and the curve's roughness from its second differences.
 struct FocusCurveSummary {
-  double peak = 0.0;              // F_max, the sampled maximum
-  double mean = 0.0;              // mean of F over all frames
+  double peak = 0.0;  // F_max, the sampled maximum
+  double mean = 0.0;  // mean of F over all frames
   // Sum of t_k^2, t_k = F_k - 2 F_(k-1) + F_(k-2), over the k whose t_k does not involve the
   // maximum (m not in {k-2, k-1, k}), and how many terms that is.
   double curvature_sq_sum = 0.0;
   int curvature_count = 0;
-  bool peak_at_end = false;       // the maximum is on the first or last frame
+  bool peak_at_end = false;  // the maximum is on the first or last frame
 };
 
 // Confidence in [0, 1] that the peak is real focus rather than noise ("the peak against the
@@ -82,8 +82,7 @@ inline constexpr double kConfidenceSnrZero = 4.0;
 inline float FocusConfidence(const FocusCurveSummary& s) {
   const double prominence = s.peak - s.mean;
   if (!(prominence > 0.0) || !(s.peak > 0.0)) return 0.f;
-  double sigma =
-      s.curvature_count > 0 ? std::sqrt(std::max(s.curvature_sq_sum, 0.0) / (6.0 * s.curvature_count)) : 0.0;
+  double sigma = s.curvature_count > 0 ? std::sqrt(std::max(s.curvature_sq_sum, 0.0) / (6.0 * s.curvature_count)) : 0.0;
   sigma = std::max(sigma, 1e-3 * s.peak);
   // 1 - kConfidenceSnrZero / snr with snr = prominence / sigma, in one division.
   double c = std::clamp(1.0 - kConfidenceSnrZero * sigma / prominence, 0.0, 1.0);

@@ -7,13 +7,13 @@
 namespace inspection {
 
 struct DepthErrorStats {
-  size_t compared_pixels = 0;   // finite in both maps
-  double valid_percent = 0.0;   // share of measured pixels with finite depth
-  double mean_error_um = 0.0;   // measured - reference
-  double stddev_error_um = 0.0; // thesis Table 6.3's sigma
+  size_t compared_pixels = 0;    // finite in both maps
+  double valid_percent = 0.0;    // share of measured pixels with finite depth
+  double mean_error_um = 0.0;    // measured - reference
+  double stddev_error_um = 0.0;  // thesis Table 6.3's sigma
   double rmse_um = 0.0;
   double mean_abs_error_um = 0.0;
-  double outlier_percent = 0.0; // |error| > outlier_threshold_um, among compared pixels
+  double outlier_percent = 0.0;  // |error| > outlier_threshold_um, among compared pixels
 };
 
 // depth_um, reference_um: CV_32FC1 of equal size; NaN = no value. border_px pixels at each edge

@@ -4,9 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <random>
-
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 namespace inspection {
 namespace {
@@ -91,8 +90,8 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
         options.linearity_step_tolerance * model.linearity.characterised_step_um) {
       const std::string was = model.linearity.source;
       model.linearity = ZLinearity::Uncharacterised();
-      model.linearity.source += "; the characterisation (" + was + ") does not apply at " + std::to_string(step) +
-                                " um steps";
+      model.linearity.source +=
+          "; the characterisation (" + was + ") does not apply at " + std::to_string(step) + " um steps";
     }
   }
 
@@ -115,8 +114,10 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
     // other only. Otherwise pool both (the minimum of two noisy estimates would be biased low).
     bool use_x = std::isfinite(gx), use_y = std::isfinite(gy);
     if (use_x && use_y) {
-      if (gx > 1.5 * gy) use_x = false;
-      else if (gy > 1.5 * gx) use_y = false;
+      if (gx > 1.5 * gy)
+        use_x = false;
+      else if (gy > 1.5 * gx)
+        use_y = false;
     }
     if (!use_x && !use_y) {
       *global_var = std::nan("");

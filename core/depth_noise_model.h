@@ -29,10 +29,9 @@
 #pragma once
 
 #include <cstdint>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/status.h"
 #include "core/z_linearity.h"
@@ -40,8 +39,8 @@
 namespace inspection {
 
 struct DepthNoiseOptions {
-  int window_px = 7;                    // SffOptions::window_px of the reconstruction (1..63)
-  std::vector<double> z_positions_um;   // the stack's frame positions (stack.json frames[].z_um), >= 2
+  int window_px = 7;                   // SffOptions::window_px of the reconstruction (1..63)
+  std::vector<double> z_positions_um;  // the stack's frame positions (stack.json frames[].z_um), >= 2
   ZLinearity linearity = ZLinearity::Uncharacterised();
   double stage_repeatability_um = 0.0;  // +- bound of the uniform per-move error (simulated rig: 0.1)
   // Side of the neighbourhood the local sigma averages over; 0 = 8 windows (~64 independent
@@ -55,7 +54,7 @@ struct DepthNoiseOptions {
 };
 
 struct DepthNoiseModel {
-  cv::Mat sigma_um;          // CV_32FC1: random standard uncertainty of each measured pixel; NaN elsewhere
+  cv::Mat sigma_um;              // CV_32FC1: random standard uncertainty of each measured pixel; NaN elsewhere
   double global_sigma_um = 0.0;  // the same over the whole mask (used where a neighbourhood has too few samples)
   // Largest single-pixel error the map plausibly holds: max |second difference| / 2 over the
   // mask (same directions as sigma). A lone spike of height A gives a second difference of -2A
@@ -63,10 +62,10 @@ struct DepthNoiseModel {
   // SFF depth errors have heavier tails than Gaussian (wrong-peak clusters), which a Gaussian
   // Monte Carlo misses: extremes (Sp, Sv, Sz, flatness) use this bound instead.
   double extreme_error_um = 0.0;
-  int correlation_px = 1;    // side of the box B
+  int correlation_px = 1;  // side of the box B
   ZGrid grid;
-  ZLinearity linearity;      // the table in use (maybe the uncharacterised bound, see its source)
-  double stage_u_um = 0.0;   // standard uncertainty of one frame's z: r / sqrt 3
+  ZLinearity linearity;     // the table in use (maybe the uncharacterised bound, see its source)
+  double stage_u_um = 0.0;  // standard uncertainty of one frame's z: r / sqrt 3
 
   // Perturbation k (0-based) of a Monte Carlo set of `count` drawn with `seed`: one realisation
   // of all three components on the pixels with depth and a sigma (CV_32FC1, 0 elsewhere). The

@@ -5,10 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <vector>
-
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
+#include <vector>
 
 namespace inspection {
 namespace {
@@ -35,8 +34,8 @@ cv::Mat Weights(const cv::Mat& depth_um, const cv::Mat& confidence) {
 }
 
 template <int CN>
-void WeightedMedianRows(const cv::Range& rows, const cv::Mat& depth, const cv::Mat& weight, const cv::Mat& guide,
-                        int r, int step, const std::vector<float>& lut, float lut_scale, cv::Mat* out) {
+void WeightedMedianRows(const cv::Range& rows, const cv::Mat& depth, const cv::Mat& weight, const cv::Mat& guide, int r,
+                        int step, const std::vector<float>& lut, float lut_scale, cv::Mat* out) {
   std::vector<std::pair<float, float>> samples;
   samples.reserve(size_t(2 * r / step + 1) * (2 * r / step + 1));
   for (int y = rows.start; y < rows.end; ++y) {
@@ -100,10 +99,15 @@ cv::Mat WeightedMedian(const cv::Mat& depth, const cv::Mat& weight, const cv::Ma
   cv::Mat out(depth.size(), CV_32F);
   const int cn = guide.channels();
   const int step = o.sample_step_px > 0 ? o.sample_step_px : std::max(1, o.radius_px / 4);
-  cv::parallel_for_(cv::Range(0, depth.rows), [&](const cv::Range& rows) {
-    if (cn == 3) WeightedMedianRows<3>(rows, depth, weight, guide, o.radius_px, step, lut, lut_scale, &out);
-    else WeightedMedianRows<1>(rows, depth, weight, guide, o.radius_px, step, lut, lut_scale, &out);
-  }, o.threads > 0 ? o.threads : -1);
+  cv::parallel_for_(
+      cv::Range(0, depth.rows),
+      [&](const cv::Range& rows) {
+        if (cn == 3)
+          WeightedMedianRows<3>(rows, depth, weight, guide, o.radius_px, step, lut, lut_scale, &out);
+        else
+          WeightedMedianRows<1>(rows, depth, weight, guide, o.radius_px, step, lut, lut_scale, &out);
+      },
+      o.threads > 0 ? o.threads : -1);
   return out;
 }
 
@@ -113,7 +117,8 @@ cv::Mat BoxMean(const cv::Mat& m, int r) {
   return out;
 }
 
-cv::Mat GuidedFilter(const cv::Mat& depth, const cv::Mat& weight, const cv::Mat& guide, const DepthRefinementOptions& o) {
+cv::Mat GuidedFilter(const cv::Mat& depth, const cv::Mat& weight, const cv::Mat& guide,
+                     const DepthRefinementOptions& o) {
   cv::Mat lum;
   if (guide.channels() == 3) {
     cv::transform(guide, lum, cv::Matx13f(0.0722f, 0.7152f, 0.2126f));  // BGR -> BT.709 luminance
@@ -178,9 +183,12 @@ cv::Mat GuidedFilter(const cv::Mat& depth, const cv::Mat& weight, const cv::Mat&
 
 const char* DepthRefinementName(DepthRefinement r) {
   switch (r) {
-    case DepthRefinement::kNone: return "none";
-    case DepthRefinement::kWeightedMedian: return "weighted-median";
-    case DepthRefinement::kGuidedFilter: return "guided-filter";
+    case DepthRefinement::kNone:
+      return "none";
+    case DepthRefinement::kWeightedMedian:
+      return "weighted-median";
+    case DepthRefinement::kGuidedFilter:
+      return "guided-filter";
   }
   return "unknown";
 }
@@ -208,8 +216,12 @@ Status DepthRefinementOptions::Validate() const {
   }
   if (threads < 0) return Status::InvalidArgument("refinement threads must be >= 0");
   switch (method) {
-    case DepthRefinement::kNone: case DepthRefinement::kWeightedMedian: case DepthRefinement::kGuidedFilter: break;
-    default: return Status::InvalidArgument("refinement method is unknown");
+    case DepthRefinement::kNone:
+    case DepthRefinement::kWeightedMedian:
+    case DepthRefinement::kGuidedFilter:
+      break;
+    default:
+      return Status::InvalidArgument("refinement method is unknown");
   }
   return Status::Ok();
 }

@@ -31,16 +31,16 @@ StatusOr<DepthRefinement> ParseDepthRefinement(const std::string& name);
 
 struct DepthRefinementOptions {
   DepthRefinement method = DepthRefinement::kWeightedMedian;
-  int radius_px = 4;            // window side 2 radius_px + 1; 1..31
+  int radius_px = 4;  // window side 2 radius_px + 1; 1..31
   // Weighted median: the window is sampled every sample_step_px pixels in x and y (0 = auto:
   // max(1, radius_px / 4), so a wide window costs no more than ~81 samples per pixel).
   int sample_step_px = 0;
-  int iterations = 1;           // passes, each on the previous result; 1..5
-  double guide_sigma = 0.06;    // weighted median: guide difference (fraction of full scale) of weight e^-1/2; > 0
+  int iterations = 1;               // passes, each on the previous result; 1..5
+  double guide_sigma = 0.06;        // weighted median: guide difference (fraction of full scale) of weight e^-1/2; > 0
   double guided_filter_eps = 1e-3;  // guided filter: regulariser (guide variance units, guide in [0, 1]); > 0
-  int threads = 0;              // 0 = OpenCV's default parallelism
+  int threads = 0;                  // 0 = OpenCV's default parallelism
 
-  Status Validate() const;      // INVALID_ARGUMENT naming the field
+  Status Validate() const;  // INVALID_ARGUMENT naming the field
 };
 
 // depth_um: CV_32FC1, NaN = no depth. confidence: CV_32FC1 in [0, 1] of the same size (weights;

@@ -4,9 +4,8 @@
 #include "core/focus_measure.h"
 
 #include <cmath>
-#include <string>
-
 #include <opencv2/imgproc.hpp>
+#include <string>
 
 namespace inspection {
 namespace {
@@ -50,12 +49,15 @@ std::vector<double> ChebyshevPolynomial(int m, int n_points) {
   const int N = n_points;
   std::vector<double> t_prev2(N, 1.0), t_prev(N), t(N);
   for (int x = 0; x < N; ++x) t_prev[x] = 1.0 - N + 2.0 * x;  // t_1
-  if (m == 0) t = t_prev2;
-  else if (m == 1) t = t_prev;
+  if (m == 0)
+    t = t_prev2;
+  else if (m == 1)
+    t = t_prev;
   for (int n = 2; n <= m; ++n) {  // three-term recurrence, eq. 3.21-3.22
     for (int x = 0; x < N; ++x) {
       t[x] = ((2.0 * n - 1.0) * (2.0 * x - N + 1.0) * t_prev[x] -
-              (n - 1.0) * (double(N) * N - (n - 1.0) * (n - 1.0)) * t_prev2[x]) / n;
+              (n - 1.0) * (double(N) * N - (n - 1.0) * (n - 1.0)) * t_prev2[x]) /
+             n;
     }
     t_prev2 = t_prev;
     t_prev = t;
@@ -83,8 +85,10 @@ Status ComputeFocusMeasure(const cv::Mat& frame, FocusMeasure measure, int windo
         cv::Mat f32, ixx, iyy, e;
         frame.convertTo(f32, CV_32F);
         SecondDerivatives(f32, &ixx, &iyy);
-        if (measure == FocusMeasure::kModifiedLaplacian) e = cv::abs(ixx) + cv::abs(iyy);
-        else e = ixx.mul(ixx) + iyy.mul(iyy);
+        if (measure == FocusMeasure::kModifiedLaplacian)
+          e = cv::abs(ixx) + cv::abs(iyy);
+        else
+          e = ixx.mul(ixx) + iyy.mul(iyy);
         *focus = WindowSum(e, w);
         return Status::Ok();
       }

@@ -8,9 +8,8 @@
 // same statistics as if the specimen continued symmetrically.
 #pragma once
 
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/sff_options.h"
 #include "core/status.h"

@@ -71,7 +71,7 @@ bool NonlinearModel(FormModel model, int sign, const Eigen::VectorXd& p, double 
   }
   // Cylinder: p = (phi, offset, axis_z, axis_slope, R).
   const double c = std::cos(p[0]), s = std::sin(p[0]);
-  const double t = x * c + y * s;        // along the axis
+  const double t = x * c + y * s;          // along the axis
   const double d = -x * s + y * c - p[1];  // from the axis, in the image plane
   const double r = p[4];
   const double q2 = r * r - d * d;
@@ -146,7 +146,8 @@ StatusOr<Eigen::VectorXd> CylinderStart(const std::vector<Sample>& pts, double s
   // The larger |eigenvalue| is the curvature across the axis; the axis runs along the other.
   const int across = std::abs(es.eigenvalues()[0]) > std::abs(es.eigenvalues()[1]) ? 0 : 1;
   const double kappa = es.eigenvalues()[across];
-  if (!(std::abs(kappa) > 0.0)) return Status::FailedPrecondition("the region is flat: no cylinder radius can be fitted");
+  if (!(std::abs(kappa) > 0.0))
+    return Status::FailedPrecondition("the region is flat: no cylinder radius can be fitted");
   const Eigen::Vector2d axis = es.eigenvectors().col(1 - across);
   double phi = std::atan2(axis.y(), axis.x());
   if (phi > kPi / 2) phi -= kPi;
@@ -166,7 +167,7 @@ StatusOr<Eigen::VectorXd> CylinderStart(const std::vector<Sample>& pts, double s
 Status FitNonlinear(const std::vector<Sample>& pts, const FormOptions& options, FormFit* fit) {
   const double scale = fit->scale_um;
   INSPECT_ASSIGN_OR_RETURN(Eigen::VectorXd p, fit->model == FormModel::kSphere ? SphereStart(pts, scale, &fit->sign)
-                                                                                 : CylinderStart(pts, scale, &fit->sign));
+                                                                               : CylinderStart(pts, scale, &fit->sign));
   const int np = int(p.size());
   std::vector<double> g(np);
   // Sum of squared residuals at p, and the normal equations when wanted; false when a pixel lies
@@ -264,10 +265,14 @@ Status FitNonlinear(const std::vector<Sample>& pts, const FormOptions& options, 
 
 const char* FormModelName(FormModel model) {
   switch (model) {
-    case FormModel::kPlane: return "plane";
-    case FormModel::kPolynomial: return "polynomial";
-    case FormModel::kSphere: return "sphere";
-    case FormModel::kCylinder: return "cylinder";
+    case FormModel::kPlane:
+      return "plane";
+    case FormModel::kPolynomial:
+      return "polynomial";
+    case FormModel::kSphere:
+      return "sphere";
+    case FormModel::kCylinder:
+      return "cylinder";
   }
   return "unknown";
 }
@@ -294,7 +299,8 @@ double FormFit::Evaluate(double x_um, double y_um) const {
   const bool absolute = model == FormModel::kSphere;
   const double x = absolute ? x_um : x_um - origin_x_um, y = absolute ? y_um : y_um - origin_y_um;
   switch (model) {
-    case FormModel::kPlane: return parameters[0] + parameters[1] * x + parameters[2] * y;
+    case FormModel::kPlane:
+      return parameters[0] + parameters[1] * x + parameters[2] * y;
     case FormModel::kPolynomial: {
       double b[10];
       Monomials(polynomial_order, x / scale_um, y / scale_um, b);
@@ -321,7 +327,9 @@ void FormFit::ParameterGradient(double x_um, double y_um, double* out) const {
       out[1] = x;
       out[2] = y;
       return;
-    case FormModel::kPolynomial: Monomials(polynomial_order, x / scale_um, y / scale_um, out); return;
+    case FormModel::kPolynomial:
+      Monomials(polynomial_order, x / scale_um, y / scale_um, out);
+      return;
     case FormModel::kSphere:
     case FormModel::kCylinder: {
       double v;

@@ -5,11 +5,10 @@
 // because that is the direction of the measurement error.
 #pragma once
 
-#include <string>
-#include <vector>
-
 #include <Eigen/Dense>
 #include <opencv2/core.hpp>
+#include <string>
+#include <vector>
 
 #include "core/status.h"
 
@@ -52,7 +51,7 @@ struct FormFit {
   int polynomial_order = 1;
   double origin_x_um = 0.0;  // centroid of the fitted pixels: conditions the fit
   double origin_y_um = 0.0;
-  double scale_um = 1.0;     // kPolynomial: half the larger side of the fitted pixels' bounding box
+  double scale_um = 1.0;  // kPolynomial: half the larger side of the fitted pixels' bounding box
   int sign = 1;
   std::vector<std::string> parameter_names;
   Eigen::VectorXd parameters;

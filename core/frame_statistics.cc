@@ -1,7 +1,7 @@
 #include "core/frame_statistics.h"
 
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 
 namespace inspection {

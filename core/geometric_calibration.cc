@@ -2,12 +2,11 @@
 // dot-grid sub-pixel centroids, LUT inversion by triangle rasterisation, homography fit.
 #include "core/geometric_calibration.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
-
-#include <Eigen/Dense>
 
 namespace inspection {
 namespace {
@@ -98,7 +97,8 @@ std::optional<cv::Point2d> GeometricCalibration::CameraFromProjector(cv::Point2d
   const int v0 = std::min(static_cast<int>(p.y), projector_size.height - 2);
   if (u0 >= 0 && v0 >= 0 && !projector_to_camera.empty()) {
     const cv::Vec2f a = projector_to_camera.at<cv::Vec2f>(v0, u0), b = projector_to_camera.at<cv::Vec2f>(v0, u0 + 1);
-    const cv::Vec2f c = projector_to_camera.at<cv::Vec2f>(v0 + 1, u0), d = projector_to_camera.at<cv::Vec2f>(v0 + 1, u0 + 1);
+    const cv::Vec2f c = projector_to_camera.at<cv::Vec2f>(v0 + 1, u0),
+                    d = projector_to_camera.at<cv::Vec2f>(v0 + 1, u0 + 1);
     if (Valid(a) && Valid(b) && Valid(c) && Valid(d)) {
       const double tx = p.x - u0, ty = p.y - v0;
       const cv::Vec2f top = a * (1 - tx) + b * tx, bottom = c * (1 - tx) + d * tx;
@@ -137,7 +137,10 @@ StatusOr<cv::Matx33d> FitHomography(const std::vector<cv::Point2d>& src, const s
     const double limit = std::max(3.0 * sorted[sorted.size() / 2], min_trim_px);
     std::vector<cv::Point2d> s2, d2;
     for (size_t i = 0; i < s.size(); ++i)
-      if (res[i] <= limit) { s2.push_back(s[i]); d2.push_back(d[i]); }
+      if (res[i] <= limit) {
+        s2.push_back(s[i]);
+        d2.push_back(d[i]);
+      }
     if (s2.size() == s.size() || s2.size() < 4) break;
     s.swap(s2);
     d.swap(d2);
@@ -237,7 +240,10 @@ StatusOr<cv::Mat> DecodeGrayCode(const std::vector<GrayCodePattern>& patterns, c
     const uint8_t* o = ok.ptr<uint8_t>(y);
     cv::Vec2f* r = out.ptr<cv::Vec2f>(y);
     for (int x = 0; x < size.width; ++x) {
-      if (!o[x]) { r[x] = {kNaN, kNaN}; continue; }
+      if (!o[x]) {
+        r[x] = {kNaN, kNaN};
+        continue;
+      }
       float coord[2];
       bool inside = true;
       for (int ax = 0; ax < 2; ++ax) {
@@ -267,8 +273,9 @@ StatusOr<cv::Matx33d> CoarseHomographyFromGrayCode(const cv::Mat& decoded) {
       dst.emplace_back(x, y);
     }
   if (src.size() < 16) {
-    return Status::FailedPrecondition("gray code: fewer than 16 decodable camera pixels (is the "
-                                      "projector lighting the camera's field of view?)");
+    return Status::FailedPrecondition(
+        "gray code: fewer than 16 decodable camera pixels (is the "
+        "projector lighting the camera's field of view?)");
   }
   return FitHomography(src, dst, 4, 1.0);
 }
@@ -296,7 +303,11 @@ std::optional<cv::Point2d> DotCentroid(const cv::Mat& signal, cv::Point2d predic
   for (int y = win.y; y < win.y + win.height; ++y) {
     const float* p = signal.ptr<float>(y);
     for (int x = win.x; x < win.x + win.width; ++x)
-      if (p[x] >= o.coarse_threshold * vmax) { sx += x; sy += y; n += 1; }
+      if (p[x] >= o.coarse_threshold * vmax) {
+        sx += x;
+        sy += y;
+        n += 1;
+      }
   }
   const cv::Point cc(static_cast<int>(std::lround(sx / n)), static_cast<int>(std::lround(sy / n)));
   // Patch around the coarse centre: pixels above patch_threshold * max, weighted by grey (4.10).
@@ -307,7 +318,11 @@ std::optional<cv::Point2d> DotCentroid(const cv::Mat& signal, cv::Point2d predic
     const float* p = signal.ptr<float>(y);
     for (int x = patch.x; x < patch.x + patch.width; ++x) {
       if ((x - cc.x) * (x - cc.x) + (y - cc.y) * (y - cc.y) > r * r) continue;
-      if (p[x] >= t) { wx += x * p[x]; wy += y * p[x]; w += p[x]; }
+      if (p[x] >= t) {
+        wx += x * p[x];
+        wy += y * p[x];
+        w += p[x];
+      }
     }
   }
   if (w <= 0) return std::nullopt;
@@ -334,10 +349,10 @@ cv::Matx22d HomographyJacobian(const cv::Matx33d& h, cv::Point2d p) {
 }  // namespace
 
 StatusOr<GeometricCalibration> EstimateGeometricCalibration(const std::vector<DotGridCapture>& captures,
-                                                           const cv::Mat& black_image,
-                                                           const cv::Matx33d& coarse_homography,
-                                                           cv::Size projector_size,
-                                                           const GeometricCalibrationOptions& options) {
+                                                            const cv::Mat& black_image,
+                                                            const cv::Matx33d& coarse_homography,
+                                                            cv::Size projector_size,
+                                                            const GeometricCalibrationOptions& options) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
   if (captures.empty()) return Status::InvalidArgument("geometry: no dot grid captures");
   if (projector_size.area() <= 0) return Status::InvalidArgument("geometry: projector_size must be positive");
@@ -345,7 +360,8 @@ StatusOr<GeometricCalibration> EstimateGeometricCalibration(const std::vector<Do
   if (black_image.size() != camera_size) return Status::InvalidArgument("geometry: black_image differs in size");
   cv::Mat black;
   black_image.convertTo(black, CV_32F);
-  const cv::Matx22d j = HomographyJacobian(coarse_homography, {projector_size.width / 2.0, projector_size.height / 2.0});
+  const cv::Matx22d j =
+      HomographyJacobian(coarse_homography, {projector_size.width / 2.0, projector_size.height / 2.0});
   const double scale = std::sqrt(std::abs(cv::determinant(j)));
   CentroidOptions co = options.centroid;
   if (co.window_radius_px <= 0) co.window_radius_px = std::max(1.5, 0.4 * options.grid_spacing_px * scale);

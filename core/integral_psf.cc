@@ -5,9 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <string>
-
 #include <opencv2/imgproc.hpp>
+#include <string>
 
 namespace inspection {
 
@@ -29,16 +28,19 @@ cv::Mat IntegralPsf::Apply(const cv::Mat& integral_image) const {
 
 const char* IpsfRegularisationName(IpsfRegularisation r) {
   switch (r) {
-    case IpsfRegularisation::kGradientL2: return "gradient_l2";
-    case IpsfRegularisation::kTotalVariation: return "total_variation";
-    case IpsfRegularisation::kTotalVariationL1: return "tv_l1";
+    case IpsfRegularisation::kGradientL2:
+      return "gradient_l2";
+    case IpsfRegularisation::kTotalVariation:
+      return "total_variation";
+    case IpsfRegularisation::kTotalVariationL1:
+      return "tv_l1";
   }
   return "gradient_l2";
 }
 
 StatusOr<IpsfRegularisation> ParseIpsfRegularisation(const std::string& name) {
-  for (IpsfRegularisation r : {IpsfRegularisation::kGradientL2, IpsfRegularisation::kTotalVariation,
-                               IpsfRegularisation::kTotalVariationL1}) {
+  for (IpsfRegularisation r :
+       {IpsfRegularisation::kGradientL2, IpsfRegularisation::kTotalVariation, IpsfRegularisation::kTotalVariationL1}) {
     if (name == IpsfRegularisationName(r)) return r;
   }
   if (name == "tv_l2") return IpsfRegularisation::kTotalVariation;

@@ -9,10 +9,9 @@
 // squares (IRLS); convolutions through OpenCV (DFT for big kernels).
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/status.h"
 
@@ -58,9 +57,9 @@ struct IntegralPsfOptions {
   // value does not depend on image size or grey scale.
   double regularisation_weight = 1e-3;
   int max_cg_iterations = 400;
-  double cg_tolerance = 1e-8;        // on the relative residual norm
-  int tv_reweight_iterations = 6;    // IRLS outer loops for total variation and the L1 data term
-  double tv_epsilon = 1e-4;          // smoothing of |grad k| in the TV weights (relative to the kernel peak)
+  double cg_tolerance = 1e-8;      // on the relative residual norm
+  int tv_reweight_iterations = 6;  // IRLS outer loops for total variation and the L1 data term
+  double tv_epsilon = 1e-4;        // smoothing of |grad k| in the TV weights (relative to the kernel peak)
   // TV-L1: smoothing of |residual| in the L1 weights, relative to the RMS residual of the
   // previous iterate (|r| ~ r^2 / sqrt(r^2 + eps^2)).
   double l1_epsilon = 0.05;

@@ -8,9 +8,8 @@
 #include <cmath>
 #include <complex>
 #include <ctime>
-#include <string>
-
 #include <opencv2/imgproc.hpp>
+#include <string>
 
 #include "core/stack.h"
 
@@ -156,9 +155,12 @@ StatusOr<IsffResult> CorrelateFrames(size_t count, GetFrame&& get_frame, const s
 double EstimateFrameNoiseSigma(const cv::Mat& frame) {
   if (frame.empty() || frame.channels() != 1 || frame.rows < 3 || frame.cols < 3) return 0.0;
   switch (frame.depth()) {
-    case CV_8U: return NoiseSigmaOf<uint8_t>(frame, true);
-    case CV_16U: return NoiseSigmaOf<uint16_t>(frame, true);
-    case CV_32F: return NoiseSigmaOf<float>(frame, false);
+    case CV_8U:
+      return NoiseSigmaOf<uint8_t>(frame, true);
+    case CV_16U:
+      return NoiseSigmaOf<uint16_t>(frame, true);
+    case CV_32F:
+      return NoiseSigmaOf<float>(frame, false);
     default: {
       cv::Mat f;
       frame.convertTo(f, CV_32F);
@@ -200,9 +202,7 @@ double IntegralImageAccumulator::FrameNoiseSigma() const {
   return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + half));
 }
 
-const char* IpsfRestorationName(IpsfRestoration r) {
-  return r == IpsfRestoration::kPlain ? "plain" : "noise_adaptive";
-}
+const char* IpsfRestorationName(IpsfRestoration r) { return r == IpsfRestoration::kPlain ? "plain" : "noise_adaptive"; }
 
 Status IpsfRestorationOptions::Validate() const {
   if (!std::isnan(frame_noise_sigma) && !(frame_noise_sigma >= 0.0 && std::isfinite(frame_noise_sigma))) {
@@ -299,10 +299,9 @@ StatusOr<IsffResult> ReconstructIntegralSff(const std::vector<cv::Mat>& frames, 
   INSPECT_ASSIGN_OR_RETURN(cv::Mat restored,
                            RestoreFocusedImage(integral, acc.frame_count(), noise, *ipsf, options.restoration));
   const double restore_s = SecondsSince(t1);
-  INSPECT_ASSIGN_OR_RETURN(
-      IsffResult r, CorrelateFrames(
-                        frames.size(), [&](size_t i) -> StatusOr<cv::Mat> { return frames[i]; }, z_um, restored,
-                        frames[0].type(), options));
+  INSPECT_ASSIGN_OR_RETURN(IsffResult r, CorrelateFrames(
+                                             frames.size(), [&](size_t i) -> StatusOr<cv::Mat> { return frames[i]; },
+                                             z_um, restored, frames[0].type(), options));
   r.frame_noise_sigma = noise;
   r.integral_seconds = integral_s;
   r.restore_seconds = restore_s;
@@ -317,10 +316,9 @@ StatusOr<IsffResult> ReconstructIntegralSffWithTemplate(const std::vector<cv::Ma
   if (focused_template.size() != frames[0].size() || focused_template.channels() != 1) {
     return Status::InvalidArgument("focused template must be single channel and of the frame size");
   }
-  INSPECT_ASSIGN_OR_RETURN(
-      IsffResult r, CorrelateFrames(
-                        frames.size(), [&](size_t i) -> StatusOr<cv::Mat> { return frames[i]; }, z_um,
-                        focused_template, frames[0].type(), options));
+  INSPECT_ASSIGN_OR_RETURN(IsffResult r, CorrelateFrames(
+                                             frames.size(), [&](size_t i) -> StatusOr<cv::Mat> { return frames[i]; },
+                                             z_um, focused_template, frames[0].type(), options));
   r.frame_noise_sigma = options.restoration.frame_noise_sigma;
   return r;
 }
@@ -359,19 +357,18 @@ StatusOr<IsffResult> ReconstructIntegralSffStack(const std::filesystem::path& di
   INSPECT_ASSIGN_OR_RETURN(cv::Mat restored,
                            RestoreFocusedImage(integral, acc.frame_count(), noise, *ipsf, options.restoration));
   const double restore_s = SecondsSince(t1);
-  INSPECT_ASSIGN_OR_RETURN(
-      IsffResult r,
-      CorrelateFrames(
-          manifest.frames.size(),
-          [&](size_t i) -> StatusOr<cv::Mat> {
-            INSPECT_ASSIGN_OR_RETURN(cv::Mat f, LoadStackFrame(dir, manifest, i));
-            if (f.type() != frame_type || f.size() != size) {
-              return Status::InvalidArgument("frame " + std::to_string(i) + " (" + manifest.frames[i].file +
-                                             "): changed between the two passes");
-            }
-            return f;
-          },
-          z_um, restored, frame_type, options));
+  INSPECT_ASSIGN_OR_RETURN(IsffResult r, CorrelateFrames(
+                                             manifest.frames.size(),
+                                             [&](size_t i) -> StatusOr<cv::Mat> {
+                                               INSPECT_ASSIGN_OR_RETURN(cv::Mat f, LoadStackFrame(dir, manifest, i));
+                                               if (f.type() != frame_type || f.size() != size) {
+                                                 return Status::InvalidArgument("frame " + std::to_string(i) + " (" +
+                                                                                manifest.frames[i].file +
+                                                                                "): changed between the two passes");
+                                               }
+                                               return f;
+                                             },
+                                             z_um, restored, frame_type, options));
   r.frame_noise_sigma = noise;
   r.integral_seconds = integral_s;
   r.restore_seconds = restore_s;

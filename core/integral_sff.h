@@ -16,9 +16,8 @@
 
 #include <filesystem>
 #include <limits>
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/calibration_bundle.h"
 #include "core/integral_psf.h"

@@ -36,7 +36,8 @@ bool SampleBilinear(const cv::Mat& depth, double x, double y, double* z, cv::Poi
     }
   }
   *z = acc;
-  *nearest = cv::Point(std::clamp(int(std::floor(x)), 0, depth.cols - 1), std::clamp(int(std::floor(y)), 0, depth.rows - 1));
+  *nearest =
+      cv::Point(std::clamp(int(std::floor(x)), 0, depth.cols - 1), std::clamp(int(std::floor(y)), 0, depth.rows - 1));
   return true;
 }
 
@@ -51,12 +52,14 @@ Status LineProfileOptions::Validate(cv::Size image_size, double pixel_size_um, c
     scale = 1.0 / pixel_size_um;
   }
   for (const auto& [name, p] : {std::pair<const char*, RoiPoint>{"start", start}, {"end", end}}) {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y)) return Status::InvalidArgument(field + "." + name + " is not a finite point");
+    if (!std::isfinite(p.x) || !std::isfinite(p.y))
+      return Status::InvalidArgument(field + "." + name + " is not a finite point");
     const double x = p.x * scale, y = p.y * scale;
     if (x < -kEdgeSlackPx || y < -kEdgeSlackPx || x > image_size.width + kEdgeSlackPx ||
         y > image_size.height + kEdgeSlackPx) {
-      return Status::InvalidArgument(field + "." + name + " = (" + Num(x) + ", " + Num(y) + ") px lies outside the image " +
-                                     std::to_string(image_size.width) + "x" + std::to_string(image_size.height) + " px");
+      return Status::InvalidArgument(field + "." + name + " = (" + Num(x) + ", " + Num(y) +
+                                     ") px lies outside the image " + std::to_string(image_size.width) + "x" +
+                                     std::to_string(image_size.height) + " px");
     }
   }
   if (!(width_px >= 1.0 && width_px <= 1001.0)) {
@@ -67,8 +70,8 @@ Status LineProfileOptions::Validate(cv::Size image_size, double pixel_size_um, c
   }
   const double length_px = std::hypot(end.x - start.x, end.y - start.y) * scale;
   if (!(length_px >= spacing_px)) {
-    return Status::InvalidArgument(field + ": the line is " + Num(length_px) + " px long, shorter than one sample spacing (" +
-                                   Num(spacing_px) + " px)");
+    return Status::InvalidArgument(field + ": the line is " + Num(length_px) +
+                                   " px long, shorter than one sample spacing (" + Num(spacing_px) + " px)");
   }
   if (length_px / spacing_px + 1 > double(kMaxProfileSamples)) {
     return Status::InvalidArgument(field + ": more than " + std::to_string(kMaxProfileSamples) + " samples");

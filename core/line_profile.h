@@ -3,10 +3,9 @@
 // width across it, returned as data (position along the line, height, its uncertainty).
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/depth_noise_model.h"
 #include "core/status.h"
@@ -28,16 +27,16 @@ struct LineProfileOptions {
 };
 
 struct LineProfile {
-  std::vector<double> position_um;     // distance from `start` along the line
-  std::vector<double> x_um, y_um;      // the sample's image coordinates
-  std::vector<double> height_um;       // mean height over the band's cross samples with depth; NaN if none
+  std::vector<double> position_um;  // distance from `start` along the line
+  std::vector<double> x_um, y_um;   // the sample's image coordinates
+  std::vector<double> height_um;    // mean height over the band's cross samples with depth; NaN if none
   // Standard uncertainty of each height: correlated noise averaged over the band (box model of
   // core/depth_noise_model.h), plus the z-linearity table's rms and the stage term, which do not
   // average out across a band at one height. NaN without a noise model.
   std::vector<double> uncertainty_um;
-  std::vector<int> cross_samples;      // how many of the band's cross samples had depth
+  std::vector<int> cross_samples;  // how many of the band's cross samples had depth
   double length_um = 0.0;
-  double coverage_percent() const;     // samples with a height, of all samples
+  double coverage_percent() const;  // samples with a height, of all samples
 };
 
 // Samples bilinearly between pixel centres; a cross sample counts only where its (up to) four

@@ -80,8 +80,8 @@ StatusOr<Regions> PrepareRegions(const MeasurementSpec& spec, const MeasurementC
   Regions r;
   INSPECT_ASSIGN_OR_RETURN(r.roi, RasteriseRoi(spec.roi, ctx.depth_um, ctx.pixel_size_um, field + ".roi"));
   if (spec.reference_roi) {
-    INSPECT_ASSIGN_OR_RETURN(r.reference,
-                             RasteriseRoi(*spec.reference_roi, ctx.depth_um, ctx.pixel_size_um, field + ".reference_roi"));
+    INSPECT_ASSIGN_OR_RETURN(
+        r.reference, RasteriseRoi(*spec.reference_roi, ctx.depth_um, ctx.pixel_size_um, field + ".reference_roi"));
   }
   if (r.roi.measured_pixels == 0) return Status::FailedPrecondition(field + ".roi: no pixel of the region has depth");
   if (r.reference && r.reference->measured_pixels == 0) {
@@ -112,8 +112,8 @@ StatusOr<MeasuredValue> MeasureNonAreal(const MeasurementSpec& spec, const Measu
   MeasuredValue v = Base(spec, r);
   switch (spec.kind) {
     case MeasurementKind::kStepHeight: {
-      StatusOr<StepHeightResult> s = MeasureStepHeight(ctx.depth_um, r.reference->measured, r.roi.measured,
-                                                       ctx.pixel_size_um, spec.step, noise);
+      StatusOr<StepHeightResult> s =
+          MeasureStepHeight(ctx.depth_um, r.reference->measured, r.roi.measured, ctx.pixel_size_um, spec.step, noise);
       if (!s.ok()) return s.status().WithContext(field);
       v.value = s->height_um;
       v.uncertainty = s->uncertainty;
@@ -136,8 +136,8 @@ StatusOr<MeasuredValue> MeasureNonAreal(const MeasurementSpec& spec, const Measu
     case MeasurementKind::kVolumeAbove:
     case MeasurementKind::kVolumeBelow: {
       const cv::Mat reference = r.reference ? r.reference->measured : cv::Mat();
-      StatusOr<VolumeResult> vol = MeasureVolume(ctx.depth_um, r.roi.region, reference, ctx.pixel_size_um, spec.volume,
-                                                 noise, ctx.monte_carlo);
+      StatusOr<VolumeResult> vol =
+          MeasureVolume(ctx.depth_um, r.roi.region, reference, ctx.pixel_size_um, spec.volume, noise, ctx.monte_carlo);
       if (!vol.ok()) return vol.status().WithContext(field);
       const bool above = spec.kind == MeasurementKind::kVolumeAbove;
       const double scale = spec.volume_unit == VolumeUnit::kCubicMillimetre ? 1e-9 : 1.0;
@@ -155,7 +155,8 @@ StatusOr<MeasuredValue> MeasureNonAreal(const MeasurementSpec& spec, const Measu
       const int k = f->ParameterIndex("radius_um");
       v.value = f->parameters[k];
       if (noise) {
-        StatusOr<FunctionalCovariance> cov = FormFitCovariance(*f, ctx.depth_um, r.roi.measured, ctx.pixel_size_um, *noise);
+        StatusOr<FunctionalCovariance> cov =
+            FormFitCovariance(*f, ctx.depth_um, r.roi.measured, ctx.pixel_size_um, *noise);
         if (!cov.ok()) return cov.status().WithContext(field);
         Eigen::VectorXd c = Eigen::VectorXd::Zero(f->parameters.size());
         c[k] = 1.0;
@@ -163,7 +164,8 @@ StatusOr<MeasuredValue> MeasureNonAreal(const MeasurementSpec& spec, const Measu
       }
       return v;
     }
-    default: break;
+    default:
+      break;
   }
   return Status::Internal(field + ": unhandled measurement kind");
 }
@@ -173,13 +175,20 @@ StatusOr<MeasuredValue> MeasureNonAreal(const MeasurementSpec& spec, const Measu
 const char* MeasurementKindName(MeasurementKind kind) {
   if (IsHeightParameter(kind)) return HeightParameterName(ToHeightParameter(kind));
   switch (kind) {
-    case MeasurementKind::kStepHeight: return "step_height";
-    case MeasurementKind::kFlatness: return "flatness";
-    case MeasurementKind::kTilt: return "tilt";
-    case MeasurementKind::kVolumeAbove: return "volume_above";
-    case MeasurementKind::kVolumeBelow: return "volume_below";
-    case MeasurementKind::kRadius: return "radius";
-    default: break;
+    case MeasurementKind::kStepHeight:
+      return "step_height";
+    case MeasurementKind::kFlatness:
+      return "flatness";
+    case MeasurementKind::kTilt:
+      return "tilt";
+    case MeasurementKind::kVolumeAbove:
+      return "volume_above";
+    case MeasurementKind::kVolumeBelow:
+      return "volume_below";
+    case MeasurementKind::kRadius:
+      return "radius";
+    default:
+      break;
   }
   return "unknown";
 }
@@ -202,10 +211,13 @@ StatusOr<MeasurementKind> ParseMeasurementKind(const std::string& name) {
 std::string MeasurementSpec::unit() const {
   if (IsHeightParameter(kind)) return HeightParameterUnit(ToHeightParameter(kind));
   switch (kind) {
-    case MeasurementKind::kTilt: return "deg";
+    case MeasurementKind::kTilt:
+      return "deg";
     case MeasurementKind::kVolumeAbove:
-    case MeasurementKind::kVolumeBelow: return volume_unit == VolumeUnit::kCubicMillimetre ? "mm3" : "um3";
-    default: return "um";
+    case MeasurementKind::kVolumeBelow:
+      return volume_unit == VolumeUnit::kCubicMillimetre ? "mm3" : "um3";
+    default:
+      return "um";
   }
 }
 
@@ -215,9 +227,9 @@ Status MeasurementSpec::Validate(cv::Size image_size, double pixel_size_um, cons
   }
   INSPECT_RETURN_IF_ERROR(ValidateRoi(roi, image_size, pixel_size_um, field + ".roi"));
   const bool wants_reference = kind == MeasurementKind::kStepHeight;
-  const bool takes_reference = wants_reference || ((kind == MeasurementKind::kVolumeAbove ||
-                                                    kind == MeasurementKind::kVolumeBelow) &&
-                                                   volume.reference == VolumeReference::kRegionPlane);
+  const bool takes_reference =
+      wants_reference || ((kind == MeasurementKind::kVolumeAbove || kind == MeasurementKind::kVolumeBelow) &&
+                          volume.reference == VolumeReference::kRegionPlane);
   if (wants_reference && !reference_roi) {
     return Status::InvalidArgument(field + ".reference_roi is required for " + MeasurementKindName(kind));
   }
@@ -227,7 +239,8 @@ Status MeasurementSpec::Validate(cv::Size image_size, double pixel_size_um, cons
                                         ? " with reference height"
                                         : ""));
   }
-  if (reference_roi) INSPECT_RETURN_IF_ERROR(ValidateRoi(*reference_roi, image_size, pixel_size_um, field + ".reference_roi"));
+  if (reference_roi)
+    INSPECT_RETURN_IF_ERROR(ValidateRoi(*reference_roi, image_size, pixel_size_um, field + ".reference_roi"));
   if (IsHeightParameter(kind)) {
     const Status s = areal.Validate();
     if (!s.ok()) return s.WithContext(field + ".areal");
@@ -284,9 +297,9 @@ std::vector<StatusOr<MeasuredValue>> MeasureSpecs(const std::vector<const Measur
     auto it = areal_cache.find(key);
     if (it == areal_cache.end()) {
       it = areal_cache
-               .emplace(key, EvaluateArealGroup(context.depth_um, regions->roi.measured, context.pixel_size_um,
-                                                spec.areal, regions->noise ? &*regions->noise : nullptr,
-                                                context.monte_carlo))
+               .emplace(key,
+                        EvaluateArealGroup(context.depth_um, regions->roi.measured, context.pixel_size_um, spec.areal,
+                                           regions->noise ? &*regions->noise : nullptr, context.monte_carlo))
                .first;
     }
     if (!it->second.ok()) {
@@ -303,7 +316,8 @@ std::vector<StatusOr<MeasuredValue>> MeasureSpecs(const std::vector<const Measur
 
 }  // namespace
 
-StatusOr<MeasuredValue> Measure(const MeasurementSpec& spec, const MeasurementContext& context, const std::string& field) {
+StatusOr<MeasuredValue> Measure(const MeasurementSpec& spec, const MeasurementContext& context,
+                                const std::string& field) {
   return std::move(MeasureSpecs({&spec}, context, [&](size_t) { return field; }).front());
 }
 

@@ -20,11 +20,10 @@
 // give the same value and uncertainty.
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/areal_parameters.h"
 #include "core/depth_noise_model.h"
@@ -38,7 +37,13 @@
 namespace inspection {
 
 enum class MeasurementKind {
-  kSa, kSq, kSp, kSv, kSz, kSsk, kSku,  // ISO 25178-2 height parameters of `roi` (options: areal)
+  kSa,
+  kSq,
+  kSp,
+  kSv,
+  kSz,
+  kSsk,
+  kSku,          // ISO 25178-2 height parameters of `roi` (options: areal)
   kStepHeight,   // `roi` (measured region) above `reference_roi`, um (options: step)
   kFlatness,     // FLTt of `roi` against its least-squares plane, um
   kTilt,         // tilt of `roi`'s least-squares plane, degrees
@@ -60,8 +65,8 @@ struct MeasurementSpec {
   MeasurementKind kind = MeasurementKind::kSa;
   RegionOfInterest roi;
   std::optional<RegionOfInterest> reference_roi;  // step height: required; volume: plane region (optional)
-  ArealOptions areal;        // Sa..Sku: form removal and S-/L-filter cut-offs
-  FormOptions form{FormModel::kSphere};  // radius: kSphere or kCylinder
+  ArealOptions areal;                             // Sa..Sku: form removal and S-/L-filter cut-offs
+  FormOptions form{FormModel::kSphere};           // radius: kSphere or kCylinder
   StepHeightOptions step;
   VolumeOptions volume;
   VolumeUnit volume_unit = VolumeUnit::kCubicMicrometre;
@@ -73,9 +78,9 @@ struct MeasurementSpec {
 
 // The depth map and how to model its errors; shared by all measurements of one inspection.
 struct MeasurementContext {
-  cv::Mat depth_um;            // CV_32FC1, NaN = no depth (DepthResult::depth_um)
+  cv::Mat depth_um;  // CV_32FC1, NaN = no depth (DepthResult::depth_um)
   double pixel_size_um = 0.0;
-  DepthNoiseOptions noise;     // window, the stack's z positions, z linearity, stage repeatability
+  DepthNoiseOptions noise;  // window, the stack's z positions, z linearity, stage repeatability
   MonteCarloOptions monte_carlo;
   bool with_uncertainty = true;  // false: values only (budgets stay NaN), e.g. on a ground truth
 };

@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
-
 #include <opencv2/imgproc.hpp>
 
 namespace inspection {
@@ -175,7 +174,8 @@ StatusOr<FunctionalCovariance> LinearFunctionalCovariance(const std::vector<cv::
   }
   Eigen::MatrixXd bias(cells.cells(), kLinearityPhases);
   for (int c = 0; c < cells.cells(); ++c) {
-    for (int k = 0; k < kLinearityPhases; ++k) bias(c, k) = cells.Bias(model.linearity, c, (k + 0.5) / kLinearityPhases);
+    for (int k = 0; k < kLinearityPhases; ++k)
+      bias(c, k) = cells.Bias(model.linearity, c, (k + 0.5) / kLinearityPhases);
   }
   const Eigen::MatrixXd l = cell_weight * bias;  // n x phases
   cov.linearity = l * l.transpose() / double(kLinearityPhases);
@@ -256,9 +256,9 @@ StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& d
       continue;
     }
     if (count[i] < std::max(2, options.samples / 2)) {
-      return Status::FailedPrecondition("Monte Carlo uncertainty: only " + std::to_string(count[i]) + " of " +
-                                        std::to_string(options.samples) +
-                                        " perturbed measurements succeeded (the measurement is unstable under its noise)");
+      return Status::FailedPrecondition(
+          "Monte Carlo uncertainty: only " + std::to_string(count[i]) + " of " + std::to_string(options.samples) +
+          " perturbed measurements succeeded (the measurement is unstable under its noise)");
     }
     const double c = count[i], mean = sum[i] / c;
     out[i].samples = count[i];

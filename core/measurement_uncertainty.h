@@ -16,14 +16,13 @@
 // d / (sqrt 2 - 1) is used: exact in the worst case, conservative otherwise.
 #pragma once
 
+#include <Eigen/Dense>
 #include <cmath>
 #include <cstdint>
-#include <string>
 #include <functional>
-#include <vector>
-
-#include <Eigen/Dense>
 #include <opencv2/core.hpp>
+#include <string>
+#include <vector>
 
 #include "core/depth_noise_model.h"
 #include "core/form_removal.h"
@@ -85,16 +84,16 @@ StatusOr<FunctionalCovariance> FormFitCovariance(const FormFit& fit, const cv::M
                                                  double pixel_size_um, const DepthNoiseModel& model);
 
 struct MonteCarloOptions {
-  int samples = 32;               // 8..10000; 32 gives the spread to ~13 % (1 / sqrt(2 (n - 1)))
-  uint64_t seed = 0x25178u;       // fixed: the same map and measurement give the same uncertainty
+  int samples = 32;          // 8..10000; 32 gives the spread to ~13 % (1 / sqrt(2 (n - 1)))
+  uint64_t seed = 0x25178u;  // fixed: the same map and measurement give the same uncertainty
   Status Validate() const;
 };
 
 struct MonteCarloEstimate {
-  double spread = 0.0;  // standard deviation of f(z + e_k) over the samples
-  double bias = 0.0;    // noise-bias estimate (mean_k f(z + e_k) - f(z)) / (sqrt 2 - 1), signed
+  double spread = 0.0;                // standard deviation of f(z + e_k) over the samples
+  double bias = 0.0;                  // noise-bias estimate (mean_k f(z + e_k) - f(z)) / (sqrt 2 - 1), signed
   double standard_uncertainty = 0.0;  // sqrt(spread^2 + bias^2)
-  int samples = 0;      // samples that gave a finite value
+  int samples = 0;                    // samples that gave a finite value
 };
 
 // Budget of a Monte Carlo estimate.

@@ -6,9 +6,8 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
-#include <string>
-
 #include <opencv2/imgproc.hpp>
+#include <string>
 
 #include "core/ncc_kernel.h"
 #include "core/parallel_for.h"
@@ -145,13 +144,13 @@ struct NccFocusEngine::Impl {
   StatePlane<float> best, best_ncc, sum, curv_all, curv_excl, aif;
   StatePlane<float> before, after, ring;  // J, J, Jr planes
   StatePlane<int16_t> idx;
-  std::vector<uint8_t> phase;     // 0 searching, 1 local maximum found (filling `after`), 2 stopped
-  StatePlane<int16_t> n_seen;     // ISFF-FAST: frames the pixel saw (set when it stops)
+  std::vector<uint8_t> phase;  // 0 searching, 1 local maximum found (filling `after`), 2 stopped
+  StatePlane<int16_t> n_seen;  // ISFF-FAST: frames the pixel saw (set when it stops)
 
   // Tiles.
   std::vector<cv::Rect> tiles;
-  std::vector<int> tile_searching;     // pixels of the tile not stopped
-  std::vector<cv::Rect> tile_active;   // bounding box of those pixels: what is computed
+  std::vector<int> tile_searching;    // pixels of the tile not stopped
+  std::vector<cv::Rect> tile_active;  // bounding box of those pixels: what is computed
   std::vector<Scratch> scratch;
   std::vector<std::vector<float>> fm_buf, nm_buf;
   NccWorkCounters work;
@@ -177,8 +176,7 @@ struct NccFocusEngine::Impl {
 
   // Updates the state of the tile's pixels with their focus values and mean NCC of frame k.
   template <typename P>
-  int64_t UpdateTile(const cv::Rect& T, const float* fm, const float* nm, const cv::Mat& frame, int k,
-                     int* searching) {
+  int64_t UpdateTile(const cv::Rect& T, const float* fm, const float* nm, const cv::Mat& frame, int k, int* searching) {
     const float stop_ncc = float(o.stop_threshold);
     const bool fast = o.stop_at_first_maximum;
     // Plane base pointers: ring[0] is the last value, ring[1] the one before.
@@ -319,8 +317,10 @@ Status NccFocusEngine::PushFrame(const cv::Mat& frame, double z_um) {
     ncc_kernel::TileFocus(frame, m.ts, hs, m.o.focus_value, T, m.scratch[worker], fm.data(), nm.data());
     int64_t u = 0;
     const int searching_before = m.tile_searching[t];
-    if (frame.depth() == CV_8U) u = m.UpdateTile<uint8_t>(T, fm.data(), nm.data(), frame, k, &m.tile_searching[t]);
-    else u = m.UpdateTile<uint16_t>(T, fm.data(), nm.data(), frame, k, &m.tile_searching[t]);
+    if (frame.depth() == CV_8U)
+      u = m.UpdateTile<uint8_t>(T, fm.data(), nm.data(), frame, k, &m.tile_searching[t]);
+    else
+      u = m.UpdateTile<uint16_t>(T, fm.data(), nm.data(), frame, k, &m.tile_searching[t]);
     // ISFF-FAST: the next frame is computed only over the box of the pixels still searching
     // (the NCC of a pixel needs its neighbours' patches, so a box, not a pixel list).
     if (m.tile_searching[t] != searching_before && m.tile_searching[t] > 0) m.tile_active[t] = m.SearchingBox(T);
@@ -399,8 +399,8 @@ StatusOr<DepthResult> NccFocusEngine::Finish() {
   aif_f.convertTo(r.all_in_focus, m.frame_type);
   r.valid_fraction = double(valid.load()) / double(m.size.area());
   // Release the state: the engine is done.
-  for (StatePlane<float>* p : {&m.best, &m.best_ncc, &m.sum, &m.curv_all, &m.curv_excl, &m.aif, &m.before, &m.after,
-                               &m.ring}) {
+  for (StatePlane<float>* p :
+       {&m.best, &m.best_ncc, &m.sum, &m.curv_all, &m.curv_excl, &m.aif, &m.before, &m.after, &m.ring}) {
     p->Release();
   }
   m.idx.Release();
@@ -413,10 +413,10 @@ int NccFocusEngine::frames_pushed() const { return int(impl_->z.size()); }
 
 size_t NccFocusEngine::state_bytes() const {
   const Impl& m = *impl_;
-  const size_t planes = m.best.size() + m.best_ncc.size() + m.sum.size() + m.curv_all.size() + m.curv_excl.size() + m.aif.size() +
-                        m.before.size() + m.after.size() + m.ring.size();
-  return planes * sizeof(float) + m.idx.size() * 2 + m.phase.size() + m.n_seen.size() * 2 +
-         m.ts.t_pad.total() * 4 + m.ts.t_sum.total() * 4 + m.ts.t_inv.total() * 4;
+  const size_t planes = m.best.size() + m.best_ncc.size() + m.sum.size() + m.curv_all.size() + m.curv_excl.size() +
+                        m.aif.size() + m.before.size() + m.after.size() + m.ring.size();
+  return planes * sizeof(float) + m.idx.size() * 2 + m.phase.size() + m.n_seen.size() * 2 + m.ts.t_pad.total() * 4 +
+         m.ts.t_sum.total() * 4 + m.ts.t_inv.total() * 4;
 }
 
 const NccWorkCounters& NccFocusEngine::work() const { return impl_->work; }

@@ -18,9 +18,8 @@
 
 #include <cstdint>
 #include <memory>
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/depth_interpolation.h"
 #include "core/sff_engine.h"  // DepthResult
@@ -70,10 +69,10 @@ struct NccFocusOptions {
 struct NccWorkCounters {
   int64_t computed_pixel_frames = 0;       // pixels whose NCC and F were computed, summed over frames
   int64_t computed_pixel_frames_full = 0;  // the global maximum search's: pixels x frames
-  int64_t tile_frames = 0;       // tiles processed, summed over frames
-  int64_t tile_frames_full = 0;  // tiles x frames
-  int64_t pixel_frames = 0;      // state updates (pixels that were still searching)
-  int64_t stopped_pixels = 0;    // ISFF-FAST: pixels that stopped at a local maximum >= threshold
+  int64_t tile_frames = 0;                 // tiles processed, summed over frames
+  int64_t tile_frames_full = 0;            // tiles x frames
+  int64_t pixel_frames = 0;                // state updates (pixels that were still searching)
+  int64_t stopped_pixels = 0;              // ISFF-FAST: pixels that stopped at a local maximum >= threshold
 };
 
 // Reference whole-frame maps (tests and offline use). frame and focused_template: single

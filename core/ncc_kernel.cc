@@ -3,13 +3,12 @@
 // at run time); see TileFocusT for the numerics.
 #include "core/ncc_kernel.h"
 
-#include <algorithm>
-#include <cmath>
-#include <type_traits>
-
 #include <immintrin.h>
 
+#include <algorithm>
+#include <cmath>
 #include <opencv2/imgproc.hpp>
+#include <type_traits>
 
 namespace inspection::ncc_kernel {
 
@@ -146,7 +145,7 @@ void NccRow(const A* sw, const A* sww, const A* swt, const float* tsum, const fl
 // vectorise.
 template <typename P, typename A>
 void TileFocusT(const cv::Mat& frame, const TemplateStats& ts, int hs, CorrelationFocusValue value, const cv::Rect& T,
-               ScratchT<A>& s, float* fm, float* nm) {
+                ScratchT<A>& s, float* fm, float* nm) {
   const int W = frame.cols, H = frame.rows, hc = ts.hc, n = ts.n, k = 2 * hc + 1;
   const int rx0 = std::max(0, T.x - hs), rx1 = std::min(W, T.x + T.width + hs);
   const int ry0 = std::max(0, T.y - hs), ry1 = std::min(H, T.y + T.height + hs);
@@ -259,11 +258,17 @@ void TileFocus(const cv::Mat& frame, const TemplateStats& ts, int hs, Correlatio
                Scratch& s, float* fm, float* nm) {
   switch (frame.depth()) {
     case CV_8U:
-      if (ts.n <= 225) TileFocusT<uint8_t, float>(frame, ts, hs, value, T, s.f, fm, nm);
-      else TileFocusT<uint8_t, double>(frame, ts, hs, value, T, s.d, fm, nm);
+      if (ts.n <= 225)
+        TileFocusT<uint8_t, float>(frame, ts, hs, value, T, s.f, fm, nm);
+      else
+        TileFocusT<uint8_t, double>(frame, ts, hs, value, T, s.d, fm, nm);
       break;
-    case CV_16U: TileFocusT<uint16_t, double>(frame, ts, hs, value, T, s.d, fm, nm); break;
-    default: TileFocusT<float, double>(frame, ts, hs, value, T, s.d, fm, nm); break;
+    case CV_16U:
+      TileFocusT<uint16_t, double>(frame, ts, hs, value, T, s.d, fm, nm);
+      break;
+    default:
+      TileFocusT<float, double>(frame, ts, hs, value, T, s.d, fm, nm);
+      break;
   }
 }
 

@@ -3,9 +3,8 @@
 // Kept apart from the engine (state, maximum search, ISFF-FAST) so each reads as one thing.
 #pragma once
 
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/ncc_focus.h"
 
@@ -22,10 +21,10 @@ inline int Reflect101(int p, int len) {
 // patch, whose NCC is defined as 0).
 struct TemplateStats {
   int hc = 0;
-  int n = 0;       // pixels per patch
-  cv::Mat t_pad;   // CV_32FC1, (H + 2hc) x (W + 2hc), centred on its mean (NCC ignores offsets)
-  cv::Mat t_sum;   // CV_32FC1, H x W
-  cv::Mat t_inv;   // CV_32FC1, H x W
+  int n = 0;      // pixels per patch
+  cv::Mat t_pad;  // CV_32FC1, (H + 2hc) x (W + 2hc), centred on its mean (NCC ignores offsets)
+  cv::Mat t_sum;  // CV_32FC1, H x W
+  cv::Mat t_inv;  // CV_32FC1, H x W
 };
 
 TemplateStats MakeTemplateStats(const cv::Mat& templ, int correlation_window_px);

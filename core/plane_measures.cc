@@ -4,7 +4,6 @@
 
 #include <cmath>
 #include <limits>
-
 #include <opencv2/imgproc.hpp>
 
 namespace inspection {
@@ -19,7 +18,8 @@ Status CheckInputs(const cv::Mat& depth_um, const cv::Mat& mask, double pixel_si
   if (mask.type() != CV_8UC1 || mask.size() != depth_um.size()) {
     return Status::InvalidArgument(std::string(what) + " mask must be CV_8UC1 of the depth map's size");
   }
-  if (!(pixel_size_um > 0.0) || !std::isfinite(pixel_size_um)) return Status::InvalidArgument("pixel_size_um must be > 0");
+  if (!(pixel_size_um > 0.0) || !std::isfinite(pixel_size_um))
+    return Status::InvalidArgument("pixel_size_um must be > 0");
   return Status::Ok();
 }
 
@@ -40,11 +40,10 @@ StatusOr<TiltResult> MeasureTilt(const cv::Mat& depth_um, const cv::Mat& mask, d
   res.tilt_y_deg = std::atan(gy) * kDegPerRad;
   res.azimuth_deg = m > 0.0 ? std::atan2(gy, gx) * kDegPerRad : 0.0;
   if (noise != nullptr) {
-    INSPECT_ASSIGN_OR_RETURN(FunctionalCovariance cov, FormFitCovariance(res.plane, depth_um, mask, pixel_size_um, *noise));
+    INSPECT_ASSIGN_OR_RETURN(FunctionalCovariance cov,
+                             FormFitCovariance(res.plane, depth_um, mask, pixel_size_um, *noise));
     const double to_deg = kDegPerRad / (1.0 + m * m);  // d atan(m) / dm
-    auto part = [&](const Eigen::MatrixXd& c) {
-      return to_deg * SlopeMagnitudeUncertainty(c.block<2, 2>(1, 1));
-    };
+    auto part = [&](const Eigen::MatrixXd& c) { return to_deg * SlopeMagnitudeUncertainty(c.block<2, 2>(1, 1)); };
     res.uncertainty.method = "analytic";
     res.uncertainty.random = part(cov.random);
     res.uncertainty.linearity = part(cov.linearity);
@@ -83,9 +82,8 @@ StatusOr<VolumeReference> ParseVolumeReference(const std::string& name) {
   return Status::InvalidArgument("unknown volume reference '" + name + "' (region_plane, height)");
 }
 
-StatusOr<VolumeResult> MeasureVolume(const cv::Mat& depth_um, const cv::Mat& region_mask,
-                                     const cv::Mat& reference_mask, double pixel_size_um,
-                                     const VolumeOptions& options, const DepthNoiseModel* noise,
+StatusOr<VolumeResult> MeasureVolume(const cv::Mat& depth_um, const cv::Mat& region_mask, const cv::Mat& reference_mask,
+                                     double pixel_size_um, const VolumeOptions& options, const DepthNoiseModel* noise,
                                      const MonteCarloOptions& monte_carlo) {
   INSPECT_RETURN_IF_ERROR(CheckInputs(depth_um, region_mask, pixel_size_um, "region"));
   const bool own_plane = reference_mask.empty();
@@ -103,7 +101,8 @@ StatusOr<VolumeResult> MeasureVolume(const cv::Mat& depth_um, const cv::Mat& reg
   // measured pixel nearby are covered by scaling the sums to the whole region.
   constexpr double kFillSigmaPx = 4.0, kFillMinWeight = 0.05;
   const int pad = int(std::ceil(3.0 * kFillSigmaPx));
-  const cv::Rect work = (box + cv::Size(2 * pad, 2 * pad) - cv::Point(pad, pad)) & cv::Rect(0, 0, depth_um.cols, depth_um.rows);
+  const cv::Rect work =
+      (box + cv::Size(2 * pad, 2 * pad) - cv::Point(pad, pad)) & cv::Rect(0, 0, depth_um.cols, depth_um.rows);
   // Above, below, and the parts of each that come from filled pixels (outputs 2 and 3).
   auto volumes = [&](const cv::Mat& z, size_t* measured) -> StatusOr<std::vector<double>> {
     FormFit plane;

@@ -71,9 +71,8 @@ struct VolumeResult {
 };
 // region_mask: the region (all its pixels, measured or not, e.g. RoiMask::region);
 // reference_mask: kRegionPlane's reference region (empty = the region itself).
-StatusOr<VolumeResult> MeasureVolume(const cv::Mat& depth_um, const cv::Mat& region_mask,
-                                     const cv::Mat& reference_mask, double pixel_size_um,
-                                     const VolumeOptions& options, const DepthNoiseModel* noise,
+StatusOr<VolumeResult> MeasureVolume(const cv::Mat& depth_um, const cv::Mat& region_mask, const cv::Mat& reference_mask,
+                                     double pixel_size_um, const VolumeOptions& options, const DepthNoiseModel* noise,
                                      const MonteCarloOptions& monte_carlo = {});
 
 }  // namespace inspection

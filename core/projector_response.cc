@@ -20,8 +20,7 @@ Status ProjectorResponseFunction::Validate() const {
                                      "] must be finite and >= 0");
     }
     if (i > 0 && v < relative_irradiance[i - 1]) {
-      return Status::InvalidArgument("projector_response.relative_irradiance decreases at grey " +
-                                     std::to_string(i));
+      return Status::InvalidArgument("projector_response.relative_irradiance decreases at grey " + std::to_string(i));
     }
   }
   if (std::abs(relative_irradiance[255] - 1.0) > 1e-9) {
@@ -63,8 +62,8 @@ double ProjectorCalibrationExposureUs(int grey, double exposure_min_us, double e
 }
 
 StatusOr<ProjectorResponseFunction> EstimateProjectorResponse(const std::vector<ProjectorResponseCapture>& captures,
-                                                      const CameraResponseFunction& camera_response,
-                                                      const ProjectorResponseOptions& options) {
+                                                              const CameraResponseFunction& camera_response,
+                                                              const ProjectorResponseOptions& options) {
   INSPECT_RETURN_IF_ERROR(camera_response.Validate());
   std::map<int, const ProjectorResponseCapture*> by_level;
   for (size_t k = 0; k < captures.size(); ++k) {
@@ -72,8 +71,7 @@ StatusOr<ProjectorResponseFunction> EstimateProjectorResponse(const std::vector<
     const std::string name = "captures[" + std::to_string(k) + "]";
     if (c.grey < 0 || c.grey > 255) return Status::InvalidArgument(name + ".grey must be 0..255");
     if (!(c.exposure_us > 0)) return Status::InvalidArgument(name + ".exposure_us must be > 0");
-    if (c.image.empty() || c.image.channels() != 1 ||
-        (c.image.depth() != CV_8U && c.image.depth() != CV_16U)) {
+    if (c.image.empty() || c.image.channels() != 1 || (c.image.depth() != CV_8U && c.image.depth() != CV_16U)) {
       return Status::InvalidArgument(name + ".image must be CV_8UC1 or CV_16UC1");
     }
     if (!captures.empty() && c.image.size() != captures[0].image.size()) {

@@ -4,9 +4,8 @@
 // radiance through the camera response (eq. 4.5).
 #pragma once
 
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/camera_response.h"
 #include "core/status.h"
@@ -57,7 +56,7 @@ struct ProjectorResponseOptions {
 // captures must contain grey 255 and at least one other level; levels are sorted and missing
 // levels are linearly interpolated. Errors name the capture.
 StatusOr<ProjectorResponseFunction> EstimateProjectorResponse(const std::vector<ProjectorResponseCapture>& captures,
-                                                      const CameraResponseFunction& camera_response,
-                                                      const ProjectorResponseOptions& options);
+                                                              const CameraResponseFunction& camera_response,
+                                                              const ProjectorResponseOptions& options);
 
 }  // namespace inspection

@@ -4,9 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <string>
-
 #include <opencv2/imgproc.hpp>
+#include <string>
 
 namespace inspection {
 
@@ -128,8 +127,8 @@ StatusOr<PsfCalibration> EstimatePsf(const std::vector<PsfCapture>& captures, co
       ++n;
     }
     if (n == 0) {
-      return Status::FailedPrecondition("psf: no dot fits inside the frame at defocus " +
-                                        std::to_string(c.defocus_um) + " um");
+      return Status::FailedPrecondition("psf: no dot fits inside the frame at defocus " + std::to_string(c.defocus_um) +
+                                        " um");
     }
     acc /= n;
     resample_var /= n;
@@ -146,8 +145,8 @@ StatusOr<PsfCalibration> EstimatePsf(const std::vector<PsfCapture>& captures, co
     acc -= background;
     const double total = cv::sum(acc)[0];
     if (!(total > 0)) {
-      return Status::FailedPrecondition("psf: no light in the dot patches at defocus " +
-                                        std::to_string(c.defocus_um) + " um");
+      return Status::FailedPrecondition("psf: no light in the dot patches at defocus " + std::to_string(c.defocus_um) +
+                                        " um");
     }
     PsfAtDefocus s;
     s.defocus_um = c.defocus_um;
@@ -173,7 +172,10 @@ StatusOr<PsfCalibration> EstimatePsf(const std::vector<PsfCapture>& captures, co
           }
       }
       double peak_sum = 0, peak_cnt = 0;
-      for (int b = 0; b < 2; ++b) { peak_sum += sum[b]; peak_cnt += cnt[b]; }
+      for (int b = 0; b < 2; ++b) {
+        peak_sum += sum[b];
+        peak_cnt += cnt[b];
+      }
       radial_influence.push_back(0.0);
       if (peak_cnt > 0 && peak_sum > 0) {
         const double limit = options.influence_fraction * peak_sum / peak_cnt;

@@ -4,9 +4,8 @@
 // centre value), which texture projection uses (eq. 5.15).
 #pragma once
 
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/status.h"
 
@@ -32,13 +31,13 @@ struct PsfCalibration {
 // One capture of a sparse dot grid at a known defocus.
 struct PsfCapture {
   double defocus_um = 0.0;
-  cv::Mat signal;                       // CV_32FC1 background-subtracted, linear in light
+  cv::Mat signal;                        // CV_32FC1 background-subtracted, linear in light
   std::vector<cv::Point2d> dot_centres;  // camera positions of the lit projector pixels
 };
 
 struct PsfOptions {
-  int patch_radius_px = 10;            // psf is (2r+1)^2; keep below half the dot distance
-  double influence_fraction = 0.05;    // sigma_p: where the profile falls to this of its peak
+  int patch_radius_px = 10;          // psf is (2r+1)^2; keep below half the dot distance
+  double influence_fraction = 0.05;  // sigma_p: where the profile falls to this of its peak
 
   Status Validate() const;
 };

@@ -4,11 +4,10 @@
 // offset, spacing^2 captures), stored compressed (Eigen SparseMatrix, CSC, float).
 #pragma once
 
-#include <filesystem>
-#include <vector>
-
 #include <Eigen/SparseCore>
+#include <filesystem>
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/camera_response.h"
 #include "core/geometric_calibration.h"
@@ -26,7 +25,7 @@ struct ScatterMatrix {
   cv::Size camera_size;
   cv::Size projector_size;
   Sparse a;
-  cv::Mat black_radiance;               // e of eq. 4.11: camera radiance at projector black, CV_32FC1
+  cv::Mat black_radiance;                 // e of eq. 4.11: camera radiance at projector black, CV_32FC1
   double projector_black_irradiance = 0;  // prf(0): the part of e_p already contained in e
   int patch_radius_px = 0;
   int grid_spacing_px = 0;
@@ -48,9 +47,9 @@ struct ScatterCapture {
 
 struct ScatterMatrixOptions {
   int grid_spacing_px = 8;
-  int patch_radius_px = 6;          // square patch (2r+1)^2 around the LUT centroid
-  double relative_threshold = 0.01;  // entries below this share of the patch peak are dropped
-  double dot_irradiance = 1.0;       // prf of the dots' grey level (255 -> 1)
+  int patch_radius_px = 6;                  // square patch (2r+1)^2 around the LUT centroid
+  double relative_threshold = 0.01;         // entries below this share of the patch peak are dropped
+  double dot_irradiance = 1.0;              // prf of the dots' grey level (255 -> 1)
   double projector_black_irradiance = 0.0;  // prf(0); columns are scaled by 1 / (dot - black)
 
   Status Validate() const;
@@ -83,13 +82,12 @@ class ScatterMatrixBuilder {
 // Cuts each lit projector pixel's patch around geometry.projector_to_camera and stores it as
 // its column. Projector pixels without a LUT entry get empty columns.
 StatusOr<ScatterMatrix> BuildScatterMatrix(const std::vector<ScatterCapture>& captures,
-                                           const GeometricCalibration& geometry,
-                                           const cv::Mat& black_radiance,
+                                           const GeometricCalibration& geometry, const cv::Mat& black_radiance,
                                            const ScatterMatrixOptions& options);
 
 struct ScatterPrediction {
-  cv::Mat predicted_grey;           // CV_32FC1, in the camera's grey levels
-  double mean_abs_error_grey = 0;   // over the mask
+  cv::Mat predicted_grey;             // CV_32FC1, in the camera's grey levels
+  double mean_abs_error_grey = 0;     // over the mask
   double mean_abs_error_percent = 0;  // of the camera's full scale (thesis: ~6 %)
   long pixel_count = 0;
 };
@@ -98,8 +96,7 @@ struct ScatterPrediction {
 // compares it with `captured` over `mask` (CV_8UC1, non-zero = compared; empty = all).
 StatusOr<ScatterPrediction> PredictAndCompare(const ScatterMatrix& scatter, const ProjectorResponseFunction& prf,
                                               const CameraResponseFunction& crf, const cv::Mat& pattern,
-                                              double exposure_us, const cv::Mat& captured,
-                                              const cv::Mat& mask);
+                                              double exposure_us, const cv::Mat& captured, const cv::Mat& mask);
 
 // Binary CSC file: magic "INSPSCT1", int32 rows, cols; int64 nnz; int32 outer[cols+1] (as
 // int64 offsets would overflow nothing here: nnz < 2^31 is checked), int32 inner[nnz],

@@ -40,8 +40,10 @@ DepthResult ReconstructFusedTiles(const SffOptions& options, const std::vector<c
   std::vector<TenengradScratch> scratch(static_cast<size_t>(workers));
   std::vector<std::vector<int32_t>> volumes(static_cast<size_t>(workers));
   for (int w = 0; w < workers; ++w) {
-    if (compact) compact_states[size_t(w)].Allocate(kTileW, kBatchTileH, options.use_simd, options.use_avx512);
-    else states[size_t(w)].Allocate(kTileW, kBatchTileH, j, options.use_simd);
+    if (compact)
+      compact_states[size_t(w)].Allocate(kTileW, kBatchTileH, options.use_simd, options.use_avx512);
+    else
+      states[size_t(w)].Allocate(kTileW, kBatchTileH, j, options.use_simd);
     scratch[size_t(w)].Reserve(options.window_px);
     volumes[size_t(w)].resize(size_t(kTileW) * kBatchTileH * kFrameChunk);
   }
@@ -80,9 +82,9 @@ DepthResult ReconstructFusedTiles(const SffOptions& options, const std::vector<c
     for (int y = 0; y < th; ++y) {
       const size_t off = size_t(y) * kTileW;
       if (compact) {
-        v += FinishCompactRow(compact_states[size_t(worker)], off, tw, zf, options,
-                              out.depth.ptr<uint32_t>(y0 + y) + x0, out.confidence.ptr<uint32_t>(y0 + y) + x0,
-                              out.aif.ptr<uint8_t>(y0 + y) + x0);
+        v +=
+            FinishCompactRow(compact_states[size_t(worker)], off, tw, zf, options, out.depth.ptr<uint32_t>(y0 + y) + x0,
+                             out.confidence.ptr<uint32_t>(y0 + y) + x0, out.aif.ptr<uint8_t>(y0 + y) + x0);
       } else {
         v += FinishExactSpan(states[size_t(worker)], off, tw, z_um, options, out, x0, y0 + y);
       }

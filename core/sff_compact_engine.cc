@@ -74,8 +74,7 @@ class CompactEngine final : public SffEngine {
       for (int k = k0; k < k1; ++k) {
         const int slot = k - k0;
         const cv::Mat* next = slot + 1 < int(pending_.size()) ? &pending_[size_t(slot) + 1] : nullptr;
-        FocusRowsToVolume(state_.avx2, pending_[size_t(slot)], slot, x0, y0, tw, th, options_.window_px, sc, vol,
-                          next);
+        FocusRowsToVolume(state_.avx2, pending_[size_t(slot)], slot, x0, y0, tw, th, options_.window_px, sc, vol, next);
       }
       for (int y = 0; y < th; ++y) {
         const uint8_t* pix_rows[kFrameChunk];
@@ -98,7 +97,7 @@ class CompactEngine final : public SffEngine {
   CompactState state_;
   std::vector<TenengradScratch> scratch_;
   std::vector<std::vector<int32_t>> volumes_;  // per worker: focus rows of one tile x kFrameChunk frames
-  std::vector<cv::Mat> pending_;              // frames of the open chunk
+  std::vector<cv::Mat> pending_;               // frames of the open chunk
 };
 
 }  // namespace

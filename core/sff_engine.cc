@@ -82,8 +82,7 @@ DepthResult MakeDepthResult(const cv::Mat& depth_um, const cv::Mat& confidence, 
 
 }  // namespace sff_internal
 
-StatusOr<std::unique_ptr<SffEngine>> SffEngine::Create(const SffOptions& options, cv::Size frame_size,
-                                                       int frame_type) {
+StatusOr<std::unique_ptr<SffEngine>> SffEngine::Create(const SffOptions& options, cv::Size frame_size, int frame_type) {
   INSPECT_RETURN_IF_ERROR(sff_internal::CheckCreate(options, frame_size, frame_type));
   if (sff_internal::UseCompact(options, frame_type)) return sff_internal::NewCompactEngine(options, frame_size);
   return sff_internal::NewExactEngine(options, frame_size, frame_type);

@@ -5,10 +5,9 @@
 #pragma once
 
 #include <memory>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/sff_options.h"
 #include "core/status.h"
@@ -16,9 +15,9 @@
 namespace inspection {
 
 struct DepthResult {
-  cv::Mat depth_um;      // CV_32FC1: stage z (µm) at which the pixel is sharpest; NaN = no depth
-  cv::Mat confidence;    // CV_32FC1 in [0, 1]
-  cv::Mat all_in_focus;  // same type as the frames: grey value from the sharpest frame
+  cv::Mat depth_um;             // CV_32FC1: stage z (µm) at which the pixel is sharpest; NaN = no depth
+  cv::Mat confidence;           // CV_32FC1 in [0, 1]
+  cv::Mat all_in_focus;         // same type as the frames: grey value from the sharpest frame
   double valid_fraction = 0.0;  // share of pixels with finite depth
   int frame_count = 0;
 };
@@ -52,8 +51,7 @@ struct DepthResult {
 class SffEngine {
  public:
   // frame_type: CV_8UC1 or CV_16UC1.
-  static StatusOr<std::unique_ptr<SffEngine>> Create(const SffOptions& options, cv::Size frame_size,
-                                                     int frame_type);
+  static StatusOr<std::unique_ptr<SffEngine>> Create(const SffOptions& options, cv::Size frame_size, int frame_type);
   virtual ~SffEngine() = default;
 
   // z_um must be strictly monotonic over the pushed frames (either direction). The frame is

@@ -5,9 +5,8 @@
 
 #include <cstddef>
 #include <memory>
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/sff_engine.h"
 

@@ -5,13 +5,20 @@ namespace inspection {
 
 const char* FocusMeasureName(FocusMeasure m) {
   switch (m) {
-    case FocusMeasure::kModifiedLaplacian: return "ml";
-    case FocusMeasure::kSumModifiedLaplacian: return "sml";
-    case FocusMeasure::kTenengrad: return "tenengrad";
-    case FocusMeasure::kGreyLevelVariance: return "variance";
-    case FocusMeasure::kHelmliMean: return "helmli-mean";
-    case FocusMeasure::kChebyshevMoments: return "chebyshev";
-    case FocusMeasure::kGreyLevelLocalVariance: return "glvm";
+    case FocusMeasure::kModifiedLaplacian:
+      return "ml";
+    case FocusMeasure::kSumModifiedLaplacian:
+      return "sml";
+    case FocusMeasure::kTenengrad:
+      return "tenengrad";
+    case FocusMeasure::kGreyLevelVariance:
+      return "variance";
+    case FocusMeasure::kHelmliMean:
+      return "helmli-mean";
+    case FocusMeasure::kChebyshevMoments:
+      return "chebyshev";
+    case FocusMeasure::kGreyLevelLocalVariance:
+      return "glvm";
   }
   return "unknown";
 }
@@ -28,15 +35,19 @@ StatusOr<FocusMeasure> ParseFocusMeasure(const std::string& name) {
 
 const char* DepthInterpolationName(DepthInterpolation i) {
   switch (i) {
-    case DepthInterpolation::kMaximum: return "maximum";
-    case DepthInterpolation::kLineFit: return "linefit";
-    case DepthInterpolation::kGaussian: return "gaussian";
+    case DepthInterpolation::kMaximum:
+      return "maximum";
+    case DepthInterpolation::kLineFit:
+      return "linefit";
+    case DepthInterpolation::kGaussian:
+      return "gaussian";
   }
   return "unknown";
 }
 
 StatusOr<DepthInterpolation> ParseDepthInterpolation(const std::string& name) {
-  for (DepthInterpolation i : {DepthInterpolation::kMaximum, DepthInterpolation::kLineFit, DepthInterpolation::kGaussian}) {
+  for (DepthInterpolation i :
+       {DepthInterpolation::kMaximum, DepthInterpolation::kLineFit, DepthInterpolation::kGaussian}) {
     if (name == DepthInterpolationName(i)) return i;
   }
   return Status::InvalidArgument("interpolation '" + name + "' is unknown (maximum, linefit, gaussian)");
@@ -54,14 +65,24 @@ Status SffOptions::Validate() const {
     return Status::InvalidArgument("linefit_half_width " + std::to_string(linefit_half_width) + " must be 1..4");
   }
   switch (focus_measure) {
-    case FocusMeasure::kModifiedLaplacian: case FocusMeasure::kSumModifiedLaplacian: case FocusMeasure::kTenengrad:
-    case FocusMeasure::kGreyLevelVariance: case FocusMeasure::kHelmliMean: case FocusMeasure::kChebyshevMoments:
-    case FocusMeasure::kGreyLevelLocalVariance: break;
-    default: return Status::InvalidArgument("focus_measure is unknown");
+    case FocusMeasure::kModifiedLaplacian:
+    case FocusMeasure::kSumModifiedLaplacian:
+    case FocusMeasure::kTenengrad:
+    case FocusMeasure::kGreyLevelVariance:
+    case FocusMeasure::kHelmliMean:
+    case FocusMeasure::kChebyshevMoments:
+    case FocusMeasure::kGreyLevelLocalVariance:
+      break;
+    default:
+      return Status::InvalidArgument("focus_measure is unknown");
   }
   switch (interpolation) {
-    case DepthInterpolation::kMaximum: case DepthInterpolation::kLineFit: case DepthInterpolation::kGaussian: break;
-    default: return Status::InvalidArgument("interpolation is unknown");
+    case DepthInterpolation::kMaximum:
+    case DepthInterpolation::kLineFit:
+    case DepthInterpolation::kGaussian:
+      break;
+    default:
+      return Status::InvalidArgument("interpolation is unknown");
   }
   return Status::Ok();
 }

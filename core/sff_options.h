@@ -12,13 +12,13 @@ namespace inspection {
 // Focus measure operators of thesis 3.1.3.
 // Exact definitions and border handling: core/focus_measure.h.
 enum class FocusMeasure {
-  kModifiedLaplacian,      // ML: |Ixx| + |Iyy| (masks of eq. 3.11, unsquared eq. 3.8) summed over the window
-  kSumModifiedLaplacian,   // SML, eq. 3.12
-  kTenengrad,              // eq. 3.14
-  kGreyLevelVariance,      // eq. 3.15
-  kHelmliMean,             // Helmli-Scherer mean ratio, eq. 3.16
-  kChebyshevMoments,       // Yap & Raveendran ratio, eq. 3.17-3.22
-  kGreyLevelLocalVariance, // GLVM: local variance from the mean
+  kModifiedLaplacian,       // ML: |Ixx| + |Iyy| (masks of eq. 3.11, unsquared eq. 3.8) summed over the window
+  kSumModifiedLaplacian,    // SML, eq. 3.12
+  kTenengrad,               // eq. 3.14
+  kGreyLevelVariance,       // eq. 3.15
+  kHelmliMean,              // Helmli-Scherer mean ratio, eq. 3.16
+  kChebyshevMoments,        // Yap & Raveendran ratio, eq. 3.17-3.22
+  kGreyLevelLocalVariance,  // GLVM: local variance from the mean
 };
 
 // Depth interpolation of thesis 3.1.4.
@@ -28,7 +28,7 @@ enum class DepthInterpolation {
   kGaussian,  // three-point Gaussian, eq. 3.30-3.34
 };
 
-const char* FocusMeasureName(FocusMeasure m);              // "tenengrad", "sml", ...
+const char* FocusMeasureName(FocusMeasure m);  // "tenengrad", "sml", ...
 StatusOr<FocusMeasure> ParseFocusMeasure(const std::string& name);
 const char* DepthInterpolationName(DepthInterpolation i);  // "maximum", "linefit", "gaussian"
 StatusOr<DepthInterpolation> ParseDepthInterpolation(const std::string& name);

@@ -7,9 +7,8 @@
 #include <bit>
 #include <cstddef>
 #include <cstdint>
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/cpu_features.h"
 #include "core/sff_options.h"
@@ -38,7 +37,7 @@ struct StatePlanes {
   std::vector<T> best;
   std::vector<int32_t> idx;
   std::vector<T> before[kMaxJ], after[kMaxJ], ring[kMaxJ];  // F(m-1-i), F(m+1+i), F(k-1-i)
-  std::vector<T> last2;                                      // F(k-2)
+  std::vector<T> last2;                                     // F(k-2)
   // Sum of F; sum of squared second differences t_k = F_k - 2 F_(k-1) + F_(k-2) over the curve,
   // and over the (up to three) t_k that involve the current maximum (excluded at the end).
   std::vector<float> sum, curv_all, curv_excl;
@@ -134,9 +133,15 @@ struct CompactState {
   void Reset();
   size_t Bytes() const;
   CompactPtrs Row(size_t off) {
-    return {reinterpret_cast<int32_t*>(best.data) + off, reinterpret_cast<uint32_t*>(sum_idx.data) + off,
-            kept_idx.data() + off, last.data() + off, last2.data() + off, before.data() + off, after.data() + off,
-            pending.data() + off, aif.data + off};
+    return {reinterpret_cast<int32_t*>(best.data) + off,
+            reinterpret_cast<uint32_t*>(sum_idx.data) + off,
+            kept_idx.data() + off,
+            last.data() + off,
+            last2.data() + off,
+            before.data() + off,
+            after.data() + off,
+            pending.data() + off,
+            aif.data + off};
   }
 };
 

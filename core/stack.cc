@@ -2,10 +2,9 @@
 
 #include <cmath>
 #include <fstream>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <sstream>
 
 #include "core/colour.h"
 
@@ -122,8 +121,7 @@ StatusOr<StackManifest> ReadStackManifest(const fs::path& dir) {
   INSPECT_ASSIGN_OR_RETURN(StackManifest m, ParseStackManifest(ss.str()));
   for (size_t i = 0; i < m.frames.size(); ++i) {
     if (!fs::is_regular_file(dir / m.frames[i].file, ec)) {
-      return Status::InvalidArgument("frame " + std::to_string(i) + " (" + m.frames[i].file +
-                                     "): file is missing");
+      return Status::InvalidArgument("frame " + std::to_string(i) + " (" + m.frames[i].file + "): file is missing");
     }
   }
   return m;

@@ -16,10 +16,9 @@
 #pragma once
 
 #include <filesystem>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/status.h"
 
@@ -70,8 +69,7 @@ StatusOr<StackFrameImage> LoadStackFrameImage(const std::filesystem::path& dir, 
 
 // The grey image focus is measured on (CV_8UC1 or CV_16UC1): the frame as stored, or the
 // luminance of a colour frame. Grey stacks give exactly what they did before colour support.
-StatusOr<cv::Mat> LoadStackFrame(const std::filesystem::path& dir, const StackManifest& manifest,
-                                 size_t index);
+StatusOr<cv::Mat> LoadStackFrame(const std::filesystem::path& dir, const StackManifest& manifest, size_t index);
 
 // Decodes every frame and checks that all frames share size, channel count (grey or colour) and
 // bit depth. Errors name the frame: "frame 3 (frame_0003.png): size 640x480 differs from frame 0

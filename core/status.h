@@ -76,17 +76,26 @@ class [[nodiscard]] Status {
 template <typename T>
 class [[nodiscard]] StatusOr {
  public:
-  StatusOr(T value) : value_(std::move(value)) {}                   // NOLINT: implicit by design
-  StatusOr(Status status) : status_(std::move(status)) {             // NOLINT: implicit by design
+  StatusOr(T value) : value_(std::move(value)) {}         // NOLINT: implicit by design
+  StatusOr(Status status) : status_(std::move(status)) {  // NOLINT: implicit by design
     assert(!status_.ok() && "StatusOr constructed from an OK status without a value");
     if (status_.ok()) status_ = Status::Internal("StatusOr built from OK status without value");
   }
 
   bool ok() const { return status_.ok(); }
   const Status& status() const { return status_; }
-  T& value() & { assert(ok()); return *value_; }
-  const T& value() const& { assert(ok()); return *value_; }
-  T&& value() && { assert(ok()); return std::move(*value_); }
+  T& value() & {
+    assert(ok());
+    return *value_;
+  }
+  const T& value() const& {
+    assert(ok());
+    return *value_;
+  }
+  T&& value() && {
+    assert(ok());
+    return std::move(*value_);
+  }
   T* operator->() { return &value(); }
   const T* operator->() const { return &value(); }
   T& operator*() & { return value(); }
@@ -100,10 +109,10 @@ class [[nodiscard]] StatusOr {
 }  // namespace inspection
 
 // Early-return helpers; keep call sites short without hiding control flow behind exceptions.
-#define INSPECT_RETURN_IF_ERROR(expr)                 \
-  do {                                                \
-    ::inspection::Status _st = (expr);                \
-    if (!_st.ok()) return _st;                        \
+#define INSPECT_RETURN_IF_ERROR(expr)  \
+  do {                                 \
+    ::inspection::Status _st = (expr); \
+    if (!_st.ok()) return _st;         \
   } while (0)
 
 #define INSPECT_CONCAT_INNER(a, b) a##b

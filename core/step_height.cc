@@ -20,7 +20,8 @@ Status CheckMasks(const cv::Mat& depth_um, const cv::Mat& reference_mask, const 
       return Status::InvalidArgument(std::string(name) + " mask must be CV_8UC1 of the depth map's size");
     }
   }
-  if (!(pixel_size_um > 0.0) || !std::isfinite(pixel_size_um)) return Status::InvalidArgument("pixel_size_um must be > 0");
+  if (!(pixel_size_um > 0.0) || !std::isfinite(pixel_size_um))
+    return Status::InvalidArgument("pixel_size_um must be > 0");
   if (cv::countNonZero(reference_mask & measured_mask) > 0) {
     return Status::InvalidArgument("the reference and measured regions of a step height overlap");
   }
@@ -119,8 +120,9 @@ StatusOr<StepHeightResult> MeasureStepHeight(const cv::Mat& depth_um, const cv::
                        mea->residual_rms_um * mea->residual_rms_um * double(mea->pixel_count);
     res.residual_rms_um = std::sqrt(rss / double(ref->pixel_count + mea->pixel_count));
     // Height at (ox, oy) = g_m^T params_m - g_r^T params_r, each params = N^-1 J^T z.
-    for (const auto& [fit, mask, sign] : {std::tuple<const FormFit*, const cv::Mat*, double>{&*mea, &measured_mask, 1.0},
-                                          {&*ref, &reference_mask, -1.0}}) {
+    for (const auto& [fit, mask, sign] :
+         {std::tuple<const FormFit*, const cv::Mat*, double>{&*mea, &measured_mask, 1.0},
+          {&*ref, &reference_mask, -1.0}}) {
       double g[3];
       fit->ParameterGradient(ox, oy, g);
       const std::vector<cv::Mat> w = FormFitWeights(*fit, depth_um, *mask, pixel_size_um);

@@ -37,12 +37,12 @@ struct StepHeightResult {
   double vertical_offset_um = 0.0;  // the same along z
   double slope_x = 0.0;             // of the common (or reference) plane, um/um
   double slope_y = 0.0;
-  double evaluation_x_um = 0.0;     // where the height is taken (image coordinates, core/surface_roi.h)
+  double evaluation_x_um = 0.0;  // where the height is taken (image coordinates, core/surface_roi.h)
   double evaluation_y_um = 0.0;
   size_t reference_pixels = 0;
   size_t measured_pixels = 0;
-  double residual_rms_um = 0.0;     // of the fit(s) over both regions
-  UncertaintyBudget uncertainty;    // of height_um; NaN without a noise model
+  double residual_rms_um = 0.0;   // of the fit(s) over both regions
+  UncertaintyBudget uncertainty;  // of height_um; NaN without a noise model
 };
 
 // reference_mask, measured_mask: CV_8UC1 of depth_um's size (e.g. RoiMask::measured of two

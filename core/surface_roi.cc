@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-
 #include <opencv2/imgproc.hpp>
 
 namespace inspection {
@@ -82,8 +81,8 @@ void FillPolygon(const std::vector<RoiPoint>& v, cv::Mat& mask) {
 
 Status ValidateRectangle(const RegionOfInterest& roi, cv::Size size, double scale, const std::string& field) {
   const char* u = UnitSuffix(roi.unit);
-  for (auto [name, v] : {std::pair<const char*, double>{"x", roi.x}, {"y", roi.y}, {"width", roi.width},
-                         {"height", roi.height}}) {
+  for (auto [name, v] :
+       {std::pair<const char*, double>{"x", roi.x}, {"y", roi.y}, {"width", roi.width}, {"height", roi.height}}) {
     if (!std::isfinite(v)) return Status::InvalidArgument(field + "." + name + " is not a finite number");
   }
   if (!(roi.width > 0.0)) return Status::InvalidArgument(field + ".width must be > 0, got " + Num(roi.width) + " " + u);
@@ -92,8 +91,10 @@ Status ValidateRectangle(const RegionOfInterest& roi, cv::Size size, double scal
   }
   const double x0 = roi.x * scale, y0 = roi.y * scale;
   const double x1 = (roi.x + roi.width) * scale, y1 = (roi.y + roi.height) * scale;
-  if (x0 < -kEdgeSlackPx) return Status::InvalidArgument(field + ".x = " + Num(roi.x) + " " + u + " lies left of the image");
-  if (y0 < -kEdgeSlackPx) return Status::InvalidArgument(field + ".y = " + Num(roi.y) + " " + u + " lies above the image");
+  if (x0 < -kEdgeSlackPx)
+    return Status::InvalidArgument(field + ".x = " + Num(roi.x) + " " + u + " lies left of the image");
+  if (y0 < -kEdgeSlackPx)
+    return Status::InvalidArgument(field + ".y = " + Num(roi.y) + " " + u + " lies above the image");
   if (x1 > size.width + kEdgeSlackPx) {
     return Status::InvalidArgument(field + ": x + width = " + Num(x1) + " px exceeds the image width " +
                                    std::to_string(size.width) + " px");
@@ -180,9 +181,12 @@ Status ValidatePolygon(const RegionOfInterest& roi, cv::Size size, double scale,
 
 const char* RoiShapeName(RoiShape shape) {
   switch (shape) {
-    case RoiShape::kWholeField: return "whole_field";
-    case RoiShape::kRectangle: return "rectangle";
-    case RoiShape::kPolygon: return "polygon";
+    case RoiShape::kWholeField:
+      return "whole_field";
+    case RoiShape::kRectangle:
+      return "rectangle";
+    case RoiShape::kPolygon:
+      return "polygon";
   }
   return "unknown";
 }
@@ -233,9 +237,12 @@ Status ValidateRoi(const RegionOfInterest& roi, cv::Size image_size, double pixe
     scale = 1.0 / pixel_size_um;
   }
   switch (roi.shape) {
-    case RoiShape::kWholeField: return Status::Ok();
-    case RoiShape::kRectangle: return ValidateRectangle(roi, image_size, scale, field);
-    case RoiShape::kPolygon: return ValidatePolygon(roi, image_size, scale, field);
+    case RoiShape::kWholeField:
+      return Status::Ok();
+    case RoiShape::kRectangle:
+      return ValidateRectangle(roi, image_size, scale, field);
+    case RoiShape::kPolygon:
+      return ValidatePolygon(roi, image_size, scale, field);
   }
   return Status::InvalidArgument(field + ".shape is not a known shape");
 }
@@ -246,7 +253,9 @@ StatusOr<cv::Mat> RasteriseRegion(const RegionOfInterest& roi, cv::Size image_si
   const double scale = roi.unit == RoiUnit::kMicrometre ? 1.0 / pixel_size_um : 1.0;
   cv::Mat m(image_size, CV_8UC1, cv::Scalar(0));
   switch (roi.shape) {
-    case RoiShape::kWholeField: m.setTo(255); break;
+    case RoiShape::kWholeField:
+      m.setTo(255);
+      break;
     case RoiShape::kRectangle: {
       int c0, c1, r0, r1;
       CentreRange(roi.x * scale, (roi.x + roi.width) * scale, image_size.width, &c0, &c1);
@@ -254,7 +263,9 @@ StatusOr<cv::Mat> RasteriseRegion(const RegionOfInterest& roi, cv::Size image_si
       m(cv::Rect(c0, r0, c1 - c0, r1 - r0)).setTo(255);
       break;
     }
-    case RoiShape::kPolygon: FillPolygon(PolygonPx(roi, scale), m); break;
+    case RoiShape::kPolygon:
+      FillPolygon(PolygonPx(roi, scale), m);
+      break;
   }
   return m;
 }

@@ -9,10 +9,9 @@
 // regions that share an edge never share a pixel). The whole image spans [0, width] x [0, height].
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/status.h"
 
@@ -68,9 +67,9 @@ Status ValidateRoi(const RegionOfInterest& roi, cv::Size image_size, double pixe
 
 // A rasterised region on one depth map.
 struct RoiMask {
-  cv::Mat region;       // CV_8UC1, 255 on every pixel of the region (measured or not)
-  cv::Mat measured;     // CV_8UC1, 255 on the region's pixels with finite depth
-  cv::Rect bounds;      // bounding box of `region` (pixels)
+  cv::Mat region;    // CV_8UC1, 255 on every pixel of the region (measured or not)
+  cv::Mat measured;  // CV_8UC1, 255 on the region's pixels with finite depth
+  cv::Rect bounds;   // bounding box of `region` (pixels)
   size_t region_pixels = 0;
   size_t measured_pixels = 0;
   // measured_pixels / region_pixels in percent (0 for an empty region).

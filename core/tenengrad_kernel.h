@@ -14,9 +14,8 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/sff_options.h"
 #include "core/sff_state.h"
@@ -116,8 +115,8 @@ struct TenengradKernels {
                              const int32_t* vol_row, size_t slot_stride, const uint8_t* const* pix_rows);
   static void ExactRowsFromFocus(StatePlanes<float, uint8_t>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
                                  int y_begin, int y_end);
-  static void ExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k, const cv::Mat& focus,
-                                 const cv::Mat& frame, int y_begin, int y_end);
+  static void ExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
+                                 int y_begin, int y_end);
   // Tenengrad map of a whole 8-bit frame (CV_32SC1 out, allocated): ComputeTenengradU8.
   static void TenengradMap(const cv::Mat& frame, int window_px, cv::Mat* out);
   // Portable (the scalar reference), AVX2 (blocks of 8) and AVX-512 (blocks of 16): pixels

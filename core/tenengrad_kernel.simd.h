@@ -17,7 +17,6 @@
 #include <algorithm>
 #include <bit>
 #include <cstdint>
-
 #include <opencv2/core.hpp>
 
 #include "core/tenengrad_kernel.h"
@@ -96,10 +95,10 @@ SFF_TARGET __attribute__((noinline)) void StatsRow(int n, int k, const T* __rest
 template <typename T, typename P>
 SFF_TARGET __attribute__((noinline)) void UpdateRowJ1(int n, int k, float curv_scale, const T* __restrict f,
                                                       const P* __restrict pix, T* __restrict best,
-                                                      int32_t* __restrict idx, T* __restrict prev,
-                                                      T* __restrict next, T* __restrict last, T* __restrict last2,
-                                                      int32_t* __restrict aif, float* __restrict sum,
-                                                      float* __restrict curv_all, float* __restrict curv_excl) {
+                                                      int32_t* __restrict idx, T* __restrict prev, T* __restrict next,
+                                                      T* __restrict last, T* __restrict last2, int32_t* __restrict aif,
+                                                      float* __restrict sum, float* __restrict curv_all,
+                                                      float* __restrict curv_excl) {
   const int32_t kk = k, km1 = k - 1, km2 = k - 2;
   for (int x = 0; x < n; ++x) {
     const T v = f[x], b = best[x], l = last[x], l2 = last2[x];
@@ -191,12 +190,18 @@ SFF_INLINE SFF_TARGET void WindowRowFixed(const int32_t* __restrict colsum, int3
 SFF_INLINE SFF_TARGET void WindowRow(const int32_t* __restrict colsum, int32_t* __restrict pairs,
                                      int32_t* __restrict out, int tw, int window) {
   switch (window) {
-    case 3: return WindowRowFixed<3>(colsum, pairs, out, tw);
-    case 5: return WindowRowFixed<5>(colsum, pairs, out, tw);
-    case 7: return WindowRowFixed<7>(colsum, pairs, out, tw);
-    case 9: return WindowRowFixed<9>(colsum, pairs, out, tw);
-    case 11: return WindowRowFixed<11>(colsum, pairs, out, tw);
-    default: break;
+    case 3:
+      return WindowRowFixed<3>(colsum, pairs, out, tw);
+    case 5:
+      return WindowRowFixed<5>(colsum, pairs, out, tw);
+    case 7:
+      return WindowRowFixed<7>(colsum, pairs, out, tw);
+    case 9:
+      return WindowRowFixed<9>(colsum, pairs, out, tw);
+    case 11:
+      return WindowRowFixed<11>(colsum, pairs, out, tw);
+    default:
+      break;
   }
   const int np = tw + window - 2;
   for (int x = 0; x < np; ++x) pairs[x] = colsum[x] + colsum[x + 1];
@@ -240,8 +245,8 @@ SFF_INLINE SFF_TARGET void TenengradTile(const cv::Mat& frame, int x0, int y0, i
     if (loaded < 3) continue;
     int32_t* old_out = sc.ering.data() + size_t(e_rows % window) * es;
     const int32_t* old_in = e_rows < window ? sc.zeros.data() : old_out;
-    SobelEnergyRow(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(), sc,
-                   old_in, old_out, ew);
+    SobelEnergyRow(sc.in[loaded % 3].data(), sc.in[(loaded + 1) % 3].data(), sc.in[(loaded + 2) % 3].data(), sc, old_in,
+                   old_out, ew);
     ++e_rows;
     if (e_rows < window) continue;
     const int y = y0 + e_rows - window;
@@ -267,9 +272,7 @@ struct StateSink {
 struct VolumeSink {
   int32_t* vol;
   int slot, y0, tw;
-  SFF_INLINE SFF_TARGET int32_t* Dest(int y) {
-    return vol + (size_t(slot) * kBatchTileH + size_t(y - y0)) * kTileW;
-  }
+  SFF_INLINE SFF_TARGET int32_t* Dest(int y) { return vol + (size_t(slot) * kBatchTileH + size_t(y - y0)) * kTileW; }
   SFF_INLINE SFF_TARGET void operator()(int, const int32_t*, const uint8_t*) {}  // already in place
 };
 
@@ -319,15 +322,15 @@ SFF_TARGET void TenengradKernels<SFF_ISA>::ExactRowFrames(StatePlanes<int32_t, u
 
 template <>
 SFF_TARGET void TenengradKernels<SFF_ISA>::ExactRowsFromFocus(StatePlanes<float, uint8_t>& st, int k,
-                                                              const cv::Mat& focus, const cv::Mat& frame,
-                                                              int y_begin, int y_end) {
+                                                              const cv::Mat& focus, const cv::Mat& frame, int y_begin,
+                                                              int y_end) {
   SFF_ISA_NS::ExactRowsFromFocusImpl(st, k, focus, frame, y_begin, y_end);
 }
 
 template <>
 SFF_TARGET void TenengradKernels<SFF_ISA>::ExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k,
-                                                              const cv::Mat& focus, const cv::Mat& frame,
-                                                              int y_begin, int y_end) {
+                                                              const cv::Mat& focus, const cv::Mat& frame, int y_begin,
+                                                              int y_end) {
   SFF_ISA_NS::ExactRowsFromFocusImpl(st, k, focus, frame, y_begin, y_end);
 }
 

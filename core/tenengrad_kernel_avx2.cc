@@ -34,10 +34,10 @@ __attribute__((target("avx2"))) inline void EnergyRowAvx2(const int16_t* a, cons
     const __m256i gx = _mm256_sub_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(sv + x)),
                                         _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sv + x + 2)));
     const __m256i d1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x + 1));
-    const __m256i gy = _mm256_add_epi16(
-        _mm256_add_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x)),
-                         _mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x + 2))),
-        _mm256_add_epi16(d1, d1));
+    const __m256i gy =
+        _mm256_add_epi16(_mm256_add_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x)),
+                                          _mm256_loadu_si256(reinterpret_cast<const __m256i*>(dv + x + 2))),
+                         _mm256_add_epi16(d1, d1));
     const __m256i lo = _mm256_unpacklo_epi16(gx, gy), hi = _mm256_unpackhi_epi16(gx, gy);
     const __m256i elo = _mm256_madd_epi16(lo, lo), ehi = _mm256_madd_epi16(hi, hi);
     // unpack works within 128-bit lanes: restore pixel order x .. x+7 and x+8 .. x+15.
@@ -128,9 +128,11 @@ __attribute__((target("avx2"))) inline __m256 LogPositiveAvx2(__m256 x) {
 // The compact state update (scalar reference: tenengrad_kernel_portable.cc) for blocks of 8
 // pixels whose state stays in registers over the frames.
 template <>
-__attribute__((target("avx2"))) void TenengradKernels<Isa::kAvx2>::UpdateCompact(
-    CompactPtrs s, int x_begin, int x_end, int k_begin, int k_end, int slot0, const int32_t* vol_row,
-    size_t slot_stride, const uint8_t* const* pix_rows) {
+__attribute__((target("avx2"))) void TenengradKernels<Isa::kAvx2>::UpdateCompact(CompactPtrs s, int x_begin, int x_end,
+                                                                                 int k_begin, int k_end, int slot0,
+                                                                                 const int32_t* vol_row,
+                                                                                 size_t slot_stride,
+                                                                                 const uint8_t* const* pix_rows) {
   const __m256i one_bits = _mm256_set1_epi32(int(kOneBits)), low8 = _mm256_set1_epi32(0xFF);
   const __m256i sample_mask = _mm256_set1_epi32(int(kSampleMask)), pending_mask = _mm256_set1_epi32(int(kPendingMask));
   const __m256 sum_mask = AsPs(_mm256_set1_epi32(int(kSumMask)));
@@ -152,8 +154,7 @@ __attribute__((target("avx2"))) void TenengradKernels<Isa::kAvx2>::UpdateCompact
     __m256 lf = _mm256_sub_ps(AsPs(lbits), fone);
     __m256 d = _mm256_sub_ps(lf, _mm256_sub_ps(AsPs(l2bits), fone));
     __m256 ef = _mm256_sub_ps(AsPs(ebits), fone);
-    __m256i kv = _mm256_set1_epi32(k_begin), km2 = _mm256_set1_epi32(k_begin - 2),
-            km3 = _mm256_set1_epi32(k_begin - 3);
+    __m256i kv = _mm256_set1_epi32(k_begin), km2 = _mm256_set1_epi32(k_begin - 2), km3 = _mm256_set1_epi32(k_begin - 3);
     for (int k = k_begin; k < k_end; ++k) {
       const int slot = k - slot0;
       const __m256i v = ld(vol_row + size_t(slot) * slot_stride + x);
@@ -203,9 +204,11 @@ __attribute__((target("avx2"))) void TenengradKernels<Isa::kAvx2>::UpdateCompact
 // writes depth into best and confidence into sum_idx): each block is read before it is written.
 // Pixels x_begin .. x_end-1 (x_end - x_begin a multiple of 8); returns the number kept.
 template <>
-__attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompact(
-    CompactPtrs s, int x_begin, int x_end, const float* zf, int n, bool gaussian, float min_confidence,
-    uint32_t* depth, uint32_t* conf, uint8_t* aif) {
+__attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompact(CompactPtrs s, int x_begin,
+                                                                                   int x_end, const float* zf, int n,
+                                                                                   bool gaussian, float min_confidence,
+                                                                                   uint32_t* depth, uint32_t* conf,
+                                                                                   uint8_t* aif) {
   size_t valid = 0;
   const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);
   const __m256i izero = _mm256_setzero_si256(), low8 = _mm256_set1_epi32(0xFF);
@@ -237,8 +240,8 @@ __attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompa
     __m256 c = _mm256_sub_ps(one, _mm256_div_ps(_mm256_mul_ps(_mm256_set1_ps(float(kConfidenceSnrZero)), sigma),
                                                 _mm256_max_ps(prominence, _mm256_set1_ps(1e-30f))));
     c = _mm256_min_ps(one, _mm256_max_ps(zero, c));
-    const __m256 has_peak = _mm256_and_ps(_mm256_cmp_ps(prominence, zero, _CMP_GT_OQ),
-                                          _mm256_cmp_ps(best, zero, _CMP_GT_OQ));
+    const __m256 has_peak =
+        _mm256_and_ps(_mm256_cmp_ps(prominence, zero, _CMP_GT_OQ), _mm256_cmp_ps(best, zero, _CMP_GT_OQ));
     c = _mm256_and_ps(c, has_peak);
     const __m256i at_end = _mm256_or_si256(_mm256_cmpeq_epi32(m, izero), _mm256_cmpeq_epi32(m, last_frame));
     c = _mm256_blendv_ps(c, _mm256_mul_ps(c, _mm256_set1_ps(0.5f)), AsPs(at_end));
@@ -250,9 +253,9 @@ __attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompa
       const __m256i mp1 = _mm256_min_epi32(last_frame, _mm256_add_epi32(m, _mm256_set1_epi32(1)));
       const __m256 u1 = _mm256_sub_ps(_mm256_i32gather_ps(zf, mm1, 4), z2);
       const __m256 u3 = _mm256_sub_ps(_mm256_i32gather_ps(zf, mp1, 4), z2);
-      const __m256 ok_f = _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(f1, zero, _CMP_GT_OQ),
-                                                      _mm256_cmp_ps(f3, zero, _CMP_GT_OQ)),
-                                        _mm256_andnot_ps(AsPs(at_end), _mm256_cmp_ps(best, zero, _CMP_GT_OQ)));
+      const __m256 ok_f =
+          _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(f1, zero, _CMP_GT_OQ), _mm256_cmp_ps(f3, zero, _CMP_GT_OQ)),
+                        _mm256_andnot_ps(AsPs(at_end), _mm256_cmp_ps(best, zero, _CMP_GT_OQ)));
       // Logs only of positive finite ratios (others are masked out below).
       const __m256 safe1 = _mm256_blendv_ps(one, f1, ok_f), safe3 = _mm256_blendv_ps(one, f3, ok_f);
       const __m256 safe2 = _mm256_blendv_ps(one, best, ok_f);
@@ -260,13 +263,13 @@ __attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompa
       const __m256 b = LogPositiveAvx2(_mm256_div_ps(safe2, safe3));
       const __m256 den = _mm256_sub_ps(_mm256_mul_ps(a, u3), _mm256_mul_ps(b, u1));
       const __m256 num_var = _mm256_mul_ps(_mm256_mul_ps(u1, u3), _mm256_sub_ps(u1, u3));
-      const __m256 mu = _mm256_div_ps(
-          _mm256_sub_ps(_mm256_mul_ps(a, _mm256_mul_ps(u3, u3)), _mm256_mul_ps(b, _mm256_mul_ps(u1, u1))),
-          _mm256_mul_ps(_mm256_set1_ps(2.f), den));
+      const __m256 mu =
+          _mm256_div_ps(_mm256_sub_ps(_mm256_mul_ps(a, _mm256_mul_ps(u3, u3)), _mm256_mul_ps(b, _mm256_mul_ps(u1, u1))),
+                        _mm256_mul_ps(_mm256_set1_ps(2.f), den));
       const __m256 in_range = _mm256_and_ps(_mm256_cmp_ps(mu, _mm256_min_ps(u1, u3), _CMP_GE_OQ),
                                             _mm256_cmp_ps(mu, _mm256_max_ps(u1, u3), _CMP_LE_OQ));
-      const __m256 ok = _mm256_and_ps(_mm256_and_ps(ok_f, in_range),
-                                      _mm256_cmp_ps(_mm256_mul_ps(den, num_var), zero, _CMP_GT_OQ));
+      const __m256 ok =
+          _mm256_and_ps(_mm256_and_ps(ok_f, in_range), _mm256_cmp_ps(_mm256_mul_ps(den, num_var), zero, _CMP_GT_OQ));
       z_um = _mm256_add_ps(z2, _mm256_and_ps(mu, ok));
     }
     const __m256 keep = _mm256_cmp_ps(c, _mm256_set1_ps(min_confidence), _CMP_GE_OQ);

@@ -30,9 +30,11 @@ __attribute__((target("avx512f"))) inline void St16x16(uint16_t* p, __m512i v) {
 // The same operations per pixel as the AVX2 kernel (a masked add of t_k^2 equals adding
 // t_k^2 & mask, as the pending sum is never -0), 16 pixels at a time.
 template <>
-__attribute__((target("avx512f"))) void TenengradKernels<Isa::kAvx512>::UpdateCompact(
-    CompactPtrs s, int x_begin, int x_end, int k_begin, int k_end, int slot0, const int32_t* vol_row,
-    size_t slot_stride, const uint8_t* const* pix_rows) {
+__attribute__((target("avx512f"))) void TenengradKernels<Isa::kAvx512>::UpdateCompact(CompactPtrs s, int x_begin,
+                                                                                      int x_end, int k_begin, int k_end,
+                                                                                      int slot0, const int32_t* vol_row,
+                                                                                      size_t slot_stride,
+                                                                                      const uint8_t* const* pix_rows) {
   const __m512i one_bits = _mm512_set1_epi32(int(kOneBits)), low8 = _mm512_set1_epi32(0xFF);
   const __m512i sample_mask = _mm512_set1_epi32(int(kSampleMask)), pending_mask = _mm512_set1_epi32(int(kPendingMask));
   const __m512i sum_mask = _mm512_set1_epi32(int(kSumMask));
@@ -54,8 +56,7 @@ __attribute__((target("avx512f"))) void TenengradKernels<Isa::kAvx512>::UpdateCo
     __m512 lf = _mm512_sub_ps(_mm512_castsi512_ps(lbits), fone);
     __m512 d = _mm512_sub_ps(lf, _mm512_sub_ps(_mm512_castsi512_ps(l2bits), fone));
     __m512 ef = _mm512_sub_ps(_mm512_castsi512_ps(ebits), fone);
-    __m512i kv = _mm512_set1_epi32(k_begin), km2 = _mm512_set1_epi32(k_begin - 2),
-            km3 = _mm512_set1_epi32(k_begin - 3);
+    __m512i kv = _mm512_set1_epi32(k_begin), km2 = _mm512_set1_epi32(k_begin - 2), km3 = _mm512_set1_epi32(k_begin - 3);
     for (int k = k_begin; k < k_end; ++k) {
       const int slot = k - slot0;
       const __m512i v = _mm512_loadu_si512(vol_row + size_t(slot) * slot_stride + x);

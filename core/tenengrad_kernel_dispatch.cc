@@ -15,32 +15,42 @@ using Avx512 = TenengradKernels<Isa::kAvx512>;
 
 void FusedTileFrame(const cv::Mat& frame, int k, int x0, int y0, int tw, int th, int window, TenengradScratch& sc,
                     StatePlanes<int32_t, uint8_t>& st, int sx, int sy, const cv::Mat* next) {
-  if (st.simd) Avx2::FusedTileFrame(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
-  else Portable::FusedTileFrame(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+  if (st.simd)
+    Avx2::FusedTileFrame(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
+  else
+    Portable::FusedTileFrame(frame, k, x0, y0, tw, th, window, sc, st, sx, sy, next);
 }
 
 void FocusRowsToVolume(bool avx2, const cv::Mat& frame, int slot, int x0, int y0, int tw, int th, int window,
                        TenengradScratch& sc, int32_t* vol, const cv::Mat* next) {
-  if (avx2) Avx2::FocusRowsToVolume(frame, slot, x0, y0, tw, th, window, sc, vol, next);
-  else Portable::FocusRowsToVolume(frame, slot, x0, y0, tw, th, window, sc, vol, next);
+  if (avx2)
+    Avx2::FocusRowsToVolume(frame, slot, x0, y0, tw, th, window, sc, vol, next);
+  else
+    Portable::FocusRowsToVolume(frame, slot, x0, y0, tw, th, window, sc, vol, next);
 }
 
 void UpdateExactRowFrames(StatePlanes<int32_t, uint8_t>& st, size_t off, int n, int k_begin, int k_end,
                           const int32_t* vol_row, size_t slot_stride, const uint8_t* const* pix_rows) {
-  if (st.simd) Avx2::ExactRowFrames(st, off, n, k_begin, k_end, vol_row, slot_stride, pix_rows);
-  else Portable::ExactRowFrames(st, off, n, k_begin, k_end, vol_row, slot_stride, pix_rows);
+  if (st.simd)
+    Avx2::ExactRowFrames(st, off, n, k_begin, k_end, vol_row, slot_stride, pix_rows);
+  else
+    Portable::ExactRowFrames(st, off, n, k_begin, k_end, vol_row, slot_stride, pix_rows);
 }
 
 void UpdateExactRowsFromFocus(StatePlanes<float, uint8_t>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
                               int y_begin, int y_end) {
-  if (st.simd) Avx2::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
-  else Portable::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
+  if (st.simd)
+    Avx2::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
+  else
+    Portable::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
 }
 
 void UpdateExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
                               int y_begin, int y_end) {
-  if (st.simd) Avx2::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
-  else Portable::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
+  if (st.simd)
+    Avx2::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
+  else
+    Portable::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
 }
 
 void UpdateCompactRow(CompactState& st, size_t off, int n, int k_begin, int k_end, int slot0, const int32_t* vol_row,
@@ -79,8 +89,10 @@ Status ComputeTenengradU8(const cv::Mat& frame, int window_px, cv::Mat* focus, b
     return Status::InvalidArgument("window_px " + std::to_string(window_px) + " must be odd and between 3 and 31");
   }
   cv::Mat out(frame.size(), CV_32SC1);
-  if (use_simd && CpuHasAvx2()) sff_internal::Avx2::TenengradMap(frame, window_px, &out);
-  else sff_internal::Portable::TenengradMap(frame, window_px, &out);
+  if (use_simd && CpuHasAvx2())
+    sff_internal::Avx2::TenengradMap(frame, window_px, &out);
+  else
+    sff_internal::Portable::TenengradMap(frame, window_px, &out);
   *focus = out;
   return Status::Ok();
 }

@@ -44,8 +44,8 @@ namespace inspection::sff_internal {
 // do the same float and integer operations in the same order (bit-identical). Since idx < k at
 // frame k, idx == k-1 is idx > k-2 and idx in {k-1, k-2} (t_k involves the maximum) is idx > k-3.
 template <>
-void TenengradKernels<Isa::kPortable>::UpdateCompact(CompactPtrs s, int x_begin, int x_end, int k_begin,
-                                                     int k_end, int slot0, const int32_t* vol_row, size_t slot_stride,
+void TenengradKernels<Isa::kPortable>::UpdateCompact(CompactPtrs s, int x_begin, int x_end, int k_begin, int k_end,
+                                                     int slot0, const int32_t* vol_row, size_t slot_stride,
                                                      const uint8_t* const* pix_rows) {
   const float pmax = FromBits(kPendingMaxBits);
   for (int x = x_begin; x < x_end; ++x) {
@@ -65,7 +65,7 @@ void TenengradKernels<Isa::kPortable>::UpdateCompact(CompactPtrs s, int x_begin,
       const int32_t v = vol_row[size_t(slot) * slot_stride + x];
       const int32_t p = pix_rows[slot][x];
       const float fv = float(v);
-      const float t = (fv - lf) - d;  // t_k in float: for wide windows 2 F overflows int32
+      const float t = (fv - lf) - d;          // t_k in float: for wide windows 2 F overflows int32
       const float t2 = k >= 2 ? t * t : 0.f;  // t_1 does not exist
       const bool gt = v > b, was = id > k - 2, near = id > k - 3;
       kept = FromBits(Bits(kept + (gt ? ef : (near ? 0.f : t2))) & kSumMask);
@@ -127,8 +127,8 @@ inline float LogPositiveScalar(float x) {
 // AVX2 blocks, or everything without AVX2): the scalar twin of the AVX2 kernel, bit-identical
 // per pixel, with the same in-place rule (core/tenengrad_kernel.h, FinishCompactRow).
 template <>
-size_t TenengradKernels<Isa::kPortable>::FinishCompact(CompactPtrs s, int x_begin, int x_end, const float* zf,
-                                                       int n, bool gaussian, float min_confidence, uint32_t* depth,
+size_t TenengradKernels<Isa::kPortable>::FinishCompact(CompactPtrs s, int x_begin, int x_end, const float* zf, int n,
+                                                       bool gaussian, float min_confidence, uint32_t* depth,
                                                        uint32_t* conf, uint8_t* aif) {
   auto maxps = [](float a, float b) { return a > b ? a : b; };  // _mm256_max_ps(a, b)
   auto minps = [](float a, float b) { return a < b ? a : b; };  // _mm256_min_ps(a, b)

@@ -24,10 +24,10 @@ StatusOr<TexturePeriod> ChooseTexturePeriod(double influence_radius_px, double c
   cell = std::max(cell, 1);
   const double half = cell * camera_px_per_projector_px;
   if (!(half < upper)) {
-    return Status::FailedPrecondition("no checkerboard period satisfies eq. 5.15: 2 sigma_p = " +
-                                      std::to_string(lower) + " px needs t/2 = " + std::to_string(half) +
-                                      " px, not below window + 2 = " + std::to_string(upper) +
-                                      " px; enlarge the focus window");
+    return Status::FailedPrecondition(
+        "no checkerboard period satisfies eq. 5.15: 2 sigma_p = " + std::to_string(lower) +
+        " px needs t/2 = " + std::to_string(half) + " px, not below window + 2 = " + std::to_string(upper) +
+        " px; enlarge the focus window");
   }
   return TexturePeriod{cell, half};
 }

@@ -15,7 +15,7 @@ namespace inspection {
 // 2 sigma_p < t/2 < m + 2. t/2 is a whole number of projector pixels times the projector-to-
 // camera pixel ratio (thesis: t = {3.4, 6.8, ...}).
 struct TexturePeriod {
-  int cell_projector_px = 0;       // projector pixels per checker cell (= t/2 in projector px)
+  int cell_projector_px = 0;         // projector pixels per checker cell (= t/2 in projector px)
   double half_period_camera_px = 0;  // t/2 in camera px
 };
 

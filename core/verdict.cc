@@ -18,9 +18,12 @@ std::string Num(double v) {
 
 const char* VerdictName(Verdict v) {
   switch (v) {
-    case Verdict::kOk: return "OK";
-    case Verdict::kNotOk: return "NOT_OK";
-    case Verdict::kNotDecidable: return "NOT_DECIDABLE";
+    case Verdict::kOk:
+      return "OK";
+    case Verdict::kNotOk:
+      return "NOT_OK";
+    case Verdict::kNotDecidable:
+      return "NOT_DECIDABLE";
   }
   return "NOT_DECIDABLE";
 }
@@ -31,7 +34,8 @@ Status Tolerance::Validate(const std::string& field) const {
   if (upper && !std::isfinite(*upper)) return Status::InvalidArgument(field + ".upper is not a finite number");
   if (!lower && !upper) return Status::InvalidArgument(field + ": needs a lower or an upper tolerance (or both)");
   if (lower && upper && *lower > *upper) {
-    return Status::InvalidArgument(field + ": lower tolerance " + Num(*lower) + " exceeds upper tolerance " + Num(*upper));
+    return Status::InvalidArgument(field + ": lower tolerance " + Num(*lower) + " exceeds upper tolerance " +
+                                   Num(*upper));
   }
   if (!(min_coverage_percent >= 0.0 && min_coverage_percent <= 100.0)) {
     return Status::InvalidArgument(field + ".min_coverage_percent must be in 0..100, got " + Num(min_coverage_percent));
@@ -62,7 +66,8 @@ VerdictResult Judge(double value, double standard_uncertainty, double coverage_p
   r.conformance_upper = usl - u;
   if (!(coverage_percent >= tolerance.min_coverage_percent)) {
     r.verdict = Verdict::kNotDecidable;
-    r.reason = "coverage " + Num(coverage_percent) + " % is below the minimum " + Num(tolerance.min_coverage_percent) + " %";
+    r.reason =
+        "coverage " + Num(coverage_percent) + " % is below the minimum " + Num(tolerance.min_coverage_percent) + " %";
     return r;
   }
   if (!std::isfinite(value)) {
@@ -75,8 +80,8 @@ VerdictResult Judge(double value, double standard_uncertainty, double coverage_p
   }
   if (value < lsl - u || value > usl + u) {
     r.verdict = Verdict::kNotOk;
-    r.reason = "non-conformance proven: " + Num(value) + (value < lsl - u ? " < LSL - U = " + Num(lsl - u)
-                                                                         : " > USL + U = " + Num(usl + u));
+    r.reason = "non-conformance proven: " + Num(value) +
+               (value < lsl - u ? " < LSL - U = " + Num(lsl - u) : " > USL + U = " + Num(usl + u));
     return r;
   }
   if (std::isfinite(usl - lsl) && 2.0 * u >= usl - lsl) {

@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-
 #include <nlohmann/json.hpp>
 
 #include "core/form_removal.h"
@@ -121,7 +120,8 @@ StatusOr<ZLinearity> ZLinearityFromJson(const std::string& text) {
   }
   for (const auto& v : j["bias_of_step"]) {
     if (!v.is_number() || !std::isfinite(v.get<double>()) || std::abs(v.get<double>()) > 1.0) {
-      return Status::InvalidArgument("z linearity: 'bias_of_step' entries must be numbers in [-1, 1] (fractions of a step)");
+      return Status::InvalidArgument(
+          "z linearity: 'bias_of_step' entries must be numbers in [-1, 1] (fractions of a step)");
     }
     l.bias_of_step.push_back(v.get<double>());
   }
@@ -173,10 +173,10 @@ StatusOr<ZLinearity> CharacteriseZLinearity(const cv::Mat& depth_um, const cv::M
     if (count[i] < count[emptiest]) emptiest = i;
   }
   if (count[emptiest] < size_t(options.min_pixels_per_bin)) {
-    return Status::FailedPrecondition(
-        "z linearity: fractional position " + std::to_string(double(emptiest) / n) + " of the z step has only " +
-        std::to_string(count[emptiest]) + " pixels (needs " + std::to_string(options.min_pixels_per_bin) +
-        "): tilt the flat so that its heights span at least one z step over the region");
+    return Status::FailedPrecondition("z linearity: fractional position " + std::to_string(double(emptiest) / n) +
+                                      " of the z step has only " + std::to_string(count[emptiest]) + " pixels (needs " +
+                                      std::to_string(options.min_pixels_per_bin) +
+                                      "): tilt the flat so that its heights span at least one z step over the region");
   }
   ZLinearity l;
   double mean = 0.0;

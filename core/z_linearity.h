@@ -9,10 +9,9 @@
 // tilted flat (CharacteriseZLinearity) and enters every uncertainty (core/depth_noise_model.h).
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/status.h"
 
@@ -65,8 +64,8 @@ std::string ZLinearityToJson(const ZLinearity& linearity);
 StatusOr<ZLinearity> ZLinearityFromJson(const std::string& text);
 
 struct ZLinearityOptions {
-  int bins = 20;                  // table size, 4..200
-  int min_pixels_per_bin = 500;   // every bin must be sampled this often (a tilt covering >= 1 step)
+  int bins = 20;                 // table size, 4..200
+  int min_pixels_per_bin = 500;  // every bin must be sampled this often (a tilt covering >= 1 step)
   Status Validate() const;
 };
 

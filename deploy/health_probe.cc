@@ -5,15 +5,15 @@
 //
 // Exit codes (as grpc_health_probe): 0 SERVING, 1 bad usage, 2 no connection within the timeout,
 // 3 the RPC failed (e.g. NOT_FOUND for an unknown service), 4 NOT_SERVING or UNKNOWN.
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
+
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <sstream>
 #include <string>
-
-#include <grpcpp/generic/generic_stub.h>
-#include <grpcpp/grpcpp.h>
 
 namespace {
 
@@ -36,7 +36,7 @@ std::string EncodeRequest(const std::string& service) {
   std::string bytes;
   if (service.empty()) return bytes;  // proto3 default: not encoded
   bytes.push_back(0x0a);
-  for (size_t n = service.size(); ; n >>= 7) {
+  for (size_t n = service.size();; n >>= 7) {
     if (n < 0x80) {
       bytes.push_back(char(n));
       break;
@@ -68,11 +68,16 @@ int DecodeStatus(const std::string& bytes) {
 
 const char* StatusName(int status) {
   switch (status) {
-    case 0: return "UNKNOWN";
-    case 1: return "SERVING";
-    case 2: return "NOT_SERVING";
-    case 3: return "SERVICE_UNKNOWN";
-    default: return "INVALID";
+    case 0:
+      return "UNKNOWN";
+    case 1:
+      return "SERVING";
+    case 2:
+      return "NOT_SERVING";
+    case 3:
+      return "SERVICE_UNKNOWN";
+    default:
+      return "INVALID";
   }
 }
 
@@ -96,10 +101,14 @@ int main(int argc, char** argv) {
       }
       return argv[++i];
     };
-    if (arg == "--addr") addr = value();
-    else if (arg == "--service") service = value();
-    else if (arg == "--tls-ca") tls_ca = value();
-    else if (arg == "--tls-server-name") server_name = value();
+    if (arg == "--addr")
+      addr = value();
+    else if (arg == "--service")
+      service = value();
+    else if (arg == "--tls-ca")
+      tls_ca = value();
+    else if (arg == "--tls-server-name")
+      server_name = value();
     else if (arg == "--timeout") {
       std::string t = value();
       char* end = nullptr;
@@ -132,8 +141,7 @@ int main(int argc, char** argv) {
     credentials = grpc::SslCredentials(ssl);
     if (!server_name.empty()) args.SetSslTargetNameOverride(server_name);
   }
-  auto deadline = std::chrono::system_clock::now() +
-                  std::chrono::microseconds(static_cast<int64_t>(timeout_s * 1e6));
+  auto deadline = std::chrono::system_clock::now() + std::chrono::microseconds(static_cast<int64_t>(timeout_s * 1e6));
   auto channel = grpc::CreateCustomChannel(addr, credentials, args);
   if (!channel->WaitForConnected(deadline)) {
     std::cerr << "inspect-health-probe: no connection to " << addr << " within " << timeout_s << " s\n";

@@ -2,9 +2,8 @@
 // the Aravis driver (GigE Vision / USB3 Vision). Not thread-safe: the rig's job worker owns it.
 #pragma once
 
-#include <string>
-
 #include <opencv2/core.hpp>
+#include <string>
 
 #include "core/status.h"
 

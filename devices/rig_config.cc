@@ -2,10 +2,9 @@
 #include "devices/rig_config.h"
 
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
-
-#include <nlohmann/json.hpp>
 
 #include "devices/drivers/device_rig.h"
 #include "devices/drivers/null_projector.h"
@@ -37,9 +36,7 @@ class Section {
     return Typed(k, &json::is_number_unsigned, "must be a non-negative integer", out);  // JSON's 5, not -5 or 5.0
   }
   Status Bool(const std::string& k, bool* out) { return Typed(k, &json::is_boolean, "must be true or false", out); }
-  Status String(const std::string& k, std::string* out) {
-    return Typed(k, &json::is_string, "must be a string", out);
-  }
+  Status String(const std::string& k, std::string* out) { return Typed(k, &json::is_string, "must be a string", out); }
   // USB ids as "0x0403" strings or integers.
   Status UsbId(const std::string& k, uint16_t* out) {
     if (!has(k)) return Status::Ok();
@@ -91,9 +88,7 @@ class Section {
   std::set<std::string> seen_;
 };
 
-Status Positive(const std::string& key, double v) {
-  return v > 0.0 ? Status::Ok() : ConfigError(key, "must be > 0");
-}
+Status Positive(const std::string& key, double v) { return v > 0.0 ? Status::Ok() : ConfigError(key, "must be > 0"); }
 
 Status ParseSimulation(Section s, SimulatedRigOptions* o) {
   INSPECT_RETURN_IF_ERROR(s.String("specimen", &o->specimen));
@@ -111,7 +106,8 @@ Status ParseSimulation(Section s, SimulatedRigOptions* o) {
   if (o->camera_size.width <= 0 || o->camera_size.height <= 0) {
     return ConfigError(s.key("camera_width/camera_height"), "must be > 0");
   }
-  if (o->camera_bit_depth != 8 && o->camera_bit_depth != 12) return ConfigError(s.key("camera_bit_depth"), "must be 8 or 12");
+  if (o->camera_bit_depth != 8 && o->camera_bit_depth != 12)
+    return ConfigError(s.key("camera_bit_depth"), "must be 8 or 12");
   if (o->projector_size.width <= 0 || o->projector_size.height <= 0) {
     return ConfigError(s.key("projector_width/projector_height"), "must be > 0");
   }
@@ -142,7 +138,8 @@ Status ParseCamera(Section s, RigConfig* c) {
     return ConfigError(region.key("x/y/width/height"), "must be >= 0");
   }
   if (!AravisPixelFormatBits(o.pixel_format).ok()) {
-    return ConfigError(s.key("pixel_format"), "'" + o.pixel_format + "' is not supported (Mono8, Mono10, Mono12, Mono16)");
+    return ConfigError(s.key("pixel_format"),
+                       "'" + o.pixel_format + "' is not supported (Mono8, Mono10, Mono12, Mono16)");
   }
   INSPECT_RETURN_IF_ERROR(Positive(s.key("exposure_us"), o.exposure_us));
   INSPECT_RETURN_IF_ERROR(Positive(s.key("frame_timeout_ms"), o.frame_timeout_ms));
@@ -204,8 +201,10 @@ Status ParseFramebuffer(Section s, RigConfig* c) {
       m.green = {5, 6};
       m.blue = {0, 5};
     }
-    for (auto [name, field] : {std::pair<const char*, FramebufferBitfield*>{"red", &m.red}, {"green", &m.green},
-                               {"blue", &m.blue}, {"transp", &m.transp}}) {
+    for (auto [name, field] : {std::pair<const char*, FramebufferBitfield*>{"red", &m.red},
+                               {"green", &m.green},
+                               {"blue", &m.blue},
+                               {"transp", &m.transp}}) {
       INSPECT_ASSIGN_OR_RETURN(Section bf, mode.Object(name));
       INSPECT_RETURN_IF_ERROR(bf.Int("offset", &field->offset));
       INSPECT_RETURN_IF_ERROR(bf.Int("length", &field->length));
@@ -265,8 +264,8 @@ StatusOr<RigConfig> ParseRigConfig(const std::string& text) {
   }
   c.simulated = cam_sim && stage_sim && proj_sim;
   if (!c.simulated && (cam_sim || stage_sim || proj_sim)) {
-    return Status::InvalidArgument("rig config: camera.driver = " + c.camera_driver + ", stage.driver = " +
-                                   c.stage_driver + ", projector.driver = " + c.projector_driver +
+    return Status::InvalidArgument("rig config: camera.driver = " + c.camera_driver +
+                                   ", stage.driver = " + c.stage_driver + ", projector.driver = " + c.projector_driver +
                                    ": mixing simulated and real devices is not supported");
   }
 
@@ -285,7 +284,8 @@ StatusOr<RigConfig> ParseRigConfig(const std::string& text) {
   }
   if (sim.present()) return ConfigError("simulation", "applies only when every driver is \"simulated\"");
 
-  if (!top.has("pixel_size_um")) return ConfigError("pixel_size_um", "is required for a real rig (µm per camera pixel on the specimen)");
+  if (!top.has("pixel_size_um"))
+    return ConfigError("pixel_size_um", "is required for a real rig (µm per camera pixel on the specimen)");
   INSPECT_RETURN_IF_ERROR(top.Number("pixel_size_um", &c.pixel_size_um));
   INSPECT_RETURN_IF_ERROR(Positive("pixel_size_um", c.pixel_size_um));
   INSPECT_RETURN_IF_ERROR(ParseCamera(camera, &c));
@@ -314,7 +314,8 @@ StatusOr<RigConfig> ParseRigConfig(const std::string& text) {
   INSPECT_RETURN_IF_ERROR(Positive("scan_defaults.exposure_us", c.scan_defaults.exposure_us));
   for (auto [key, z] : {std::pair<const char*, double>{"scan_defaults.z_start_um", c.scan_defaults.z_start_um},
                         {"scan_defaults.z_end_um", c.scan_defaults.z_end_um}}) {
-    if (z < c.stage.min_z_um || z > c.stage.max_z_um) return ConfigError(key, "must lie within stage.min_z_um..max_z_um");
+    if (z < c.stage.min_z_um || z > c.stage.max_z_um)
+      return ConfigError(key, "must lie within stage.min_z_um..max_z_um");
   }
   INSPECT_RETURN_IF_ERROR(top.NoUnknownKeys());
   return c;

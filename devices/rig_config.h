@@ -28,8 +28,8 @@ struct RigConfig {
   bool simulated = true;  // true: everything below except `simulation` is unused
   SimulatedRigOptions simulation;
 
-  std::string name;              // free text shown in GetRigStatus
-  double pixel_size_um = 0.0;    // camera pixel on the specimen; required for a real rig
+  std::string name;            // free text shown in GetRigStatus
+  double pixel_size_um = 0.0;  // camera pixel on the specimen; required for a real rig
   ScanDefaults scan_defaults;
 
   std::string camera_driver = "simulated";

@@ -1,12 +1,12 @@
 // Identities, roles and the role table of the RPCs (see access_control.h).
 #include "server/access_control.h"
 
-#include <fstream>
-#include <sstream>
-
 #include <grpcpp/server_context.h>
-#include <nlohmann/json.hpp>
 #include <openssl/crypto.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
 
 namespace inspection {
 
@@ -20,33 +20,16 @@ struct MethodRole {
 // Every RPC of inspection.v1. Reads are viewer; work on the rig or the archive is operator;
 // what changes how the rig measures is engineer; what destroys data or overrides others is admin.
 constexpr MethodRole kMethodRoles[] = {
-    {"GetRigStatus", Role::kViewer},
-    {"WatchJob", Role::kViewer},
-    {"GetJob", Role::kViewer},
-    {"ListJobs", Role::kViewer},
-    {"DownloadArtifact", Role::kViewer},
-    {"GetCalibration", Role::kViewer},
-    {"ListCalibrations", Role::kViewer},
-    {"ListSpecimens", Role::kViewer},
-    {"GetRecipe", Role::kViewer},
-    {"ListRecipes", Role::kViewer},
-    {"Scan", Role::kOperator},
-    {"Reconstruct", Role::kOperator},
+    {"GetRigStatus", Role::kViewer},     {"WatchJob", Role::kViewer},         {"GetJob", Role::kViewer},
+    {"ListJobs", Role::kViewer},         {"DownloadArtifact", Role::kViewer}, {"GetCalibration", Role::kViewer},
+    {"ListCalibrations", Role::kViewer}, {"ListSpecimens", Role::kViewer},    {"GetRecipe", Role::kViewer},
+    {"ListRecipes", Role::kViewer},      {"Scan", Role::kOperator},           {"Reconstruct", Role::kOperator},
     {"CancelJob", Role::kOperator},  // own jobs; the handler asks admin for others' jobs
-    {"GetResult", Role::kOperator},
-    {"ListResults", Role::kOperator},
-    {"WatchResults", Role::kOperator},
-    {"Calibrate", Role::kEngineer},
-    {"SetSpecimen", Role::kEngineer},
-    {"CreateRecipe", Role::kEngineer},
-    {"UpdateRecipe", Role::kEngineer},
-    {"DeleteRecipe", Role::kEngineer},
-    {"ResetRig", Role::kAdmin},
-    {"DeleteJob", Role::kAdmin},
-    {"DeleteScan", Role::kAdmin},
-    {"PinJob", Role::kAdmin},
-    {"GetRetention", Role::kViewer},
-    {"SetRetention", Role::kAdmin},
+    {"GetResult", Role::kOperator},      {"ListResults", Role::kOperator},    {"WatchResults", Role::kOperator},
+    {"Calibrate", Role::kEngineer},      {"SetSpecimen", Role::kEngineer},    {"CreateRecipe", Role::kEngineer},
+    {"UpdateRecipe", Role::kEngineer},   {"DeleteRecipe", Role::kEngineer},   {"ResetRig", Role::kAdmin},
+    {"DeleteJob", Role::kAdmin},         {"DeleteScan", Role::kAdmin},        {"PinJob", Role::kAdmin},
+    {"GetRetention", Role::kViewer},     {"SetRetention", Role::kAdmin},
 };
 
 std::string_view Trim(std::string_view s) {
@@ -81,8 +64,7 @@ StatusOr<std::vector<std::pair<std::string, std::string>>> ParseTokens(const std
     const auto space = l.find_first_of(" \t");
     if (space == std::string_view::npos) {
       if (line_no > 1 || !tokens.empty()) {
-        return Status::InvalidArgument("token file line " + std::to_string(line_no) +
-                                       ": expected 'identity token'");
+        return Status::InvalidArgument("token file line " + std::to_string(line_no) + ": expected 'identity token'");
       }
       tokens.emplace_back(std::string(l), "token");
       continue;
@@ -111,10 +93,14 @@ StatusOr<std::vector<std::pair<std::string, std::string>>> ParseTokens(const std
 
 const char* RoleName(Role role) {
   switch (role) {
-    case Role::kViewer: return "viewer";
-    case Role::kOperator: return "operator";
-    case Role::kEngineer: return "engineer";
-    case Role::kAdmin: return "admin";
+    case Role::kViewer:
+      return "viewer";
+    case Role::kOperator:
+      return "operator";
+    case Role::kEngineer:
+      return "engineer";
+    case Role::kAdmin:
+      return "admin";
   }
   return "unknown";
 }
@@ -178,7 +164,8 @@ StatusOr<AccessPolicy> AccessPolicy::Parse(const std::string& policy_json, const
           return Status::InvalidArgument("policy.identities." + it.key() + ": role must be a string");
         }
         auto role = ParseRole(it.value().get<std::string>());
-        if (!role.ok()) return Status::InvalidArgument("policy.identities." + it.key() + ": " + role.status().message());
+        if (!role.ok())
+          return Status::InvalidArgument("policy.identities." + it.key() + ": " + role.status().message());
         p.roles_[it.key()] = *role;
       }
     }

@@ -40,9 +40,9 @@ Role RequiredRole(std::string_view method);
 // What a call presented, extracted from the transport. Kept free of gRPC types so the policy
 // is testable without a server.
 struct CallerCredentials {
-  std::string bearer_token;                // from "authorization: Bearer <token>"; empty if none
-  std::vector<std::string> cert_names;     // verified client certificate: CN first, then SANs
-  std::string peer;                        // "ipv4:127.0.0.1:5432"
+  std::string bearer_token;             // from "authorization: Bearer <token>"; empty if none
+  std::vector<std::string> cert_names;  // verified client certificate: CN first, then SANs
+  std::string peer;                     // "ipv4:127.0.0.1:5432"
 };
 CallerCredentials CredentialsFromContext(const grpc::ServerContext& context);
 
@@ -69,8 +69,8 @@ class AccessPolicy {
   // a valid token is unauthenticated.
   static StatusOr<AccessPolicy> Parse(const std::string& policy_json, const std::string& token_text,
                                       bool require_client_cert);
-  static StatusOr<AccessPolicy> Load(const std::filesystem::path& policy_file,
-                                     const std::filesystem::path& token_file, bool require_client_cert);
+  static StatusOr<AccessPolicy> Load(const std::filesystem::path& policy_file, const std::filesystem::path& token_file,
+                                     bool require_client_cert);
 
   bool enabled() const { return enabled_; }
   // UNAUTHENTICATED without credentials or with an unknown token; PERMISSION_DENIED for a
@@ -81,7 +81,7 @@ class AccessPolicy {
   bool enabled_ = false;
   bool require_client_cert_ = false;
   bool have_policy_ = false;
-  std::map<std::string, Role> roles_;            // identity -> role
+  std::map<std::string, Role> roles_;  // identity -> role
   std::optional<Role> default_role_;
   std::vector<std::pair<std::string, std::string>> tokens_;  // (token, identity)
 };

@@ -1,12 +1,12 @@
 #include "server/artifact_files.h"
 
+#include <openssl/evp.h>
+#include <zip.h>
+
 #include <algorithm>
 #include <fstream>
 #include <memory>
 #include <vector>
-
-#include <openssl/evp.h>
-#include <zip.h>
 
 namespace inspection {
 namespace fs = std::filesystem;

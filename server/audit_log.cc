@@ -1,11 +1,11 @@
 // Audit log: JSON Lines, flushed per record, rotated by size (see audit_log.h).
 #include "server/audit_log.h"
 
-#include <chrono>
-#include <system_error>
-
-#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <nlohmann/json.hpp>
+#include <system_error>
 
 namespace inspection {
 
@@ -82,9 +82,9 @@ void AuditLog::RotateLocked() {
 }
 
 void AuditLog::Append(const AuditRecord& record) {
-  const int64_t now_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
-                             std::chrono::system_clock::now().time_since_epoch())
-                             .count();
+  const int64_t now_ms =
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+          .count();
   const std::string line = Format(record, now_ms) + "\n";
   std::lock_guard lock(mu_);
   if (bytes_ > 0 && bytes_ + static_cast<int64_t>(line.size()) > options_.max_file_bytes) RotateLocked();

@@ -25,13 +25,13 @@ struct AuditRecord {
   std::string method;    // RPC name, e.g. "Scan"
   std::string target;    // job / recipe / artifact / scan id the call acted on, if any
   StatusCode code = StatusCode::kOk;
-  std::string message;   // outcome message (cut); never a credential
+  std::string message;  // outcome message (cut); never a credential
 };
 
 struct AuditLogOptions {
-  std::filesystem::path path;            // e.g. <data-dir>/audit/audit.jsonl
-  int64_t max_file_bytes = 16 << 20;     // rotate when the current file would exceed this
-  int max_rotated_files = 8;             // audit.jsonl.1 .. .N kept; older ones deleted
+  std::filesystem::path path;         // e.g. <data-dir>/audit/audit.jsonl
+  int64_t max_file_bytes = 16 << 20;  // rotate when the current file would exceed this
+  int max_rotated_files = 8;          // audit.jsonl.1 .. .N kept; older ones deleted
 };
 
 class AuditLog {

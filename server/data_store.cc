@@ -1,8 +1,8 @@
 #include "server/data_store.h"
 
-#include <random>
-
 #include <sqlite3.h>
+
+#include <random>
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -46,9 +46,7 @@ Status DbError(sqlite3* db, const std::string& what) {
   return Status::Internal("database: " + what + ": " + sqlite3_errmsg(db));
 }
 
-int64_t CreateNs(const v1::Job& job) {
-  return job.create_time().seconds() * 1000000000LL + job.create_time().nanos();
-}
+int64_t CreateNs(const v1::Job& job) { return job.create_time().seconds() * 1000000000LL + job.create_time().nanos(); }
 
 }  // namespace
 
@@ -192,7 +190,10 @@ StatusOr<std::vector<v1::JobEvent>> DataStore::Events(const std::string& job_id)
 Status DataStore::PutArtifact(const StoredArtifact& a) {
   std::lock_guard<std::mutex> lock(mu_);
   Stmt st(db_, "INSERT OR REPLACE INTO artifacts(artifact_id, job_id, path, artifact) VALUES(?,?,?,?)");
-  st.Text(1, a.artifact.artifact_id()).Text(2, a.job_id).Text(3, a.path.string()).Blob(4, a.artifact.SerializeAsString());
+  st.Text(1, a.artifact.artifact_id())
+      .Text(2, a.job_id)
+      .Text(3, a.path.string())
+      .Blob(4, a.artifact.SerializeAsString());
   if (st.Step() != SQLITE_DONE) return DbError(db_, "PutArtifact");
   return Status::Ok();
 }

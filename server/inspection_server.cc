@@ -1,11 +1,11 @@
 #include "server/inspection_server.h"
 
-#include <fstream>
-#include <sstream>
-
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <spdlog/spdlog.h>
+
+#include <fstream>
+#include <sstream>
 
 #include "server/access_control.h"
 
@@ -22,7 +22,7 @@ StatusOr<std::string> ReadFile(const std::string& path, const char* what) {
 }  // namespace
 
 StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const ServerOptions& options,
-                                                                   std::unique_ptr<Rig> rig, Status rig_startup) {
+                                                                    std::unique_ptr<Rig> rig, Status rig_startup) {
   std::unique_ptr<InspectionServer> s(new InspectionServer());
   s->options_ = options;
   if (options.rig_queue_capacity < 0) return Status::InvalidArgument("queue capacity must be >= 0");
@@ -118,7 +118,9 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
                  s->ops_->address());
   }
   spdlog::info("inspectd listening on {} (data dir {}, rig {}, state {})", s->address(), options.data_dir.string(),
-               !s->rig_ ? "none (reconstruct only)" : s->rig_->simulated() ? "simulated" : "configured",
+               !s->rig_               ? "none (reconstruct only)"
+               : s->rig_->simulated() ? "simulated"
+                                      : "configured",
                s->rig_ ? v1::RigState_Name(s->rig_->state()) : "-");
   return s;
 }

@@ -3,10 +3,10 @@
 // inspectd runs it and as the end-to-end tests start it on loopback.
 #pragma once
 
+#include <grpcpp/grpcpp.h>
+
 #include <memory>
 #include <string>
-
-#include <grpcpp/grpcpp.h>
 
 #include "core/status.h"
 #include "devices/rig.h"
@@ -29,7 +29,7 @@ struct ServerOptions {
   bool reflection = true;
   std::string tls_cert_file;  // PEM; with tls_key_file enables TLS
   std::string tls_key_file;
-  std::string auth_token;     // empty = no authentication
+  std::string auth_token;          // empty = no authentication
   SimulatedRigOptions simulation;  // used when no rig is given to Start
   // Reconstruct only (the scale-out pool): no rig is opened; rig calls answer FAILED_PRECONDITION.
   bool no_rig = false;

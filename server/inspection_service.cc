@@ -1,11 +1,11 @@
 // gRPC handlers: translate through the request mapping, delegate, stream job events back.
 #include "server/inspection_service.h"
 
+#include <openssl/crypto.h>
+#include <spdlog/spdlog.h>
+
 #include <fstream>
 #include <map>
-#include <openssl/crypto.h>
-
-#include <spdlog/spdlog.h>
 
 #include "core/stack.h"
 #include "server/grpc_status.h"
@@ -22,8 +22,10 @@ grpc::Status Grpc(const Status& s) { return ToGrpcStatus(s); }
 // job's error otherwise (UNKNOWN when a stored job lacks its code).
 Status JobOutcome(const v1::Job& job) {
   switch (job.state()) {
-    case v1::JOB_STATE_SUCCEEDED: return Status::Ok();
-    case v1::JOB_STATE_CANCELLED: return Status::Cancelled(job.error_message());
+    case v1::JOB_STATE_SUCCEEDED:
+      return Status::Ok();
+    case v1::JOB_STATE_CANCELLED:
+      return Status::Cancelled(job.error_message());
     default:
       return Status(job.error_code() ? StatusCode(job.error_code()) : StatusCode::kUnknown, job.error_message());
   }
@@ -83,8 +85,8 @@ Status ReceiveUpload(grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructReque
     if (!complete[path]) return Status::InvalidArgument("file '" + path + "' ended without a chunk marked last");
   }
   if (upload.upload_file_count > 0 && int(sizes.size()) != upload.upload_file_count) {
-    return Status::InvalidArgument("received " + std::to_string(sizes.size()) + " files but start.upload.file_count is " +
-                                   std::to_string(upload.upload_file_count));
+    return Status::InvalidArgument("received " + std::to_string(sizes.size()) +
+                                   " files but start.upload.file_count is " + std::to_string(upload.upload_file_count));
   }
   return Status::Ok();
 }

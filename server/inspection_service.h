@@ -56,7 +56,8 @@ class InspectionServiceImpl final : public v1::InspectionService::Service {
 class SimulationServiceImpl final : public v1::SimulationService::Service {
  public:
   SimulationServiceImpl(const ServiceOptions& options, RigController* rig) : options_(options), rig_(rig) {}
-  grpc::Status ListSpecimens(grpc::ServerContext*, const v1::ListSpecimensRequest*, v1::ListSpecimensResponse*) override;
+  grpc::Status ListSpecimens(grpc::ServerContext*, const v1::ListSpecimensRequest*,
+                             v1::ListSpecimensResponse*) override;
   grpc::Status SetSpecimen(grpc::ServerContext*, const v1::SetSpecimenRequest*, v1::ListSpecimensResponse*) override;
 
  private:

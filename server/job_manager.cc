@@ -1,11 +1,11 @@
 // JobManager: queues, records and events of every job; the work itself is the JobRunner's.
 #include "server/job_manager.h"
 
-#include <algorithm>
-#include <optional>
-
 #include <google/protobuf/util/time_util.h>
 #include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <optional>
 
 #include "server/log_format.h"
 
@@ -24,9 +24,12 @@ bool IsTerminal(v1::JobState s) {
 
 const char* IdPrefix(v1::JobKind kind) {
   switch (kind) {
-    case v1::JOB_KIND_SCAN: return "scan";
-    case v1::JOB_KIND_CALIBRATE: return "cal";
-    default: return "rec";
+    case v1::JOB_KIND_SCAN:
+      return "scan";
+    case v1::JOB_KIND_CALIBRATE:
+      return "cal";
+    default:
+      return "rec";
   }
 }
 
@@ -145,8 +148,9 @@ Status JobManager::Start() {
     INSPECT_ASSIGN_OR_RETURN(std::vector<v1::JobEvent> events, store_->Events(job.job_id()));
     job.set_state(v1::JOB_STATE_FAILED);
     job.set_error_code(int(StatusCode::kAborted));
-    job.set_error_message(was_running ? "the server stopped while the job was running; its partial results were discarded"
-                                      : "the server stopped before the job ran; submit it again");
+    job.set_error_message(was_running
+                              ? "the server stopped while the job was running; its partial results were discarded"
+                              : "the server stopped before the job ran; submit it again");
     *job.mutable_end_time() = TimeUtil::GetCurrentTime();
     job.set_queue_position(0);
     INSPECT_RETURN_IF_ERROR(store_->PutJob(job));

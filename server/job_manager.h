@@ -70,7 +70,7 @@ class JobRecord {
 
   v1::JobEvent NextEventLocked(const EventFill& fill) const;  // caller holds mu_
 
-  mutable std::mutex mu_;  // guards the members below
+  mutable std::mutex mu_;               // guards the members below
   mutable std::condition_variable cv_;  // signalled on every event
   v1::Job job_;
   std::vector<v1::JobEvent> events_;
@@ -78,7 +78,7 @@ class JobRecord {
 };
 
 struct JobManagerOptions {
-  int rig_queue_capacity = 4;          // jobs waiting behind the running rig job
+  int rig_queue_capacity = 4;  // jobs waiting behind the running rig job
   int reconstruct_queue_capacity = 8;
   // Sees every event once it is persisted (metrics, dashboard). Called on the emitting thread,
   // sometimes under the manager's lock: it must be quick and must not call the manager.
@@ -102,8 +102,8 @@ class JobManager {
   // and for UNAVAILABLE (shutting down), ABORTED and RESOURCE_EXHAUSTED (see above), no job is
   // created.
   using Prepare = std::function<StatusOr<JobWork>()>;
-  StatusOr<std::shared_ptr<JobRecord>> Submit(v1::JobKind kind, const std::string& request_id,
-                                              const std::string& label, const Prepare& prepare);
+  StatusOr<std::shared_ptr<JobRecord>> Submit(v1::JobKind kind, const std::string& request_id, const std::string& label,
+                                              const Prepare& prepare);
 
   // A live record, or one rebuilt from the store (events included) for a job of an earlier run.
   StatusOr<std::shared_ptr<JobRecord>> Find(const std::string& job_id);
@@ -143,7 +143,7 @@ class JobManager {
   DataStore* const store_;
   JobRunner* const runner_;
 
-  mutable std::mutex mu_;  // guards the members below
+  mutable std::mutex mu_;            // guards the members below
   std::condition_variable work_cv_;  // a job was queued, or the manager stops
   bool stopping_ = false;
   std::map<std::string, RecordPtr> live_;  // jobs of this run (finished ones trimmed)

@@ -21,7 +21,7 @@ using EventFill = std::function<void(v1::JobEvent&)>;
 // A running job as its runner sees it.
 struct JobContext {
   std::string job_id;
-  const std::atomic<bool>* cancel = nullptr;  // set by CancelJob or shutdown; check between frames
+  const std::atomic<bool>* cancel = nullptr;   // set by CancelJob or shutdown; check between frames
   std::function<void(const EventFill&)> emit;  // records and streams one progress event
 };
 

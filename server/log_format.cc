@@ -1,13 +1,13 @@
 // Text and JSON log lines for inspectd (log_format.h).
 #include "server/log_format.h"
 
+#include <spdlog/spdlog.h>
+
 #include <chrono>
 #include <cstdio>
 #include <ctime>
 #include <iostream>
-
 #include <nlohmann/json.hpp>
-#include <spdlog/spdlog.h>
 
 namespace inspection {
 

@@ -4,11 +4,11 @@
 // so procedures log through plain spdlog calls and still get their job attributed.
 #pragma once
 
+#include <spdlog/formatter.h>
+
 #include <memory>
 #include <string>
 #include <string_view>
-
-#include <spdlog/formatter.h>
 
 #include "core/status.h"
 

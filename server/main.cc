@@ -1,14 +1,14 @@
 // inspectd: the inspection service beside one microscope rig. Runs the simulated rig unless a
 // rig configuration names real devices.
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
 #include <csignal>
 #include <iostream>
 #include <map>
 #include <thread>
 #include <type_traits>
 #include <variant>
-
-#include <CLI/CLI.hpp>
-#include <spdlog/spdlog.h>
 
 #include "devices/rig_config.h"
 #include "server/inspection_server.h"
@@ -26,9 +26,12 @@ std::string DefaultText(const ConfigKey& key) {
       [](auto InspectdConfig::*f) -> std::string {
         const auto& value = defaults.*f;
         using T = std::decay_t<decltype(value)>;
-        if constexpr (std::is_same_v<T, std::string>) return value;
-        else if constexpr (std::is_same_v<T, bool>) return value ? "on" : "off";
-        else return std::to_string(value);
+        if constexpr (std::is_same_v<T, std::string>)
+          return value;
+        else if constexpr (std::is_same_v<T, bool>)
+          return value ? "on" : "off";
+        else
+          return std::to_string(value);
       },
       key.field);
 }
@@ -36,9 +39,10 @@ std::string DefaultText(const ConfigKey& key) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"inspectd: shape-from-focus inspection service for one microscope rig.\n"
-               "Every setting is also a key of the --config file and an INSPECTD_* environment variable;\n"
-               "flags > environment > file > defaults. --print-config shows the result."};
+  CLI::App app{
+      "inspectd: shape-from-focus inspection service for one microscope rig.\n"
+      "Every setting is also a key of the --config file and an INSPECTD_* environment variable;\n"
+      "flags > environment > file > defaults. --print-config shows the result."};
   std::string config_path;
   bool print_config = false;
   app.add_option("--config", config_path, "JSON configuration file (env INSPECTD_CONFIG)");
@@ -130,7 +134,8 @@ int main(int argc, char** argv) {
   PrintAnnouncement(config.log_format, "inspectd listening on " + (*server)->address());
   if ((*server)->http_port() != 0) {
     const char* scheme = config.tls_cert.empty() ? "http" : "https";
-    PrintAnnouncement(config.log_format, std::string("inspectd http on ") + scheme + "://" + (*server)->http_address() + "/");
+    PrintAnnouncement(config.log_format,
+                      std::string("inspectd http on ") + scheme + "://" + (*server)->http_address() + "/");
   }
   std::thread waiter([&] {
     int sig = 0;

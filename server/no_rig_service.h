@@ -22,8 +22,8 @@ std::string NoRigMessage(std::string_view method);
 // UNIMPLEMENTED unnoticed).
 inline constexpr std::array<std::string_view, 4> kRigOnlyMethods = {"GetRigStatus", "Calibrate", "Scan", "ResetRig"};
 inline constexpr std::array<std::string_view, 8> kNoRigServedMethods = {
-    "Reconstruct", "WatchJob", "GetJob", "ListJobs", "CancelJob", "DownloadArtifact", "GetCalibration",
-    "ListCalibrations"};
+    "Reconstruct", "WatchJob",         "GetJob",         "ListJobs",
+    "CancelJob",   "DownloadArtifact", "GetCalibration", "ListCalibrations"};
 
 class NoRigInspectionService final : public v1::InspectionService::Service {
  public:
@@ -76,7 +76,8 @@ class NoRigInspectionService final : public v1::InspectionService::Service {
 class NoRigSimulationService final : public v1::SimulationService::Service {
  public:
   explicit NoRigSimulationService(const ServiceOptions& options) : options_(options) {}
-  grpc::Status ListSpecimens(grpc::ServerContext*, const v1::ListSpecimensRequest*, v1::ListSpecimensResponse*) override;
+  grpc::Status ListSpecimens(grpc::ServerContext*, const v1::ListSpecimensRequest*,
+                             v1::ListSpecimensResponse*) override;
   grpc::Status SetSpecimen(grpc::ServerContext*, const v1::SetSpecimenRequest*, v1::ListSpecimensResponse*) override;
 
  private:

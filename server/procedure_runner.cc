@@ -2,12 +2,12 @@
 // progress events and their results published into the data store.
 #include "server/procedure_runner.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <filesystem>
 #include <memory>
 #include <string>
-
-#include <spdlog/spdlog.h>
 
 #include "core/depth_export.h"
 #include "core/stack.h"
@@ -67,13 +67,12 @@ void EmitPhase(const JobContext& context, v1::JobPhase phase, double progress = 
 }  // namespace
 
 StatusOr<v1::JobResult> ProcedureRunner::Run(const JobWork& work, const JobContext& context) {
-  return std::visit(
-      Overloaded{
-          [&](const ScanWork& w) { return OnRig(rig_, [&] { return RunScan(w, context); }); },
-          [&](const CalibrateWork& w) { return OnRig(rig_, [&] { return RunCalibrate(w, context); }); },
-          [&](const ReconstructWork& w) { return RunReconstruct(w, context); },
-      },
-      work);
+  return std::visit(Overloaded{
+                        [&](const ScanWork& w) { return OnRig(rig_, [&] { return RunScan(w, context); }); },
+                        [&](const CalibrateWork& w) { return OnRig(rig_, [&] { return RunCalibrate(w, context); }); },
+                        [&](const ReconstructWork& w) { return RunReconstruct(w, context); },
+                    },
+                    work);
 }
 
 StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const JobContext& context) {
@@ -93,8 +92,8 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
       e.mutable_frame()->set_stack_frame(f.stack_frame);
     });
   };
-  INSPECT_ASSIGN_OR_RETURN(ScanOutcome outcome,
-                           inspection::RunScan(rig_->rig(), plan, stack.path(), on_frame, *context.cancel, bundle.get()));
+  INSPECT_ASSIGN_OR_RETURN(ScanOutcome outcome, inspection::RunScan(rig_->rig(), plan, stack.path(), on_frame,
+                                                                    *context.cancel, bundle.get()));
   EmitPhase(context, v1::JOB_PHASE_STORING, 0.92);
 
   INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher, ResultPublisher::Create(store_, job_id));
@@ -103,7 +102,8 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
   meta.description = "depth (um) of scan " + job_id;
   INSPECT_RETURN_IF_ERROR(publisher.WriteDepth(outcome.depth, meta, work.extra_exports));
   if (!outcome.ground_truth_um.empty()) {
-    INSPECT_RETURN_IF_ERROR(publisher.CopyFile(v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF, stack.path() / kGroundTruthDepthName));
+    INSPECT_RETURN_IF_ERROR(
+        publisher.CopyFile(v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF, stack.path() / kGroundTruthDepthName));
   }
   INSPECT_RETURN_IF_ERROR(publisher.Zip(v1::ARTIFACT_KIND_STACK_ZIP, stack.path(), "stack.zip"));
   if (context.cancel->load()) return Status::Cancelled("scan cancelled while storing");  // a cancel's last chance

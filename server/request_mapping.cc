@@ -15,45 +15,68 @@ namespace {
 StatusOr<FocusMeasure> MapFocusMeasure(v1::FocusMeasure m) {
   switch (m) {
     case v1::FOCUS_MEASURE_UNSPECIFIED:
-    case v1::FOCUS_MEASURE_TENENGRAD: return FocusMeasure::kTenengrad;
-    case v1::FOCUS_MEASURE_MODIFIED_LAPLACIAN: return FocusMeasure::kModifiedLaplacian;
-    case v1::FOCUS_MEASURE_SUM_MODIFIED_LAPLACIAN: return FocusMeasure::kSumModifiedLaplacian;
-    case v1::FOCUS_MEASURE_GREY_LEVEL_VARIANCE: return FocusMeasure::kGreyLevelVariance;
-    case v1::FOCUS_MEASURE_HELMLI_MEAN: return FocusMeasure::kHelmliMean;
-    case v1::FOCUS_MEASURE_CHEBYSHEV_MOMENTS: return FocusMeasure::kChebyshevMoments;
-    case v1::FOCUS_MEASURE_GREY_LEVEL_LOCAL_VARIANCE: return FocusMeasure::kGreyLevelLocalVariance;
-    default: return Status::InvalidArgument("focus_measure " + std::to_string(int(m)) + " is unknown");
+    case v1::FOCUS_MEASURE_TENENGRAD:
+      return FocusMeasure::kTenengrad;
+    case v1::FOCUS_MEASURE_MODIFIED_LAPLACIAN:
+      return FocusMeasure::kModifiedLaplacian;
+    case v1::FOCUS_MEASURE_SUM_MODIFIED_LAPLACIAN:
+      return FocusMeasure::kSumModifiedLaplacian;
+    case v1::FOCUS_MEASURE_GREY_LEVEL_VARIANCE:
+      return FocusMeasure::kGreyLevelVariance;
+    case v1::FOCUS_MEASURE_HELMLI_MEAN:
+      return FocusMeasure::kHelmliMean;
+    case v1::FOCUS_MEASURE_CHEBYSHEV_MOMENTS:
+      return FocusMeasure::kChebyshevMoments;
+    case v1::FOCUS_MEASURE_GREY_LEVEL_LOCAL_VARIANCE:
+      return FocusMeasure::kGreyLevelLocalVariance;
+    default:
+      return Status::InvalidArgument("focus_measure " + std::to_string(int(m)) + " is unknown");
   }
 }
 
 StatusOr<DepthInterpolation> MapInterpolation(v1::DepthInterpolation i, const std::string& field) {
   switch (i) {
     case v1::DEPTH_INTERPOLATION_UNSPECIFIED:
-    case v1::DEPTH_INTERPOLATION_GAUSSIAN: return DepthInterpolation::kGaussian;
-    case v1::DEPTH_INTERPOLATION_MAXIMUM: return DepthInterpolation::kMaximum;
-    case v1::DEPTH_INTERPOLATION_LINE_FIT: return DepthInterpolation::kLineFit;
-    default: return Status::InvalidArgument(field + ".interpolation " + std::to_string(int(i)) + " is unknown");
+    case v1::DEPTH_INTERPOLATION_GAUSSIAN:
+      return DepthInterpolation::kGaussian;
+    case v1::DEPTH_INTERPOLATION_MAXIMUM:
+      return DepthInterpolation::kMaximum;
+    case v1::DEPTH_INTERPOLATION_LINE_FIT:
+      return DepthInterpolation::kLineFit;
+    default:
+      return Status::InvalidArgument(field + ".interpolation " + std::to_string(int(i)) + " is unknown");
   }
 }
 
 StatusOr<DepthExportKind> MapExtraExport(int kind, const std::string& field) {
   switch (kind) {
-    case v1::ARTIFACT_KIND_DEPTH_PNG16: return DepthExportKind::kDepthPng16;
-    case v1::ARTIFACT_KIND_DEPTH_PLY: return DepthExportKind::kDepthPly;
-    case v1::ARTIFACT_KIND_DEPTH_X3P: return DepthExportKind::kDepthX3p;
-    default: return Status::InvalidArgument(field + " must be ARTIFACT_KIND_DEPTH_PNG16, _PLY or _X3P");
+    case v1::ARTIFACT_KIND_DEPTH_PNG16:
+      return DepthExportKind::kDepthPng16;
+    case v1::ARTIFACT_KIND_DEPTH_PLY:
+      return DepthExportKind::kDepthPly;
+    case v1::ARTIFACT_KIND_DEPTH_X3P:
+      return DepthExportKind::kDepthX3p;
+    default:
+      return Status::InvalidArgument(field + " must be ARTIFACT_KIND_DEPTH_PNG16, _PLY or _X3P");
   }
 }
 
 StatusOr<CalibrationStep> MapCalibrationStep(int step, const std::string& field) {
   switch (step) {
-    case v1::CALIBRATION_STEP_CAMERA_RESPONSE: return CalibrationStep::kCameraResponse;
-    case v1::CALIBRATION_STEP_PROJECTOR_RESPONSE: return CalibrationStep::kProjectorResponse;
-    case v1::CALIBRATION_STEP_GEOMETRY: return CalibrationStep::kGeometry;
-    case v1::CALIBRATION_STEP_PSF: return CalibrationStep::kPsf;
-    case v1::CALIBRATION_STEP_SCATTER_MATRIX: return CalibrationStep::kScatterMatrix;
-    case v1::CALIBRATION_STEP_INTEGRAL_PSF: return CalibrationStep::kIntegralPsf;
-    default: return Status::InvalidArgument(field + " is not a calibration step");
+    case v1::CALIBRATION_STEP_CAMERA_RESPONSE:
+      return CalibrationStep::kCameraResponse;
+    case v1::CALIBRATION_STEP_PROJECTOR_RESPONSE:
+      return CalibrationStep::kProjectorResponse;
+    case v1::CALIBRATION_STEP_GEOMETRY:
+      return CalibrationStep::kGeometry;
+    case v1::CALIBRATION_STEP_PSF:
+      return CalibrationStep::kPsf;
+    case v1::CALIBRATION_STEP_SCATTER_MATRIX:
+      return CalibrationStep::kScatterMatrix;
+    case v1::CALIBRATION_STEP_INTEGRAL_PSF:
+      return CalibrationStep::kIntegralPsf;
+    default:
+      return Status::InvalidArgument(field + " is not a calibration step");
   }
 }
 
@@ -95,15 +118,24 @@ StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::Reconstructi
 
 StatusOr<std::optional<IlluminationMode>> MapIlluminationMode(v1::IlluminationMode mode) {
   switch (mode) {
-    case v1::ILLUMINATION_MODE_UNSPECIFIED: return std::optional<IlluminationMode>();
-    case v1::ILLUMINATION_MODE_STD: return std::optional(IlluminationMode::kStd);
-    case v1::ILLUMINATION_MODE_HDR: return std::optional(IlluminationMode::kHdr);
-    case v1::ILLUMINATION_MODE_ADAPT_IT: return std::optional(IlluminationMode::kAdaptIterative);
-    case v1::ILLUMINATION_MODE_ADAPT: return std::optional(IlluminationMode::kAdapt);
-    case v1::ILLUMINATION_MODE_TEXTURE: return std::optional(IlluminationMode::kTexture);
-    case v1::ILLUMINATION_MODE_HF_ADAPT: return std::optional(IlluminationMode::kHfAdapt);
-    case v1::ILLUMINATION_MODE_ADAPTED_HF: return std::optional(IlluminationMode::kAdaptedHf);
-    default: return Status::InvalidArgument("illumination " + std::to_string(int(mode)) + " is unknown");
+    case v1::ILLUMINATION_MODE_UNSPECIFIED:
+      return std::optional<IlluminationMode>();
+    case v1::ILLUMINATION_MODE_STD:
+      return std::optional(IlluminationMode::kStd);
+    case v1::ILLUMINATION_MODE_HDR:
+      return std::optional(IlluminationMode::kHdr);
+    case v1::ILLUMINATION_MODE_ADAPT_IT:
+      return std::optional(IlluminationMode::kAdaptIterative);
+    case v1::ILLUMINATION_MODE_ADAPT:
+      return std::optional(IlluminationMode::kAdapt);
+    case v1::ILLUMINATION_MODE_TEXTURE:
+      return std::optional(IlluminationMode::kTexture);
+    case v1::ILLUMINATION_MODE_HF_ADAPT:
+      return std::optional(IlluminationMode::kHfAdapt);
+    case v1::ILLUMINATION_MODE_ADAPTED_HF:
+      return std::optional(IlluminationMode::kAdaptedHf);
+    default:
+      return Status::InvalidArgument("illumination " + std::to_string(int(mode)) + " is unknown");
   }
 }
 
@@ -150,7 +182,8 @@ StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& req, const ScanContext&
 
   ScanWork work;
   INSPECT_ASSIGN_OR_RETURN(work.plan, MakeScanPlan(z0, z1, dz, exposure, *context.stage));
-  INSPECT_ASSIGN_OR_RETURN(ReconstructionSettings rec, MapReconstructionOptions(req.reconstruction(), "reconstruction"));
+  INSPECT_ASSIGN_OR_RETURN(ReconstructionSettings rec,
+                           MapReconstructionOptions(req.reconstruction(), "reconstruction"));
   work.plan.sff = rec.sff;
   work.extra_exports = std::move(rec.extra_exports);
 
@@ -168,7 +201,8 @@ StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& req, const ScanContext&
 StatusOr<CalibrateWork> MapCalibrateRequest(const v1::CalibrateRequest& req) {
   CalibrateWork work;
   for (int i = 0; i < req.steps_size(); ++i) {
-    INSPECT_ASSIGN_OR_RETURN(CalibrationStep step, MapCalibrationStep(req.steps(i), "steps[" + std::to_string(i) + "]"));
+    INSPECT_ASSIGN_OR_RETURN(CalibrationStep step,
+                             MapCalibrationStep(req.steps(i), "steps[" + std::to_string(i) + "]"));
     work.options.steps.push_back(step);
   }
   return work;
@@ -186,7 +220,8 @@ StatusOr<ReconstructSource> MapReconstructSource(const v1::ReconstructStart& sta
   if (!start.has_upload()) return Status::InvalidArgument("start.source must be scan_id or upload");
   const v1::StackUpload& upload = start.upload();
   if (upload.total_bytes() < 0 || upload.total_bytes() > max_upload_bytes) {
-    return Status::InvalidArgument("start.upload.total_bytes must be between 0 and " + std::to_string(max_upload_bytes));
+    return Status::InvalidArgument("start.upload.total_bytes must be between 0 and " +
+                                   std::to_string(max_upload_bytes));
   }
   if (upload.file_count() < 0) return Status::InvalidArgument("start.upload.file_count must be >= 0");
   source.upload = true;

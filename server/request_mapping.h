@@ -66,8 +66,8 @@ StatusOr<CalibrateWork> MapCalibrateRequest(const v1::CalibrateRequest& request)
 
 // Where a Reconstruct request's stack comes from, checked before any byte is received.
 struct ReconstructSource {
-  std::string scan_id;     // a stored scan (an id NewId could have made), or
-  bool upload = false;     // the stack follows as file chunks
+  std::string scan_id;             // a stored scan (an id NewId could have made), or
+  bool upload = false;             // the stack follows as file chunks
   int64_t upload_total_bytes = 0;  // 0 = not announced
   int upload_file_count = 0;       // 0 = not announced
 };
@@ -77,8 +77,7 @@ StatusOr<ReconstructSource> MapReconstructSource(const v1::ReconstructStart& sta
 inline constexpr int64_t kMaxChunkBytes = 1 << 20;  // 1 MiB: far below gRPC's 4 MiB message limit
 Status CheckUploadChunk(const v1::StackFileChunk& chunk);
 // The work for a stack folder that is in place and validated; `upload` owns it when uploaded.
-StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start,
-                                              const std::filesystem::path& stack_dir,
+StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start, const std::filesystem::path& stack_dir,
                                               std::shared_ptr<const OwnedFolder> upload);
 
 // ---------------------------------------------------------------------------------------------
@@ -90,7 +89,7 @@ bool IsSafeId(const std::string& id);
 Status CheckJobId(const std::string& job_id);
 
 struct JobListQuery {
-  v1::JobKind kind = v1::JOB_KIND_UNSPECIFIED;    // UNSPECIFIED = all
+  v1::JobKind kind = v1::JOB_KIND_UNSPECIFIED;     // UNSPECIFIED = all
   v1::JobState state = v1::JOB_STATE_UNSPECIFIED;  // UNSPECIFIED = all
   int limit = 50;
   int64_t before_create_ns = 0;  // 0 = from the newest

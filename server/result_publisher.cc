@@ -75,27 +75,41 @@ const char* MediaType(v1::ArtifactKind k) {
   switch (k) {
     case v1::ARTIFACT_KIND_DEPTH_TIFF:
     case v1::ARTIFACT_KIND_CONFIDENCE_TIFF:
-    case v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF: return "image/tiff";
+    case v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF:
+      return "image/tiff";
     case v1::ARTIFACT_KIND_ALL_IN_FOCUS_PNG:
     case v1::ARTIFACT_KIND_DEPTH_PREVIEW_PNG:
-    case v1::ARTIFACT_KIND_DEPTH_PNG16: return "image/png";
-    case v1::ARTIFACT_KIND_STACK_ZIP: return "application/zip";
-    case v1::ARTIFACT_KIND_DEPTH_PLY: return "application/x-ply";
-    case v1::ARTIFACT_KIND_DEPTH_X3P: return "application/x-iso25178-x3p";
-    default: return "application/octet-stream";
+    case v1::ARTIFACT_KIND_DEPTH_PNG16:
+      return "image/png";
+    case v1::ARTIFACT_KIND_STACK_ZIP:
+      return "application/zip";
+    case v1::ARTIFACT_KIND_DEPTH_PLY:
+      return "application/x-ply";
+    case v1::ARTIFACT_KIND_DEPTH_X3P:
+      return "application/x-iso25178-x3p";
+    default:
+      return "application/octet-stream";
   }
 }
 
 v1::ArtifactKind ToArtifactKind(DepthExportKind k) {
   switch (k) {
-    case DepthExportKind::kDepthTiff: return v1::ARTIFACT_KIND_DEPTH_TIFF;
-    case DepthExportKind::kConfidenceTiff: return v1::ARTIFACT_KIND_CONFIDENCE_TIFF;
-    case DepthExportKind::kAllInFocusPng: return v1::ARTIFACT_KIND_ALL_IN_FOCUS_PNG;
-    case DepthExportKind::kDepthPreviewPng: return v1::ARTIFACT_KIND_DEPTH_PREVIEW_PNG;
-    case DepthExportKind::kDepthPng16: return v1::ARTIFACT_KIND_DEPTH_PNG16;
-    case DepthExportKind::kDepthPly: return v1::ARTIFACT_KIND_DEPTH_PLY;
-    case DepthExportKind::kDepthX3p: return v1::ARTIFACT_KIND_DEPTH_X3P;
-    case DepthExportKind::kGroundTruthTiff: return v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF;
+    case DepthExportKind::kDepthTiff:
+      return v1::ARTIFACT_KIND_DEPTH_TIFF;
+    case DepthExportKind::kConfidenceTiff:
+      return v1::ARTIFACT_KIND_CONFIDENCE_TIFF;
+    case DepthExportKind::kAllInFocusPng:
+      return v1::ARTIFACT_KIND_ALL_IN_FOCUS_PNG;
+    case DepthExportKind::kDepthPreviewPng:
+      return v1::ARTIFACT_KIND_DEPTH_PREVIEW_PNG;
+    case DepthExportKind::kDepthPng16:
+      return v1::ARTIFACT_KIND_DEPTH_PNG16;
+    case DepthExportKind::kDepthPly:
+      return v1::ARTIFACT_KIND_DEPTH_PLY;
+    case DepthExportKind::kDepthX3p:
+      return v1::ARTIFACT_KIND_DEPTH_X3P;
+    case DepthExportKind::kGroundTruthTiff:
+      return v1::ARTIFACT_KIND_GROUND_TRUTH_TIFF;
   }
   return v1::ARTIFACT_KIND_UNSPECIFIED;
 }

@@ -7,11 +7,10 @@
 #pragma once
 
 #include <filesystem>
+#include <opencv2/core.hpp>
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/depth_export.h"
 #include "core/sff_engine.h"

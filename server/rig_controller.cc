@@ -39,7 +39,8 @@ Status RigController::CheckUsable() const {
 void RigController::SetStateLocked(v1::RigState state, std::string detail) {
   const bool was_usable = state_ == v1::RIG_STATE_READY || state_ == v1::RIG_STATE_BUSY;
   const bool now_usable = state == v1::RIG_STATE_READY || state == v1::RIG_STATE_BUSY;
-  if (state != state_) spdlog::info("rig state {} -> {} {}", v1::RigState_Name(state_), v1::RigState_Name(state), detail);
+  if (state != state_)
+    spdlog::info("rig state {} -> {} {}", v1::RigState_Name(state_), v1::RigState_Name(state), detail);
   state_ = state;
   detail_ = std::move(detail);
   if (was_usable != now_usable && health_cb_) health_cb_(now_usable);

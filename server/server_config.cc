@@ -7,9 +7,8 @@
 #include <cstdio>
 #include <fstream>
 #include <limits>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "server/http/http_endpoint.h"
 #include "server/log_format.h"
@@ -98,35 +97,34 @@ Status SetFromJson(const ConfigKey& key, const Json& v, InspectdConfig* config) 
     return Status::InvalidArgument("key " + Quoted(key.name) + " must be " + expected + ", got " + JsonTypeName(v) +
                                    " " + v.dump());
   };
-  return std::visit(
-      Overloaded{
-          [&](std::string InspectdConfig::*f) -> Status {
-            if (!v.is_string()) return wrong("a string");
-            config->*f = v.get<std::string>();
-            return Status::Ok();
-          },
-          [&](int InspectdConfig::*f) -> Status {
-            if (!v.is_number_integer()) return wrong("an integer");
-            if (v.is_number_unsigned() ? v.get<uint64_t>() > uint64_t(std::numeric_limits<int>::max())
-                                       : (v.get<int64_t>() < std::numeric_limits<int>::min() ||
-                                          v.get<int64_t>() > std::numeric_limits<int>::max())) {
-              return wrong("an integer in int range");
-            }
-            config->*f = int(v.get<int64_t>());
-            return Status::Ok();
-          },
-          [&](uint64_t InspectdConfig::*f) -> Status {
-            if (!v.is_number_unsigned()) return wrong("an integer >= 0");
-            config->*f = v.get<uint64_t>();
-            return Status::Ok();
-          },
-          [&](bool InspectdConfig::*f) -> Status {
-            if (!v.is_boolean()) return wrong("true or false");
-            config->*f = v.get<bool>();
-            return Status::Ok();
-          },
-      },
-      key.field);
+  return std::visit(Overloaded{
+                        [&](std::string InspectdConfig::*f) -> Status {
+                          if (!v.is_string()) return wrong("a string");
+                          config->*f = v.get<std::string>();
+                          return Status::Ok();
+                        },
+                        [&](int InspectdConfig::*f) -> Status {
+                          if (!v.is_number_integer()) return wrong("an integer");
+                          if (v.is_number_unsigned() ? v.get<uint64_t>() > uint64_t(std::numeric_limits<int>::max())
+                                                     : (v.get<int64_t>() < std::numeric_limits<int>::min() ||
+                                                        v.get<int64_t>() > std::numeric_limits<int>::max())) {
+                            return wrong("an integer in int range");
+                          }
+                          config->*f = int(v.get<int64_t>());
+                          return Status::Ok();
+                        },
+                        [&](uint64_t InspectdConfig::*f) -> Status {
+                          if (!v.is_number_unsigned()) return wrong("an integer >= 0");
+                          config->*f = v.get<uint64_t>();
+                          return Status::Ok();
+                        },
+                        [&](bool InspectdConfig::*f) -> Status {
+                          if (!v.is_boolean()) return wrong("true or false");
+                          config->*f = v.get<bool>();
+                          return Status::Ok();
+                        },
+                    },
+                    key.field);
 }
 
 }  // namespace
@@ -161,8 +159,10 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
       {"log_level", &C::log_level, "trace, debug, info, warn, error, critical or off"},
       {"log_format", &C::log_format, "text, or json for one JSON object per line (time, level, message, job_id)"},
       {"no_rig", &C::no_rig,
-       "reconstruct only: open no rig; Scan, Calibrate, GetRigStatus, ResetRig and specimens answer FAILED_PRECONDITION"},
-      {"http_listen", &C::http_listen, "host:port for Prometheus /metrics and the web dashboard (port 0 = any); empty: off"},
+       "reconstruct only: open no rig; Scan, Calibrate, GetRigStatus, ResetRig and specimens answer "
+       "FAILED_PRECONDITION"},
+      {"http_listen", &C::http_listen,
+       "host:port for Prometheus /metrics and the web dashboard (port 0 = any); empty: off"},
   };
   return keys;
 }
@@ -174,8 +174,7 @@ const ConfigKey* FindConfigKey(std::string_view name) {
   return nullptr;
 }
 
-Status SetConfigFromText(const ConfigKey& key, std::string_view text, std::string_view origin,
-                         InspectdConfig* config) {
+Status SetConfigFromText(const ConfigKey& key, std::string_view text, std::string_view origin, InspectdConfig* config) {
   auto bad = [&](const char* expected) {
     return Status::InvalidArgument(std::string(origin) + " " + Quoted(text) + " must be " + expected);
   };

@@ -66,8 +66,7 @@ using ConfigSources = std::map<std::string, std::string, std::less<>>;
 // Sets one setting from text as written on a command line or in the environment: integers in
 // full ("4", not "4x"), booleans true/false/1/0/yes/no/on/off. `origin` names the flag or the
 // variable in the error.
-Status SetConfigFromText(const ConfigKey& key, std::string_view text, std::string_view origin,
-                         InspectdConfig* config);
+Status SetConfigFromText(const ConfigKey& key, std::string_view text, std::string_view origin, InspectdConfig* config);
 
 // Applies a JSON object of settings. Unknown keys and values of the wrong JSON type are errors
 // naming the key; `origin` (the file path) prefixes every message.

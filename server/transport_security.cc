@@ -1,11 +1,11 @@
 // TLS / mTLS server credentials with file-watching reload (see transport_security.h).
 #include "server/transport_security.h"
 
-#include <fstream>
-
 #include <grpcpp/security/tls_certificate_provider.h>
 #include <grpcpp/security/tls_credentials_options.h>
 #include <spdlog/spdlog.h>
+
+#include <fstream>
 
 namespace inspection {
 

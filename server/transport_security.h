@@ -3,10 +3,10 @@
 // is allowed only on loopback unless the admin says --insecure.
 #pragma once
 
+#include <grpcpp/security/server_credentials.h>
+
 #include <memory>
 #include <string>
-
-#include <grpcpp/security/server_credentials.h>
 
 #include "core/status.h"
 

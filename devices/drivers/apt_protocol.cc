@@ -13,9 +13,7 @@ void PutU16(std::vector<uint8_t>& b, uint16_t v) {
 void PutU32(std::vector<uint8_t>& b, uint32_t v) {
   for (int i = 0; i < 4; ++i) b.push_back(static_cast<uint8_t>((v >> (8 * i)) & 0xFF));
 }
-uint16_t GetU16(const std::vector<uint8_t>& b, size_t at) {
-  return static_cast<uint16_t>(b[at] | (b[at + 1] << 8));
-}
+uint16_t GetU16(const std::vector<uint8_t>& b, size_t at) { return static_cast<uint16_t>(b[at] | (b[at + 1] << 8)); }
 uint32_t GetU32(const std::vector<uint8_t>& b, size_t at) {
   return static_cast<uint32_t>(b[at]) | (static_cast<uint32_t>(b[at + 1]) << 8) |
          (static_cast<uint32_t>(b[at + 2]) << 16) | (static_cast<uint32_t>(b[at + 3]) << 24);
@@ -108,7 +106,8 @@ StatusOr<HwInfo> ParseHwInfo(const Message& m) {
 
 StatusOr<MotorStatus> ParseMotorStatus(const Message& m) {
   if (m.data.size() < 14) {
-    return Status::DataLoss("APT message " + Hex(m.id) + ": expected 14 status bytes, got " + std::to_string(m.data.size()));
+    return Status::DataLoss("APT message " + Hex(m.id) + ": expected 14 status bytes, got " +
+                            std::to_string(m.data.size()));
   }
   MotorStatus s;
   s.channel = GetU16(m.data, 0);

@@ -79,7 +79,7 @@ Message AckDcStatusUpdate();
 
 struct HwInfo {
   uint32_t serial_number = 0;
-  std::string model;     // e.g. "KDC101"
+  std::string model;  // e.g. "KDC101"
   uint16_t hw_type = 0;
   std::string firmware;  // "major.interim.minor"
   uint16_t hw_version = 0;

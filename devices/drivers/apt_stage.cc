@@ -20,8 +20,8 @@ StatusOr<AptStageType> LookupAptStageType(const std::string& name) {
   // Z8 series: 512 counts/rev motor encoder x 67.49:1 gearhead, 1 mm lead screw.
   // MTS25/MTS50-Z8: 512 x 67:1, 1 mm lead screw.
   static const AptStageType kTypes[] = {
-      {"Z806", 34554.96, 6.0},      {"Z812", 34554.96, 12.0}, {"Z825", 34554.96, 25.0},
-      {"MTS25-Z8", 34304.0, 25.0},  {"MTS50-Z8", 34304.0, 50.0},
+      {"Z806", 34554.96, 6.0},     {"Z812", 34554.96, 12.0},    {"Z825", 34554.96, 25.0},
+      {"MTS25-Z8", 34304.0, 25.0}, {"MTS50-Z8", 34304.0, 50.0},
   };
   std::string known;
   for (const AptStageType& t : kTypes) {
@@ -70,8 +70,8 @@ DeviceInfo AptStage::BuildInfo() const {
   d.model = hw_info_.model.empty() ? options_.stage_type : hw_info_.model + " + " + options_.stage_type;
   d.serial = hw_info_.serial_number ? std::to_string(hw_info_.serial_number) : (transport_ ? transport_->serial() : "");
   d.connected = connected_;
-  d.detail = connected_ ? (transport_ ? transport_->description() : "") + (homed_ ? ", homed" : ", not homed")
-                        : last_error_;
+  d.detail =
+      connected_ ? (transport_ ? transport_->description() : "") + (homed_ ? ", homed" : ", not homed") : last_error_;
   return d;
 }
 
@@ -194,7 +194,8 @@ Status AptStage::MoveTo(double z_um) {
   StatusOr<apt::MotorStatus> st = apt::ParseMotorStatus(*done);
   last_position_counts_ = st.ok() ? st->position_counts : target;
   // Mechanical settling before the camera may expose (thesis 6: the stage must be at rest).
-  if (options_.settle_ms > 0) std::this_thread::sleep_for(std::chrono::microseconds(static_cast<int64_t>(options_.settle_ms * 1000)));
+  if (options_.settle_ms > 0)
+    std::this_thread::sleep_for(std::chrono::microseconds(static_cast<int64_t>(options_.settle_ms * 1000)));
   return Status::Ok();
 }
 

@@ -27,20 +27,21 @@ StatusOr<AptStageType> LookupAptStageType(const std::string& name);
 
 struct AptStageOptions {
   std::string stage_type = "Z825";
-  double counts_per_mm = 0.0;   // > 0 overrides the stage type's scale
-  double min_z_um = 0.0;        // travel limits enforced before any move; within the stage travel
+  double counts_per_mm = 0.0;  // > 0 overrides the stage type's scale
+  double min_z_um = 0.0;       // travel limits enforced before any move; within the stage travel
   double max_z_um = 25000.0;
-  double move_timeout_ms = 10000.0;   // MOVE_COMPLETED must arrive within this
-  double home_timeout_ms = 60000.0;   // MOVE_HOMED must arrive within this
-  double settle_ms = 50.0;            // wait after MOVE_COMPLETED before the exposure may start
+  double move_timeout_ms = 10000.0;  // MOVE_COMPLETED must arrive within this
+  double home_timeout_ms = 60000.0;  // MOVE_HOMED must arrive within this
+  double settle_ms = 50.0;           // wait after MOVE_COMPLETED before the exposure may start
   bool home_on_connect = false;
-  bool identify_on_connect = false;   // flash the controller's LED (MOD_IDENTIFY)
+  bool identify_on_connect = false;  // flash the controller's LED (MOD_IDENTIFY)
   FtdiLineSettings line;
 
   Status Validate() const;  // INVALID_ARGUMENT naming the field
 };
 
-// Not thread-safe, except info(), which any thread may call. Survives unplugging: operations return UNAVAILABLE until Connect() succeeds.
+// Not thread-safe, except info(), which any thread may call. Survives unplugging: operations return UNAVAILABLE until
+// Connect() succeeds.
 class AptStage : public Stage {
  public:
   AptStage(AptStageOptions options, UsbTransportFactory open_transport);

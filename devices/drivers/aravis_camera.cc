@@ -43,9 +43,7 @@ AravisCamera::AravisCamera(AravisCameraOptions options) : options_(std::move(opt
   Publish();
 }
 
-void AravisCamera::Publish() {
-  published_.Set(BuildInfo(), h_ ? h_->lost_flag : nullptr, kControlLost);
-}
+void AravisCamera::Publish() { published_.Set(BuildInfo(), h_ ? h_->lost_flag : nullptr, kControlLost); }
 
 AravisCamera::~AravisCamera() {
   Disconnect("closed");
@@ -93,8 +91,7 @@ Status AravisCamera::Connect() {
       if (options_.serial.empty() || (serial && options_.serial == serial)) id = arv_get_device_id(i);
     }
     if (id.empty()) {
-      return fail(options_.serial.empty() ? "no camera found"
-                                          : "no camera with serial " + options_.serial + " found");
+      return fail(options_.serial.empty() ? "no camera found" : "no camera with serial " + options_.serial + " found");
     }
   }
   auto h = std::make_unique<Handles>();
@@ -120,8 +117,8 @@ Status AravisCamera::Connect() {
       arv_camera_gv_auto_packet_size(h->camera, &e);
     }
     g_clear_error(&e);
-    h->lost_handler = g_signal_connect(arv_camera_get_device(h->camera), "control-lost",
-                                       G_CALLBACK(OnControlLost), h->lost_flag.get());
+    h->lost_handler = g_signal_connect(arv_camera_get_device(h->camera), "control-lost", G_CALLBACK(OnControlLost),
+                                       h->lost_flag.get());
   }
   {
     // An unsupported pixel format is a configuration error, not an absent camera.
@@ -243,15 +240,17 @@ StatusOr<cv::Mat> AravisCamera::Capture() {
   const auto deadline = std::chrono::steady_clock::now() +
                         std::chrono::microseconds(static_cast<int64_t>(options_.frame_timeout_ms * 1000));
   for (;;) {
-    const auto left = std::chrono::duration_cast<std::chrono::microseconds>(deadline - std::chrono::steady_clock::now());
-    ArvBuffer* buffer = left.count() > 0 ? arv_stream_timeout_pop_buffer(h_->stream, static_cast<guint64>(left.count()))
-                                         : nullptr;
+    const auto left =
+        std::chrono::duration_cast<std::chrono::microseconds>(deadline - std::chrono::steady_clock::now());
+    ArvBuffer* buffer =
+        left.count() > 0 ? arv_stream_timeout_pop_buffer(h_->stream, static_cast<guint64>(left.count())) : nullptr;
     if (!buffer) {
       // No frame: is the camera still there? A control read answers that.
       arv_camera_get_payload(h_->camera, &e);
       if (e || h_->control_lost.load()) return Lost("no frame and no answer on the control channel: " + TakeError(e));
       return Status::DeadlineExceeded("camera (aravis " + device_id_ + "): no frame within " +
-                                      std::to_string(static_cast<int>(options_.frame_timeout_ms)) + " ms of the trigger");
+                                      std::to_string(static_cast<int>(options_.frame_timeout_ms)) +
+                                      " ms of the trigger");
     }
     if (arv_buffer_get_status(buffer) != ARV_BUFFER_STATUS_SUCCESS) {
       // Incomplete frame (lost packets): trigger again while time remains.
@@ -266,14 +265,14 @@ StatusOr<cv::Mat> AravisCamera::Capture() {
     size_t size = 0;
     const void* data = arv_buffer_get_image_data(buffer, &size);
     const bool eight = format == ARV_PIXEL_FORMAT_MONO_8;
-    const bool sixteen = format == ARV_PIXEL_FORMAT_MONO_10 || format == ARV_PIXEL_FORMAT_MONO_12 ||
-                         format == ARV_PIXEL_FORMAT_MONO_16;
+    const bool sixteen =
+        format == ARV_PIXEL_FORMAT_MONO_10 || format == ARV_PIXEL_FORMAT_MONO_12 || format == ARV_PIXEL_FORMAT_MONO_16;
     const size_t needed = static_cast<size_t>(w) * ht * (eight ? 1 : 2);
     if ((!eight && !sixteen) || data == nullptr || size < needed) {
       arv_stream_push_buffer(h_->stream, buffer);
       return Status::DataLoss("camera (aravis " + device_id_ + "): unexpected frame (pixel format 0x" +
-                              std::to_string(format) + ", " + std::to_string(size) + " bytes for " +
-                              std::to_string(w) + "x" + std::to_string(ht) + ")");
+                              std::to_string(format) + ", " + std::to_string(size) + " bytes for " + std::to_string(w) +
+                              "x" + std::to_string(ht) + ")");
     }
     cv::Mat frame;
     cv::Mat(ht, w, eight ? CV_8UC1 : CV_16UC1, const_cast<void*>(data)).copyTo(frame);

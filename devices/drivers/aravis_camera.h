@@ -14,14 +14,14 @@
 namespace inspection {
 
 struct AravisCameraOptions {
-  std::string device_id;  // Aravis device id; empty: match `serial`, or the first camera found
-  std::string serial;     // serial number as Aravis reports it (arv-tool-0.8 lists both)
+  std::string device_id;               // Aravis device id; empty: match `serial`, or the first camera found
+  std::string serial;                  // serial number as Aravis reports it (arv-tool-0.8 lists both)
   std::string pixel_format = "Mono8";  // Mono8 -> CV_8UC1; Mono12 / Mono16 -> CV_16UC1
   double exposure_us = 10000.0;
-  double gain_db = 0.0;   // written with arv_camera_set_gain (cameras with GainRaw take raw units)
+  double gain_db = 0.0;              // written with arv_camera_set_gain (cameras with GainRaw take raw units)
   double frame_timeout_ms = 2000.0;  // trigger -> complete frame; DEADLINE_EXCEEDED after it
   int n_buffers = 4;
-  int packet_size = 0;    // GigE packet size in bytes; 0 = negotiate (arv_camera_gv_auto_packet_size)
+  int packet_size = 0;  // GigE packet size in bytes; 0 = negotiate (arv_camera_gv_auto_packet_size)
   // Sensor region of interest; width/height 0 keep the camera's current region.
   int region_x = 0;
   int region_y = 0;

@@ -19,9 +19,12 @@ class DeviceRig : public Rig {
 
   DeviceRig(std::unique_ptr<Camera> camera, Part camera_part, std::unique_ptr<Stage> stage, Part stage_part,
             std::unique_ptr<Projector> projector, Part projector_part, double pixel_size_um, ScanDefaults defaults)
-      : camera_(std::move(camera)), stage_(std::move(stage)), projector_(std::move(projector)),
+      : camera_(std::move(camera)),
+        stage_(std::move(stage)),
+        projector_(std::move(projector)),
         parts_{std::move(camera_part), std::move(stage_part), std::move(projector_part)},
-        pixel_size_um_(pixel_size_um), defaults_(defaults) {}
+        pixel_size_um_(pixel_size_um),
+        defaults_(defaults) {}
 
   Camera& camera() override { return *camera_; }
   Projector& projector() override { return *projector_; }

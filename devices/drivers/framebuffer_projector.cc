@@ -154,12 +154,13 @@ void FramebufferProjector::EncodePixel(uint8_t grey, uint8_t* out) const {
   };
   uint32_t v = channel(mode_.red) | channel(mode_.green) | channel(mode_.blue);
   if (mode_.transp.length > 0) v |= ((1u << mode_.transp.length) - 1u) << mode_.transp.offset;  // opaque
-  for (int i = 0; i < bpp; ++i) out[i] = static_cast<uint8_t>((v >> (8 * i)) & 0xFF);  // little-endian memory
+  for (int i = 0; i < bpp; ++i) out[i] = static_cast<uint8_t>((v >> (8 * i)) & 0xFF);           // little-endian memory
 }
 
 Status FramebufferProjector::Show(const cv::Mat& pattern) {
   Republish publish{this};
-  if (fd_ < 0) return Status::Unavailable("projector (framebuffer " + options_.device + ") is not connected: " + last_error_);
+  if (fd_ < 0)
+    return Status::Unavailable("projector (framebuffer " + options_.device + ") is not connected: " + last_error_);
   if (pattern.type() != CV_8UC1 || pattern.size() != region_.size()) {
     return Status::InvalidArgument("pattern must be CV_8UC1 of " + std::to_string(region_.width) + "x" +
                                    std::to_string(region_.height) + " (projector resolution)");

@@ -21,11 +21,11 @@ struct FramebufferBitfield {
 };
 
 struct FramebufferMode {
-  int width = 0;            // visible pixels (xres)
-  int height = 0;           // visible lines (yres)
-  int bits_per_pixel = 32;  // 8, 16, 24 or 32
+  int width = 0;              // visible pixels (xres)
+  int height = 0;             // visible lines (yres)
+  int bits_per_pixel = 32;    // 8, 16, 24 or 32
   int line_length_bytes = 0;  // stride; 0 = width * bytes per pixel
-  int x_offset = 0;         // visible area within the virtual framebuffer (xoffset, yoffset)
+  int x_offset = 0;           // visible area within the virtual framebuffer (xoffset, yoffset)
   int y_offset = 0;
   // 8 bpp is treated as grey (identity palette). Defaults: XRGB8888 / RGB565 / BGR888 layouts.
   FramebufferBitfield red{16, 8}, green{8, 8}, blue{0, 8}, transp{0, 0};
@@ -50,7 +50,8 @@ struct FramebufferProjectorOptions {
   bool flip_vertical = false;
 };
 
-// Not thread-safe, except info(), which any thread may call. Operations return UNAVAILABLE while the display is not connected.
+// Not thread-safe, except info(), which any thread may call. Operations return UNAVAILABLE while the display is not
+// connected.
 class FramebufferProjector : public Projector {
  public:
   explicit FramebufferProjector(FramebufferProjectorOptions options);

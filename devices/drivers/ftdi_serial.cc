@@ -38,21 +38,27 @@ Status FtdiSerial::Configure(const FtdiLineSettings& s) {
   const auto iface = static_cast<uint16_t>(s.interface_index);
   INSPECT_ASSIGN_OR_RETURN(ftdi::BaudDivisor divisor, ftdi::EncodeBaudDivisor(s.baud));
   INSPECT_RETURN_IF_ERROR(transport_->ControlOut(ftdi::kSioReset, ftdi::kResetSio, iface, t).WithContext("FTDI reset"));
-  INSPECT_RETURN_IF_ERROR(transport_->ControlOut(ftdi::kSioSetBaudRate, divisor.value,
-                                                 // Single-port chips take divisor bit 16 in wIndex; multi-port chips move it to the high
-                                                 // byte and put the port number in the low byte.
-                                                 iface == 0 ? divisor.index : static_cast<uint16_t>((divisor.index << 8) | iface), t)
-                              .WithContext("FTDI baud rate"));
+  INSPECT_RETURN_IF_ERROR(
+      transport_
+          ->ControlOut(ftdi::kSioSetBaudRate, divisor.value,
+                       // Single-port chips take divisor bit 16 in wIndex; multi-port chips move it to the high
+                       // byte and put the port number in the low byte.
+                       iface == 0 ? divisor.index : static_cast<uint16_t>((divisor.index << 8) | iface), t)
+          .WithContext("FTDI baud rate"));
   // 8 data bits, no parity (0 << 8), 1 stop bit (0 << 11).
-  INSPECT_RETURN_IF_ERROR(transport_->ControlOut(ftdi::kSioSetData, 0x0008, iface, t).WithContext("FTDI line properties"));
+  INSPECT_RETURN_IF_ERROR(
+      transport_->ControlOut(ftdi::kSioSetData, 0x0008, iface, t).WithContext("FTDI line properties"));
   if (s.purge_dwell_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(s.purge_dwell_ms));
-  INSPECT_RETURN_IF_ERROR(transport_->ControlOut(ftdi::kSioReset, ftdi::kPurgeRx, iface, t).WithContext("FTDI purge RX"));
-  INSPECT_RETURN_IF_ERROR(transport_->ControlOut(ftdi::kSioReset, ftdi::kPurgeTx, iface, t).WithContext("FTDI purge TX"));
+  INSPECT_RETURN_IF_ERROR(
+      transport_->ControlOut(ftdi::kSioReset, ftdi::kPurgeRx, iface, t).WithContext("FTDI purge RX"));
+  INSPECT_RETURN_IF_ERROR(
+      transport_->ControlOut(ftdi::kSioReset, ftdi::kPurgeTx, iface, t).WithContext("FTDI purge TX"));
   if (s.purge_dwell_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(s.purge_dwell_ms));
   const uint16_t flow = s.rts_cts_flow_control ? ftdi::kFlowRtsCts : 0;
+  INSPECT_RETURN_IF_ERROR(transport_->ControlOut(ftdi::kSioSetFlowCtrl, 0, static_cast<uint16_t>(flow | iface), t)
+                              .WithContext("FTDI flow control"));
   INSPECT_RETURN_IF_ERROR(
-      transport_->ControlOut(ftdi::kSioSetFlowCtrl, 0, static_cast<uint16_t>(flow | iface), t).WithContext("FTDI flow control"));
-  INSPECT_RETURN_IF_ERROR(transport_->ControlOut(ftdi::kSioSetModemCtrl, ftdi::kSetRtsHigh, iface, t).WithContext("FTDI RTS"));
+      transport_->ControlOut(ftdi::kSioSetModemCtrl, ftdi::kSetRtsHigh, iface, t).WithContext("FTDI RTS"));
   rx_.clear();
   return Status::Ok();
 }
@@ -64,7 +70,8 @@ Status FtdiSerial::Write(const std::vector<uint8_t>& bytes, int timeout_ms) {
 StatusOr<std::vector<uint8_t>> FtdiSerial::Read(size_t n, std::chrono::steady_clock::time_point deadline) {
   const size_t packet = static_cast<size_t>(std::max(transport_->max_packet_size(), ftdi::kModemStatusBytes + 1));
   while (rx_.size() < n) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     if (left.count() <= 0) {
       return Status::DeadlineExceeded("no reply from the controller: " + std::to_string(rx_.size()) + " of " +
                                       std::to_string(n) + " bytes received");

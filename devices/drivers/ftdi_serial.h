@@ -24,9 +24,9 @@ inline constexpr uint8_t kSioSetLatencyTimer = 0x09;
 inline constexpr uint16_t kResetSio = 0;
 inline constexpr uint16_t kPurgeRx = 1;
 inline constexpr uint16_t kPurgeTx = 2;
-inline constexpr uint16_t kFlowRtsCts = 0x0100;    // mode byte 0x01, in the high byte of wIndex
+inline constexpr uint16_t kFlowRtsCts = 0x0100;  // mode byte 0x01, in the high byte of wIndex
 inline constexpr uint16_t kSetRtsHigh = 0x0202;
-inline constexpr int kModemStatusBytes = 2;        // at the start of every bulk IN packet
+inline constexpr int kModemStatusBytes = 2;  // at the start of every bulk IN packet
 
 struct BaudDivisor {
   uint16_t value = 0;
@@ -39,10 +39,10 @@ StatusOr<BaudDivisor> EncodeBaudDivisor(int baud);
 }  // namespace ftdi
 
 struct FtdiLineSettings {
-  int baud = 115200;               // Thorlabs APT: 115200 baud, 8 data bits, 1 stop bit, no parity
+  int baud = 115200;  // Thorlabs APT: 115200 baud, 8 data bits, 1 stop bit, no parity
   bool rts_cts_flow_control = true;
-  int interface_index = 0;         // 0 on single-port chips (FT232)
-  int purge_dwell_ms = 50;         // Thorlabs: pause before and after purging; 0 in tests
+  int interface_index = 0;  // 0 on single-port chips (FT232)
+  int purge_dwell_ms = 50;  // Thorlabs: pause before and after purging; 0 in tests
   int control_timeout_ms = 1000;
 };
 

@@ -13,7 +13,8 @@ namespace {
 Status FromLibusb(int rc, const std::string& what) {
   const std::string msg = what + ": " + libusb_error_name(rc);
   if (rc == LIBUSB_ERROR_TIMEOUT) return Status::DeadlineExceeded(msg);
-  if (rc == LIBUSB_ERROR_ACCESS) return Status::Unavailable(msg + " (no permission: install deploy/udev/70-inspection-devices.rules)");
+  if (rc == LIBUSB_ERROR_ACCESS)
+    return Status::Unavailable(msg + " (no permission: install deploy/udev/70-inspection-devices.rules)");
   return Status::Unavailable(msg);
 }
 
@@ -41,8 +42,14 @@ class LibusbTransport : public UsbTransport {
  public:
   LibusbTransport(libusb_context* ctx, libusb_device_handle* h, int iface, uint8_t ep_in, uint8_t ep_out,
                   int max_packet, std::string desc, std::string serial)
-      : ctx_(ctx), h_(h), iface_(iface), ep_in_(ep_in), ep_out_(ep_out), max_packet_(max_packet),
-        desc_(std::move(desc)), serial_(std::move(serial)) {}
+      : ctx_(ctx),
+        h_(h),
+        iface_(iface),
+        ep_in_(ep_in),
+        ep_out_(ep_out),
+        max_packet_(max_packet),
+        desc_(std::move(desc)),
+        serial_(std::move(serial)) {}
   ~LibusbTransport() override {
     libusb_release_interface(h_, iface_);
     libusb_close(h_);
@@ -50,9 +57,8 @@ class LibusbTransport : public UsbTransport {
   }
 
   Status ControlOut(uint8_t request, uint16_t value, uint16_t index, int timeout_ms) override {
-    const int rc = libusb_control_transfer(
-        h_, static_cast<uint8_t>(0x40) /* OUT | VENDOR | DEVICE */, request, value, index,
-        nullptr, 0, static_cast<unsigned>(timeout_ms));
+    const int rc = libusb_control_transfer(h_, static_cast<uint8_t>(0x40) /* OUT | VENDOR | DEVICE */, request, value,
+                                           index, nullptr, 0, static_cast<unsigned>(timeout_ms));
     if (rc < 0) return FromLibusb(rc, "control request " + std::to_string(request));
     return Status::Ok();
   }
@@ -64,7 +70,8 @@ class LibusbTransport : public UsbTransport {
                                         static_cast<unsigned>(timeout_ms));
     if (rc < 0) return FromLibusb(rc, "bulk write");
     if (sent != static_cast<int>(data.size())) {
-      return Status::Unavailable("bulk write: " + std::to_string(sent) + " of " + std::to_string(data.size()) + " bytes sent");
+      return Status::Unavailable("bulk write: " + std::to_string(sent) + " of " + std::to_string(data.size()) +
+                                 " bytes sent");
     }
     return Status::Ok();
   }
@@ -165,7 +172,9 @@ StatusOr<std::unique_ptr<UsbTransport>> OpenLibusbTransport(const UsbDeviceSelec
     libusb_exit(ctx);
     return s;
   };
-  if (ep_in == 0 || ep_out == 0) return close_all(Status::Unavailable(desc + ": no bulk IN/OUT endpoints on interface " + std::to_string(sel.interface_number)));
+  if (ep_in == 0 || ep_out == 0)
+    return close_all(
+        Status::Unavailable(desc + ": no bulk IN/OUT endpoints on interface " + std::to_string(sel.interface_number)));
   // Thorlabs controllers bind to the kernel's ftdi_sio (ttyUSB) driver by default.
   if (libusb_kernel_driver_active(h, sel.interface_number) == 1) {
     if (int rc = libusb_detach_kernel_driver(h, sel.interface_number); rc < 0) {

@@ -15,8 +15,7 @@ class PublishedInfo {
  public:
   // lost: optional flag a library thread raises asynchronously (e.g. GigE heartbeat loss);
   // while it is set, readers see connected == false with lost_detail.
-  void Set(DeviceInfo info, std::shared_ptr<const std::atomic<bool>> lost = nullptr,
-           std::string lost_detail = "") {
+  void Set(DeviceInfo info, std::shared_ptr<const std::atomic<bool>> lost = nullptr, std::string lost_detail = "") {
     std::lock_guard<std::mutex> lock(mu_);
     info_ = std::move(info);
     lost_ = std::move(lost);

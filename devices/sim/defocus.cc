@@ -4,20 +4,19 @@
 
 #include <algorithm>
 #include <cmath>
-
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
 namespace inspection {
 namespace {
 
-constexpr double kLadderRatio = 1.4;   // sigma ratio between rungs
+constexpr double kLadderRatio = 1.4;  // sigma ratio between rungs
 constexpr double kLadderMaxSigmaPx = 90.0;
 constexpr int kMaxFactor = 32;
 constexpr double kGaussianOnlyWeight = 0.02;  // below this pillbox weight the PSF is Gaussian
 constexpr double kMaxFullResSigmaPx = 3.0;
-constexpr double kMaxResidualSigmaPx = 2.0;   // kernel half-size 5 at most
-constexpr double kGaussianTruncation = 2.5;   // kernel half-size in sigmas
+constexpr double kMaxResidualSigmaPx = 2.0;  // kernel half-size 5 at most
+constexpr double kGaussianTruncation = 2.5;  // kernel half-size in sigmas
 
 // PSF sigma left for the kernel on an f-times reduced image: the f x f box reduction and the
 // bilinear enlargement together contribute about f^2/4 to the variance (full-res px^2).
@@ -51,15 +50,14 @@ double DefocusModel::SigmaPx(double defocus_um) const {
 }
 
 double DefocusModel::PillboxWeight(double sigma_px) const {
-  return std::clamp((sigma_px - gaussian_until_sigma_px) / (pillbox_from_sigma_px - gaussian_until_sigma_px),
-                    0.0, 1.0);
+  return std::clamp((sigma_px - gaussian_until_sigma_px) / (pillbox_from_sigma_px - gaussian_until_sigma_px), 0.0, 1.0);
 }
 
 cv::Mat DefocusModel::Kernel(double sigma_px, double shape_sigma_px, double truncation_sigmas) const {
   const double w = PillboxWeight(shape_sigma_px);
   const double radius = 2.0 * sigma_px;
-  const int half = static_cast<int>(
-      std::ceil(std::max(w < 1.0 ? truncation_sigmas * sigma_px : 0.0, radius + 0.5) - 1e-9));
+  const int half =
+      static_cast<int>(std::ceil(std::max(w < 1.0 ? truncation_sigmas * sigma_px : 0.0, radius + 0.5) - 1e-9));
   const int size = 2 * half + 1;
   cv::Mat gauss(size, size, CV_64FC1, cv::Scalar(0)), disk(size, size, CV_64FC1, cv::Scalar(0));
   constexpr int kSub = 4;  // supersampling of the pillbox edge
@@ -117,8 +115,8 @@ void SpatiallyVaryingBlur::ComputeLayer(int i) {
   if (model_.PillboxWeight(sigma) < kGaussianOnlyWeight) {
     GaussianBlurTruncated(reduced_[k], &low, sigma_low);
   } else {
-    cv::filter2D(reduced_[k], low, CV_32F, model_.Kernel(sigma_low, sigma, kGaussianTruncation), cv::Point(-1, -1),
-                 0.0, cv::BORDER_REFLECT);
+    cv::filter2D(reduced_[k], low, CV_32F, model_.Kernel(sigma_low, sigma, kGaussianTruncation), cv::Point(-1, -1), 0.0,
+                 cv::BORDER_REFLECT);
   }
   layers_[i] = low;  // kept reduced; enlarged row by row while mixing
 }
@@ -184,9 +182,12 @@ void SpatiallyVaryingBlur::Apply(const cv::Mat& src, const BlurPlan& plan, cv::M
   // One task per rung, all independent (full-resolution rungs blur the source directly), handed
   // out one at a time so two threads share the expensive full-resolution rungs.
   const int tasks = i1 - i0 + 1;
-  cv::parallel_for_(cv::Range(0, tasks), [&](const cv::Range& r) {
-    for (int t = r.start; t < r.end; ++t) ComputeLayer(i0 + t);
-  }, tasks);
+  cv::parallel_for_(
+      cv::Range(0, tasks),
+      [&](const cv::Range& r) {
+        for (int t = r.start; t < r.end; ++t) ComputeLayer(i0 + t);
+      },
+      tasks);
 
   // Bilinear enlargement of reduced rungs (same sampling as cv::resize INTER_LINEAR), done per
   // row into small buffers so no full-size copy of a reduced rung is ever stored. For an exact

@@ -6,9 +6,8 @@
 // interpolates between the two rungs bracketing its own width.
 #pragma once
 
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/status.h"
 
@@ -42,8 +41,8 @@ struct DefocusModel {
 // both defocus passes of a frame.
 struct BlurPlan {
   int first_rung = 0, last_rung = 0;  // rungs used by this map
-  cv::Mat rung;    // CV_8UC1: lower rung, relative to first_rung
-  cv::Mat weight;  // CV_32FC1: weight of the upper rung (0..1)
+  cv::Mat rung;                       // CV_8UC1: lower rung, relative to first_rung
+  cv::Mat weight;                     // CV_32FC1: weight of the upper rung (0..1)
 };
 
 // Not thread-safe (keeps scratch buffers between calls); one per renderer. Type and size
@@ -69,11 +68,11 @@ class SpatiallyVaryingBlur {
   void ComputeLayer(int i);
 
   DefocusModel model_;
-  std::vector<double> ladder_;  // PSF sigma of each rung, geometric
-  std::vector<int> factor_;     // reduction factor (1, 2, 4, ...) of each rung
-  cv::Mat padded_;              // source with a reflected border, size a multiple of kMaxFactor
+  std::vector<double> ladder_;    // PSF sigma of each rung, geometric
+  std::vector<int> factor_;       // reduction factor (1, 2, 4, ...) of each rung
+  cv::Mat padded_;                // source with a reflected border, size a multiple of kMaxFactor
   std::vector<cv::Mat> reduced_;  // padded_ reduced by 2^k (index k)
-  std::vector<cv::Mat> layers_;     // rung images, reduced by layer_factor_
+  std::vector<cv::Mat> layers_;   // rung images, reduced by layer_factor_
   std::vector<int> layer_factor_;
   int border_ = 0;
 };

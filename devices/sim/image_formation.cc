@@ -2,15 +2,13 @@
 #include "devices/sim/image_formation.h"
 
 #include <cmath>
-
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
 namespace inspection {
 
 Status ImageFormationOptions::Validate() const {
-  if (camera_size.width < 16 || camera_size.height < 16 || camera_size.width > 8192 ||
-      camera_size.height > 8192) {
+  if (camera_size.width < 16 || camera_size.height < 16 || camera_size.width > 8192 || camera_size.height > 8192) {
     return Status::InvalidArgument("camera_size must be 16x16 .. 8192x8192");
   }
   if (projector_size.width < 16 || projector_size.height < 16 || projector_size.width > 8192 ||
@@ -139,8 +137,8 @@ const cv::Mat& ImageFormation::CameraIrradianceScratch(const cv::Mat& pattern, d
     blur_.Apply(scratch_ep_, plan, &scratch_ep_blurred_);
     ep = &scratch_ep_blurred_;
   }
-  cv::multiply(*ep, surface_, scratch_es_);                 // eq. 5.2
-  blur_.Apply(scratch_es_, plan, &scratch_ec_);             // defocus on the way back
+  cv::multiply(*ep, surface_, scratch_es_);      // eq. 5.2
+  blur_.Apply(scratch_es_, plan, &scratch_ec_);  // defocus on the way back
   return scratch_ec_;
 }
 

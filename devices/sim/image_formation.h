@@ -10,7 +10,6 @@
 #include <array>
 #include <cstdint>
 #include <memory>
-
 #include <opencv2/core.hpp>
 
 #include "core/status.h"
@@ -36,8 +35,7 @@ struct ImageFormationOptions {
 class ImageFormation {
  public:
   // specimen maps must have options.camera_size.
-  static StatusOr<std::unique_ptr<ImageFormation>> Create(const ImageFormationOptions& options,
-                                                          Specimen specimen);
+  static StatusOr<std::unique_ptr<ImageFormation>> Create(const ImageFormationOptions& options, Specimen specimen);
 
   Status SetSpecimen(Specimen specimen);
   const Specimen& specimen() const { return specimen_; }
@@ -72,8 +70,8 @@ class ImageFormation {
   ImageFormationOptions options_;
   ProjectorCameraGeometry geometry_;
   std::array<float, 256> prf_table_;
-  cv::Rect projector_roi_;  // projector pixels the camera sees
-  cv::Mat map_x_, map_y_;   // camera -> projector_roi_ coordinates (released once converted)
+  cv::Rect projector_roi_;                 // projector pixels the camera sees
+  cv::Mat map_x_, map_y_;                  // camera -> projector_roi_ coordinates (released once converted)
   cv::Mat fixed_map_xy_, fixed_map_frac_;  // the same as fixed-point remap maps
   Specimen specimen_;
   cv::Mat surface_;  // reflectance * texture

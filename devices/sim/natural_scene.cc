@@ -5,10 +5,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 #include <random>
 #include <sstream>
-
-#include <opencv2/imgproc.hpp>
 
 #include "devices/sim/defocus.h"
 
@@ -90,7 +89,8 @@ cv::Mat DeadLeaves(cv::Size size, double r_min, double r_max, double lightness, 
     if (rng.Uniform() < 0.7) {
       cv::circle(canvas, c * kSuper, std::max(1, int(std::lround(r * kSuper))), colour, cv::FILLED, cv::LINE_8);
     } else {
-      const cv::RotatedRect box(c * kSuper, cv::Size2f(float(2 * r * kSuper), float(2 * r * kSuper * rng.Uniform(0.3, 1.0))),
+      const cv::RotatedRect box(c * kSuper,
+                                cv::Size2f(float(2 * r * kSuper), float(2 * r * kSuper * rng.Uniform(0.3, 1.0))),
                                 float(rng.Uniform(0, 180)));
       cv::Point2f p[4];
       box.points(p);
@@ -336,7 +336,8 @@ cv::Mat LayerDepth(cv::Size size, const cv::Mat& alpha, double lo, double hi, bo
 // Blurred copies of a layer at sigma_0 * ratio^i (i = 0..n-1), premultiplied colour and alpha.
 // Small kernels run directly; large ones as products of spectra of the reflect-padded layer,
 // whose transform is computed once for all rungs.
-std::vector<cv::Mat> Ladder(const Layer& layer, const DefocusModel& model, double max_sigma, std::vector<double>* sigmas) {
+std::vector<cv::Mat> Ladder(const Layer& layer, const DefocusModel& model, double max_sigma,
+                            std::vector<double>* sigmas) {
   sigmas->clear();
   for (double s = model.in_focus_sigma_px;; s *= kLadderRatio) {
     sigmas->push_back(s);
@@ -434,8 +435,10 @@ cv::Mat Expose(const cv::Mat& radiance, const NaturalSceneOptions& o, Rng* rng) 
         double e = std::max(v[c], 0.0) * o.full_well_electrons;
         if (rng) e += std::sqrt(e + o.read_noise_electrons * o.read_noise_electrons) * rng->Normal();
         const double q = std::round(SrgbEncode(std::clamp(e / o.full_well_electrons, 0.0, 1.0)) * full);
-        if (depth == CV_8U) out.ptr<uint8_t>(y)[cn * x + c] = uint8_t(q);
-        else out.ptr<uint16_t>(y)[cn * x + c] = uint16_t(q);
+        if (depth == CV_8U)
+          out.ptr<uint8_t>(y)[cn * x + c] = uint8_t(q);
+        else
+          out.ptr<uint16_t>(y)[cn * x + c] = uint16_t(q);
       }
     }
   return out;
@@ -464,12 +467,11 @@ StatusOr<NaturalScene> RenderNaturalScene(const NaturalSceneOptions& o) {
   const cv::Size size = o.size;
   const double n = o.frames;
   NaturalScene scene;
-  scene.blur_radius_px_per_frame =
-      o.blur_radius_px_per_frame > 0 ? o.blur_radius_px_per_frame : rng.Uniform(0.5, 1.2);
+  scene.blur_radius_px_per_frame = o.blur_radius_px_per_frame > 0 ? o.blur_radius_px_per_frame : rng.Uniform(0.5, 1.2);
   DefocusModel model;
   model.in_focus_sigma_px = o.in_focus_sigma_px;
   model.blur_radius_px_per_um = scene.blur_radius_px_per_frame;  // "um" = frames here
-  model.gaussian_until_sigma_px = 1.0;  // a camera's defocus is a disc already at a few px
+  model.gaussian_until_sigma_px = 1.0;                           // a camera's defocus is a disc already at a few px
   model.pillbox_from_sigma_px = 4.0;
   std::ostringstream desc;
   desc.precision(3);
@@ -568,8 +570,10 @@ StatusOr<NaturalScene> RenderNaturalScene(const NaturalSceneOptions& o) {
   for (int k = 0; k <= o.frames; ++k) {
     accum[k] *= exposure;
     Rng noise(o.seed * 7919u + uint32_t(k) * 104729u + 3u);
-    if (k < o.frames) scene.frames.push_back(Expose(accum[k], o, &noise));
-    else scene.all_in_focus = Expose(accum[k], o, nullptr);
+    if (k < o.frames)
+      scene.frames.push_back(Expose(accum[k], o, &noise));
+    else
+      scene.all_in_focus = Expose(accum[k], o, nullptr);
   }
   return scene;
 }

@@ -33,10 +33,9 @@
 #pragma once
 
 #include <cstdint>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/status.h"
 
@@ -48,21 +47,21 @@ struct NaturalSceneOptions {
   uint32_t seed = 1;
   // Blur-circle radius per frame of defocus (pixels). <= 0: drawn from the seed in [0.5, 1.2].
   double blur_radius_px_per_frame = 0.0;
-  double in_focus_sigma_px = 0.5;      // lens + sensor PSF at focus (Gaussian sigma)
-  double full_well_electrons = 6000.0; // at linear radiance 1: shot noise
+  double in_focus_sigma_px = 0.5;       // lens + sensor PSF at focus (Gaussian sigma)
+  double full_well_electrons = 6000.0;  // at linear radiance 1: shot noise
   double read_noise_electrons = 5.0;
-  int bit_depth = 8;                   // 8 -> CV_8U, 16 -> CV_16U frames
-  bool colour = true;                  // false: grey frames (BT.709 luminance)
+  int bit_depth = 8;   // 8 -> CV_8U, 16 -> CV_16U frames
+  bool colour = true;  // false: grey frames (BT.709 luminance)
 
   Status Validate() const;  // INVALID_ARGUMENT naming the field
 };
 
 struct NaturalScene {
   std::vector<cv::Mat> frames;  // frame k focused at depth k; CV_8UC3/CV_16UC3 (BGR) or 1 channel
-  cv::Mat depth_frames;   // CV_32FC1 truth: depth of the visible surface (frontmost alpha >= 0.5)
-  cv::Mat all_in_focus;   // every layer at its own focus, noise-free, type of the frames
-  cv::Mat textured;       // CV_8UC1: 255 where the visible surface carries texture, 0 on flat paint / sky
-  cv::Mat occlusion_edge; // CV_8UC1: 255 within 3 px of a depth jump of more than 1 frame
+  cv::Mat depth_frames;         // CV_32FC1 truth: depth of the visible surface (frontmost alpha >= 0.5)
+  cv::Mat all_in_focus;         // every layer at its own focus, noise-free, type of the frames
+  cv::Mat textured;             // CV_8UC1: 255 where the visible surface carries texture, 0 on flat paint / sky
+  cv::Mat occlusion_edge;       // CV_8UC1: 255 within 3 px of a depth jump of more than 1 frame
   double blur_radius_px_per_frame = 0.0;
   std::string description;  // one line: layers, materials, depth ranges
 };

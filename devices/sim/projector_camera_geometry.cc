@@ -17,8 +17,8 @@ Status ProjectorCameraGeometryOptions::Validate() const {
   return Status::Ok();
 }
 
-ProjectorCameraGeometry::ProjectorCameraGeometry(const ProjectorCameraGeometryOptions& options,
-                                                 cv::Size camera_size, cv::Size projector_size)
+ProjectorCameraGeometry::ProjectorCameraGeometry(const ProjectorCameraGeometryOptions& options, cv::Size camera_size,
+                                                 cv::Size projector_size)
     : options_(options),
       camera_size_(camera_size),
       projector_size_(projector_size),

@@ -26,8 +26,7 @@ struct ProjectorCameraGeometryOptions {
 // Pixel centres are at integer coordinates in both devices. Immutable; thread-safe.
 class ProjectorCameraGeometry {
  public:
-  ProjectorCameraGeometry(const ProjectorCameraGeometryOptions& options, cv::Size camera_size,
-                          cv::Size projector_size);
+  ProjectorCameraGeometry(const ProjectorCameraGeometryOptions& options, cv::Size camera_size, cv::Size projector_size);
 
   // Projector coordinate seen by the camera pixel (x, y) (the thesis's camera LUT).
   cv::Point2d CameraToProjector(cv::Point2d camera) const;

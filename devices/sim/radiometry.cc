@@ -3,9 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <vector>
-
 #include <opencv2/core/utility.hpp>
+#include <vector>
 
 namespace inspection {
 
@@ -95,8 +94,8 @@ const std::vector<float>& NormalQuantiles() {
 
 }  // namespace
 
-cv::Mat ExposeAndDigitise(const cv::Mat& irradiance, double exposure_us, double gain_db,
-                          const CameraResponse& response, uint64_t noise_seed) {
+cv::Mat ExposeAndDigitise(const cv::Mat& irradiance, double exposure_us, double gain_db, const CameraResponse& response,
+                          uint64_t noise_seed) {
   CV_Assert(irradiance.type() == CV_32FC1);
   const int max_dn = response.max_dn();
   // Response look-up table over the relative exposure, interpolated linearly.
@@ -108,8 +107,8 @@ cv::Mat ExposeAndDigitise(const cv::Mat& irradiance, double exposure_us, double 
   const float e_per_unit = static_cast<float>(exposure_us * response.sensitivity_e_per_us * gain);
   const float inv_full_well = static_cast<float>(1.0 / response.full_well_e);
   // Read noise is specified in 8-bit grey levels on the linear part of the range.
-  const float read_e = static_cast<float>(response.read_noise_dn8 / (255.0 - response.black_level_dn8) *
-                                          response.full_well_e);
+  const float read_e =
+      static_cast<float>(response.read_noise_dn8 / (255.0 - response.black_level_dn8) * response.full_well_e);
   const float read_var = read_e * read_e;
   const bool shot = response.shot_noise;
   const bool any_noise = shot || read_e > 0.0f;
@@ -150,7 +149,10 @@ cv::Mat ExposeAndDigitise(const cv::Mat& irradiance, double exposure_us, double 
             grey = lut[i] + t * (lut[i + 1] - lut[i]);
           }
           const int v = std::min(static_cast<int>(grey + 0.5f), max_dn);  // grey >= 0
-          if (o8) o8[x] = static_cast<uint8_t>(v); else o16[x] = static_cast<uint16_t>(v);
+          if (o8)
+            o8[x] = static_cast<uint8_t>(v);
+          else
+            o16[x] = static_cast<uint16_t>(v);
         }
       }
     }

@@ -13,8 +13,7 @@
 namespace inspection {
 
 Status SimulatedRigOptions::Validate() const {
-  if (camera_size.width < 16 || camera_size.height < 16 || camera_size.width > 8192 ||
-      camera_size.height > 8192) {
+  if (camera_size.width < 16 || camera_size.height < 16 || camera_size.width > 8192 || camera_size.height > 8192) {
     return Status::InvalidArgument("camera_size must be 16x16 .. 8192x8192");
   }
   if (camera_bit_depth != 8 && camera_bit_depth != 12) {
@@ -60,7 +59,8 @@ StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptio
 StatusOr<std::unique_ptr<ImageFormation>> CreateSimulatedRenderer(const SimulatedRigOptions& options) {
   INSPECT_ASSIGN_OR_RETURN(ImageFormationOptions f, ImageFormationOptionsFor(options));
   INSPECT_ASSIGN_OR_RETURN(
-      Specimen s, MakeSpecimen(options.specimen, SpecimenGrid{options.camera_size, options.pixel_size_um, options.seed}));
+      Specimen s,
+      MakeSpecimen(options.specimen, SpecimenGrid{options.camera_size, options.pixel_size_um, options.seed}));
   return ImageFormation::Create(f, std::move(s));
 }
 
@@ -127,10 +127,12 @@ class SimulatedCamera : public Camera {
   DeviceInfo info() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
     const bool up = !s_->faults.camera_unplugged;
-    return {"camera", "simulated",
+    return {"camera",
+            "simulated",
             "SimCam " + std::to_string(s_->options.camera_size.width) + "x" +
                 std::to_string(s_->options.camera_size.height),
-            "SIM-" + std::to_string(s_->options.seed), up,
+            "SIM-" + std::to_string(s_->options.seed),
+            up,
             up ? "specimen " + s_->specimen_name : "simulated fault: unplugged"};
   }
   cv::Size frame_size() const override { return s_->options.camera_size; }
@@ -178,10 +180,13 @@ class SimulatedProjector : public Projector {
   explicit SimulatedProjector(SimState* s) : s_(s) {}
   DeviceInfo info() const override {
     const bool up = !s_->faults.projector_unplugged;
-    return {"projector", "simulated",
+    return {"projector",
+            "simulated",
             "SimProjector " + std::to_string(s_->options.projector_size.width) + "x" +
                 std::to_string(s_->options.projector_size.height),
-            "SIM-" + std::to_string(s_->options.seed), up, up ? "" : "simulated fault: unplugged"};
+            "SIM-" + std::to_string(s_->options.seed),
+            up,
+            up ? "" : "simulated fault: unplugged"};
   }
   cv::Size resolution() const override { return s_->options.projector_size; }
   Status Show(const cv::Mat& pattern) override {
@@ -208,8 +213,9 @@ class SimulatedStage : public Stage {
   DeviceInfo info() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
     const bool up = !s_->faults.stage_unplugged;
-    return {"stage", "simulated", "SimStage z", "SIM-" + std::to_string(s_->options.seed), up,
-            up ? "" : "simulated fault: unplugged"};
+    return {"stage",      "simulated",
+            "SimStage z", "SIM-" + std::to_string(s_->options.seed),
+            up,           up ? "" : "simulated fault: unplugged"};
   }
   double min_z_um() const override { return kStageMinUm; }
   double max_z_um() const override { return kStageMaxUm; }

@@ -26,10 +26,10 @@ struct SimulatedRigOptions {
   cv::Size camera_size{1024, 768};  // camera pixels
   int camera_bit_depth = 8;         // 8 or 12
   cv::Size projector_size{1280, 720};
-  double pixel_size_um = 0.74;      // camera pixel on the specimen (thesis 6: 0.740 µm)
-  double numerical_aperture = 0.3;  // objective NA (10x): sets the defocus blur per µm
+  double pixel_size_um = 0.74;          // camera pixel on the specimen (thesis 6: 0.740 µm)
+  double numerical_aperture = 0.3;      // objective NA (10x): sets the defocus blur per µm
   double stage_repeatability_um = 0.1;  // ±, uniform (thesis 6: ±0.1 µm)
-  double read_noise_dn = 0.8;       // camera read noise, in output grey levels (8-bit scale)
+  double read_noise_dn = 0.8;           // camera read noise, in output grey levels (8-bit scale)
   bool shot_noise = true;
 
   Status Validate() const;

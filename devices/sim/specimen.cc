@@ -8,7 +8,6 @@
 #include <fstream>
 #include <functional>
 #include <map>
-
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -58,8 +57,8 @@ cv::Mat SmoothNoise(const Grid& g, uint64_t stream, double sigma_x, double sigma
 }
 
 // Log-normal texture with mean 1: fine grain (contrast fine_log) plus a coarse mottling.
-cv::Mat Texture(const Grid& g, uint64_t stream, double fine_log, double coarse_log,
-                double fine_sigma_x = 1.0, double fine_sigma_y = 1.0) {
+cv::Mat Texture(const Grid& g, uint64_t stream, double fine_log, double coarse_log, double fine_sigma_x = 1.0,
+                double fine_sigma_y = 1.0) {
   cv::Mat t = fine_log * SmoothNoise(g, stream, fine_sigma_x, fine_sigma_y) +
               coarse_log * SmoothNoise(g, stream + 1000, 8.0, 8.0);
   cv::exp(t, t);
@@ -272,9 +271,15 @@ StatusOr<cv::Mat> ReadSceneImage(const std::filesystem::path& dir, const nlohman
                                    std::to_string(img.channels()) + " channels");
   }
   switch (img.depth()) {
-    case CV_8U: *default_scale = 1.0 / 255.0; break;
-    case CV_16U: *default_scale = 1.0 / 65535.0; break;
-    default: *default_scale = 1.0; break;
+    case CV_8U:
+      *default_scale = 1.0 / 255.0;
+      break;
+    case CV_16U:
+      *default_scale = 1.0 / 65535.0;
+      break;
+    default:
+      *default_scale = 1.0;
+      break;
   }
   cv::Mat f;
   img.convertTo(f, CV_32FC1);
@@ -309,8 +314,7 @@ StatusOr<Specimen> MakeSpecimen(const std::string& name, const SpecimenGrid& gri
   if (it == builtins.end()) {
     std::string known;
     for (const auto& n : BuiltinSpecimenNames()) known += (known.empty() ? "" : ", ") + n;
-    return Status::NotFound("unknown specimen '" + name + "'; built-ins: " + known +
-                            "; or file:/path/scene.json");
+    return Status::NotFound("unknown specimen '" + name + "'; built-ins: " + known + "; or file:/path/scene.json");
   }
   return it->second(Grid{grid.camera_size, grid.pixel_size_um, grid.seed});
 }

@@ -1,13 +1,13 @@
 // The dashboard's JSON endpoints, thumbnails and static assets (dashboard.h).
 #include "server/http/dashboard.h"
 
+#include <google/protobuf/util/json_util.h>
+#include <httplib.h>
+
 #include <algorithm>
 #include <charconv>
 #include <cstdio>
 #include <filesystem>
-
-#include <google/protobuf/util/json_util.h>
-#include <httplib.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -144,12 +144,10 @@ void Dashboard::AddRoutes(HttpEndpoint& endpoint) {
       res.set_content(asset.body.data(), asset.body.size(), std::string(asset.content_type).c_str());
     });
   }
-  endpoint.AddDataRoute("/api/status", [this](const httplib::Request&, httplib::Response& res) {
-    SendJson(res, StatusJson());
-  });
-  endpoint.AddDataRoute("/api/live", [this](const httplib::Request&, httplib::Response& res) {
-    SendJson(res, LiveJson());
-  });
+  endpoint.AddDataRoute("/api/status",
+                        [this](const httplib::Request&, httplib::Response& res) { SendJson(res, StatusJson()); });
+  endpoint.AddDataRoute("/api/live",
+                        [this](const httplib::Request&, httplib::Response& res) { SendJson(res, LiveJson()); });
   endpoint.AddDataRoute("/api/jobs", [this](const httplib::Request& req, httplib::Response& res) {
     int limit = 20;
     if (req.has_param("limit")) {
@@ -163,46 +161,46 @@ void Dashboard::AddRoutes(HttpEndpoint& endpoint) {
   });
   // Job ids are letters, digits and '-' (data_store NewId): the pattern admits nothing that
   // could leave the data directory.
-  endpoint.AddDataRoute(R"(/api/jobs/([A-Za-z0-9_-]+)/frame\.png)", [this](const httplib::Request& req,
-                                                                            httplib::Response& res) {
-    const std::string id = req.matches[1];
-    int index = -1;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      auto it = live_.find(id);
-      if (it == live_.end() || it->second.frame_events == 0) return SendError(res, 404, "no running scan " + id);
-      const v1::JobEvent& f = it->second.last_frame_event;
-      // During acquisition the reported frame is being captured and its file is written after
-      // the event: the newest complete file is the one before it.
-      const bool acquiring = it->second.last_event.phase() == v1::JOB_PHASE_ACQUIRING;
-      index = f.frame().frame_index() - (acquiring ? 1 : 0);
-    }
-    if (index < 0) return SendError(res, 404, "no frame stored yet");
-    for (const fs::path& dir : {sources_.store->tmp_dir() / (id + ".stack"), sources_.store->scans_dir() / id}) {
-      std::string png = ThumbnailPng((dir / FrameName(index)).string(), 320);
-      if (png.empty()) continue;
-      res.set_header("X-Frame-Index", std::to_string(index));
-      res.set_content(std::move(png), "image/png");
-      return;
-    }
-    SendError(res, 404, "frame " + std::to_string(index) + " of " + id + " is not stored");
-  });
-  endpoint.AddDataRoute(R"(/api/jobs/([A-Za-z0-9_-]+)/preview\.png)", [this](const httplib::Request& req,
-                                                                              httplib::Response& res) {
-    auto record = sources_.jobs->Find(req.matches[1]);
-    if (!record.ok()) return SendError(res, 404, record.status().message());
-    const v1::Job job = (*record)->Snapshot();  // outlives the loop (a temporary's member would not)
-    for (const v1::Artifact& a : job.result().artifacts()) {
-      if (a.kind() != v1::ARTIFACT_KIND_DEPTH_PREVIEW_PNG) continue;
-      auto stored = sources_.store->GetArtifact(a.artifact_id());
-      if (!stored.ok()) break;
-      std::string png = ThumbnailPng(stored->path.string(), 480);
-      if (png.empty()) break;
-      res.set_content(std::move(png), "image/png");
-      return;
-    }
-    SendError(res, 404, "job has no depth preview");
-  });
+  endpoint.AddDataRoute(
+      R"(/api/jobs/([A-Za-z0-9_-]+)/frame\.png)", [this](const httplib::Request& req, httplib::Response& res) {
+        const std::string id = req.matches[1];
+        int index = -1;
+        {
+          std::lock_guard<std::mutex> lock(mu_);
+          auto it = live_.find(id);
+          if (it == live_.end() || it->second.frame_events == 0) return SendError(res, 404, "no running scan " + id);
+          const v1::JobEvent& f = it->second.last_frame_event;
+          // During acquisition the reported frame is being captured and its file is written after
+          // the event: the newest complete file is the one before it.
+          const bool acquiring = it->second.last_event.phase() == v1::JOB_PHASE_ACQUIRING;
+          index = f.frame().frame_index() - (acquiring ? 1 : 0);
+        }
+        if (index < 0) return SendError(res, 404, "no frame stored yet");
+        for (const fs::path& dir : {sources_.store->tmp_dir() / (id + ".stack"), sources_.store->scans_dir() / id}) {
+          std::string png = ThumbnailPng((dir / FrameName(index)).string(), 320);
+          if (png.empty()) continue;
+          res.set_header("X-Frame-Index", std::to_string(index));
+          res.set_content(std::move(png), "image/png");
+          return;
+        }
+        SendError(res, 404, "frame " + std::to_string(index) + " of " + id + " is not stored");
+      });
+  endpoint.AddDataRoute(
+      R"(/api/jobs/([A-Za-z0-9_-]+)/preview\.png)", [this](const httplib::Request& req, httplib::Response& res) {
+        auto record = sources_.jobs->Find(req.matches[1]);
+        if (!record.ok()) return SendError(res, 404, record.status().message());
+        const v1::Job job = (*record)->Snapshot();  // outlives the loop (a temporary's member would not)
+        for (const v1::Artifact& a : job.result().artifacts()) {
+          if (a.kind() != v1::ARTIFACT_KIND_DEPTH_PREVIEW_PNG) continue;
+          auto stored = sources_.store->GetArtifact(a.artifact_id());
+          if (!stored.ok()) break;
+          std::string png = ThumbnailPng(stored->path.string(), 480);
+          if (png.empty()) break;
+          res.set_content(std::move(png), "image/png");
+          return;
+        }
+        SendError(res, 404, "job has no depth preview");
+      });
 }
 
 }  // namespace inspection

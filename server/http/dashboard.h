@@ -51,9 +51,9 @@ class Dashboard {
   DashboardSources sources_;
 
   struct LiveJob {
-    v1::JobEvent last_event;         // without the job (terminal events end the entry)
-    v1::JobEvent last_frame_event;   // the newest event with frame progress
-    int64_t frame_events = 0;        // frame events so far: the live view's advancing counter
+    v1::JobEvent last_event;        // without the job (terminal events end the entry)
+    v1::JobEvent last_frame_event;  // the newest event with frame progress
+    int64_t frame_events = 0;       // frame events so far: the live view's advancing counter
   };
   std::mutex mu_;  // guards live_
   std::map<std::string, LiveJob> live_;

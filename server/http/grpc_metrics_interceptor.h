@@ -4,9 +4,9 @@
 // before their handler runs (authentication, bad arguments) count too.
 #pragma once
 
-#include <memory>
-
 #include <grpcpp/support/server_interceptor.h>
+
+#include <memory>
 
 #include "server/http/server_metrics.h"
 

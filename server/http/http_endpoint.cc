@@ -1,10 +1,10 @@
 // inspectd's HTTP port: routing, bearer-token checks and the serving thread (http_endpoint.h).
 #include "server/http/http_endpoint.h"
 
-#include <charconv>
-
 #include <httplib.h>
 #include <spdlog/spdlog.h>
+
+#include <charconv>
 
 namespace inspection {
 
@@ -34,8 +34,8 @@ HttpEndpoint::HttpEndpoint(HttpEndpointOptions options) : options_(std::move(opt
   }
   // Dashboard polls and scrapes are small; nothing here should be cached by a proxy, and the
   // page must not be framed by another site.
-  server_->set_default_headers({{"Cache-Control", "no-store"}, {"X-Content-Type-Options", "nosniff"},
-                                {"X-Frame-Options", "DENY"}});
+  server_->set_default_headers(
+      {{"Cache-Control", "no-store"}, {"X-Content-Type-Options", "nosniff"}, {"X-Frame-Options", "DENY"}});
 }
 
 HttpEndpoint::~HttpEndpoint() { Stop(); }

@@ -26,7 +26,7 @@ struct Response;
 namespace inspection {
 
 struct HttpEndpointOptions {
-  std::string listen_address;  // host:port; port 0 picks a free port (see port())
+  std::string listen_address;                   // host:port; port 0 picks a free port (see port())
   std::shared_ptr<const AccessControl> access;  // null = open (no authentication configured)
   std::string role_method = "GetRigStatus";     // the gRPC method whose role the data routes need
   // PEM files: with both, the port speaks HTTPS with the gRPC port's certificate, so a token

@@ -33,16 +33,19 @@ void CheckNames(const std::string& name, const std::vector<std::string>& labels)
 std::string EscapeHelp(std::string_view help) {
   std::string out;
   for (char c : help) {
-    if (c == '\\') out += "\\\\";
-    else if (c == '\n') out += "\\n";
-    else out += c;
+    if (c == '\\')
+      out += "\\\\";
+    else if (c == '\n')
+      out += "\\n";
+    else
+      out += c;
   }
   return out;
 }
 
 // {a="x",b="y"} plus an optional extra label (le for buckets); empty when there are none.
-std::string LabelText(const std::vector<std::string>& names, const LabelValues& values, std::string_view extra_name = {},
-                      std::string_view extra_value = {}) {
+std::string LabelText(const std::vector<std::string>& names, const LabelValues& values,
+                      std::string_view extra_name = {}, std::string_view extra_value = {}) {
   std::string out;
   for (size_t i = 0; i < names.size(); ++i) {
     out += out.empty() ? "{" : ",";
@@ -76,10 +79,14 @@ std::string FormatMetricValue(double v) {
 std::string EscapeLabelValue(std::string_view value) {
   std::string out;
   for (char c : value) {
-    if (c == '\\') out += "\\\\";
-    else if (c == '"') out += "\\\"";
-    else if (c == '\n') out += "\\n";
-    else out += c;
+    if (c == '\\')
+      out += "\\\\";
+    else if (c == '"')
+      out += "\\\"";
+    else if (c == '\n')
+      out += "\\n";
+    else
+      out += c;
   }
   return out;
 }
@@ -107,8 +114,9 @@ Histogram MetricsRegistry::AddHistogram(std::string name, std::string help, std:
       std::abort();
     }
   }
-  return Histogram(this, Add({std::move(name), std::move(help), Type::kHistogram, std::move(label_names),
-                              std::move(upper_bounds), {}}));
+  return Histogram(
+      this,
+      Add({std::move(name), std::move(help), Type::kHistogram, std::move(label_names), std::move(upper_bounds), {}}));
 }
 
 MetricsRegistry::Series& MetricsRegistry::SeriesLocked(size_t family, const LabelValues& labels) {
@@ -186,8 +194,8 @@ std::string MetricsRegistry::Render() const {
       uint64_t cumulative = 0;
       for (size_t i = 0; i < f.upper_bounds.size(); ++i) {
         cumulative += s.bucket_counts[i];
-        out += f.name + "_bucket" + LabelText(f.label_names, values, "le", FormatMetricValue(f.upper_bounds[i])) +
-               " " + std::to_string(cumulative) + "\n";
+        out += f.name + "_bucket" + LabelText(f.label_names, values, "le", FormatMetricValue(f.upper_bounds[i])) + " " +
+               std::to_string(cumulative) + "\n";
       }
       out += f.name + "_bucket" + LabelText(f.label_names, values, "le", "+Inf") + " " + std::to_string(s.count) + "\n";
       out += f.name + "_sum" + LabelText(f.label_names, values) + " " + FormatMetricValue(s.sum) + "\n";

@@ -5,11 +5,11 @@
 // Thread-safe.
 #pragma once
 
+#include <grpcpp/support/server_interceptor.h>
+
 #include <filesystem>
 #include <memory>
 #include <string>
-
-#include <grpcpp/support/server_interceptor.h>
 
 #include "server/http/dashboard.h"
 #include "server/http/http_endpoint.h"

@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <cctype>
-
 #include <chrono>
 
 namespace inspection {
@@ -35,38 +34,40 @@ std::string JobKindLabel(v1::JobKind kind) { return EnumLabel(v1::JobKind_Name(k
 std::string JobStateLabel(v1::JobState state) { return EnumLabel(v1::JobState_Name(state), "JOB_STATE_"); }
 
 std::string GrpcCodeName(int code) {
-  static const char* kNames[] = {"OK",          "CANCELLED",          "UNKNOWN",        "INVALID_ARGUMENT",
-                                 "DEADLINE_EXCEEDED", "NOT_FOUND",    "ALREADY_EXISTS", "PERMISSION_DENIED",
-                                 "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION", "ABORTED", "OUT_OF_RANGE",
-                                 "UNIMPLEMENTED", "INTERNAL",         "UNAVAILABLE",    "DATA_LOSS",
-                                 "UNAUTHENTICATED"};
+  static const char* kNames[] = {
+      "OK",        "CANCELLED",      "UNKNOWN",           "INVALID_ARGUMENT",   "DEADLINE_EXCEEDED",
+      "NOT_FOUND", "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
+      "ABORTED",   "OUT_OF_RANGE",   "UNIMPLEMENTED",     "INTERNAL",           "UNAVAILABLE",
+      "DATA_LOSS", "UNAUTHENTICATED"};
   if (code >= 0 && code < int(std::size(kNames))) return kNames[code];
   return "CODE_" + std::to_string(code);
 }
 
 ServerMetrics::ServerMetrics(std::string server_version, std::function<double()> now_s)
-    : jobs_(registry_.AddCounter("inspectd_jobs_total", "Jobs that ended, by kind and final state.",
-                                 {"kind", "state"})),
+    : jobs_(
+          registry_.AddCounter("inspectd_jobs_total", "Jobs that ended, by kind and final state.", {"kind", "state"})),
       job_duration_(registry_.AddHistogram("inspectd_job_duration_seconds",
                                            "Running time of jobs that ran (start to end), by kind.",
                                            kJobDurationBuckets_s, {"kind"})),
-      queue_wait_(registry_.AddHistogram("inspectd_job_queue_wait_seconds",
-                                         "Time jobs waited in their queue before they started, by kind (observed at their end).",
-                                         kQueueWaitBuckets_s, {"kind"})),
-      frames_acquired_(registry_.AddCounter("inspectd_frames_acquired_total",
-                                            "Camera captures of scans (stack frames, HDR exposures, ADAPT iterations).")),
-      last_scan_mean_grey_(registry_.AddGauge("inspectd_last_scan_mean_grey",
-                                              "Mean grey value (0..255) over the stack frames of the last finished scan.")),
-      last_scan_saturated_(registry_.AddGauge(
-          "inspectd_last_scan_saturated_percent",
-          "Saturated pixels in percent, averaged over the stack frames of the last finished scan.")),
+      queue_wait_(registry_.AddHistogram(
+          "inspectd_job_queue_wait_seconds",
+          "Time jobs waited in their queue before they started, by kind (observed at their end).", kQueueWaitBuckets_s,
+          {"kind"})),
+      frames_acquired_(
+          registry_.AddCounter("inspectd_frames_acquired_total",
+                               "Camera captures of scans (stack frames, HDR exposures, ADAPT iterations).")),
+      last_scan_mean_grey_(registry_.AddGauge(
+          "inspectd_last_scan_mean_grey", "Mean grey value (0..255) over the stack frames of the last finished scan.")),
+      last_scan_saturated_(
+          registry_.AddGauge("inspectd_last_scan_saturated_percent",
+                             "Saturated pixels in percent, averaged over the stack frames of the last finished scan.")),
       last_scan_frames_(registry_.AddGauge("inspectd_last_scan_frames", "Stack frames of the last finished scan.")),
       engine_seconds_(registry_.AddHistogram(
           "inspectd_reconstruct_engine_seconds",
           "SFF engine time of succeeded jobs: scan = last frame to depth map, reconstruct = the whole job.",
           kEngineBuckets_s, {"kind"})),
-      rig_state_(registry_.AddGauge("inspectd_rig_state", "1 for the rig's current state, 0 for the others.",
-                                    {"state"})),
+      rig_state_(
+          registry_.AddGauge("inspectd_rig_state", "1 for the rig's current state, 0 for the others.", {"state"})),
       rig_present_(registry_.AddGauge("inspectd_rig_present", "1 with a rig, 0 for inspectd --no-rig.")),
       queued_jobs_(registry_.AddGauge("inspectd_rig_queue_jobs", "Rig jobs waiting behind the running one.")),
       running_jobs_(registry_.AddGauge("inspectd_rig_job_running", "1 while a rig job (scan, calibration) runs.")),

@@ -10,10 +10,9 @@
 #include <chrono>
 #include <cmath>
 #include <ctime>
+#include <opencv2/imgproc.hpp>
 #include <random>
 #include <set>
-
-#include <opencv2/imgproc.hpp>
 
 #include "core/camera_response.h"
 #include "core/geometric_calibration.h"
@@ -67,8 +66,7 @@ cv::Mat Checkerboard(cv::Size size, int square_px) {
 // Everything a step needs to drive the rig: capture with cancellation, progress, frame count.
 class Session {
  public:
-  Session(Rig& rig, const std::function<void(const CalibrationProgress&)>& on_progress,
-          const std::atomic<bool>& cancel)
+  Session(Rig& rig, const std::function<void(const CalibrationProgress&)>& on_progress, const std::atomic<bool>& cancel)
       : rig_(rig), on_progress_(on_progress), cancel_(cancel) {
     max_grey_ = (1 << rig.camera().bit_depth()) - 1;
   }
@@ -93,9 +91,7 @@ class Session {
     if (on_progress_) on_progress_(progress_);
   }
 
-  Status CheckCancel() const {
-    return cancel_.load() ? Status::Cancelled("calibration cancelled") : Status::Ok();
-  }
+  Status CheckCancel() const { return cancel_.load() ? Status::Cancelled("calibration cancelled") : Status::Ok(); }
 
   StatusOr<cv::Mat> Capture(const cv::Mat& pattern, double exposure_us) {
     INSPECT_RETURN_IF_ERROR(CheckCancel());
@@ -203,8 +199,8 @@ class Targeting {
     const double step = d.z_step_um > 0 ? d.z_step_um : 5.0;
     if (!(hi > lo)) return Status::FailedPrecondition("autofocus: empty z range; set focus_z_um");
     const cv::Mat pattern = Checkerboard(s_.projector_size(), 1);
-    INSPECT_ASSIGN_OR_RETURN(double dt, s_.AutoExposure(cv::Mat(s_.projector_size(), CV_8UC1, cv::Scalar(255)), 0.99, 0.6,
-                                                        rig.camera().exposure_us()));
+    INSPECT_ASSIGN_OR_RETURN(double dt, s_.AutoExposure(cv::Mat(s_.projector_size(), CV_8UC1, cv::Scalar(255)), 0.99,
+                                                        0.6, rig.camera().exposure_us()));
     std::vector<double> zs, fm;
     for (double z = lo; z <= hi + 1e-9; z += step) {
       INSPECT_RETURN_IF_ERROR(s_.MoveTo(z));
@@ -271,8 +267,8 @@ Status RunProjectorResponse(Session& s, Targeting& t, const CalibrationOptions& 
   INSPECT_RETURN_IF_ERROR(t.Use(o.simulated_target).status());
   const cv::Size ps = s.projector_size();
   // dt_min: grey 255 with its 99th percentile at 80 % of full scale.
-  INSPECT_ASSIGN_OR_RETURN(double dt_min, s.AutoExposure(cv::Mat(ps, CV_8UC1, cv::Scalar(255)), 0.99, 0.8,
-                                                         s.rig().camera().exposure_us()));
+  INSPECT_ASSIGN_OR_RETURN(
+      double dt_min, s.AutoExposure(cv::Mat(ps, CV_8UC1, cv::Scalar(255)), 0.99, 0.8, s.rig().camera().exposure_us()));
   const double dt_max = std::min(dt_min * o.prf_exposure_span, 1e7);
   std::vector<int> levels;
   for (int g = 0; g < 255; g += o.prf_level_step) levels.push_back(g);
@@ -296,7 +292,8 @@ Status RunProjectorResponse(Session& s, Targeting& t, const CalibrationOptions& 
     // Restrict to the lit area when the geometry is known.
     cv::Mat lit(b.geometry->camera_size, CV_8UC1);
     for (int y = 0; y < lit.rows; ++y)
-      for (int x = 0; x < lit.cols; ++x) lit.at<uint8_t>(y, x) = std::isfinite(b.geometry->camera_to_projector.at<cv::Vec2f>(y, x)[0]) ? 255 : 0;
+      for (int x = 0; x < lit.cols; ++x)
+        lit.at<uint8_t>(y, x) = std::isfinite(b.geometry->camera_to_projector.at<cv::Vec2f>(y, x)[0]) ? 255 : 0;
     po.roi = cv::boundingRect(lit);
   }
   INSPECT_ASSIGN_OR_RETURN(ProjectorResponseFunction prf, EstimateProjectorResponse(caps, *b.camera_response, po));
@@ -316,8 +313,8 @@ Status RunGeometry(Session& s, Targeting& t, const CalibrationOptions& o, Calibr
                    CalibrationStepReport& rep) {
   INSPECT_RETURN_IF_ERROR(t.Use(o.simulated_geometry_target).status());
   const cv::Size ps = s.projector_size();
-  INSPECT_ASSIGN_OR_RETURN(double dt, s.AutoExposure(cv::Mat(ps, CV_8UC1, cv::Scalar(255)), 0.99, 0.75,
-                                                     s.rig().camera().exposure_us()));
+  INSPECT_ASSIGN_OR_RETURN(
+      double dt, s.AutoExposure(cv::Mat(ps, CV_8UC1, cv::Scalar(255)), 0.99, 0.75, s.rig().camera().exposure_us()));
   INSPECT_ASSIGN_OR_RETURN(cv::Mat black, s.Capture(cv::Mat::zeros(ps, CV_8UC1), dt));
   s.Item("black");
   const auto gray = MakeGrayCodePatterns(ps, o.gray_code_finest_stripe_px);
@@ -416,8 +413,8 @@ Status RunScatter(Session& s, Targeting& t, const CalibrationOptions& o, Calibra
                    : static_cast<int>(std::ceil(1.5 * g.camera_px_per_projector_px)) + 2;
   }
   // One exposure for every capture: the test pattern's brightest areas (uniform 255) at 80 %.
-  INSPECT_ASSIGN_OR_RETURN(double dt, s.AutoExposure(cv::Mat(ps, CV_8UC1, cv::Scalar(255)), 0.99, 0.8,
-                                                     s.rig().camera().exposure_us()));
+  INSPECT_ASSIGN_OR_RETURN(
+      double dt, s.AutoExposure(cv::Mat(ps, CV_8UC1, cv::Scalar(255)), 0.99, 0.8, s.rig().camera().exposure_us()));
   INSPECT_ASSIGN_OR_RETURN(cv::Mat black, s.Capture(cv::Mat::zeros(ps, CV_8UC1), dt));
   const cv::Mat black_radiance = crf.Radiance(black, dt);
   ScatterMatrixOptions so;
@@ -516,7 +513,8 @@ Status RunIntegralPsf(Session& s, Targeting& t, const CalibrationOptions& o, Cal
 Status CalibrationOptions::Validate() const {
   if (crf_exposure_count < 3) return Status::InvalidArgument("crf_exposure_count must be >= 3");
   if (!(crf_exposure_span > 1)) return Status::InvalidArgument("crf_exposure_span must be > 1");
-  if (crf_projector_grey < 1 || crf_projector_grey > 255) return Status::InvalidArgument("crf_projector_grey must be 1..255");
+  if (crf_projector_grey < 1 || crf_projector_grey > 255)
+    return Status::InvalidArgument("crf_projector_grey must be 1..255");
   if (prf_level_step < 1 || prf_level_step > 128) return Status::InvalidArgument("prf_level_step must be 1..128");
   if (!(prf_exposure_span >= 1)) return Status::InvalidArgument("prf_exposure_span must be >= 1");
   if (gray_code_finest_stripe_px < 2) return Status::InvalidArgument("gray_code_finest_stripe_px must be >= 2");
@@ -555,8 +553,9 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
   const cv::Size cam = rig.camera().frame_size(), proj = rig.projector().resolution();
   if (previous) {
     if (previous->camera_size != cam || previous->projector_size != proj) {
-      return Status::FailedPrecondition("previous calibration is for camera " + std::to_string(previous->camera_size.width) +
-                                        "x" + std::to_string(previous->camera_size.height) + " / projector " +
+      return Status::FailedPrecondition("previous calibration is for camera " +
+                                        std::to_string(previous->camera_size.width) + "x" +
+                                        std::to_string(previous->camera_size.height) + " / projector " +
                                         std::to_string(previous->projector_size.width) + "x" +
                                         std::to_string(previous->projector_size.height) + ", the rig differs");
     }
@@ -584,7 +583,8 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
     if (!wanted.count(step)) continue;
     for (CalibrationStep d : needs) {
       if (!available(d, step)) {
-        return Status::FailedPrecondition(std::string(CalibrationStepName(step)) + " needs a " + CalibrationStepName(d) +
+        return Status::FailedPrecondition(std::string(CalibrationStepName(step)) + " needs a " +
+                                          CalibrationStepName(d) +
                                           " calibration: run that step too or pass a previous bundle that has it");
       }
     }
@@ -598,11 +598,13 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
   for (int i = 0; i < count; ++i) {
     const CalibrationStep step = steps[i];
     const int sp_geo = options.geometry_grid_spacing_px, sp_sc = options.scatter_grid_spacing_px;
-    const int items[] = {options.crf_exposure_count, (255 + options.prf_level_step - 1) / options.prf_level_step + 1,
-                         1 + static_cast<int>(MakeGrayCodePatterns(proj, options.gray_code_finest_stripe_px).size()) +
-                             sp_geo * sp_geo,
-                         static_cast<int>(options.psf_defocus_um.size()), sp_sc * sp_sc + 1,
-                         2 * static_cast<int>(std::floor(options.ipsf_half_range_um / options.ipsf_step_um + 1e-9)) + 1};
+    const int items[] = {
+        options.crf_exposure_count,
+        (255 + options.prf_level_step - 1) / options.prf_level_step + 1,
+        1 + static_cast<int>(MakeGrayCodePatterns(proj, options.gray_code_finest_stripe_px).size()) + sp_geo * sp_geo,
+        static_cast<int>(options.psf_defocus_um.size()),
+        sp_sc * sp_sc + 1,
+        2 * static_cast<int>(std::floor(options.ipsf_half_range_um / options.ipsf_step_um + 1e-9)) + 1};
     session.BeginStep(CalibrationStepName(step), i, count, items[static_cast<int>(step)]);
     const int frames_before = session.frames();
     const auto t0 = Clock::now();
@@ -610,12 +612,24 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
     rep.step = step;
     Status st;
     switch (step) {
-      case CalibrationStep::kCameraResponse: st = RunCameraResponse(session, targeting, options, b, rep); break;
-      case CalibrationStep::kProjectorResponse: st = RunProjectorResponse(session, targeting, options, b, rep); break;
-      case CalibrationStep::kGeometry: st = RunGeometry(session, targeting, options, b, rep); break;
-      case CalibrationStep::kPsf: st = RunPsf(session, targeting, options, b, rep); break;
-      case CalibrationStep::kScatterMatrix: st = RunScatter(session, targeting, options, b, rep); break;
-      case CalibrationStep::kIntegralPsf: st = RunIntegralPsf(session, targeting, options, b, rep); break;
+      case CalibrationStep::kCameraResponse:
+        st = RunCameraResponse(session, targeting, options, b, rep);
+        break;
+      case CalibrationStep::kProjectorResponse:
+        st = RunProjectorResponse(session, targeting, options, b, rep);
+        break;
+      case CalibrationStep::kGeometry:
+        st = RunGeometry(session, targeting, options, b, rep);
+        break;
+      case CalibrationStep::kPsf:
+        st = RunPsf(session, targeting, options, b, rep);
+        break;
+      case CalibrationStep::kScatterMatrix:
+        st = RunScatter(session, targeting, options, b, rep);
+        break;
+      case CalibrationStep::kIntegralPsf:
+        st = RunIntegralPsf(session, targeting, options, b, rep);
+        break;
     }
     if (!st.ok()) return st.WithContext(CalibrationStepName(step));
     rep.duration_s = std::chrono::duration<double>(Clock::now() - t0).count();

@@ -24,12 +24,12 @@
 namespace inspection {
 
 struct CalibrationProgress {
-  std::string step;       // CalibrationStepName, or "focus" while focusing on the target
-  int step_index = 0;     // 0-based among the steps of this run
+  std::string step;    // CalibrationStepName, or "focus" while focusing on the target
+  int step_index = 0;  // 0-based among the steps of this run
   int step_count = 0;
-  int item = 0;           // frames (or sub-tasks) done in this step
+  int item = 0;  // frames (or sub-tasks) done in this step
   int item_count = 0;
-  std::string message;    // human-readable, e.g. "dot grid 12/64"
+  std::string message;  // human-readable, e.g. "dot grid 12/64"
 };
 
 struct CalibrationOptions {

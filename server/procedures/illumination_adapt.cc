@@ -59,10 +59,9 @@ class PredictiveAdaptIllumination : public IlluminationStrategy {
     // Their corrections light the first z again (the second one its stack frame).
     for (int k = 0; k < 2; ++k) {
       INSPECT_ASSIGN_OR_RETURN(cv::Mat p, k == 0 ? StatusOr<cv::Mat>(uniform) : comp_.Shown(irr_next_));
-      INSPECT_ASSIGN_OR_RETURN(cv::Mat f, rig.Capture(0, p, plan_.exposure_us, CaptureRole::kRawFrame,
-                                                      RawFrameName(0, "init", k)));
-      INSPECT_ASSIGN_OR_RETURN(CompensationStep st,
-                               comp_.Correct(p, f, plan_.exposure_us, irr_next_, ShownAt::kSameZ));
+      INSPECT_ASSIGN_OR_RETURN(
+          cv::Mat f, rig.Capture(0, p, plan_.exposure_us, CaptureRole::kRawFrame, RawFrameName(0, "init", k)));
+      INSPECT_ASSIGN_OR_RETURN(CompensationStep st, comp_.Correct(p, f, plan_.exposure_us, irr_next_, ShownAt::kSameZ));
       irr_next_ = st.projector_irradiance;
     }
     return Status::Ok();

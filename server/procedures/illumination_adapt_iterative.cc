@@ -32,14 +32,14 @@ class IterativeAdaptIllumination : public IlluminationStrategy {
     double last_err = std::numeric_limits<double>::infinity();
     for (int k = 0;; ++k) {
       INSPECT_ASSIGN_OR_RETURN(pattern, comp_.Shown(irr));
-      INSPECT_ASSIGN_OR_RETURN(frame, rig.Capture(i, pattern, plan_.exposure_us, CaptureRole::kUndecided,
-                                                  RawFrameName(i, "it", k)));
+      INSPECT_ASSIGN_OR_RETURN(
+          frame, rig.Capture(i, pattern, plan_.exposure_us, CaptureRole::kUndecided, RawFrameName(i, "it", k)));
       // Each iteration's correction lights this z again: the thesis's per-pixel estimate.
       INSPECT_ASSIGN_OR_RETURN(CompensationStep st,
                                comp_.Correct(pattern, frame, plan_.exposure_us, irr, ShownAt::kSameZ));
       const double err = st.mean_abs_error_grey / level_scale;
-      const bool done = k + 1 >= prm.max_iterations || err < prm.tolerance_grey ||
-                        err > last_err * (1.0 - prm.min_improvement);
+      const bool done =
+          k + 1 >= prm.max_iterations || err < prm.tolerance_grey || err > last_err * (1.0 - prm.min_improvement);
       last_err = err;
       rig.DecideLastCapture(done);
       if (done) break;

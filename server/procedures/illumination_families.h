@@ -5,7 +5,6 @@
 
 #include <functional>
 #include <memory>
-
 #include <opencv2/core.hpp>
 
 #include "core/compensation.h"
@@ -16,9 +15,9 @@ namespace inspection {
 std::unique_ptr<IlluminationStrategy> MakeUniformIllumination(const ScanPlan& plan,
                                                               const IlluminationSetup& setup);  // STD
 std::unique_ptr<IlluminationStrategy> MakeHdrIllumination(const ScanPlan& plan, const CalibrationBundle& bundle,
-                                                          const IlluminationSetup& setup);          // HDR-n
+                                                          const IlluminationSetup& setup);  // HDR-n
 std::unique_ptr<IlluminationStrategy> MakeTextureIllumination(const ScanPlan& plan, const CalibrationBundle& bundle,
-                                                              const IlluminationSetup& setup);      // TEXTURE
+                                                              const IlluminationSetup& setup);  // TEXTURE
 
 // What an ADAPT-family mode compensates towards and how it shows the solved irradiance.
 struct CompensationTarget {

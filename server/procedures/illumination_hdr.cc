@@ -39,15 +39,16 @@ class HdrIllumination : public IlluminationStrategy {
     const int top = (1 << setup_.camera_bit_depth) - 1;
     hi_ = std::exp(crf_.LogExposure(top)) / exposures_us_.front();
     lo_ = std::exp(crf_.LogExposure(1)) / exposures_us_.back();
-    pattern_name_ = "uniform:" + std::to_string(plan_.uniform_grey) + ":hdr" + std::to_string(plan_.params.hdr_exposures);
+    pattern_name_ =
+        "uniform:" + std::to_string(plan_.uniform_grey) + ":hdr" + std::to_string(plan_.params.hdr_exposures);
     return rig.ShowPattern(cv::Mat(setup_.projector_size, CV_8UC1, cv::Scalar(plan_.uniform_grey)));
   }
 
   StatusOr<CapturedStackFrame> CaptureStackFrame(int i, ScanCaptureContext& rig) override {
     std::vector<cv::Mat> frames;
     for (size_t k = 0; k < exposures_us_.size(); ++k) {
-      INSPECT_ASSIGN_OR_RETURN(cv::Mat f, rig.Capture(i, cv::Mat(), exposures_us_[k], CaptureRole::kRawFrame,
-                                                      RawFrameName(i, "e", int(k))));
+      INSPECT_ASSIGN_OR_RETURN(
+          cv::Mat f, rig.Capture(i, cv::Mat(), exposures_us_[k], CaptureRole::kRawFrame, RawFrameName(i, "e", int(k))));
       frames.push_back(f);
     }
     INSPECT_ASSIGN_OR_RETURN(cv::Mat e, MergeRadiance(frames, exposures_us_, crf_));  // eq. 3.44

@@ -10,13 +10,16 @@ namespace inspection {
 std::unique_ptr<IlluminationStrategy> CreateIlluminationStrategy(const ScanPlan& plan, const CalibrationBundle* bundle,
                                                                  const IlluminationSetup& setup) {
   switch (plan.mode) {
-    case IlluminationMode::kStd: break;
-    case IlluminationMode::kHdr: return MakeHdrIllumination(plan, *bundle, setup);
+    case IlluminationMode::kStd:
+      break;
+    case IlluminationMode::kHdr:
+      return MakeHdrIllumination(plan, *bundle, setup);
     case IlluminationMode::kAdaptIterative:
       return MakeIterativeAdaptIllumination(plan, *bundle, setup, UniformGreyTarget(plan, setup));
     case IlluminationMode::kAdapt:
       return MakePredictiveAdaptIllumination(plan, *bundle, setup, UniformGreyTarget(plan, setup));
-    case IlluminationMode::kTexture: return MakeTextureIllumination(plan, *bundle, setup);
+    case IlluminationMode::kTexture:
+      return MakeTextureIllumination(plan, *bundle, setup);
     case IlluminationMode::kHfAdapt:
       return MakePredictiveAdaptIllumination(plan, *bundle, setup, HfAdaptTarget(plan, *bundle, setup));
     case IlluminationMode::kAdaptedHf:

@@ -32,8 +32,8 @@ class TextureIllumination : public IlluminationStrategy {
     INSPECT_ASSIGN_OR_RETURN(TexturePeriod period, PlanTexturePeriod(plan_, bundle_));
     INSPECT_ASSIGN_OR_RETURN(cv::Mat pattern,
                              MakeHfPattern(setup_.projector_size, period.cell_projector_px, plan_.params.gamma));
-    pattern_name_ = "checkerboard:" + std::to_string(period.cell_projector_px) +
-                    ":gamma=" + std::to_string(plan_.params.gamma);
+    pattern_name_ =
+        "checkerboard:" + std::to_string(period.cell_projector_px) + ":gamma=" + std::to_string(plan_.params.gamma);
     // Same mean projector irradiance as STD's uniform pattern: the exposure is scaled by
     // prf(uniform) / mean prf(checkerboard), so the mean grey stays near STD's.
     const ProjectorResponseFunction& pr = *bundle_.projector_response;
@@ -89,8 +89,8 @@ CompensationTargetFactory AdaptedHfTarget(const ScanPlan& plan, const Calibratio
     t.options.texture_period_camera_px = 2.0 * period.half_period_camera_px;
     const double level_scale = LevelScale(setup);
     // Thesis: 25 % / 75 % of full scale, 60 and 190 for 8 bit.
-    t.desired_grey = CameraCheckerboard(setup.camera_size, period.half_period_camera_px, 60.0 * level_scale,
-                                        190.0 * level_scale);
+    t.desired_grey =
+        CameraCheckerboard(setup.camera_size, period.half_period_camera_px, 60.0 * level_scale, 190.0 * level_scale);
     return t;
   };
 }

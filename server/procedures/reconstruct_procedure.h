@@ -14,8 +14,16 @@
 
 namespace inspection {
 
-enum class DepthExportKind { kDepthTiff, kConfidenceTiff, kAllInFocusPng, kDepthPreviewPng, kDepthPng16, kDepthPly,
-                             kDepthX3p, kGroundTruthTiff };
+enum class DepthExportKind {
+  kDepthTiff,
+  kConfidenceTiff,
+  kAllInFocusPng,
+  kDepthPreviewPng,
+  kDepthPng16,
+  kDepthPly,
+  kDepthX3p,
+  kGroundTruthTiff
+};
 
 struct DepthArtifactFile {
   DepthExportKind kind;
@@ -25,7 +33,8 @@ struct DepthArtifactFile {
 // Writes depth.tiff, confidence.tiff, all_in_focus.png, depth_preview.png and the requested
 // extras (kDepthPng16, kDepthPly, kDepthX3p) into dir. On error, files already written stay for
 // the caller to discard with the folder.
-StatusOr<std::vector<DepthArtifactFile>> WriteDepthArtifacts(const DepthResult& result, const std::filesystem::path& dir,
+StatusOr<std::vector<DepthArtifactFile>> WriteDepthArtifacts(const DepthResult& result,
+                                                             const std::filesystem::path& dir,
                                                              const DepthExportMeta& meta,
                                                              const std::vector<DepthExportKind>& extras);
 

@@ -5,7 +5,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/depth_export.h"
@@ -35,8 +34,7 @@ StatusOr<ScanPlan> MakeScanPlan(double z_start_um, double z_end_um, double z_ste
   const long steps = long(std::floor(span / z_step_um + 1e-6));
   if (steps + 1 < 3) {
     return Status::InvalidArgument("z range [" + std::to_string(z_start_um) + ", " + std::to_string(z_end_um) +
-                                   "] with z_step_um " + std::to_string(z_step_um) +
-                                   " gives fewer than 3 frames");
+                                   "] with z_step_um " + std::to_string(z_step_um) + " gives fewer than 3 frames");
   }
   if (steps + 1 > 5000) return Status::InvalidArgument("z range and z_step_um give more than 5000 frames");
   ScanPlan plan;
@@ -53,31 +51,44 @@ Status IlluminationParams::Validate() const {
   if (!(psi >= 0 && psi <= 1)) return Status::InvalidArgument("psi must be in [0, 1]");
   if (max_iterations < 1 || max_iterations > 20) return Status::InvalidArgument("max_iterations must be in [1, 20]");
   if (!(tolerance_grey > 0)) return Status::InvalidArgument("tolerance_grey must be > 0");
-  if (!(min_improvement >= 0 && min_improvement < 1)) return Status::InvalidArgument("min_improvement must be in [0, 1)");
+  if (!(min_improvement >= 0 && min_improvement < 1))
+    return Status::InvalidArgument("min_improvement must be in [0, 1)");
   if (!(target_grey > 0 && target_grey < 255)) return Status::InvalidArgument("target_grey must be in (0, 255)");
   return compensation.Validate();
 }
 
 std::string IlluminationModeName(IlluminationMode mode, int hdr_exposures) {
   switch (mode) {
-    case IlluminationMode::kStd: return "STD";
-    case IlluminationMode::kHdr: return "HDR" + std::to_string(hdr_exposures);
-    case IlluminationMode::kAdaptIterative: return "ADAPT-IT";
-    case IlluminationMode::kAdapt: return "ADAPT";
-    case IlluminationMode::kTexture: return "TEXTURE";
-    case IlluminationMode::kHfAdapt: return "HF+ADAPT";
-    case IlluminationMode::kAdaptedHf: return "ADAPTED-HF";
+    case IlluminationMode::kStd:
+      return "STD";
+    case IlluminationMode::kHdr:
+      return "HDR" + std::to_string(hdr_exposures);
+    case IlluminationMode::kAdaptIterative:
+      return "ADAPT-IT";
+    case IlluminationMode::kAdapt:
+      return "ADAPT";
+    case IlluminationMode::kTexture:
+      return "TEXTURE";
+    case IlluminationMode::kHfAdapt:
+      return "HF+ADAPT";
+    case IlluminationMode::kAdaptedHf:
+      return "ADAPTED-HF";
   }
   return "?";
 }
 
 StatusOr<std::vector<double>> HdrRelativeExposures(int n) {
   switch (n) {  // thesis Table 6.2, in % of the STD exposure
-    case 2: return std::vector<double>{0.50, 1.50};
-    case 3: return std::vector<double>{0.50, 1.00, 2.00};
-    case 4: return std::vector<double>{0.25, 0.75, 1.50, 2.00};
-    case 5: return std::vector<double>{0.25, 0.50, 1.00, 2.00, 4.00};
-    default: return Status::InvalidArgument("hdr_exposures must be in [2, 5] (thesis Table 6.2)");
+    case 2:
+      return std::vector<double>{0.50, 1.50};
+    case 3:
+      return std::vector<double>{0.50, 1.00, 2.00};
+    case 4:
+      return std::vector<double>{0.25, 0.75, 1.50, 2.00};
+    case 5:
+      return std::vector<double>{0.25, 0.50, 1.00, 2.00, 4.00};
+    default:
+      return Status::InvalidArgument("hdr_exposures must be in [2, 5] (thesis Table 6.2)");
   }
 }
 
@@ -85,8 +96,8 @@ Status CheckCalibrationFor(IlluminationMode mode, const CalibrationBundle* bundl
   std::vector<CalibrationStep> need;
   const bool adapt = mode == IlluminationMode::kAdaptIterative || mode == IlluminationMode::kAdapt ||
                      mode == IlluminationMode::kHfAdapt || mode == IlluminationMode::kAdaptedHf;
-  const bool texture = mode == IlluminationMode::kTexture || mode == IlluminationMode::kHfAdapt ||
-                       mode == IlluminationMode::kAdaptedHf;
+  const bool texture =
+      mode == IlluminationMode::kTexture || mode == IlluminationMode::kHfAdapt || mode == IlluminationMode::kAdaptedHf;
   if (mode == IlluminationMode::kHdr || adapt) need.push_back(CalibrationStep::kCameraResponse);
   if (adapt || texture) need.push_back(CalibrationStep::kProjectorResponse);
   if (texture) need.push_back(CalibrationStep::kGeometry);
@@ -94,12 +105,13 @@ Status CheckCalibrationFor(IlluminationMode mode, const CalibrationBundle* bundl
   if (adapt) need.push_back(CalibrationStep::kScatterMatrix);
   std::string missing;
   for (CalibrationStep s : need) {
-    if (bundle == nullptr || !bundle->HasModel(s)) missing += std::string(missing.empty() ? "" : ", ") + CalibrationStepName(s);
+    if (bundle == nullptr || !bundle->HasModel(s))
+      missing += std::string(missing.empty() ? "" : ", ") + CalibrationStepName(s);
   }
   if (!missing.empty()) {
-    return Status::FailedPrecondition("illumination " + IlluminationModeName(mode) +
-                                      " needs the calibration step(s) " + missing +
-                                      (bundle == nullptr ? " (no active calibration)" : " (missing in the active calibration)"));
+    return Status::FailedPrecondition(
+        "illumination " + IlluminationModeName(mode) + " needs the calibration step(s) " + missing +
+        (bundle == nullptr ? " (no active calibration)" : " (missing in the active calibration)"));
   }
   return Status::Ok();
 }
@@ -113,7 +125,12 @@ class ScanRecorder : public ScanCaptureContext {
   ScanRecorder(Rig& rig, const ScanPlan& plan, const fs::path& stack_dir,
                const std::function<void(const ScanFrameEvent&)>& on_frame, const std::atomic<bool>& cancel,
                ScanOutcome& out)
-      : rig_(rig), plan_(plan), stack_dir_(stack_dir), on_frame_(on_frame), cancel_(cancel), out_(out),
+      : rig_(rig),
+        plan_(plan),
+        stack_dir_(stack_dir),
+        on_frame_(on_frame),
+        cancel_(cancel),
+        out_(out),
         count_(int(plan.z_um.size())) {}
 
   Status CheckCancel(int i) const {
@@ -155,8 +172,10 @@ class ScanRecorder : public ScanCaptureContext {
     ev.exposure_us = camera.exposure_us();
     ev.statistics = st;
     ev.acquisition = acquisitions_;
-    if (role == CaptureRole::kUndecided) pending_ = ev;
-    else Report(ev, stack_frame);
+    if (role == CaptureRole::kUndecided)
+      pending_ = ev;
+    else
+      Report(ev, stack_frame);
     ++acquisitions_;
     return frame;
   }

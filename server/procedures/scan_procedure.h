@@ -59,13 +59,13 @@ StatusOr<std::vector<double>> HdrRelativeExposures(int n);
 Status CheckCalibrationFor(IlluminationMode mode, const CalibrationBundle* bundle);
 
 struct ScanPlan {
-  std::vector<double> z_um;       // stage positions in acquisition order
+  std::vector<double> z_um;  // stage positions in acquisition order
   double exposure_us = 0.0;
-  int uniform_grey = 128;          // STD projector pattern
+  int uniform_grey = 128;  // STD projector pattern
   IlluminationMode mode = IlluminationMode::kStd;
   IlluminationParams params;
   SffOptions sff;
-  std::string calibration_id;      // recorded in stack.json
+  std::string calibration_id;  // recorded in stack.json
 };
 
 // Builds the z positions from start to end (inclusive when end falls on the grid) with step
@@ -80,7 +80,7 @@ struct ScanFrameEvent {
   double z_um = 0.0;  // position reported by the stage
   double exposure_us = 0.0;
   FrameStatistics statistics;
-  int acquisition = 0;      // 0-based number of this capture in the scan (all captures)
+  int acquisition = 0;  // 0-based number of this capture in the scan (all captures)
   // false for HDR exposures, ADAPT initialisation frames and ADAPT-IT iterations that are not
   // kept. ADAPT-IT reports each iteration after its stop test, so the kept one says true.
   bool stack_frame = true;
@@ -91,8 +91,8 @@ struct ScanOutcome {
   DepthResult depth;
   cv::Mat ground_truth_um;  // simulated rig only; empty otherwise
   double acquisition_seconds = 0.0;
-  double engine_finish_seconds = 0.0;  // time from the last frame to the depth map
-  int images_acquired = 0;                    // every capture (thesis Table 6.3 #imgs)
+  double engine_finish_seconds = 0.0;               // time from the last frame to the depth map
+  int images_acquired = 0;                          // every capture (thesis Table 6.3 #imgs)
   std::vector<FrameStatistics> capture_statistics;  // per capture, in order (Fig. 6.3)
   std::vector<bool> capture_is_stack_frame;
 };

@@ -5,9 +5,9 @@
 //   (the same patches through Eigen's setFromTriplets);
 //   BM_ScatterPredict (one predicted camera image, eq. 4.12) vs BM_FrameCopy (one float frame copy).
 #include <benchmark/benchmark.h>
-#include <opencv2/imgproc.hpp>
 
 #include <Eigen/SparseCore>
+#include <opencv2/imgproc.hpp>
 
 #include "core/geometric_calibration.h"
 #include "core/scatter_matrix.h"
@@ -99,7 +99,8 @@ void BM_ScatterBuildTriplets(benchmark::State& state) {
                 peak = std::max(peak, capture.at<float>(y, x));
             for (int y = std::max(0, cy - kRadius); y <= std::min(cam.height - 1, cy + kRadius); ++y)
               for (int x = std::max(0, cx - kRadius); x <= std::min(cam.width - 1, cx + kRadius); ++x)
-                if (capture.at<float>(y, x) > 0.005f * peak) t.emplace_back(y * cam.width + x, v * proj.width + u, capture.at<float>(y, x));
+                if (capture.at<float>(y, x) > 0.005f * peak)
+                  t.emplace_back(y * cam.width + x, v * proj.width + u, capture.at<float>(y, x));
           }
       }
     Eigen::SparseMatrix<float> a(cam.area(), proj.area());

@@ -13,13 +13,12 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <random>
-#include <string>
-#include <vector>
-
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
+#include <string>
+#include <vector>
 
 #include "core/depth_export.h"
 #include "core/sff_engine.h"
@@ -32,9 +31,7 @@ using inspection::SffOptions;
 
 namespace {
 
-double Now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
+double Now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 
 // kB from /proc/self/status ("VmRSS" or "VmHWM").
 long ProcStatusKb(const char* key) {
@@ -76,19 +73,32 @@ bool ParseArgs(int argc, char** argv, Args* a) {
   for (int i = 1; i < argc; ++i) {
     const std::string k = argv[i];
     auto next = [&]() -> std::string { return i + 1 < argc ? argv[++i] : ""; };
-    if (k == "--stack") a->stack = next();
-    else if (k == "--keep") a->keep = next();
-    else if (k == "--width") a->width = std::stoi(next());
-    else if (k == "--height") a->height = std::stoi(next());
-    else if (k == "--frames") a->frames = std::stoi(next());
-    else if (k == "--dz") a->dz_um = std::stod(next());
-    else if (k == "--repeat") a->repeat = std::max(1, std::stoi(next()));
-    else if (k == "--engine-only") a->engine_only = true;
-    else if (k == "--dump-depth") a->dump_depth = next();
-    else if (k == "--no-simd") a->options.use_simd = false;      // portable kernels
-    else if (k == "--no-avx512") a->options.use_avx512 = false;  // AVX2 kernels only
-    else if (k == "--threads") a->options.threads = std::stoi(next());
-    else if (k == "--window") a->options.window_px = std::stoi(next());
+    if (k == "--stack")
+      a->stack = next();
+    else if (k == "--keep")
+      a->keep = next();
+    else if (k == "--width")
+      a->width = std::stoi(next());
+    else if (k == "--height")
+      a->height = std::stoi(next());
+    else if (k == "--frames")
+      a->frames = std::stoi(next());
+    else if (k == "--dz")
+      a->dz_um = std::stod(next());
+    else if (k == "--repeat")
+      a->repeat = std::max(1, std::stoi(next()));
+    else if (k == "--engine-only")
+      a->engine_only = true;
+    else if (k == "--dump-depth")
+      a->dump_depth = next();
+    else if (k == "--no-simd")
+      a->options.use_simd = false;  // portable kernels
+    else if (k == "--no-avx512")
+      a->options.use_avx512 = false;  // AVX2 kernels only
+    else if (k == "--threads")
+      a->options.threads = std::stoi(next());
+    else if (k == "--window")
+      a->options.window_px = std::stoi(next());
     else if (k == "--measure") {
       auto m = inspection::ParseFocusMeasure(next());
       if (!m.ok()) return std::fprintf(stderr, "%s\n", m.status().ToString().c_str()), false;
@@ -132,8 +142,10 @@ inspection::Status GenerateStack(const fs::path& dir, const Args& a) {
   std::vector<cv::Mat> levels;
   for (double s = 0; s <= sigma_max + dsig; s += dsig) {
     cv::Mat b;
-    if (s < 0.05) b = texture.clone();
-    else cv::GaussianBlur(texture, b, cv::Size(0, 0), s);
+    if (s < 0.05)
+      b = texture.clone();
+    else
+      cv::GaussianBlur(texture, b, cv::Size(0, 0), s);
     levels.push_back(b);
   }
   inspection::StackManifest m;
@@ -155,7 +167,8 @@ inspection::Status GenerateStack(const fs::path& dir, const Args& a) {
         const double pos = s / dsig;
         const int i = std::min(int(pos), int(levels.size()) - 2);
         const double w = pos - i;
-        const double v = (1 - w) * levels[size_t(i)].at<float>(y, x) + w * levels[size_t(i) + 1].at<float>(y, x) + nr[x];
+        const double v =
+            (1 - w) * levels[size_t(i)].at<float>(y, x) + w * levels[size_t(i) + 1].at<float>(y, x) + nr[x];
         fr[x] = cv::saturate_cast<uint8_t>(v);
       }
     }
@@ -238,7 +251,8 @@ int main(int argc, char** argv) {
   bool remove_dir = false;
   double generate_s = 0;
   if (dir.empty()) {
-    dir = a.keep.empty() ? fs::temp_directory_path() / ("inspect_bench_stack_" + std::to_string(::getpid())) : fs::path(a.keep);
+    dir = a.keep.empty() ? fs::temp_directory_path() / ("inspect_bench_stack_" + std::to_string(::getpid()))
+                         : fs::path(a.keep);
     remove_dir = a.keep.empty();
     const double t0 = Now();
     auto st = GenerateStack(dir, a);
@@ -247,8 +261,8 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "generate: %s\n", st.ToString().c_str());
       return 1;
     }
-    std::fprintf(stderr, "generated %dx%d x %d frames in %s (%.1f s)\n", a.width, a.height, a.frames,
-                 dir.c_str(), generate_s);
+    std::fprintf(stderr, "generated %dx%d x %d frames in %s (%.1f s)\n", a.width, a.height, a.frames, dir.c_str(),
+                 generate_s);
   }
 
   // Load/decode, timed on its own.

@@ -8,6 +8,8 @@
 //        [--modes STD,ADAPT,...]   (default 256x192, 96x72, seed 5, all tables, every specimen and mode)
 // --bias-only prints only the last table; --specimens / --modes restrict it (for quick checks).
 // Exit status 3 when a mode exceeds the bias bound.
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -15,7 +17,6 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string>
-#include <unistd.h>
 
 #include "core/depth_metrics.h"
 #include "devices/sim/simulated_rig.h"
@@ -59,14 +60,15 @@ struct Evaluator {
     r.z_step_um = z_step_um;
     if (!rig->simulation()->SetSpecimen(specimen).ok()) return r;
     const ScanDefaults d = rig->scan_defaults();
-    auto plan = MakeScanPlan(d.z_start_um, d.z_end_um, z_step_um > 0 ? z_step_um : d.z_step_um, d.exposure_us,
-                             rig->stage());
+    auto plan =
+        MakeScanPlan(d.z_start_um, d.z_end_um, z_step_um > 0 ? z_step_um : d.z_step_um, d.exposure_us, rig->stage());
     if (!plan.ok()) return r;
     plan->mode = mode;
     plan->params = params;
     plan->sff.window_px = kWindowPx;
     std::atomic<bool> cancel{false};
-    const fs::path stack = dir / (specimen + "_" + std::to_string(int(mode)) + "_" + std::to_string(params.hdr_exposures));
+    const fs::path stack =
+        dir / (specimen + "_" + std::to_string(int(mode)) + "_" + std::to_string(params.hdr_exposures));
     auto o = RunScan(*rig, *plan, stack, nullptr, cancel, bundle);
     std::error_code ec;
     fs::remove_all(stack, ec);
@@ -117,10 +119,10 @@ int Main(int argc, char** argv) {
   ro.seed = 5;
   bool bias_only = false;
   std::vector<std::string> specimens = BuiltinSpecimenNames();
-  const IlluminationMode all_modes[] = {IlluminationMode::kStd,     IlluminationMode::kHdr,
-                                        IlluminationMode::kAdaptIterative, IlluminationMode::kAdapt,
-                                        IlluminationMode::kTexture, IlluminationMode::kHfAdapt,
-                                        IlluminationMode::kAdaptedHf};
+  const IlluminationMode all_modes[] = {
+      IlluminationMode::kStd,      IlluminationMode::kHdr,     IlluminationMode::kAdaptIterative,
+      IlluminationMode::kAdapt,    IlluminationMode::kTexture, IlluminationMode::kHfAdapt,
+      IlluminationMode::kAdaptedHf};
   std::vector<IlluminationMode> modes(std::begin(all_modes), std::end(all_modes));
   const char* usage =
       "usage: inspect-evaluate [--camera WxH] [--projector WxH] [--seed N] [--bias-only] [--specimens a,b] "
@@ -136,10 +138,14 @@ int Main(int argc, char** argv) {
       return 2;
     }
     const std::string v = argv[++i];
-    if (a == "--camera") ro.camera_size = ParseSize(v.c_str());
-    else if (a == "--projector") ro.projector_size = ParseSize(v.c_str());
-    else if (a == "--seed") ro.seed = std::strtoull(v.c_str(), nullptr, 10);
-    else if (a == "--specimens") specimens = SplitCommas(v);
+    if (a == "--camera")
+      ro.camera_size = ParseSize(v.c_str());
+    else if (a == "--projector")
+      ro.projector_size = ParseSize(v.c_str());
+    else if (a == "--seed")
+      ro.seed = std::strtoull(v.c_str(), nullptr, 10);
+    else if (a == "--specimens")
+      specimens = SplitCommas(v);
     else if (a == "--modes") {
       modes.clear();
       for (const std::string& name : SplitCommas(v)) {
@@ -177,10 +183,11 @@ int Main(int argc, char** argv) {
     return 1;
   }
   Evaluator ev{rig->get(), &*bundle, fs::temp_directory_path() / ("inspect_evaluate_" + std::to_string(::getpid()))};
-  std::printf("Simulated rig: camera %dx%d, projector %dx%d, seed %llu; sigma_p %.2f px; Tenengrad 9x9; "
-              "outlier = |error| > 2 z steps or no depth counted apart (valid %%)\n\n",
-              ro.camera_size.width, ro.camera_size.height, ro.projector_size.width, ro.projector_size.height,
-              (unsigned long long)ro.seed, bundle->psf->influence_radius_px);
+  std::printf(
+      "Simulated rig: camera %dx%d, projector %dx%d, seed %llu; sigma_p %.2f px; Tenengrad 9x9; "
+      "outlier = |error| > 2 z steps or no depth counted apart (valid %%)\n\n",
+      ro.camera_size.width, ro.camera_size.height, ro.projector_size.width, ro.projector_size.height,
+      (unsigned long long)ro.seed, bundle->psf->influence_radius_px);
 
   if (!bias_only) PrintThesisTables(ev);
   const int violations = PrintBiasTable(ev, specimens, modes);
@@ -197,9 +204,10 @@ void PrintThesisTables(Evaluator& ev) {
     IlluminationMode mode;
     int hdr;
   };
-  const M methods[] = {{IlluminationMode::kStd, 3},  {IlluminationMode::kHdr, 2}, {IlluminationMode::kHdr, 3},
-                       {IlluminationMode::kHdr, 4},  {IlluminationMode::kHdr, 5}, {IlluminationMode::kAdaptIterative, 3},
-                       {IlluminationMode::kAdapt, 3}, {IlluminationMode::kTexture, 3},
+  const M methods[] = {{IlluminationMode::kStd, 3},     {IlluminationMode::kHdr, 2},
+                       {IlluminationMode::kHdr, 3},     {IlluminationMode::kHdr, 4},
+                       {IlluminationMode::kHdr, 5},     {IlluminationMode::kAdaptIterative, 3},
+                       {IlluminationMode::kAdapt, 3},   {IlluminationMode::kTexture, 3},
                        {IlluminationMode::kHfAdapt, 3}, {IlluminationMode::kAdaptedHf, 3}};
   std::vector<std::vector<Run>> runs(std::size(methods), std::vector<Run>(std::size(t63)));
   for (size_t mi = 0; mi < std::size(methods); ++mi) {
@@ -215,17 +223,18 @@ void PrintThesisTables(Evaluator& ev) {
     for (size_t mi = 0; mi < std::size(methods); ++mi) {
       const Run& r = runs[mi][k];
       const IlluminationMode m = methods[mi].mode;
-      if (!r.ok || !(m == IlluminationMode::kHdr || m == IlluminationMode::kAdapt ||
-                     m == IlluminationMode::kAdaptIterative)) {
+      if (!r.ok ||
+          !(m == IlluminationMode::kHdr || m == IlluminationMode::kAdapt || m == IlluminationMode::kAdaptIterative)) {
         continue;
       }
       const cv::Mat finite = r.depth_um == r.depth_um;
       common[k] = common[k].empty() ? finite : (common[k] & finite);
     }
   }
-  std::printf("Table 6.3: depth error against ground truth [um] as sigma, bias (mean signed error) and RMSE, over the "
-              "method's own measured pixels and over the pixels every HDR and ADAPT method measured (common); "
-              "number of images; valid %% of pixels\n");
+  std::printf(
+      "Table 6.3: depth error against ground truth [um] as sigma, bias (mean signed error) and RMSE, over the "
+      "method's own measured pixels and over the pixels every HDR and ADAPT method measured (common); "
+      "number of images; valid %% of pixels\n");
   for (size_t k = 0; k < std::size(t63); ++k) {
     std::printf("%-10s | own:  sigma    bias   RMSE | common: sigma    bias   RMSE | #imgs  valid\n", t63[k]);
     for (size_t mi = 0; mi < std::size(methods); ++mi) {
@@ -247,8 +256,9 @@ void PrintThesisTables(Evaluator& ev) {
   std::fflush(stdout);
 
   // Table 6.5
-  std::printf("Table 6.5: STD vs TEXTURE on low-texture specimens, sigma, bias, RMSE [um] (valid %%), 2.5 um steps; "
-              "n.m. = not measurable (< 50 %% valid)\n");
+  std::printf(
+      "Table 6.5: STD vs TEXTURE on low-texture specimens, sigma, bias, RMSE [um] (valid %%), 2.5 um steps; "
+      "n.m. = not measurable (< 50 %% valid)\n");
   std::printf("%-10s | %-31s | %-31s\n", "Specimen", "STD", "TEXTURE");
   for (const char* s : {"lens", "mirror"}) {
     Run a = ev.Scan(s, IlluminationMode::kStd, {}, 2.5);
@@ -256,17 +266,20 @@ void PrintThesisTables(Evaluator& ev) {
     auto cell = [](const Run& r) {
       char buf[64];
       if (!r.ok) return std::string("failed");
-      if (r.error.valid_percent < 50) std::snprintf(buf, sizeof(buf), "n.m.                   (%5.1f%%)", r.error.valid_percent);
-      else std::snprintf(buf, sizeof(buf), "%s (%5.1f%%)", ErrorCells(r.error).c_str(), r.error.valid_percent);
+      if (r.error.valid_percent < 50)
+        std::snprintf(buf, sizeof(buf), "n.m.                   (%5.1f%%)", r.error.valid_percent);
+      else
+        std::snprintf(buf, sizeof(buf), "%s (%5.1f%%)", ErrorCells(r.error).c_str(), r.error.valid_percent);
       return std::string(buf);
     };
     std::printf("%-10s | %-31s | %-31s\n", s, cell(a).c_str(), cell(b).c_str());
   }
 
   // Table 6.6
-  std::printf("\nTable 6.6: outliers on the coin [%% of measured pixels]: |error| > 2 z steps against the truth, "
-              "and the thesis's reference-free measure (depth > 2 z steps off the median of the 8 neighbours); "
-              "valid %%, images; depth error sigma, bias, RMSE [um]\n");
+  std::printf(
+      "\nTable 6.6: outliers on the coin [%% of measured pixels]: |error| > 2 z steps against the truth, "
+      "and the thesis's reference-free measure (depth > 2 z steps off the median of the 8 neighbours); "
+      "valid %%, images; depth error sigma, bias, RMSE [um]\n");
   std::printf("%-10s %9s %9s %7s %6s  %6s %7s %6s\n", "Method", "vs truth", "local", "valid", "#imgs", "sigma", "bias",
               "RMSE");
   for (IlluminationMode m : {IlluminationMode::kStd, IlluminationMode::kAdapt, IlluminationMode::kTexture,
@@ -282,8 +295,9 @@ void PrintThesisTables(Evaluator& ev) {
   }
 
   // Fig. 6.3
-  std::printf("\nFig. 6.3: cutter, mean / standard deviation of the grey image (8-bit units) and saturated %% "
-              "over the first captures (ADAPT: 2 initialisation frames first; ADAPT-IT: every iteration)\n");
+  std::printf(
+      "\nFig. 6.3: cutter, mean / standard deviation of the grey image (8-bit units) and saturated %% "
+      "over the first captures (ADAPT: 2 initialisation frames first; ADAPT-IT: every iteration)\n");
   Run s = ev.Scan("cutter", IlluminationMode::kStd, {});
   Run it = ev.Scan("cutter", IlluminationMode::kAdaptIterative, {});
   Run ad = ev.Scan("cutter", IlluminationMode::kAdapt, {});
@@ -304,8 +318,9 @@ void PrintThesisTables(Evaluator& ev) {
 // as a user would start it. Returns the number of bias bound violations.
 int PrintBiasTable(Evaluator& ev, const std::vector<std::string>& specimens,
                    const std::vector<IlluminationMode>& modes) {
-  std::printf("\nBias: every built-in specimen with every mode at its default scan (5 um steps); sigma, bias, RMSE "
-              "[um]; the bound |bias| <= max(0.1 um, 0.02 z steps) applies where the mode measures >= 95 %% of pixels\n");
+  std::printf(
+      "\nBias: every built-in specimen with every mode at its default scan (5 um steps); sigma, bias, RMSE "
+      "[um]; the bound |bias| <= max(0.1 um, 0.02 z steps) applies where the mode measures >= 95 %% of pixels\n");
   std::printf("%-8s %-10s  %6s %7s %6s %7s %6s  %s\n", "Specimen", "Method", "sigma", "bias", "RMSE", "valid", "#imgs",
               "bound");
   int violations = 0;

@@ -7,6 +7,7 @@
 //   inspect-load --server 127.0.0.1:50051 [--server-pid PID] [--clients 8] [--seconds 30]
 //                [--max-calls 5000] [--token-file F]
 // Exit 0 when no call ended INTERNAL/UNKNOWN/DATA_LOSS and every artifact verified.
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -15,12 +16,10 @@
 #include <iostream>
 #include <map>
 #include <mutex>
-#include <random>
-#include <thread>
-
-#include <CLI/CLI.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
+#include <thread>
 
 #include "client_cli/inspection_client.h"
 
@@ -34,15 +33,16 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 struct Tally {
-  std::mutex mu;  // guards the members below
+  std::mutex mu;                                                // guards the members below
   std::map<std::string, std::map<std::string, int64_t>> codes;  // method -> code name -> calls
   std::map<std::string, std::vector<double>> latency_ms;        // method -> samples
   std::vector<std::string> finished_jobs;                       // succeeded jobs to verify
   void Add(const std::string& method, const grpc::Status& st, double ms) {
-    static const char* kNames[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT", "DEADLINE_EXCEEDED",
-                                   "NOT_FOUND", "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED",
-                                   "FAILED_PRECONDITION", "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED",
-                                   "INTERNAL", "UNAVAILABLE", "DATA_LOSS", "UNAUTHENTICATED"};
+    static const char* kNames[] = {
+        "OK",        "CANCELLED",      "UNKNOWN",           "INVALID_ARGUMENT",   "DEADLINE_EXCEEDED",
+        "NOT_FOUND", "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
+        "ABORTED",   "OUT_OF_RANGE",   "UNIMPLEMENTED",     "INTERNAL",           "UNAVAILABLE",
+        "DATA_LOSS", "UNAUTHENTICATED"};
     const int c = st.error_code();
     std::lock_guard lock(mu);
     codes[method][c >= 0 && c <= 16 ? kNames[c] : "?"]++;
@@ -205,8 +205,10 @@ int main(int argc, char** argv) {
     for (const auto& a : job.result().artifacts()) {
       const fs::path dest = downloads / ("verify-" + a.artifact_id());
       grpc::Status st = verifier.DownloadArtifact(a.artifact_id(), dest, false);
-      if (st.ok() && inspection::client::Sha256OfFile(dest) == a.sha256()) ++verified;
-      else ++mismatched;
+      if (st.ok() && inspection::client::Sha256OfFile(dest) == a.sha256())
+        ++verified;
+      else
+        ++mismatched;
       fs::remove(dest);
     }
   }

@@ -9,6 +9,8 @@
 //              stack, for the IPSF of every regulariser, plain (eq. 5.23) and noise-adaptive;
 // and the time each calibration step and reconstruction took.
 // Usage: isff-evaluate [--camera WxH] [--seed N] [--repeats N]   (default 512x384, seed 5, 7)
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -17,15 +19,13 @@
 #include <cstdlib>
 #include <ctime>
 #include <filesystem>
+#include <opencv2/imgproc.hpp>
 #include <random>
 #include <string>
-#include <unistd.h>
-
-#include <opencv2/imgproc.hpp>
 
 #include "core/depth_metrics.h"
-#include "core/sff_engine.h"
 #include "core/integral_sff.h"
+#include "core/sff_engine.h"
 #include "core/stack.h"
 #include "devices/sim/defocus.h"
 #include "devices/sim/image_formation.h"
@@ -169,11 +169,12 @@ void Table68(const IntegralPsf& ipsf, const std::vector<Scanned>& scans, const c
                 Cell(e_gt).c_str(), Cell(e_is).c_str(), Cell(e_th).c_str(),
                 e_is.stddev_error_um / e_std.stddev_error_um);
   }
-  std::printf("Reconstruction times [ms] on the stack in memory, same run: STD = SffEngine::ReconstructInMemory "
-              "(Tenengrad 7x7, fused kernels); ISFF = pass 1 (integral image + noise) + restoration (eq. 5.23 + "
-              "Wiener) + pass 2 (NCC, maximum, interpolation); wall / process CPU; the scan's STD streaming engine "
-              "finished %s\n",
-              "at the last frame (time after it below)");
+  std::printf(
+      "Reconstruction times [ms] on the stack in memory, same run: STD = SffEngine::ReconstructInMemory "
+      "(Tenengrad 7x7, fused kernels); ISFF = pass 1 (integral image + noise) + restoration (eq. 5.23 + "
+      "Wiener) + pass 2 (NCC, maximum, interpolation); wall / process CPU; the scan's STD streaming engine "
+      "finished %s\n",
+      "at the last frame (time after it below)");
   for (const Scanned& s : scans) {
     SffOptions so;
     so.window_px = kWindowPx;
@@ -185,13 +186,12 @@ void Table68(const IntegralPsf& ipsf, const std::vector<Scanned>& scans, const c
     auto is = ReconstructIntegralSff(s.frames, s.z_um, &ipsf, DefaultIsff());
     const double isff_cpu = CpuSeconds() - c0;
     if (!is.ok() || !st.ok()) continue;
-    std::printf("  %-7s STD %6.1f / %6.1f   ISFF %6.1f + %6.1f + %6.1f = %6.1f / %6.1f   (streaming STD after the "
-                "last frame %5.1f)   %2d frames of %dx%d, noise %.2f grey\n",
-                s.specimen.c_str(), 1e3 * std_wall, 1e3 * std_cpu, 1e3 * is->integral_seconds,
-                1e3 * is->restore_seconds, 1e3 * is->focus_seconds,
-                1e3 * (is->integral_seconds + is->restore_seconds + is->focus_seconds), 1e3 * isff_cpu,
-                1e3 * s.std_finish_seconds, int(s.frames.size()), s.frames[0].cols, s.frames[0].rows,
-                is->frame_noise_sigma);
+    std::printf(
+        "  %-7s STD %6.1f / %6.1f   ISFF %6.1f + %6.1f + %6.1f = %6.1f / %6.1f   (streaming STD after the "
+        "last frame %5.1f)   %2d frames of %dx%d, noise %.2f grey\n",
+        s.specimen.c_str(), 1e3 * std_wall, 1e3 * std_cpu, 1e3 * is->integral_seconds, 1e3 * is->restore_seconds,
+        1e3 * is->focus_seconds, 1e3 * (is->integral_seconds + is->restore_seconds + is->focus_seconds), 1e3 * isff_cpu,
+        1e3 * s.std_finish_seconds, int(s.frames.size()), s.frames[0].cols, s.frames[0].rows, is->frame_noise_sigma);
   }
   std::fflush(stdout);
 }
@@ -199,9 +199,10 @@ void Table68(const IntegralPsf& ipsf, const std::vector<Scanned>& scans, const c
 // ---------------------------------------------------------------------------------------------
 // Table 6.9 on one scan.
 void Table69(const IntegralPsf& ipsf, const Scanned& s, int repeats) {
-  std::printf("\nTable 6.9: ISFF-FAST on %s (%d frames): wrong maxima (discrete maximum differs from ISFF's), "
-              "sigma and bias of the depth error [um], computation against ISFF's global maximum search\n",
-              s.specimen.c_str(), int(s.frames.size()));
+  std::printf(
+      "\nTable 6.9: ISFF-FAST on %s (%d frames): wrong maxima (discrete maximum differs from ISFF's), "
+      "sigma and bias of the depth error [um], computation against ISFF's global maximum search\n",
+      s.specimen.c_str(), int(s.frames.size()));
   IsffOptions full = DefaultIsff();
   auto base = ReconstructIntegralSff(s.frames, s.z_um, &ipsf, full);
   if (!base.ok()) {
@@ -222,15 +223,17 @@ void Table69(const IntegralPsf& ipsf, const Scanned& s, int repeats) {
     return r.ok() ? Times{r->search_cpu_seconds, r->search_seconds, total_cpu} : Times{};
   };
   const DepthErrorStats e_base = Error(base->depth.depth_um, s);
-  std::printf("computed %% = pixels whose NCC was computed (bounding boxes of the searching pixels per tile) against "
-              "ISFF's pixels x frames; search CPU %% / wall %% = the search over the frames (process CPU time, all "
-              "threads / wall time) against ISFF's; pass 2 CPU %% = with the engine's set-up and the final "
-              "interpolation (medians of %d alternating runs); stopped %% = pixels that stopped at a local maximum "
-              "above the threshold\n", repeats);
-  std::printf("%-9s %12s %9s %9s %11s %8s %17s %12s %10s\n", "threshold", "wrong max %", "sigma", "bias",
-              "computed %", "tiles %", "search CPU/wall%", "pass2 CPU %", "stopped %");
-  std::printf("%-9s %12s %9.3f %+9.3f %11.1f %8.1f %17.1f %12.1f %10s   (search %.1f ms CPU, %.1f ms wall)\n",
-              "ISFF", "-", e_base.stddev_error_um, e_base.mean_error_um, 100.0, 100.0, 100.0, 100.0, "-",
+  std::printf(
+      "computed %% = pixels whose NCC was computed (bounding boxes of the searching pixels per tile) against "
+      "ISFF's pixels x frames; search CPU %% / wall %% = the search over the frames (process CPU time, all "
+      "threads / wall time) against ISFF's; pass 2 CPU %% = with the engine's set-up and the final "
+      "interpolation (medians of %d alternating runs); stopped %% = pixels that stopped at a local maximum "
+      "above the threshold\n",
+      repeats);
+  std::printf("%-9s %12s %9s %9s %11s %8s %17s %12s %10s\n", "threshold", "wrong max %", "sigma", "bias", "computed %",
+              "tiles %", "search CPU/wall%", "pass2 CPU %", "stopped %");
+  std::printf("%-9s %12s %9.3f %+9.3f %11.1f %8.1f %17.1f %12.1f %10s   (search %.1f ms CPU, %.1f ms wall)\n", "ISFF",
+              "-", e_base.stddev_error_um, e_base.mean_error_um, 100.0, 100.0, 100.0, 100.0, "-",
               1e3 * base->search_cpu_seconds, 1e3 * base->search_seconds);
   for (double thr : {0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.875, 0.9, 0.925, 0.95, 0.975}) {
     IsffOptions fast = full;
@@ -254,13 +257,12 @@ void Table69(const IntegralPsf& ipsf, const Scanned& s, int repeats) {
     const cv::Mat wrong = fr.max_index != base->max_index;
     const double wrong_pct = 100.0 * cv::countNonZero(wrong) / double(wrong.total());
     const DepthErrorStats e = Error(fr.depth.depth_um, s);
-    std::printf("%-9.3f %12.2f %9.3f %+9.3f %11.1f %8.1f %11.1f / %3.0f %12.1f %10.1f\n", thr, wrong_pct,
-                e.stddev_error_um, e.mean_error_um,
-                100.0 * fr.work.computed_pixel_frames / double(fr.work.computed_pixel_frames_full),
-                100.0 * fr.work.tile_frames / double(fr.work.tile_frames_full),
-                100.0 * median(cpu_fast) / median(cpu_full), 100.0 * median(wall_fast) / median(wall_full),
-                100.0 * median(total_fast) / median(total_full),
-                100.0 * fr.work.stopped_pixels / double(s.frames[0].total()));
+    std::printf(
+        "%-9.3f %12.2f %9.3f %+9.3f %11.1f %8.1f %11.1f / %3.0f %12.1f %10.1f\n", thr, wrong_pct, e.stddev_error_um,
+        e.mean_error_um, 100.0 * fr.work.computed_pixel_frames / double(fr.work.computed_pixel_frames_full),
+        100.0 * fr.work.tile_frames / double(fr.work.tile_frames_full), 100.0 * median(cpu_fast) / median(cpu_full),
+        100.0 * median(wall_fast) / median(wall_full), 100.0 * median(total_fast) / median(total_full),
+        100.0 * fr.work.stopped_pixels / double(s.frames[0].total()));
   }
   std::fflush(stdout);
 }
@@ -341,12 +343,13 @@ void Fig617(const CalibrationBundle* rig_bundles[3], double* estimate_seconds) {
     }
     chess_ipsf[r] = *k;
   }
-  std::printf("\nFig. 6.17: restored all-in-focus image against the ground-truth texture on the synthetic CHESS stack "
-              "(256x192, 25 frames, 2.5 um steps, values 0..1) with white noise sigma_w on every frame.\n"
-              "Error = |difference of means| / |difference of standard deviations| (the thesis's two curves) / RMSE, "
-              "for the IPSF of each regulariser, (a) estimated on the noise-free CHESS stack, (b) calibrated on the "
-              "rig's PLANE-NORM; plain = eq. 5.23 alone, adaptive = with the noise-weighted Wiener shrinkage; "
-              "0.05 and 0.1 go beyond the thesis's range\n");
+  std::printf(
+      "\nFig. 6.17: restored all-in-focus image against the ground-truth texture on the synthetic CHESS stack "
+      "(256x192, 25 frames, 2.5 um steps, values 0..1) with white noise sigma_w on every frame.\n"
+      "Error = |difference of means| / |difference of standard deviations| (the thesis's two curves) / RMSE, "
+      "for the IPSF of each regulariser, (a) estimated on the noise-free CHESS stack, (b) calibrated on the "
+      "rig's PLANE-NORM; plain = eq. 5.23 alone, adaptive = with the noise-weighted Wiener shrinkage; "
+      "0.05 and 0.1 go beyond the thesis's range\n");
   std::printf("%-6s %-9s", "", "");
   for (const char* n : names) std::printf(" | %-28s", n);
   std::printf("\n%-6s %-9s", "sigma_w", "restore");
@@ -369,9 +372,9 @@ void Fig617(const CalibrationBundle* rig_bundles[3], double* estimate_seconds) {
       for (IpsfRestoration method : {IpsfRestoration::kPlain, IpsfRestoration::kNoiseAdaptive}) {
         std::printf("%s %-5.3f %-9s", which, sw, method == IpsfRestoration::kPlain ? "plain" : "adaptive");
         for (int r = 0; r < 3; ++r) {
-          const IntegralPsf* k = which[0] == 'a' ? &chess_ipsf[r]
+          const IntegralPsf* k = which[0] == 'a'                                    ? &chess_ipsf[r]
                                  : (rig_bundles[r] && rig_bundles[r]->integral_psf) ? &*rig_bundles[r]->integral_psf
-                                                                                     : nullptr;
+                                                                                    : nullptr;
           if (k == nullptr) {
             std::printf(" | %-28s", "no IPSF");
             continue;
@@ -412,9 +415,12 @@ int Main(int argc, char** argv) {
   int repeats = 7;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
-    if (a == "--camera") ro.camera_size = ParseSize(argv[i + 1]);
-    else if (a == "--seed") ro.seed = std::strtoull(argv[i + 1], nullptr, 10);
-    else if (a == "--repeats") repeats = std::max(1, std::atoi(argv[i + 1]));
+    if (a == "--camera")
+      ro.camera_size = ParseSize(argv[i + 1]);
+    else if (a == "--seed")
+      ro.seed = std::strtoull(argv[i + 1], nullptr, 10);
+    else if (a == "--repeats")
+      repeats = std::max(1, std::atoi(argv[i + 1]));
     else {
       std::fprintf(stderr, "usage: isff-evaluate [--camera WxH] [--seed N] [--repeats N]\n");
       return 2;
@@ -456,20 +462,22 @@ int Main(int argc, char** argv) {
     }
     levels.push_back(std::move(scans));
   }
-  std::printf("Simulated rig: camera %dx%d, seed %llu, STD illumination, 5 um steps; Tenengrad %dx%d and NCC %dx%d "
-              "(summed over %dx%d); Gaussian interpolation; IPSF: the INTEGRAL_PSF calibration step with its default "
-              "regulariser (gradient_l2) unless noted\n",
-              ro.camera_size.width, ro.camera_size.height, (unsigned long long)ro.seed, kWindowPx, kWindowPx,
-              kWindowPx, kWindowPx, kWindowPx, kWindowPx);
-  std::printf("Calibration (INTEGRAL_PSF step: 17 frames at +-40 um, central %d px, kernel radius 8), seconds wall / "
-              "process CPU:\n",
-              std::min(512, std::min(ro.camera_size.width, ro.camera_size.height)));
+  std::printf(
+      "Simulated rig: camera %dx%d, seed %llu, STD illumination, 5 um steps; Tenengrad %dx%d and NCC %dx%d "
+      "(summed over %dx%d); Gaussian interpolation; IPSF: the INTEGRAL_PSF calibration step with its default "
+      "regulariser (gradient_l2) unless noted\n",
+      ro.camera_size.width, ro.camera_size.height, (unsigned long long)ro.seed, kWindowPx, kWindowPx, kWindowPx,
+      kWindowPx, kWindowPx, kWindowPx);
+  std::printf(
+      "Calibration (INTEGRAL_PSF step: 17 frames at +-40 um, central %d px, kernel radius 8), seconds wall / "
+      "process CPU:\n",
+      std::min(512, std::min(ro.camera_size.width, ro.camera_size.height)));
   for (int level = 0; level < 2; ++level) {
     std::printf("  read noise %.1f: ", ro.read_noise_dn * (level + 1));
     for (int k = 0; k < 3; ++k) {
       const IntegralPsf& p = *bundles[level][k].integral_psf;
-      std::printf("%s %.1f / %.1f s (restored/integral RMS %.3f)  ", IpsfRegularisationName(regs[k]),
-                  calib_s[level][k], calib_cpu[level][k], p.restored_rms_error / p.integral_rms_error);
+      std::printf("%s %.1f / %.1f s (restored/integral RMS %.3f)  ", IpsfRegularisationName(regs[k]), calib_s[level][k],
+                  calib_cpu[level][k], p.restored_rms_error / p.integral_rms_error);
     }
     std::printf("\n");
   }
@@ -482,9 +490,10 @@ int Main(int argc, char** argv) {
           "default read noise (0.8 grey)");
   Table68(*bundles[1][0].integral_psf, levels[1],
           "\nTable 6.8 at twice the read noise (1.6 grey; IPSF calibrated on that rig)");
-  std::printf("\nIPSF regulariser ablation, default noise: ISFF sigma [um] with the plain / noise-adaptive "
-              "restoration, and ISFF-FAST (0.9): computed %% and stopped %% (how often the template's NCC reaches the "
-              "threshold at the maximum)\n");
+  std::printf(
+      "\nIPSF regulariser ablation, default noise: ISFF sigma [um] with the plain / noise-adaptive "
+      "restoration, and ISFF-FAST (0.9): computed %% and stopped %% (how often the template's NCC reaches the "
+      "threshold at the maximum)\n");
   for (const Scanned& s : levels[0]) {
     std::printf("  %-7s", s.specimen.c_str());
     for (int k = 0; k < 3; ++k) {
@@ -513,8 +522,8 @@ int Main(int argc, char** argv) {
   const CalibrationBundle* rb[3] = {&bundles[0][0], &bundles[0][1], &bundles[0][2]};
   double est_s[3] = {};
   Fig617(rb, est_s);
-  std::printf("IPSF estimation on CHESS (256x192, radius 8), seconds: grad-L2 %.2f, TV-L2 %.2f, TV-L1 %.2f\n",
-              est_s[0], est_s[1], est_s[2]);
+  std::printf("IPSF estimation on CHESS (256x192, radius 8), seconds: grad-L2 %.2f, TV-L2 %.2f, TV-L1 %.2f\n", est_s[0],
+              est_s[1], est_s[2]);
   std::error_code ec;
   fs::remove_all(dir, ec);
   return 0;

@@ -9,6 +9,8 @@
 // Usage: natural-evaluate [--scenes N] [--size WxH] [--seed S] [--focus-stack PATH|none]
 //                         [--keep DIR] [--timing]
 //   focus-stack: --focus-stack PATH, else $FOCUS_STACK, else `focus-stack` on PATH; skipped if absent.
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -17,13 +19,11 @@
 #include <filesystem>
 #include <limits>
 #include <map>
-#include <string>
-#include <tuple>
-#include <unistd.h>
-#include <vector>
-
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <string>
+#include <tuple>
+#include <vector>
 
 #include "core/depth_consistency.h"
 #include "core/depth_export.h"
@@ -46,9 +46,9 @@ double Seconds(Clock::time_point t0) { return std::chrono::duration<double>(Cloc
 
 struct Scene {
   NaturalScene truth;
-  std::vector<cv::Mat> grey;    // what the engine sees (luminance of the colour PNGs)
-  std::vector<double> z;        // frame index
-  cv::Mat fs_depth;             // focus-stack, frame units (empty if not run)
+  std::vector<cv::Mat> grey;  // what the engine sees (luminance of the colour PNGs)
+  std::vector<double> z;      // frame index
+  cv::Mat fs_depth;           // focus-stack, frame units (empty if not run)
   double fs_seconds = 0;
   fs::path dir;
 };
@@ -235,8 +235,10 @@ void PrintHeader(const char* title) {
 void PrintRow(const std::string& name, const Metrics& m) {
   std::printf("%-34s %7.3f %6.3f %+7.3f %5.1f%% %5.1f%% | %7.3f %5.1f%% %7.3f | ", name.c_str(), m.rmse, m.corr, m.bias,
               100 * m.coverage, m.outliers, m.rmse_textured, 100 * m.coverage_textured, m.rmse_edges);
-  if (std::isfinite(m.fs_rmse_same)) std::printf("%8.3f %6.2f\n", m.fs_rmse_same, m.rmse / m.fs_rmse_same);
-  else std::printf("%8s %6s\n", "n/a", "");
+  if (std::isfinite(m.fs_rmse_same))
+    std::printf("%8.3f %6.2f\n", m.fs_rmse_same, m.rmse / m.fs_rmse_same);
+  else
+    std::printf("%8s %6s\n", "n/a", "");
 }
 
 std::vector<Metrics> EvaluateAll(std::vector<Scene>& scenes, const Candidate& c, std::vector<Cache>& caches) {
@@ -313,8 +315,8 @@ Scene MakeScene(const NaturalSceneOptions& o, const fs::path& dir) {
   }
   DepthExportMeta meta;
   meta.pixel_size_um = 1.0;
-  meta.description = "ground truth depth in frame units (z_um = frame index) of natural scene seed " +
-                     std::to_string(o.seed);
+  meta.description =
+      "ground truth depth in frame units (z_um = frame index) of natural scene seed " + std::to_string(o.seed);
   // A stack folder like a scan's: inspectctl reconstruct --stack DIR works on it.
   if (!WriteStackManifest(dir, m).ok() || !ValidateStackFrames(dir, m).ok() ||
       !WriteDepthTiff(dir / kGroundTruthDepthName, s.truth.depth_frames, meta).ok()) {
@@ -343,25 +345,32 @@ int Main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const char* v = i + 1 < argc ? argv[i + 1] : nullptr;
-    if (a == "--scenes" && v) n_scenes = std::atoi(argv[++i]);
-    else if (a == "--size" && v && std::sscanf(argv[++i], "%dx%d", &size.width, &size.height) == 2) {}
-    else if (a == "--seed" && v) seed = uint32_t(std::strtoul(argv[++i], nullptr, 10));
-    else if (a == "--focus-stack" && v) fs_flag = argv[++i];
-    else if (a == "--keep" && v) keep = argv[++i];
-    else if (a == "--timing") timing = true;
+    if (a == "--scenes" && v)
+      n_scenes = std::atoi(argv[++i]);
+    else if (a == "--size" && v && std::sscanf(argv[++i], "%dx%d", &size.width, &size.height) == 2) {
+    } else if (a == "--seed" && v)
+      seed = uint32_t(std::strtoul(argv[++i], nullptr, 10));
+    else if (a == "--focus-stack" && v)
+      fs_flag = argv[++i];
+    else if (a == "--keep" && v)
+      keep = argv[++i];
+    else if (a == "--timing")
+      timing = true;
     else {
-      std::fprintf(stderr, "usage: natural-evaluate [--scenes N] [--size WxH] [--seed S] "
-                           "[--focus-stack PATH|none] [--keep DIR] [--timing]\n");
+      std::fprintf(stderr,
+                   "usage: natural-evaluate [--scenes N] [--size WxH] [--seed S] "
+                   "[--focus-stack PATH|none] [--keep DIR] [--timing]\n");
       return 2;
     }
   }
-  const fs::path root = keep.empty() ? fs::temp_directory_path() / ("natural_evaluate_" + std::to_string(::getpid()))
-                                     : fs::path(keep);
+  const fs::path root =
+      keep.empty() ? fs::temp_directory_path() / ("natural_evaluate_" + std::to_string(::getpid())) : fs::path(keep);
   const std::string fs_exe = FindFocusStack(fs_flag);
 
-  std::printf("Natural focal stacks: %d scenes of %dx%d, 24..36 frames, seeds %u.., depth in frames; border %d px "
-              "left out; out>2 = |error| > 2 frames; -tx = textured pixels only; -ed = within 3 px of a depth jump\n",
-              n_scenes, size.width, size.height, seed, kBorderPx);
+  std::printf(
+      "Natural focal stacks: %d scenes of %dx%d, 24..36 frames, seeds %u.., depth in frames; border %d px "
+      "left out; out>2 = |error| > 2 frames; -tx = textured pixels only; -ed = within 3 px of a depth jump\n",
+      n_scenes, size.width, size.height, seed, kBorderPx);
   std::printf("focus-stack: %s\n", fs_exe.empty() ? "not found (column skipped)" : fs_exe.c_str());
   std::vector<Scene> scenes;
   for (int i = 0; i < n_scenes; ++i) {
@@ -381,9 +390,8 @@ int Main(int argc, char** argv) {
     std::printf("; textured %.0f %%)\n", textured);
   }
   std::vector<Cache> caches(scenes.size());
-  const bool have_fs = !fs_exe.empty() && std::all_of(scenes.begin(), scenes.end(), [](const Scene& s) {
-    return !s.fs_depth.empty();
-  });
+  const bool have_fs =
+      !fs_exe.empty() && std::all_of(scenes.begin(), scenes.end(), [](const Scene& s) { return !s.fs_depth.empty(); });
 
   // focus-stack alone (all its pixels) and the current default.
   if (have_fs) {
@@ -417,10 +425,10 @@ int Main(int argc, char** argv) {
 
   // Table 1: measure x window, Gaussian interpolation, confidence 0.4.
   PrintHeader("Table 1: focus measure x window (Gaussian interpolation, min confidence 0.4, no post-processing)");
-  const FocusMeasure measures[] = {FocusMeasure::kTenengrad, FocusMeasure::kSumModifiedLaplacian,
-                                   FocusMeasure::kModifiedLaplacian, FocusMeasure::kGreyLevelVariance,
-                                   FocusMeasure::kGreyLevelLocalVariance, FocusMeasure::kHelmliMean,
-                                   FocusMeasure::kChebyshevMoments};
+  const FocusMeasure measures[] = {
+      FocusMeasure::kTenengrad,         FocusMeasure::kSumModifiedLaplacian,   FocusMeasure::kModifiedLaplacian,
+      FocusMeasure::kGreyLevelVariance, FocusMeasure::kGreyLevelLocalVariance, FocusMeasure::kHelmliMean,
+      FocusMeasure::kChebyshevMoments};
   std::vector<std::pair<double, EngineKey>> ranked;
   for (FocusMeasure fm : measures) {
     for (int w : {3, 5, 7, 9, 11, 15}) {
@@ -437,7 +445,8 @@ int Main(int argc, char** argv) {
 
   PrintHeader("Table 2: depth interpolation (min confidence 0.4)");
   for (const EngineKey& k : {best, current}) {
-    for (DepthInterpolation in : {DepthInterpolation::kMaximum, DepthInterpolation::kLineFit, DepthInterpolation::kGaussian}) {
+    for (DepthInterpolation in :
+         {DepthInterpolation::kMaximum, DepthInterpolation::kLineFit, DepthInterpolation::kGaussian}) {
       PrintRow(KeyName({k.measure, k.window, in}) + (in == DepthInterpolation::kGaussian ? " gaussian" : ""),
                Mean(EvaluateAll(scenes, Single({k.measure, k.window, in}), caches)));
     }
@@ -455,20 +464,23 @@ int Main(int argc, char** argv) {
   }
 
   // Table 4: local depth consistency (core/depth_consistency.h) per measure and window.
-  PrintHeader("Table 4: local depth consistency (residual about a local plane of the unthresholded depth, "
-              "in z steps; radius focus window / 2 + 1 unless given), min confidence 0.4");
+  PrintHeader(
+      "Table 4: local depth consistency (residual about a local plane of the unthresholded depth, "
+      "in z steps; radius focus window / 2 + 1 unless given), min confidence 0.4");
   for (int w : {7, 9, 11, 13, 15}) {
     for (double steps : {0.75, 1.0, 1.5}) {
-      PrintRow(Consistent({FocusMeasure::kTenengrad, w, DepthInterpolation::kGaussian}, 0, steps).name,
-               Mean(EvaluateAll(scenes, Consistent({FocusMeasure::kTenengrad, w, DepthInterpolation::kGaussian}, 0, steps), caches)));
+      PrintRow(
+          Consistent({FocusMeasure::kTenengrad, w, DepthInterpolation::kGaussian}, 0, steps).name,
+          Mean(EvaluateAll(scenes, Consistent({FocusMeasure::kTenengrad, w, DepthInterpolation::kGaussian}, 0, steps),
+                           caches)));
     }
   }
   for (int w : {7, 9, 11}) {
     const Candidate c = Consistent({FocusMeasure::kTenengrad, w, DepthInterpolation::kGaussian}, w / 2 + 2, 1.0);
     PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
   }
-  for (FocusMeasure fm : {FocusMeasure::kSumModifiedLaplacian, FocusMeasure::kChebyshevMoments,
-                          FocusMeasure::kGreyLevelLocalVariance}) {
+  for (FocusMeasure fm :
+       {FocusMeasure::kSumModifiedLaplacian, FocusMeasure::kChebyshevMoments, FocusMeasure::kGreyLevelLocalVariance}) {
     for (int w : {9, 11}) {
       const Candidate c = Consistent({fm, w, DepthInterpolation::kGaussian}, 0, 1.0);
       PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
@@ -484,19 +496,28 @@ int Main(int argc, char** argv) {
   // Table 5: fusion of windows and of measures.
   PrintHeader("Table 5: multi-window and measure fusion (min confidence 0.4)");
   const std::vector<std::pair<std::string, std::vector<EngineKey>>> fusions = {
-      {"tenengrad 5+11", {{FocusMeasure::kTenengrad, 5, DepthInterpolation::kGaussian}, {FocusMeasure::kTenengrad, 11, DepthInterpolation::kGaussian}}},
-      {"tenengrad 3+7+15", {{FocusMeasure::kTenengrad, 3, DepthInterpolation::kGaussian}, current, {FocusMeasure::kTenengrad, 15, DepthInterpolation::kGaussian}}},
+      {"tenengrad 5+11",
+       {{FocusMeasure::kTenengrad, 5, DepthInterpolation::kGaussian},
+        {FocusMeasure::kTenengrad, 11, DepthInterpolation::kGaussian}}},
+      {"tenengrad 3+7+15",
+       {{FocusMeasure::kTenengrad, 3, DepthInterpolation::kGaussian},
+        current,
+        {FocusMeasure::kTenengrad, 15, DepthInterpolation::kGaussian}}},
       {KeyName(best) + " + tenengrad 7", {best, current}},
       {"tenengrad 7 + sml 7", {current, {FocusMeasure::kSumModifiedLaplacian, 7, DepthInterpolation::kGaussian}}},
-      {"sml 9 + glvm 9", {{FocusMeasure::kSumModifiedLaplacian, 9, DepthInterpolation::kGaussian}, {FocusMeasure::kGreyLevelLocalVariance, 9, DepthInterpolation::kGaussian}}},
+      {"sml 9 + glvm 9",
+       {{FocusMeasure::kSumModifiedLaplacian, 9, DepthInterpolation::kGaussian},
+        {FocusMeasure::kGreyLevelLocalVariance, 9, DepthInterpolation::kGaussian}}},
   };
   for (const auto& [name, keys] : fusions) {
-    for (DepthFusionRule rule : {DepthFusionRule::kMostConfident, DepthFusionRule::kConfidenceWeighted,
-                                 DepthFusionRule::kFirstConfident}) {
+    for (DepthFusionRule rule :
+         {DepthFusionRule::kMostConfident, DepthFusionRule::kConfidenceWeighted, DepthFusionRule::kFirstConfident}) {
       Candidate c;
       c.engines = keys;
       c.fusion = rule;
-      c.name = name + (rule == DepthFusionRule::kMostConfident ? " (max)" : rule == DepthFusionRule::kFirstConfident ? " (first)" : " (wtd)");
+      c.name = name + (rule == DepthFusionRule::kMostConfident    ? " (max)"
+                       : rule == DepthFusionRule::kFirstConfident ? " (first)"
+                                                                  : " (wtd)");
       PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
     }
   }
@@ -538,18 +559,24 @@ int Main(int argc, char** argv) {
   }
 
   // Per scene: the current default, the recommended one, focus-stack on the same pixels.
-  std::printf("\nPer scene: RMSE [frames] (coverage) of the current default (tenengrad 7) and of the recommended "
-              "(%s), focus-stack on the recommended one's pixels and on all pixels\n", recommended.name.c_str());
+  std::printf(
+      "\nPer scene: RMSE [frames] (coverage) of the current default (tenengrad 7) and of the recommended "
+      "(%s), focus-stack on the recommended one's pixels and on all pixels\n",
+      recommended.name.c_str());
   const auto mc = EvaluateAll(scenes, Single(current), caches), mr = EvaluateAll(scenes, recommended, caches);
   for (size_t i = 0; i < scenes.size(); ++i) {
-    std::printf("  scene %zu: current %6.3f (%5.1f%%)   recommended %6.3f (%5.1f%%)   focus-stack same pixels %6.3f, "
-                "all %6.3f\n", i, mc[i].rmse, 100 * mc[i].coverage, mr[i].rmse, 100 * mr[i].coverage, mr[i].fs_rmse_same,
-                have_fs ? Score(scenes[i].fs_depth, scenes[i].truth, cv::Mat()).rmse : NAN);
+    std::printf(
+        "  scene %zu: current %6.3f (%5.1f%%)   recommended %6.3f (%5.1f%%)   focus-stack same pixels %6.3f, "
+        "all %6.3f\n",
+        i, mc[i].rmse, 100 * mc[i].coverage, mr[i].rmse, 100 * mr[i].coverage, mr[i].fs_rmse_same,
+        have_fs ? Score(scenes[i].fs_depth, scenes[i].truth, cv::Mat()).rmse : NAN);
   }
   const Metrics rec = Mean(mr);
-  std::printf("Recommended default: mean RMSE %.3f frames at %.1f %% coverage; focus-stack on the same pixels %.3f: "
-              "%.0f %% %s\n", rec.rmse, 100 * rec.coverage, rec.fs_rmse_same,
-              100 * std::abs(1 - rec.rmse / rec.fs_rmse_same), rec.rmse < rec.fs_rmse_same ? "lower" : "higher");
+  std::printf(
+      "Recommended default: mean RMSE %.3f frames at %.1f %% coverage; focus-stack on the same pixels %.3f: "
+      "%.0f %% %s\n",
+      rec.rmse, 100 * rec.coverage, rec.fs_rmse_same, 100 * std::abs(1 - rec.rmse / rec.fs_rmse_same),
+      rec.rmse < rec.fs_rmse_same ? "lower" : "higher");
 
   if (timing) {
     // Post-processing cost at camera size, against the engine on the same stack size.

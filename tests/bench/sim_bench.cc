@@ -3,6 +3,7 @@
 // same size, so the figures can be read as ratios on any machine. "CPU" is the whole process's
 // CPU time (all threads): on a loaded machine the real time can be far above it.
 #include <benchmark/benchmark.h>
+
 #include <opencv2/imgproc.hpp>
 
 #include "devices/sim/image_formation.h"
@@ -46,8 +47,13 @@ void BM_RenderUniform(benchmark::State& state) {
     benchmark::DoNotOptimize(frame.ok());
   }
 }
-BENCHMARK(BM_RenderUniform)->Args({1024, 768, 0})->Args({1600, 1200, 0})->Args({1600, 1200, 1})
-    ->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
+BENCHMARK(BM_RenderUniform)
+    ->Args({1024, 768, 0})
+    ->Args({1600, 1200, 0})
+    ->Args({1600, 1200, 1})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime();
 
 void BM_RenderCheckerboard(benchmark::State& state) {
   auto r = MakeRenderer(SizeArg(state), "lens");
@@ -61,7 +67,12 @@ void BM_RenderCheckerboard(benchmark::State& state) {
     benchmark::DoNotOptimize(frame.ok());
   }
 }
-BENCHMARK(BM_RenderCheckerboard)->Args({1024, 768})->Args({1600, 1200})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
+BENCHMARK(BM_RenderCheckerboard)
+    ->Args({1024, 768})
+    ->Args({1600, 1200})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime();
 
 // Far from focus (the scan's first frame): large PSFs on reduced images.
 void BM_RenderFarDefocus(benchmark::State& state) {
@@ -75,7 +86,12 @@ void BM_RenderFarDefocus(benchmark::State& state) {
     benchmark::DoNotOptimize(frame.ok());
   }
 }
-BENCHMARK(BM_RenderFarDefocus)->Args({1024, 768})->Args({1600, 1200})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
+BENCHMARK(BM_RenderFarDefocus)
+    ->Args({1024, 768})
+    ->Args({1600, 1200})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime();
 
 // A 60-frame simulated scan through the rig's devices (move, capture) over skew10.
 void BM_Scan60Frames(benchmark::State& state) {
@@ -92,7 +108,11 @@ void BM_Scan60Frames(benchmark::State& state) {
     }
   }
 }
-BENCHMARK(BM_Scan60Frames)->Args({1024, 768})->Unit(benchmark::kSecond)->Iterations(1)->MeasureProcessCPUTime()
+BENCHMARK(BM_Scan60Frames)
+    ->Args({1024, 768})
+    ->Unit(benchmark::kSecond)
+    ->Iterations(1)
+    ->MeasureProcessCPUTime()
     ->UseRealTime();
 
 void BM_BaselineGaussian5x5(benchmark::State& state) {
@@ -103,7 +123,12 @@ void BM_BaselineGaussian5x5(benchmark::State& state) {
     benchmark::DoNotOptimize(dst.data);
   }
 }
-BENCHMARK(BM_BaselineGaussian5x5)->Args({1024, 768})->Args({1600, 1200})->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->UseRealTime();
+BENCHMARK(BM_BaselineGaussian5x5)
+    ->Args({1024, 768})
+    ->Args({1600, 1200})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime();
 
 }  // namespace
 }  // namespace inspection

@@ -16,12 +16,11 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <random>
 #include <string>
 #include <vector>
-
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "core/measurement.h"
 #include "core/z_linearity.h"
@@ -42,7 +41,7 @@ struct Args {
 };
 
 struct Case {
-  std::string specimen;  // built-in or file: scene
+  std::string specimen;                                        // built-in or file: scene
   std::vector<std::pair<std::string, MeasurementSpec>> specs;  // label, spec
 };
 
@@ -55,7 +54,8 @@ struct Scan {
 StatusOr<Scan> ScanOnce(Rig& rig, const std::string& specimen, const fs::path& work) {
   INSPECT_RETURN_IF_ERROR(rig.simulation()->SetSpecimen(specimen));
   const ScanDefaults d = rig.scan_defaults();
-  INSPECT_ASSIGN_OR_RETURN(ScanPlan plan, MakeScanPlan(d.z_start_um, d.z_end_um, d.z_step_um, d.exposure_us, rig.stage()));
+  INSPECT_ASSIGN_OR_RETURN(ScanPlan plan,
+                           MakeScanPlan(d.z_start_um, d.z_end_um, d.z_step_um, d.exposure_us, rig.stage()));
   std::atomic<bool> cancel{false};
   const fs::path dir = work / "stack";
   std::error_code ec;
@@ -144,9 +144,9 @@ std::vector<Case> Cases(const Args& a, const fs::path& work, double px, int bord
   {
     // 2 um cosine, 4 periods across the field, along x; the region holds 3 whole periods.
     const double lambda_px = w / 4.0;
-    const std::string scene = WriteScene(work / "scenes", "cosine", a.camera, px, [&](double x, double) {
-      return 210.0 + 2.0 * std::cos(2 * kPi * x / (lambda_px * px));
-    }, 101);
+    const std::string scene = WriteScene(
+        work / "scenes", "cosine", a.camera, px,
+        [&](double x, double) { return 210.0 + 2.0 * std::cos(2 * kPi * x / (lambda_px * px)); }, 101);
     Case c{scene, {}};
     const RegionOfInterest periods = RegionOfInterest::Rectangle(lambda_px / 2, b, 3 * lambda_px, h - 2 * b);
     for (MeasurementKind k : {MeasurementKind::kSa, MeasurementKind::kSq, MeasurementKind::kSp, MeasurementKind::kSv,
@@ -158,9 +158,12 @@ std::vector<Case> Cases(const Args& a, const fs::path& work, double px, int bord
   {
     // Convex sphere cap (lens), R = 8 fields, and a cylinder (axis along y), R = 4 fields.
     const double field = w * px, rs = 8 * field, cx = 0.5 * w * px, cy = 0.5 * h * px;
-    const std::string sphere = WriteScene(work / "scenes", "sphere", a.camera, px, [&](double x, double y) {
-      return 200.0 + std::sqrt(rs * rs - (x - cx) * (x - cx) - (y - cy) * (y - cy)) - (rs - 12.0);
-    }, 102);
+    const std::string sphere = WriteScene(
+        work / "scenes", "sphere", a.camera, px,
+        [&](double x, double y) {
+          return 200.0 + std::sqrt(rs * rs - (x - cx) * (x - cx) - (y - cy) * (y - cy)) - (rs - 12.0);
+        },
+        102);
     Case c{sphere, {}};
     c.specs.push_back({"radius", Spec(MeasurementKind::kRadius, inner)});
     MeasurementSpec vol = Spec(MeasurementKind::kVolumeAbove, inner);
@@ -169,9 +172,9 @@ std::vector<Case> Cases(const Args& a, const fs::path& work, double px, int bord
     c.specs.push_back({"volume_above", vol});
     cases.push_back(c);
     const double rc = 4 * field;
-    const std::string cyl = WriteScene(work / "scenes", "cylinder", a.camera, px, [&](double x, double) {
-      return 200.0 + std::sqrt(rc * rc - (x - cx) * (x - cx)) - (rc - 12.0);
-    }, 103);
+    const std::string cyl = WriteScene(
+        work / "scenes", "cylinder", a.camera, px,
+        [&](double x, double) { return 200.0 + std::sqrt(rc * rc - (x - cx) * (x - cx)) - (rc - 12.0); }, 103);
     Case k{cyl, {}};
     MeasurementSpec r = Spec(MeasurementKind::kRadius, inner);
     r.form.model = FormModel::kCylinder;
@@ -207,9 +210,12 @@ int main(int argc, char** argv) {
   Args a;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
-    if (arg == "--seeds" && i + 1 < argc) a.seeds = std::atoi(argv[++i]);
-    else if (arg == "--samples" && i + 1 < argc) a.samples = std::atoi(argv[++i]);
-    else if (arg == "--camera" && i + 1 < argc && std::sscanf(argv[++i], "%dx%d", &a.camera.width, &a.camera.height) == 2) {
+    if (arg == "--seeds" && i + 1 < argc)
+      a.seeds = std::atoi(argv[++i]);
+    else if (arg == "--samples" && i + 1 < argc)
+      a.samples = std::atoi(argv[++i]);
+    else if (arg == "--camera" && i + 1 < argc &&
+             std::sscanf(argv[++i], "%dx%d", &a.camera.width, &a.camera.height) == 2) {
     } else {
       std::fprintf(stderr, "usage: uncertainty-coverage [--seeds N] [--camera WxH] [--samples N]\n");
       return 2;
@@ -242,10 +248,11 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "z linearity: %s\n", linearity.status().ToString().c_str());
     return 1;
   }
-  std::printf("z linearity (SKEW10, seed 100000, %dx%d): max %.4f, rms %.4f of the step (%.3f / %.3f um at %.1f um)\n  table:",
-              a.camera.width, a.camera.height, linearity->MaxAbs(), linearity->Rms(),
-              linearity->MaxAbs() * linearity->characterised_step_um, linearity->Rms() * linearity->characterised_step_um,
-              linearity->characterised_step_um);
+  std::printf(
+      "z linearity (SKEW10, seed 100000, %dx%d): max %.4f, rms %.4f of the step (%.3f / %.3f um at %.1f um)\n  table:",
+      a.camera.width, a.camera.height, linearity->MaxAbs(), linearity->Rms(),
+      linearity->MaxAbs() * linearity->characterised_step_um, linearity->Rms() * linearity->characterised_step_um,
+      linearity->characterised_step_um);
   for (double v : linearity->bias_of_step) std::printf(" %+.3f", v);
   std::printf("\n\n");
 
@@ -295,9 +302,11 @@ int main(int argc, char** argv) {
         if (!measured[i].ok() || !truth[i].ok() || !measured_unchar[i].ok()) {
           ++failures;
           std::fprintf(stderr, "%s seed %d: %s\n", key.c_str(), seed,
-                       (!measured[i].ok() ? measured[i].status() : !truth[i].ok() ? truth[i].status()
-                                                                                  : measured_unchar[i].status())
-                           .ToString().c_str());
+                       (!measured[i].ok() ? measured[i].status()
+                        : !truth[i].ok()  ? truth[i].status()
+                                          : measured_unchar[i].status())
+                           .ToString()
+                           .c_str());
           continue;
         }
         if (!std::isfinite(truth[i]->value)) continue;  // e.g. Ssk of a perfect plane (Sq = 0)
@@ -314,8 +323,10 @@ int main(int argc, char** argv) {
   }
 
   // 3. Report.
-  std::printf("%d seeds x %zu specimens (%dx%d camera, STD, %d Monte Carlo samples): scan %.2f s, measurements %.2f s per scan\n\n",
-              a.seeds, cases.size(), a.camera.width, a.camera.height, a.samples, scan_s / scans, measure_s / scans);
+  std::printf(
+      "%d seeds x %zu specimens (%dx%d camera, STD, %d Monte Carlo samples): scan %.2f s, measurements %.2f s per "
+      "scan\n\n",
+      a.seeds, cases.size(), a.camera.width, a.camera.height, a.samples, scan_s / scans, measure_s / scans);
   std::printf("%-10s %-17s %14s %11s %11s %11s %8s %9s | %10s %8s\n", "specimen", "measurement", "truth", "bias",
               "sigma", "mean U", "covered", "max|d|/U", "U uncharac", "covered");
   std::map<std::string, std::pair<int, int>> by_param, by_param_unchar;

@@ -3,9 +3,9 @@
 // (normalised convolution); constants survive masks exactly.
 #include "core/areal_filter.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "tests/core/metrology_surfaces.h"
 

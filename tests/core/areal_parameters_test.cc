@@ -3,9 +3,9 @@
 // S-/L-filter pipeline separating roughness from waviness.
 #include "core/areal_parameters.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/areal_filter.h"
 #include "tests/core/metrology_surfaces.h"
@@ -109,7 +109,7 @@ TEST(ArealParametersTest, LFilterRemovesWavinessAndKeepsRoughness) {
   auto ps = ComputeHeightParameters(sf->surface_um, interior);
   ASSERT_TRUE(ps.ok());
   EXPECT_LT(std::abs(ps->Sq_um - raw->parameters.Sq_um), 0.15);  // the waviness remains
-  EXPECT_LT(ps->Sku, 1.6);  // a pure cosine (Sku 1.5), the fine roughness gone
+  EXPECT_LT(ps->Sku, 1.6);                                       // a pure cosine (Sku 1.5), the fine roughness gone
 }
 
 TEST(ArealParametersTest, OptionsAndNamesAreValidated) {

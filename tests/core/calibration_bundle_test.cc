@@ -2,11 +2,11 @@
 // the CSC file), a bundle is never overwritten, newer versions and damaged files are refused.
 #include "core/calibration_bundle.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 namespace inspection {
@@ -43,7 +43,8 @@ class CalibrationBundleTest : public ::testing::Test {
     g.camera_size = b.camera_size;
     g.projector_to_camera = cv::Mat(3, 4, CV_32FC2);
     for (int v = 0; v < 3; ++v)
-      for (int u = 0; u < 4; ++u) g.projector_to_camera.at<cv::Vec2f>(v, u) = cv::Vec2f(1.5f + 2.01f * u, 1.25f + 1.99f * v);
+      for (int u = 0; u < 4; ++u)
+        g.projector_to_camera.at<cv::Vec2f>(v, u) = cv::Vec2f(1.5f + 2.01f * u, 1.25f + 1.99f * v);
     g.projector_to_camera.at<cv::Vec2f>(0, 0) = cv::Vec2f(NAN, NAN);
     EXPECT_TRUE(FinishGeometricCalibration(g).ok());
     b.geometry = g;
@@ -133,8 +134,14 @@ TEST_F(CalibrationBundleTest, RefusesNewerVersionMissingFilesAndBadCurves) {
   ASSERT_TRUE(MakeBundle().Save(dir_).ok());
   const fs::path manifest = dir_ / kCalibrationBundleManifest;
   nlohmann::json j;
-  { std::ifstream in(manifest); j = nlohmann::json::parse(in); }
-  auto write = [&](const nlohmann::json& x) { std::ofstream out(manifest, std::ios::trunc); out << x.dump(); };
+  {
+    std::ifstream in(manifest);
+    j = nlohmann::json::parse(in);
+  }
+  auto write = [&](const nlohmann::json& x) {
+    std::ofstream out(manifest, std::ios::trunc);
+    out << x.dump();
+  };
 
   nlohmann::json newer = j;
   newer["version"] = kCalibrationBundleVersion + 1;

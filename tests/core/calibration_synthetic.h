@@ -4,23 +4,22 @@
 #pragma once
 
 #include <cmath>
+#include <opencv2/core.hpp>
 #include <random>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 namespace inspection::testing_synthetic {
 
 struct SyntheticRig {
   cv::Size projector{40, 30};
   cv::Size camera{128, 100};
-  double scale = 2.6;           // camera px per projector px
-  double angle_rad = 0.004;     // small rotation (thesis: 0.1 deg skew)
+  double scale = 2.6;        // camera px per projector px
+  double angle_rad = 0.004;  // small rotation (thesis: 0.1 deg skew)
   cv::Point2d offset{12.0, 9.0};
-  double k_radial = 2e-6;       // barrel distortion around the camera centre, per px^2
-  double sigma_px = 1.1;        // Gaussian footprint of one projector pixel in the camera
-  double peak = 120.0;          // camera grey (linear camera) of one lit projector pixel
-  double black = 3.0;           // camera grey with all projector pixels black
+  double k_radial = 2e-6;  // barrel distortion around the camera centre, per px^2
+  double sigma_px = 1.1;   // Gaussian footprint of one projector pixel in the camera
+  double peak = 120.0;     // camera grey (linear camera) of one lit projector pixel
+  double black = 3.0;      // camera grey with all projector pixels black
 
   // True camera position of projector pixel centre (u, v).
   cv::Point2d Map(double u, double v) const {

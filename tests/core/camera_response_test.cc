@@ -2,12 +2,12 @@
 // against OpenCV's CalibrateDebevec on the very same samples.
 #include "core/camera_response.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <cstdio>
-#include <random>
-
-#include <gtest/gtest.h>
 #include <opencv2/photo.hpp>
+#include <random>
 
 namespace inspection {
 namespace {

@@ -2,10 +2,10 @@
 // colour all-in-focus composer against the SFF engine's own choice of frame.
 #include "core/colour.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
-
-#include <gtest/gtest.h>
 
 #include "core/all_in_focus.h"
 #include "core/sff_engine.h"
@@ -172,7 +172,8 @@ TEST(AllInFocusTest, FirstOfEqualMaximaWinsAndMismatchesAreNamed) {
   // A NaN score never wins, also on the first frame: the next finite score takes the pixel.
   auto n = AllInFocusComposer::Create({1, 1}, CV_8UC1);
   ASSERT_TRUE(n.ok());
-  ASSERT_TRUE(n->PushFrame(cv::Mat(1, 1, CV_8UC1, cv::Scalar(1)), cv::Mat(1, 1, CV_32F, cv::Scalar(std::nan("")))).ok());
+  ASSERT_TRUE(
+      n->PushFrame(cv::Mat(1, 1, CV_8UC1, cv::Scalar(1)), cv::Mat(1, 1, CV_32F, cv::Scalar(std::nan("")))).ok());
   ASSERT_TRUE(n->PushFrame(cv::Mat(1, 1, CV_8UC1, cv::Scalar(2)), cv::Mat(1, 1, CV_32F, cv::Scalar(-3.f))).ok());
   EXPECT_EQ(n->all_in_focus().at<uint8_t>(0, 0), 2);
 }

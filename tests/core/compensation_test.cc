@@ -5,18 +5,18 @@
 // and the prediction of eq. 5.12 extrapolates linearly.
 #include "core/compensation.h"
 
-#include <cmath>
-#include <utility>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 #include <opencv2/imgproc.hpp>
+#include <utility>
 
 namespace inspection {
 namespace {
 
 constexpr int kRatio = 3;
 const cv::Size kProj{24, 16};
-const cv::Size kCam{kProj.width * kRatio, kProj.height * kRatio};
+const cv::Size kCam{kProj.width * kRatio, kProj.height* kRatio};
 
 // crf: Z = 128 * E * dt (linear camera), ln(E dt) = ln(Z / 128); Z = 0 clamped to ln(0.25/128).
 CameraResponseFunction LinearCrf() {
@@ -41,7 +41,8 @@ ScatterMatrix BlockScatter() {
   s.black_radiance = cv::Mat(kCam, CV_32FC1, cv::Scalar(0.002f));
   std::vector<Eigen::Triplet<float, int>> t;
   for (int y = 0; y < kCam.height; ++y) {
-    for (int x = 0; x < kCam.width; ++x) t.emplace_back(y * kCam.width + x, (y / kRatio) * kProj.width + x / kRatio, 1.0f);
+    for (int x = 0; x < kCam.width; ++x)
+      t.emplace_back(y * kCam.width + x, (y / kRatio) * kProj.width + x / kRatio, 1.0f);
   }
   s.a.resize(kCam.area(), kProj.area());
   s.a.setFromTriplets(t.begin(), t.end());
@@ -208,7 +209,7 @@ TEST(CompensationTest, PredictionIsLinearExtrapolation) {
   EXPECT_NEAR(p->at<float>(1, 1), 0.3f, 1e-6);
   auto q = PredictIrradiance(a, b, 20.0, 0.002);
   ASSERT_TRUE(q.ok());
-  EXPECT_NEAR(q->at<float>(0, 0), 1.0f, 1e-6);   // clamped to 1
+  EXPECT_NEAR(q->at<float>(0, 0), 1.0f, 1e-6);    // clamped to 1
   EXPECT_NEAR(q->at<float>(1, 1), 0.002f, 1e-6);  // clamped to the black floor
   EXPECT_EQ(PredictIrradiance(a, b, -1, 0).status().code(), StatusCode::kInvalidArgument);
 }

@@ -2,10 +2,10 @@
 // slopes, flags windows across depth steps and over noise, and NaN.
 #include "core/depth_consistency.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
-
-#include <gtest/gtest.h>
 
 namespace inspection {
 namespace {
@@ -50,8 +50,8 @@ TEST(DepthConsistencyTest, WindowsAcrossAStepAndOverNoiseAreRejected) {
     EXPECT_EQ(std::isnan(out->at<float>(12, x)), across) << x;
   }
   for (int x = 0; x < 9; ++x) EXPECT_TRUE(std::isnan(out->at<float>(27, x))) << x;  // noise
-  EXPECT_TRUE(std::isnan(out->at<float>(4, 5)));   // NaN within 3 px
-  EXPECT_FALSE(std::isnan(out->at<float>(8, 8)));  // NaN farther away
+  EXPECT_TRUE(std::isnan(out->at<float>(4, 5)));                                    // NaN within 3 px
+  EXPECT_FALSE(std::isnan(out->at<float>(8, 8)));                                   // NaN farther away
   // radius 0 = focus window / 2 + 1: 7 -> 4, so the band widens by one on each side.
   o.radius_px = 0;
   auto wide = RejectInconsistentDepth(d, d, 2.5, 7, o);

@@ -1,7 +1,9 @@
 // Tests of the depth map exports: exact round trips, format tags, atomic writes, preview colours.
 #include "core/depth_export.h"
 
+#include <gtest/gtest.h>
 #include <tiffio.h>
+#include <unistd.h>
 #include <zip.h>
 
 #include <cmath>
@@ -9,17 +11,12 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <random>
 #include <map>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
-
-#include <unistd.h>
-
-#include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
+#include <sstream>
 
 namespace inspection {
 namespace {
@@ -30,9 +27,8 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 class DepthExportTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("depth_export_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    dir_ = fs::temp_directory_path() / ("depth_export_test_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir_);
     fs::create_directories(dir_);
   }
@@ -389,8 +385,10 @@ TEST_F(DepthExportTest, X3pHasIsoLayoutAndValidChecksums) {
     for (int x = 0; x < 13; ++x) {
       const float um = d.at<float>(y, x);
       const double m = v[size_t(y) * 13 + x];
-      if (std::isnan(um)) EXPECT_TRUE(std::isnan(m));
-      else EXPECT_DOUBLE_EQ(m, double(um) * 1e-6);
+      if (std::isnan(um))
+        EXPECT_TRUE(std::isnan(m));
+      else
+        EXPECT_DOUBLE_EQ(m, double(um) * 1e-6);
     }
 }
 

@@ -2,10 +2,10 @@
 // non-uniform z, and the confidence on analytic curves.
 #include "core/depth_interpolation.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
-
-#include <gtest/gtest.h>
 
 namespace inspection {
 namespace {
@@ -42,8 +42,8 @@ TEST(DepthInterpolationTest, GaussianMatchesThesisEquation332ForUniformSteps) {
   // Eq. 3.32 literally, for d_m-1, d_m, d_m+1 = 4, 5, 6 (dz = 1) and arbitrary positive F.
   const double d1 = 4, d2 = 5, d3 = 6, f1 = 30, f2 = 50, f3 = 45;
   const double l1 = std::log(f1), l2 = std::log(f2), l3 = std::log(f3);
-  const double thesis = ((l2 - l3) * (d2 * d2 - d1 * d1) - (l2 - l1) * (d2 * d2 - d3 * d3)) /
-                        (2 * 1.0 * ((l2 - l1) + (l2 - l3)));
+  const double thesis =
+      ((l2 - l3) * (d2 * d2 - d1 * d1) - (l2 - l1) * (d2 * d2 - d3 * d3)) / (2 * 1.0 * ((l2 - l1) + (l2 - l3)));
   const FocusPeak p = GaussianPeak(d1, d2, d3, f1, f2, f3);
   EXPECT_NEAR(p.z_um, thesis, 1e-12);
   // Eq. 3.33 for uniform steps: sigma^2 = dz^2 / ((l2 - l1) + (l2 - l3)).

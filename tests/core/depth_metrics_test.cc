@@ -1,8 +1,8 @@
 #include "core/depth_metrics.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 namespace inspection {
 namespace {
@@ -13,8 +13,8 @@ TEST(DepthMetricsTest, AnalyticErrors) {
   DepthErrorStats s = CompareDepth(d, ref, 2.0);
   EXPECT_EQ(s.compared_pixels, 3u);
   EXPECT_NEAR(s.valid_percent, 75.0, 1e-9);
-  EXPECT_NEAR(s.mean_error_um, 4.0 / 3.0, 1e-9);           // (1 - 1 + 4) / 3
-  EXPECT_NEAR(s.rmse_um, std::sqrt(18.0 / 3.0), 1e-9);     // (1 + 1 + 16) / 3
+  EXPECT_NEAR(s.mean_error_um, 4.0 / 3.0, 1e-9);        // (1 - 1 + 4) / 3
+  EXPECT_NEAR(s.rmse_um, std::sqrt(18.0 / 3.0), 1e-9);  // (1 + 1 + 16) / 3
   EXPECT_NEAR(s.mean_abs_error_um, 2.0, 1e-9);
   EXPECT_NEAR(s.stddev_error_um, std::sqrt(6.0 - 16.0 / 9.0), 1e-9);
   EXPECT_NEAR(s.outlier_percent, 100.0 / 3.0, 1e-9);
@@ -34,8 +34,8 @@ TEST(DepthMetricsTest, MaskLimitsTheComparedPixels) {
   cv::Mat d = (cv::Mat_<float>(1, 4) << 1.f, 3.f, 100.f, std::nanf(""));
   cv::Mat mask = (cv::Mat_<uint8_t>(1, 4) << 1, 1, 0, 1);
   DepthErrorStats s = CompareDepth(d, ref, mask, 10.0);
-  EXPECT_EQ(s.compared_pixels, 2u);                      // the 100 um pixel is outside the mask
-  EXPECT_NEAR(s.valid_percent, 200.0 / 3.0, 1e-9);       // 2 of the 3 masked pixels have depth
+  EXPECT_EQ(s.compared_pixels, 2u);                 // the 100 um pixel is outside the mask
+  EXPECT_NEAR(s.valid_percent, 200.0 / 3.0, 1e-9);  // 2 of the 3 masked pixels have depth
   EXPECT_NEAR(s.mean_error_um, 2.0, 1e-9);
   EXPECT_NEAR(s.outlier_percent, 0.0, 1e-9);
   EXPECT_EQ(CompareDepth(d, ref, 10.0).compared_pixels, 3u);

@@ -2,10 +2,10 @@
 // fill, in that order, on a map whose good and bad pixels are known.
 #include "core/depth_postprocess.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
-
-#include <gtest/gtest.h>
 
 namespace inspection {
 namespace {

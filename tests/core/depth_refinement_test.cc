@@ -2,11 +2,11 @@
 // maps whose right answer is known: steps aligned with guide edges, spikes, holes.
 #include "core/depth_refinement.h"
 
-#include <cmath>
-#include <random>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 #include "core/depth_fill.h"
 #include "core/depth_fusion.h"
@@ -21,7 +21,8 @@ const float kNaN = std::nanf("");
 cv::Mat StepGuide(cv::Size size, int edge) {
   cv::Mat g(size, CV_8UC3);
   for (int y = 0; y < size.height; ++y)
-    for (int x = 0; x < size.width; ++x) g.at<cv::Vec3b>(y, x) = x < edge ? cv::Vec3b(40, 160, 200) : cv::Vec3b(200, 150, 60);
+    for (int x = 0; x < size.width; ++x)
+      g.at<cv::Vec3b>(y, x) = x < edge ? cv::Vec3b(40, 160, 200) : cv::Vec3b(200, 150, 60);
   return g;
 }
 
@@ -37,8 +38,8 @@ TEST(DepthRefinementTest, WeightedMedianMovesASmearedEdgeOntoTheGuideEdgeAndRemo
   const cv::Mat guide = StepGuide(size, 16);
   // The focus window smeared the far side's depth 2 px into the near object (columns 14, 15).
   cv::Mat depth = StepDepth(size, 14, 10.f, 20.f);
-  depth.at<float>(5, 5) = 50.f;                       // a spurious focus peak
-  depth.at<float>(8, 8) = kNaN;                       // not measured: stays NaN
+  depth.at<float>(5, 5) = 50.f;  // a spurious focus peak
+  depth.at<float>(8, 8) = kNaN;  // not measured: stays NaN
   cv::Mat conf(size, CV_32F, cv::Scalar(0.9f));
   DepthRefinementOptions o;
   o.method = DepthRefinement::kWeightedMedian;
@@ -203,14 +204,23 @@ TEST(DepthFillTest, NothingOrEverythingMeasuredIsReturnedAsIs) {
 
 TEST(DepthFusionTest, MostConfidentAndWeightedRules) {
   cv::Mat d1(1, 3, CV_32F), d2(1, 3, CV_32F), c1(1, 3, CV_32F), c2(1, 3, CV_32F);
-  d1.at<float>(0, 0) = 10.f; c1.at<float>(0, 0) = 0.9f; d2.at<float>(0, 0) = 14.f; c2.at<float>(0, 0) = 0.3f;
-  d1.at<float>(0, 1) = 10.f; c1.at<float>(0, 1) = 0.1f; d2.at<float>(0, 1) = 20.f; c2.at<float>(0, 1) = 0.2f;
-  d1.at<float>(0, 2) = kNaN; c1.at<float>(0, 2) = 0.9f; d2.at<float>(0, 2) = 7.f; c2.at<float>(0, 2) = 0.5f;
+  d1.at<float>(0, 0) = 10.f;
+  c1.at<float>(0, 0) = 0.9f;
+  d2.at<float>(0, 0) = 14.f;
+  c2.at<float>(0, 0) = 0.3f;
+  d1.at<float>(0, 1) = 10.f;
+  c1.at<float>(0, 1) = 0.1f;
+  d2.at<float>(0, 1) = 20.f;
+  c2.at<float>(0, 1) = 0.2f;
+  d1.at<float>(0, 2) = kNaN;
+  c1.at<float>(0, 2) = 0.9f;
+  d2.at<float>(0, 2) = 7.f;
+  c2.at<float>(0, 2) = 0.5f;
   auto m = FuseDepthMaps({d1, d2}, {c1, c2}, DepthFusionRule::kMostConfident, 0.4);
   ASSERT_TRUE(m.ok());
   EXPECT_EQ(m->depth_um.at<float>(0, 0), 10.f);
   EXPECT_TRUE(std::isnan(m->depth_um.at<float>(0, 1)));  // best confidence 0.2 < 0.4
-  EXPECT_EQ(m->depth_um.at<float>(0, 2), 7.f);            // the NaN depth does not count
+  EXPECT_EQ(m->depth_um.at<float>(0, 2), 7.f);           // the NaN depth does not count
   EXPECT_FLOAT_EQ(m->confidence.at<float>(0, 0), 0.9f);
   auto w = FuseDepthMaps({d1, d2}, {c1, c2}, DepthFusionRule::kConfidenceWeighted, 0.0);
   ASSERT_TRUE(w.ok());

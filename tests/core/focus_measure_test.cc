@@ -2,12 +2,12 @@
 // and against an independent brute-force evaluation for the Chebyshev moment ratio.
 #include "core/focus_measure.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <numeric>
-#include <random>
-
-#include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 namespace inspection {
 namespace {
@@ -150,7 +150,7 @@ TEST(FocusMeasureTest, BorderIsReflect101) {
   // padded image:
   cv::Mat padded;
   cv::copyMakeBorder(img, padded, 1, 1, 1, 1, cv::BORDER_REFLECT_101);
-  auto sobel_energy = [&](int y, int x) {  // at image pixel (y, x), |y|,|x| <= 1 beyond the edge
+  auto sobel_energy = [&](int y, int x) {                  // at image pixel (y, x), |y|,|x| <= 1 beyond the edge
     const int py = std::abs(y) + 1, px = std::abs(x) + 1;  // reflect then shift into padded
     double gx = 0, gy = 0;
     const int sx[3][3] = {{1, 0, -1}, {2, 0, -2}, {1, 0, -1}}, sy[3][3] = {{1, 2, 1}, {0, 0, 0}, {-1, -2, -1}};
@@ -180,9 +180,9 @@ TEST(FocusMeasureTest, ChebyshevPolynomialsAreOrthonormalAndMatchRho) {
       }
     }
   }
-  EXPECT_DOUBLE_EQ(ChebyshevNorm(0, 5), 5.0);                 // sum of 1^2
-  EXPECT_DOUBLE_EQ(ChebyshevNorm(1, 3), 8.0);                 // (-2)^2 + 0 + 2^2
-  EXPECT_DOUBLE_EQ(ChebyshevNorm(1, 7), 7.0 * 48.0 / 3.0);    // N (N^2 - 1) / 3
+  EXPECT_DOUBLE_EQ(ChebyshevNorm(0, 5), 5.0);               // sum of 1^2
+  EXPECT_DOUBLE_EQ(ChebyshevNorm(1, 3), 8.0);               // (-2)^2 + 0 + 2^2
+  EXPECT_DOUBLE_EQ(ChebyshevNorm(1, 7), 7.0 * 48.0 / 3.0);  // N (N^2 - 1) / 3
 }
 
 // Brute force, independent of the implementation: Gram-Schmidt on 1, x, x^2, ... gives the

@@ -3,9 +3,9 @@
 // the propagated uncertainty; bad regions fail with FAILED_PRECONDITION.
 #include "core/form_removal.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/measurement_uncertainty.h"
 #include "tests/core/metrology_surfaces.h"
@@ -113,8 +113,8 @@ TEST(FormRemovalTest, SphereWithNoiseAndHolesStaysWithinItsUncertainty) {
   auto cov = FormFitCovariance(*fit, z, All(size), kPx, KnownNoise(z, 0.05, 7));
   ASSERT_TRUE(cov.ok()) << cov.status().ToString();
   const double u = std::sqrt(cov->Total()(k, k));
-  std::printf("sphere R 500 um, noise 0.05 um (7 px correlated), holes: R = %.3f um, u = %.3f um\n",
-              fit->parameters[k], u);
+  std::printf("sphere R 500 um, noise 0.05 um (7 px correlated), holes: R = %.3f um, u = %.3f um\n", fit->parameters[k],
+              u);
   // One realisation: within 3 u (a 99.7 % interval when the uncertainty is right), and u must be
   // meaningful (not tiny, not huge) for a 110 x 150 um cap.
   EXPECT_NEAR(fit->parameters[k], r, 3.0 * u);

@@ -2,10 +2,10 @@
 // against a synthetic rig with known homography + barrel distortion.
 #include "core/geometric_calibration.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
-
-#include <gtest/gtest.h>
 
 #include "tests/core/calibration_synthetic.h"
 
@@ -56,7 +56,8 @@ TEST(DotCentroidTest, SubPixelCentreOfGaussianDot) {
   const cv::Point2d truth(19.37, 21.81);
   for (int y = 0; y < 40; ++y)
     for (int x = 0; x < 40; ++x)
-      img.at<float>(y, x) = 100.0f * std::exp(-((x - truth.x) * (x - truth.x) + (y - truth.y) * (y - truth.y)) / (2 * 1.3 * 1.3));
+      img.at<float>(y, x) =
+          100.0f * std::exp(-((x - truth.x) * (x - truth.x) + (y - truth.y) * (y - truth.y)) / (2 * 1.3 * 1.3));
   CentroidOptions o;
   o.patch_threshold = 0.0;
   auto c = DotCentroid(img, {18, 23}, o);

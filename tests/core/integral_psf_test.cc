@@ -2,10 +2,10 @@
 // Gaussians; the estimated kernel must restore the focused image from the integral image.
 #include "core/integral_psf.h"
 
-#include <random>
-
 #include <gtest/gtest.h>
+
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 namespace inspection {
 namespace {
@@ -23,8 +23,10 @@ Stack MakeStack(uint64_t seed) {
   cv::GaussianBlur(noise, s.focused, {0, 0}, 0.8);
   for (double sigma : {0.0, 0.7, 1.4, 2.1, 2.8, 3.5, 4.2}) {
     cv::Mat f;
-    if (sigma == 0) f = s.focused.clone();
-    else cv::GaussianBlur(s.focused, f, {0, 0}, sigma, sigma, cv::BORDER_REFLECT);
+    if (sigma == 0)
+      f = s.focused.clone();
+    else
+      cv::GaussianBlur(s.focused, f, {0, 0}, sigma, sigma, cv::BORDER_REFLECT);
     s.frames.push_back(f);
   }
   return s;
@@ -105,8 +107,8 @@ TEST(IntegralPsfTest, TvL1KernelResistsOutliersInTheFocusedImage) {
 }
 
 TEST(IntegralPsfTest, RegularisationNamesRoundTrip) {
-  for (IpsfRegularisation r : {IpsfRegularisation::kGradientL2, IpsfRegularisation::kTotalVariation,
-                               IpsfRegularisation::kTotalVariationL1}) {
+  for (IpsfRegularisation r :
+       {IpsfRegularisation::kGradientL2, IpsfRegularisation::kTotalVariation, IpsfRegularisation::kTotalVariationL1}) {
     auto p = ParseIpsfRegularisation(IpsfRegularisationName(r));
     ASSERT_TRUE(p.ok());
     EXPECT_EQ(*p, r);

@@ -3,10 +3,10 @@
 // ISFF-GT / ISFF-FAST end to end on a synthetic tilted stack, with the precondition errors.
 #include "core/integral_sff.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <filesystem>
-
-#include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -46,7 +46,8 @@ TEST(IntegralSffTest, NoiseEstimateIgnoresSmoothContent) {
   cv::Mat base(size, CV_32FC1);
   for (int y = 0; y < size.height; ++y)
     for (int x = 0; x < size.width; ++x)
-      base.at<float>(y, x) = float(60 + 0.5 * x + 0.3 * y + 40 * std::exp(-((x - 80) * (x - 80) + (y - 60) * (y - 60)) / 800.0));
+      base.at<float>(y, x) =
+          float(60 + 0.5 * x + 0.3 * y + 40 * std::exp(-((x - 80) * (x - 80) + (y - 60) * (y - 60)) / 800.0));
   for (double sigma : {0.5, 2.0, 5.0}) {
     const cv::Mat f = base + Noise(size, sigma, 3);
     EXPECT_NEAR(EstimateFrameNoiseSigma(f), sigma, 0.06 * sigma) << sigma;
@@ -80,8 +81,10 @@ Synthetic MakeSynthetic(cv::Size size, int n, double noise, uint64_t seed, doubl
   for (int i = 0; i <= 60; ++i) {
     cv::Mat b;
     const double sg = 0.25 * i;
-    if (sg < 0.3) b = s.texture.clone();
-    else cv::GaussianBlur(s.texture, b, {0, 0}, sg, sg, cv::BORDER_REFLECT_101);
+    if (sg < 0.3)
+      b = s.texture.clone();
+    else
+      cv::GaussianBlur(s.texture, b, {0, 0}, sg, sg, cv::BORDER_REFLECT_101);
     ladder.push_back(b);
   }
   for (int k = 0; k < n; ++k) {
@@ -205,7 +208,8 @@ TEST(IntegralSffTest, StackFolderTwoPassesMatchInMemory) {
   const IntegralPsf ipsf = Calibrate(cal);
   const Synthetic s = MakeSynthetic({64, 48}, 8, 1.0, 32);
   const std::vector<cv::Mat> frames = To8U(s.frames_f);
-  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("isff_stack_" + std::to_string(::getpid()));
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("isff_stack_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   StackManifest m;
   m.pixel_size_um = 0.74;

@@ -3,9 +3,9 @@
 // correlation model, and validation naming the field.
 #include "core/line_profile.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "tests/core/metrology_surfaces.h"
 
@@ -53,8 +53,8 @@ TEST(LineProfileTest, BandAveragesAcrossAndGapsStayEmpty) {
   o.width_px = 9;
   auto p = ExtractLineProfile(z, kPx, o, nullptr);
   ASSERT_TRUE(p.ok()) << p.status().ToString();
-  EXPECT_NEAR(p->height_um[10], 200.0, 1e-5);   // x = 15.5: flat
-  EXPECT_TRUE(std::isnan(p->height_um[20]));    // x = 25.5: no depth anywhere across
+  EXPECT_NEAR(p->height_um[10], 200.0, 1e-5);  // x = 15.5: flat
+  EXPECT_TRUE(std::isnan(p->height_um[20]));   // x = 25.5: no depth anywhere across
   EXPECT_EQ(p->cross_samples[20], 0);
   EXPECT_NEAR(p->height_um[100], 202.0, 1e-5);  // x = 105.5
   // x = 95.5: cross samples at y = 36, 37, 38 interpolate from rows 35..38, which touch the hole.

@@ -4,9 +4,9 @@
 // verdicts from Judge.
 #include "core/measurement.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/verdict.h"
 #include "tests/core/metrology_surfaces.h"
@@ -93,7 +93,7 @@ TEST_F(SyntheticPartTest, MeasuresTheKnownValuesWithinTheirUncertainty) {
   const RegionOfInterest rough = RegionOfInterest::Rectangle(10, 0, 120, 120);
   const RegionOfInterest land = RegionOfInterest::Rectangle(165, 0, 60, 120);
   const RegionOfInterest top = RegionOfInterest::Rectangle(255, 0, 60, 120);
-  std::vector<MeasurementSpec> specs = {Spec(MeasurementKind::kSa, rough), Spec(MeasurementKind::kSq, rough),
+  std::vector<MeasurementSpec> specs = {Spec(MeasurementKind::kSa, rough),  Spec(MeasurementKind::kSq, rough),
                                         Spec(MeasurementKind::kSku, rough), Spec(MeasurementKind::kStepHeight, top),
                                         Spec(MeasurementKind::kTilt, land), Spec(MeasurementKind::kFlatness, land),
                                         Spec(MeasurementKind::kSz, rough)};

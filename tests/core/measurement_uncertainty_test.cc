@@ -4,9 +4,9 @@
 // closed forms, and the Monte Carlo noise-bias estimate covers the bias of Sq on pure noise.
 #include "core/measurement_uncertainty.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/areal_parameters.h"
 #include "tests/core/metrology_surfaces.h"
@@ -46,7 +46,8 @@ TEST(MeasurementUncertaintyTest, NoiseEstimateRecoversSigmaOnPlaneAndOnALaidSurf
   EXPECT_GE(m->extreme_error_um, std::max(hi, -lo));
   EXPECT_LE(m->extreme_error_um, 2.0 * std::max(hi, -lo));
   // A 2 um cosine lay along x would swamp x's second differences; y's still see the noise only.
-  cv::Mat laid = testing::SampleSurface(size, kPx, [](double x, double) { return 200.0 + 2.0 * std::cos(2 * kPi * x / 30.0); });
+  cv::Mat laid =
+      testing::SampleSurface(size, kPx, [](double x, double) { return 200.0 + 2.0 * std::cos(2 * kPi * x / 30.0); });
   laid += noise;
   auto ml = EstimateDepthNoise(laid, cv::Mat(), Options());
   ASSERT_TRUE(ml.ok());
@@ -92,7 +93,8 @@ TEST(MeasurementUncertaintyTest, FitCovarianceMatchesTheSpreadOverRealisations) 
   // 400 noise realisations (sigma 0.05 um, 7 x 7 correlated) on a 90 x 60 px plane: the sample
   // variance of each parameter is known to sqrt(2 / 400) = 7 %; the bound is 3 of those (21 %).
   const cv::Size size(90, 60);
-  const cv::Mat base = testing::SampleSurface(size, kPx, [](double x, double y) { return 210.0 + 0.02 * x - 0.01 * y; });
+  const cv::Mat base =
+      testing::SampleSurface(size, kPx, [](double x, double y) { return 210.0 + 0.02 * x - 0.01 * y; });
   auto fit0 = FitForm(base, All(size), kPx, FormOptions{});
   ASSERT_TRUE(fit0.ok());
   auto cov = FormFitCovariance(*fit0, base, All(size), kPx, Known(base, 0.05, 7, Options()));
@@ -167,11 +169,13 @@ TEST(MeasurementUncertaintyTest, MonteCarloIsRepeatableAndItsBiasCoversNoiseOnly
   ASSERT_TRUE(a.ok() && b.ok()) << a.status().ToString();
   EXPECT_EQ((*a)[0].standard_uncertainty, (*b)[0].standard_uncertainty);  // same seed, same answer
   for (int i = 0; i < 2; ++i) {
-    std::printf("%s of noise: %.4f um, MC bias %.4f spread %.4f\n", i ? "Sa" : "Sq", (*v)[i], (*a)[i].bias, (*a)[i].spread);
+    std::printf("%s of noise: %.4f um, MC bias %.4f spread %.4f\n", i ? "Sa" : "Sq", (*v)[i], (*a)[i].bias,
+                (*a)[i].spread);
     EXPECT_NEAR((*a)[i].bias, (*v)[i], 0.15 * (*v)[i]);
     EXPECT_GE(2.0 * (*a)[i].standard_uncertainty, (*v)[i]);  // U covers the deviation from 0
   }
-  EXPECT_EQ(MonteCarloUncertainty(z, *v, measure, m, MonteCarloOptions{4}).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(MonteCarloUncertainty(z, *v, measure, m, MonteCarloOptions{4}).status().code(),
+            StatusCode::kInvalidArgument);
 }
 
 }  // namespace

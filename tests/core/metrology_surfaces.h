@@ -6,10 +6,9 @@
 
 #include <cmath>
 #include <functional>
-#include <random>
-
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 namespace inspection::testing {
 

@@ -3,9 +3,9 @@
 // ISFF-FAST's first local maximum above the threshold and the work it skips, and bad input.
 #include "core/ncc_focus.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 #include <opencv2/imgproc.hpp>
 
 namespace inspection {
@@ -95,7 +95,9 @@ TEST(NccFocusTest, InvariantToGainAndOffsetAndSignOfContrast) {
   ASSERT_TRUE(ComputeNccFocus(To8U(250 - t), t, 7, 1, CorrelationFocusValue::kShiftedSum, &ncc, nullptr).ok());
   EXPECT_NEAR(ncc.at<float>(8, 8), -1.0, 2e-3);
   // A flat frame has no correlation (defined as 0, not NaN).
-  ASSERT_TRUE(ComputeNccFocus(cv::Mat(16, 16, CV_8UC1, cv::Scalar(90)), t, 7, 1, CorrelationFocusValue::kShiftedSum, &ncc, nullptr).ok());
+  ASSERT_TRUE(ComputeNccFocus(cv::Mat(16, 16, CV_8UC1, cv::Scalar(90)), t, 7, 1, CorrelationFocusValue::kShiftedSum,
+                              &ncc, nullptr)
+                  .ok());
   EXPECT_EQ(ncc.at<float>(8, 8), 0.0f);
 }
 
@@ -127,42 +129,43 @@ TiltedStack MakeTilted(cv::Size size, int n, uint64_t seed) {
 TEST(NccFocusTest, TiledEngineMatchesWholeFrameReference) {
   const TiltedStack s = MakeTilted({45, 29}, 7, 4);
   for (CorrelationFocusValue value : {CorrelationFocusValue::kContrastWeighted, CorrelationFocusValue::kShiftedSum})
-  for (DepthInterpolation interp : {DepthInterpolation::kMaximum, DepthInterpolation::kGaussian,
-                                    DepthInterpolation::kLineFit}) {
-    // Reference: per-frame focus maps, discrete maximum and interpolated peak per pixel.
-    std::vector<cv::Mat> fm(s.frames.size());
-    for (size_t k = 0; k < s.frames.size(); ++k) {
-      cv::Mat ncc;
-      ASSERT_TRUE(ComputeNccFocus(s.frames[k], s.templ, 5, 3, value, &ncc, &fm[k]).ok());
-    }
-    NccFocusOptions o;
-    o.focus_value = value;
-    o.correlation_window_px = 5;
-    o.summation_window_px = 3;
-    o.interpolation = interp;
-    o.min_confidence = 0.0;
-    o.tile_px = 8;  // many tile seams in a 45 x 29 image
-    o.threads = 3;
-    auto engine = NccFocusEngine::Create(o, s.templ, CV_8UC1);
-    ASSERT_TRUE(engine.ok()) << engine.status().ToString();
-    const size_t bytes = (*engine)->state_bytes();
-    for (size_t k = 0; k < s.frames.size(); ++k) ASSERT_TRUE((*engine)->PushFrame(s.frames[k], s.z[k]).ok());
-    EXPECT_EQ((*engine)->state_bytes(), bytes);  // O(pixels), not O(pixels x frames)
-    auto r = (*engine)->Finish();
-    ASSERT_TRUE(r.ok()) << r.status().ToString();
-    for (int y = 0; y < 29; ++y)
-      for (int x = 0; x < 45; ++x) {
-        std::vector<double> f;
-        for (const cv::Mat& m : fm) f.push_back(m.at<float>(y, x));
-        const FocusPeak p = InterpolateFocusCurve(interp, s.z, f, 2);
-        ASSERT_NEAR(r->depth_um.at<float>(y, x), p.z_um, 2e-3) << x << "," << y << " " << CorrelationFocusValueName(value);
-        const int m = int(std::max_element(f.begin(), f.end()) - f.begin());
-        ASSERT_EQ((*engine)->max_index().at<int16_t>(y, x), m);
+    for (DepthInterpolation interp :
+         {DepthInterpolation::kMaximum, DepthInterpolation::kGaussian, DepthInterpolation::kLineFit}) {
+      // Reference: per-frame focus maps, discrete maximum and interpolated peak per pixel.
+      std::vector<cv::Mat> fm(s.frames.size());
+      for (size_t k = 0; k < s.frames.size(); ++k) {
+        cv::Mat ncc;
+        ASSERT_TRUE(ComputeNccFocus(s.frames[k], s.templ, 5, 3, value, &ncc, &fm[k]).ok());
       }
-    // The all-in-focus grey comes from the chosen frame.
-    const int m = (*engine)->max_index().at<int16_t>(14, 20);
-    EXPECT_EQ(r->all_in_focus.at<uint8_t>(14, 20), s.frames[m].at<uint8_t>(14, 20));
-  }
+      NccFocusOptions o;
+      o.focus_value = value;
+      o.correlation_window_px = 5;
+      o.summation_window_px = 3;
+      o.interpolation = interp;
+      o.min_confidence = 0.0;
+      o.tile_px = 8;  // many tile seams in a 45 x 29 image
+      o.threads = 3;
+      auto engine = NccFocusEngine::Create(o, s.templ, CV_8UC1);
+      ASSERT_TRUE(engine.ok()) << engine.status().ToString();
+      const size_t bytes = (*engine)->state_bytes();
+      for (size_t k = 0; k < s.frames.size(); ++k) ASSERT_TRUE((*engine)->PushFrame(s.frames[k], s.z[k]).ok());
+      EXPECT_EQ((*engine)->state_bytes(), bytes);  // O(pixels), not O(pixels x frames)
+      auto r = (*engine)->Finish();
+      ASSERT_TRUE(r.ok()) << r.status().ToString();
+      for (int y = 0; y < 29; ++y)
+        for (int x = 0; x < 45; ++x) {
+          std::vector<double> f;
+          for (const cv::Mat& m : fm) f.push_back(m.at<float>(y, x));
+          const FocusPeak p = InterpolateFocusCurve(interp, s.z, f, 2);
+          ASSERT_NEAR(r->depth_um.at<float>(y, x), p.z_um, 2e-3)
+              << x << "," << y << " " << CorrelationFocusValueName(value);
+          const int m = int(std::max_element(f.begin(), f.end()) - f.begin());
+          ASSERT_EQ((*engine)->max_index().at<int16_t>(y, x), m);
+        }
+      // The all-in-focus grey comes from the chosen frame.
+      const int m = (*engine)->max_index().at<int16_t>(14, 20);
+      EXPECT_EQ(r->all_in_focus.at<uint8_t>(14, 20), s.frames[m].at<uint8_t>(14, 20));
+    }
 }
 
 TEST(NccFocusTest, FindsTheTiltedPlaneWithinAStep) {

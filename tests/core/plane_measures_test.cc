@@ -3,9 +3,9 @@
 // the tilt uncertainty near zero tilt covers the Rayleigh-distributed |slope|.
 #include "core/plane_measures.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "tests/core/metrology_surfaces.h"
 
@@ -36,7 +36,8 @@ TEST(PlaneMeasuresTest, TiltAngleAndAzimuthOfTiltedPlanes) {
     double sx, sy;
   };
   for (const Case c : {Case{std::tan(5.0 * kPi / 180.0), 0.0}, Case{0.03, 0.04}, Case{-0.1, 0.02}}) {
-    const cv::Mat z = testing::SampleSurface(size, kPx, [&](double x, double y) { return 200.0 + c.sx * x + c.sy * y; });
+    const cv::Mat z =
+        testing::SampleSurface(size, kPx, [&](double x, double y) { return 200.0 + c.sx * x + c.sy * y; });
     auto t = MeasureTilt(z, All(size), kPx, nullptr);
     ASSERT_TRUE(t.ok()) << t.status().ToString();
     EXPECT_NEAR(t->tilt_deg, std::atan(std::hypot(c.sx, c.sy)) * 180.0 / kPi, 1e-5);
@@ -68,9 +69,8 @@ TEST(PlaneMeasuresTest, FlatnessIsThePeakToValleyAboutTheLeastSquaresPlane) {
   // (samples half a pixel off the crests) times cos(tilt) (perpendicular to the plane).
   const cv::Size size(400, 40);
   const double slope = std::tan(3.0 * kPi / 180.0), xc = 200 * kPx;
-  const cv::Mat z = testing::SampleSurface(size, kPx, [&](double x, double) {
-    return 250.0 + slope * x + 0.8 * std::cos(2 * kPi * (x - xc) / (50 * kPx));
-  });
+  const cv::Mat z = testing::SampleSurface(
+      size, kPx, [&](double x, double) { return 250.0 + slope * x + 0.8 * std::cos(2 * kPi * (x - xc) / (50 * kPx)); });
   auto f = MeasureFlatness(z, All(size), kPx, nullptr);
   ASSERT_TRUE(f.ok()) << f.status().ToString();
   const double expected = 1.6 * std::cos(kPi / 50) * std::cos(3.0 * kPi / 180.0);

@@ -1,10 +1,10 @@
 // Projector response (thesis eq. 4.8-4.9) through a known gamma camera and a known projector.
 #include "core/projector_response.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
-
-#include <gtest/gtest.h>
 
 namespace inspection {
 namespace {
@@ -22,7 +22,8 @@ double TruePrf(int i) { return 0.004 + 0.996 * std::pow(i / 255.0, 2.0); }
 TEST(ProjectorResponseTest, ExposuresFollowEq48) {
   EXPECT_NEAR(ProjectorCalibrationExposureUs(0, 100, 10000), 10000, 1e-6);
   EXPECT_NEAR(ProjectorCalibrationExposureUs(255, 100, 10000), 100, 1e-6);
-  EXPECT_NEAR(ProjectorCalibrationExposureUs(128, 100, 10000), std::exp(std::log(10000) - std::log(100) * 128 / 255), 1e-6);
+  EXPECT_NEAR(ProjectorCalibrationExposureUs(128, 100, 10000), std::exp(std::log(10000) - std::log(100) * 128 / 255),
+              1e-6);
 }
 
 TEST(ProjectorResponseTest, RecoversGammaProjectorWithinOnePercentOfFullScale) {

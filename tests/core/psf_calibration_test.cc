@@ -1,10 +1,10 @@
 // PSF calibration (thesis 4.3.3) and sigma_p (thesis 5.2.1): Gaussian dots of known width.
 #include "core/psf_calibration.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <random>
-
-#include <gtest/gtest.h>
 
 namespace inspection {
 namespace {

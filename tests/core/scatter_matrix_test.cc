@@ -2,12 +2,12 @@
 // light transport is known, it must predict the camera image of a random pattern.
 #include "core/scatter_matrix.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <random>
-
-#include <gtest/gtest.h>
 
 #include "tests/core/calibration_synthetic.h"
 

@@ -3,10 +3,10 @@
 // agreement, 8/16 bit, non-uniform and descending z, and bad input.
 #include "core/sff_engine.h"
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "core/focus_measure.h"
 #include "tests/core/sff_synthetic.h"
@@ -51,8 +51,8 @@ TEST_F(TiltedPlane, TenengradGaussianIsAccurateAndCoversTheTexture) {
   SffOptions o;  // defaults: Tenengrad 7x7, Gaussian, default min_confidence
   const DepthResult r = Streamed(o, stack_->frames, stack_->z_um);
   const auto e = CompareDepth(r.depth_um, stack_->height_um);
-  std::printf("[figures] tenengrad7+gaussian tilted plane: RMSE %.4f step, max %.3f step, coverage %.4f\n",
-              e.rmse_um, e.max_abs_um, r.valid_fraction);
+  std::printf("[figures] tenengrad7+gaussian tilted plane: RMSE %.4f step, max %.3f step, coverage %.4f\n", e.rmse_um,
+              e.max_abs_um, r.valid_fraction);
   EXPECT_LT(e.rmse_um, 0.25);  // z step is 1 µm
   EXPECT_GT(r.valid_fraction, 0.99);
   EXPECT_EQ(r.frame_count, 21);
@@ -116,8 +116,8 @@ TEST_F(TiltedPlane, AllInFocusComesFromTheSharpestFrame) {
     f.convertTo(f32, CV_32F);
     best_frame = std::min(best_frame, rms(f32));
   }
-  std::printf("[figures] all-in-focus RMS grey error %.2f, oracle %.2f, best single frame %.2f\n", err_aif,
-              err_oracle, best_frame);
+  std::printf("[figures] all-in-focus RMS grey error %.2f, oracle %.2f, best single frame %.2f\n", err_aif, err_oracle,
+              best_frame);
   EXPECT_LT(err_aif, 1.1 * err_oracle);
   EXPECT_LT(err_aif, 0.6 * best_frame);
 }
@@ -157,8 +157,8 @@ TEST(SffEngineTest, TexturedAndTexturelessHalvesInOneImage) {
 TEST(SffEngineTest, StreamingAndBatchAreBitIdentical) {
   // 300x150 spans several 256x64 tiles with partial ones at the right and bottom edges.
   const auto s = TiltedPlaneStack(cv::Size(300, 150), UniformZ(12, 0.0, 1.5), 4.0, 0.02, 0.03);
-  for (DepthInterpolation interp : {DepthInterpolation::kMaximum, DepthInterpolation::kGaussian,
-                                    DepthInterpolation::kLineFit}) {
+  for (DepthInterpolation interp :
+       {DepthInterpolation::kMaximum, DepthInterpolation::kGaussian, DepthInterpolation::kLineFit}) {
     for (int window : {3, 7, 31}) {
       SffOptions o;
       o.interpolation = interp;
@@ -195,8 +195,8 @@ TEST(SffEngineTest, BatchChunksOfEveryLengthMatchStreaming) {
         const DepthResult streamed = Streamed(o, s.frames, s.z_um);
         auto batch = SffEngine::ReconstructInMemory(o, s.frames, s.z_um);
         ASSERT_TRUE(batch.ok()) << batch.status().ToString();
-        const std::string what = std::to_string(n) + " frames, w" + std::to_string(window) + " " +
-                                 DepthInterpolationName(interp);
+        const std::string what =
+            std::to_string(n) + " frames, w" + std::to_string(window) + " " + DepthInterpolationName(interp);
         EXPECT_TRUE(BitIdentical(streamed.depth_um, batch->depth_um)) << what;
         EXPECT_TRUE(BitIdentical(streamed.confidence, batch->confidence)) << what;
         EXPECT_TRUE(BitIdentical(streamed.all_in_focus, batch->all_in_focus)) << what;
@@ -357,8 +357,8 @@ TEST(SffEngineTest, CompactStateMatchesExactState) {
         const double dd = std::abs(compact.depth_um.at<float>(y, x) - exact.depth_um.at<float>(y, x));
         worst_depth = std::max(worst_depth, dd);
         sum_sq += dd * dd;
-        worst_conf = std::max(
-            worst_conf, double(std::abs(compact.confidence.at<float>(y, x) - exact.confidence.at<float>(y, x))));
+        worst_conf = std::max(worst_conf,
+                              double(std::abs(compact.confidence.at<float>(y, x) - exact.confidence.at<float>(y, x))));
       }
     const double rms_depth = std::sqrt(sum_sq / double(compact.depth_um.total()));
     std::printf("[figures] compact vs exact state (%s): depth max %.2e rms %.2e step, confidence max %.2e\n",
@@ -494,7 +494,8 @@ TEST(SffEngineTest, NonUniformAndDescendingZ) {
   cv::Mat diff;
   cv::absdiff(up.depth_um, down.depth_um, diff);
   double worst;
-  cv::minMaxLoc(diff, nullptr, &worst, nullptr, nullptr, (up.depth_um == up.depth_um) & (down.depth_um == down.depth_um));
+  cv::minMaxLoc(diff, nullptr, &worst, nullptr, nullptr,
+                (up.depth_um == up.depth_um) & (down.depth_um == down.depth_um));
   EXPECT_LT(worst, 1e-4);
 }
 
@@ -542,8 +543,8 @@ TEST(SffEngineTest, RejectsBadInput) {
   ASSERT_TRUE(engine->PushFrame(f, 1.0).ok());
   expect_frame_error(engine->PushFrame(cv::Mat(13, 16, CV_8U), 2.0), "frame 2: size");
   expect_frame_error(engine->PushFrame(cv::Mat(size, CV_16U), 2.0), "frame 2: pixel type");
-  expect_frame_error(engine->PushFrame(f, 1.0), "frame 2: z_um");        // duplicate
-  expect_frame_error(engine->PushFrame(f, 0.5), "frame 2: z_um");        // direction reversed
+  expect_frame_error(engine->PushFrame(f, 1.0), "frame 2: z_um");  // duplicate
+  expect_frame_error(engine->PushFrame(f, 0.5), "frame 2: z_um");  // direction reversed
   expect_frame_error(engine->PushFrame(f, std::nan("")), "frame 2: z_um");
   EXPECT_EQ(engine->frames_pushed(), 2);  // rejected frames leave no trace
   ASSERT_TRUE(engine->PushFrame(f, 2.0).ok());

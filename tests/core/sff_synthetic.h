@@ -5,11 +5,10 @@
 
 #include <cmath>
 #include <cstring>
-#include <random>
-#include <vector>
-
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
+#include <vector>
 
 namespace inspection::testing {
 
@@ -38,9 +37,9 @@ inline cv::Mat RandomTexture(cv::Size size, unsigned seed) {
 // Tilted plane h = h0 + gx * x + gy * y (µm) imaged at z_um; blur sigma (px) at defocus d is
 // sqrt(sigma0^2 + (blur_per_um * d)^2). Frames are quantised to `type` (CV_8U or CV_16U,
 // 16-bit = 8-bit values * 257) after adding Gaussian noise of noise_grey (8-bit units).
-inline SyntheticStack TiltedPlaneStack(cv::Size size, const std::vector<double>& z_um, double h0, double gx,
-                                       double gy, int type = CV_8U, double noise_grey = 0.5,
-                                       double sigma0 = 0.6, double blur_per_um = 0.7, unsigned seed = 11) {
+inline SyntheticStack TiltedPlaneStack(cv::Size size, const std::vector<double>& z_um, double h0, double gx, double gy,
+                                       int type = CV_8U, double noise_grey = 0.5, double sigma0 = 0.6,
+                                       double blur_per_um = 0.7, unsigned seed = 11) {
   SyntheticStack s;
   s.z_um = z_um;
   s.texture = RandomTexture(size, seed);
@@ -57,8 +56,10 @@ inline SyntheticStack TiltedPlaneStack(cv::Size size, const std::vector<double>&
   std::vector<cv::Mat> levels;
   for (double sg = 0; sg <= sigma_max + dsig; sg += dsig) {
     cv::Mat b;
-    if (sg < 0.05) b = s.texture.clone();
-    else cv::GaussianBlur(s.texture, b, cv::Size(0, 0), sg, sg, cv::BORDER_REFLECT_101);
+    if (sg < 0.05)
+      b = s.texture.clone();
+    else
+      cv::GaussianBlur(s.texture, b, cv::Size(0, 0), sg, sg, cv::BORDER_REFLECT_101);
     levels.push_back(b);
   }
   std::mt19937 rng(seed * 7 + 1);
@@ -76,8 +77,10 @@ inline SyntheticStack TiltedPlaneStack(cv::Size size, const std::vector<double>&
                             (noise_grey > 0 ? noise(rng) : 0.f);
       }
     cv::Mat q;
-    if (type == CV_8U) f.convertTo(q, CV_8U);
-    else f.convertTo(q, CV_16U, 257.0);
+    if (type == CV_8U)
+      f.convertTo(q, CV_8U);
+    else
+      f.convertTo(q, CV_16U, 257.0);
     s.frames.push_back(q);
   }
   return s;

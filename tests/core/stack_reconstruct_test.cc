@@ -3,16 +3,16 @@
 // and errors naming the unreadable frame.
 #include "core/stack_reconstruct.h"
 
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <atomic>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
-#include <unistd.h>
 
 #include "core/stack.h"
 #include "tests/core/sff_synthetic.h"

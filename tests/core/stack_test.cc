@@ -1,11 +1,11 @@
 // Stack folder format: manifest parsing and frame validation name the field or frame at fault.
 #include "core/stack.h"
 
+#include <gtest/gtest.h>
+
 #include <atomic>
 #include <cstring>
 #include <fstream>
-
-#include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/colour.h"
@@ -128,7 +128,7 @@ TEST_F(StackTest, UnreadableFrameNamesTheFrame) {
 TEST_F(StackTest, ColourFramesGiveLuminanceAndKeepColour) {
   StackManifest m;
   m.pixel_size_um = 1.0;
-  const cv::Vec3b bgr8(30, 200, 90);  // Y = 0.2126 * 90 + 0.7152 * 200 + 0.0722 * 30 = 164.4
+  const cv::Vec3b bgr8(30, 200, 90);         // Y = 0.2126 * 90 + 0.7152 * 200 + 0.0722 * 30 = 164.4
   const cv::Vec3w bgr16(3000, 50000, 9000);  // Y = 0.2126 * 9000 + 0.7152 * 50000 + 0.0722 * 3000 = 37890.0
   cv::imwrite((dir_ / "a.png").string(), cv::Mat(8, 6, CV_8UC3, cv::Scalar(bgr8)));
   cv::imwrite((dir_ / "b.tiff").string(), cv::Mat(8, 6, CV_16UC3, cv::Scalar(bgr16)));
@@ -185,8 +185,10 @@ TEST_F(StackTest, MixedColourBitDepthsNameTheFrame) {
   m.pixel_size_um = 1.0;
   for (int i = 0; i < 3; ++i) {
     const std::string name = "f" + std::to_string(i) + (i == 1 ? ".tiff" : ".png");
-    if (i == 1) cv::imwrite((dir_ / name).string(), cv::Mat(5, 5, CV_16UC3, cv::Scalar(1, 2, 3)));
-    else cv::imwrite((dir_ / name).string(), cv::Mat(5, 5, CV_8UC3, cv::Scalar(1, 2, 3)));
+    if (i == 1)
+      cv::imwrite((dir_ / name).string(), cv::Mat(5, 5, CV_16UC3, cv::Scalar(1, 2, 3)));
+    else
+      cv::imwrite((dir_ / name).string(), cv::Mat(5, 5, CV_8UC3, cv::Scalar(1, 2, 3)));
     m.frames.push_back({name, double(i), 0.0, ""});
   }
   Status s = ValidateStackFrames(dir_, m);

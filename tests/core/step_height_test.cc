@@ -3,9 +3,9 @@
 // covering >= 90 % of 100 realisations).
 #include "core/step_height.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "tests/core/metrology_surfaces.h"
 
@@ -23,9 +23,8 @@ cv::Mat Rect(cv::Size s, cv::Rect r) {
 
 // Tilted base with the part right of x_step_px raised by h_um.
 cv::Mat Step(cv::Size size, double h_um, int x_step_px) {
-  return testing::SampleSurface(size, kPx, [&](double x, double y) {
-    return 200.0 + kSx * x + kSy * y + (x >= x_step_px * kPx ? h_um : 0.0);
-  });
+  return testing::SampleSurface(
+      size, kPx, [&](double x, double y) { return 200.0 + kSx * x + kSy * y + (x >= x_step_px * kPx ? h_um : 0.0); });
 }
 
 DepthNoiseModel Known(const cv::Mat& depth, double sigma, int window) {

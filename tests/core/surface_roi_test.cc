@@ -2,9 +2,9 @@
 // coverage against NaN depth, and validation messages that name the field.
 #include "core/surface_roi.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 namespace inspection {
 namespace {
@@ -48,13 +48,15 @@ TEST(SurfaceRoiTest, PolygonPixelCountMatchesItsArea) {
   // Pixel-centre sampling of a region with perimeter P errs by at most ~P/2 pixels; for these
   // axis-aligned and 45-degree-ish edges the count is within 1 % of the area.
   EXPECT_NEAR(double(tri->region_pixels), 6000.0, 60.0);
-  auto ell = RasteriseRoi(RegionOfInterest::Polygon({{10, 10}, {110, 10}, {110, 50}, {50, 50}, {50, 110}, {10, 110}}), d, 1.0);
+  auto ell =
+      RasteriseRoi(RegionOfInterest::Polygon({{10, 10}, {110, 10}, {110, 50}, {50, 50}, {50, 110}, {10, 110}}), d, 1.0);
   ASSERT_TRUE(ell.ok()) << ell.status().ToString();
-  EXPECT_EQ(ell->region_pixels, 6400u);  // edges on integer coordinates: exact
+  EXPECT_EQ(ell->region_pixels, 6400u);           // edges on integer coordinates: exact
   EXPECT_EQ(ell->region.at<uint8_t>(80, 80), 0);  // the notch is outside
   EXPECT_EQ(ell->region.at<uint8_t>(80, 20), 255);
   // Reversed orientation gives the same mask.
-  auto rev = RasteriseRoi(RegionOfInterest::Polygon({{10, 110}, {50, 110}, {50, 50}, {110, 50}, {110, 10}, {10, 10}}), d, 1.0);
+  auto rev =
+      RasteriseRoi(RegionOfInterest::Polygon({{10, 110}, {50, 110}, {50, 50}, {110, 50}, {110, 10}, {10, 10}}), d, 1.0);
   ASSERT_TRUE(rev.ok());
   EXPECT_EQ(cv::countNonZero(rev->region != ell->region), 0);
 }
@@ -62,7 +64,7 @@ TEST(SurfaceRoiTest, PolygonPixelCountMatchesItsArea) {
 TEST(SurfaceRoiTest, CoverageCountsOnlyTheRegionsPixels) {
   cv::Mat d = Depth(40, 30);
   d(cv::Rect(0, 0, 5, 30)).setTo(NAN);  // left strip without depth, outside the region
-  d.at<float>(12, 12) = NAN;              // one inside
+  d.at<float>(12, 12) = NAN;            // one inside
   auto m = RasteriseRoi(RegionOfInterest::Rectangle(10, 10, 10, 10), d, 1.0);
   ASSERT_TRUE(m.ok());
   EXPECT_EQ(m->region_pixels, 100u);
@@ -97,7 +99,9 @@ TEST(SurfaceRoiTest, ValidationNamesTheFieldAndTheProblem) {
   ExpectInvalid(RegionOfInterest::Polygon({{0, 0}, {NAN, 0}, {0, 50}}), "polygon[1] is not a finite point");
   EXPECT_TRUE(ValidateRoi(RegionOfInterest::Rectangle(0, 0, 100, 80), cv::Size(100, 80), 1.0, "roi").ok());
   // um rounding at the image edge: 74 um / 0.74 um = 100.00000000000001 px is still inside.
-  EXPECT_TRUE(ValidateRoi(RegionOfInterest::Rectangle(0, 0, 74, 59.2, RoiUnit::kMicrometre), cv::Size(100, 80), 0.74, "roi").ok());
+  EXPECT_TRUE(
+      ValidateRoi(RegionOfInterest::Rectangle(0, 0, 74, 59.2, RoiUnit::kMicrometre), cv::Size(100, 80), 0.74, "roi")
+          .ok());
 }
 
 TEST(SurfaceRoiTest, ShapeAndUnitNamesRoundTrip) {

@@ -56,7 +56,7 @@ TEST(TexturePatternTest, AddedHfPatternIsClamped) {
   EXPECT_EQ(out->at<uint8_t>(0, 1), 36);
   EXPECT_EQ(out->at<uint8_t>(0, 2), 255);
   EXPECT_EQ(out->at<uint8_t>(0, 3), 0);
-  EXPECT_EQ(out->at<uint8_t>(1, 0), 64);   // row 1 starts with CB = 0
+  EXPECT_EQ(out->at<uint8_t>(1, 0), 64);  // row 1 starts with CB = 0
   EXPECT_EQ(out->at<uint8_t>(1, 1), 192);
 }
 

@@ -2,9 +2,9 @@
 // them, coverage and capability (2U vs the tolerance band), one-sided tolerances, the overall verdict.
 #include "core/verdict.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 namespace inspection {
 namespace {
@@ -21,7 +21,7 @@ Tolerance Band(double nominal, double lower, double upper, double min_coverage =
 TEST(VerdictTest, ZonesOfIso14253) {
   const Tolerance t = Band(10.0, -0.5, 0.5);  // LSL 9.5, USL 10.5; u = 0.1 -> U = 0.2
   EXPECT_EQ(Judge(10.0, 0.1, 100, t).verdict, Verdict::kOk);
-  EXPECT_EQ(Judge(10.29, 0.1, 100, t).verdict, Verdict::kOk);          // just below USL - U
+  EXPECT_EQ(Judge(10.29, 0.1, 100, t).verdict, Verdict::kOk);            // just below USL - U
   EXPECT_EQ(Judge(10.35, 0.1, 100, t).verdict, Verdict::kNotDecidable);  // within U of USL
   EXPECT_EQ(Judge(10.65, 0.1, 100, t).verdict, Verdict::kNotDecidable);  // outside, but within U
   EXPECT_EQ(Judge(10.75, 0.1, 100, t).verdict, Verdict::kNotOk);

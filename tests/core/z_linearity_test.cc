@@ -2,9 +2,9 @@
 // periodic depth bias from a tilted flat.
 #include "core/z_linearity.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "tests/core/metrology_surfaces.h"
 
@@ -67,7 +67,8 @@ TEST(ZLinearityTest, CharacterisationRecoversAKnownPeriodicBias) {
   ASSERT_TRUE(lin.ok()) << lin.status().ToString();
   ASSERT_EQ(lin->bias_of_step.size(), 20u);
   double worst = 0.0;
-  for (int i = 0; i < 20; ++i) worst = std::max(worst, std::abs(lin->bias_of_step[i] - 0.04 * std::sin(2 * kPi * i / 20.0)));
+  for (int i = 0; i < 20; ++i)
+    worst = std::max(worst, std::abs(lin->bias_of_step[i] - 0.04 * std::sin(2 * kPi * i / 20.0)));
   // Each bin averages ~2000 pixels (~40 correlation areas) of 0.05 um noise: 0.008 um = 0.0016
   // of a step; the bound allows 3 of those plus the bin width's smoothing of the sine (0.4 %).
   EXPECT_LT(worst, 0.006) << "largest table error (fraction of a step)";

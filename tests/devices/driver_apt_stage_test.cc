@@ -1,12 +1,12 @@
 // Thorlabs APT stage over the FTDI bridge: the exact control transfers and APT bytes on the
 // wire, encoder counts <-> µm per stage type, timeouts, controller errors and unplugging,
 // against a fake controller behind the UsbTransport seam.
-#include "devices/drivers/apt_stage.h"
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
 
 #include <memory>
 
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
+#include "devices/drivers/apt_stage.h"
 
 namespace inspection {
 namespace {
@@ -26,10 +26,10 @@ struct FakeController {
   std::vector<ControlCall> control;
   std::vector<Bytes> written;  // one entry per bulk OUT transfer
   std::deque<uint8_t> pending;
-  bool silent_moves = false;   // MOVE_ABSOLUTE never completes
+  bool silent_moves = false;  // MOVE_ABSOLUTE never completes
   bool unplugged = false;
-  bool reject_moves = false;   // answer MOVE_ABSOLUTE with HW_RICHRESPONSE
-  bool chatter = false;        // send an unsolicited status update before each reply
+  bool reject_moves = false;  // answer MOVE_ABSOLUTE with HW_RICHRESPONSE
+  bool chatter = false;       // send an unsolicited status update before each reply
   int32_t position = 0;
 
   void Queue(const Bytes& b) { pending.insert(pending.end(), b.begin(), b.end()); }
@@ -41,15 +41,20 @@ struct FakeController {
     return d;
   }
   static Bytes Reply(uint16_t id, const Bytes& data) {
-    Bytes b = {static_cast<uint8_t>(id & 0xFF), static_cast<uint8_t>(id >> 8), static_cast<uint8_t>(data.size()), 0,
-               0x81, 0x50};
+    Bytes b = {static_cast<uint8_t>(id & 0xFF),
+               static_cast<uint8_t>(id >> 8),
+               static_cast<uint8_t>(data.size()),
+               0,
+               0x81,
+               0x50};
     b.insert(b.end(), data.begin(), data.end());
     return b;
   }
   void OnWrite(const Bytes& b) {
     written.push_back(b);
     const uint16_t id = static_cast<uint16_t>(b[0] | (b[1] << 8));
-    if (chatter && id != apt::kMotAckDcStatusUpdate) Queue(Reply(apt::kMotGetDcStatusUpdate, Status14(position, 0x80000400)));
+    if (chatter && id != apt::kMotAckDcStatusUpdate)
+      Queue(Reply(apt::kMotGetDcStatusUpdate, Status14(position, 0x80000400)));
     switch (id) {
       case apt::kHwReqInfo: {
         Bytes d(84, 0);
@@ -57,10 +62,12 @@ struct FakeController {
         for (int i = 0; i < 4; ++i) d[i] = static_cast<uint8_t>((serial >> (8 * i)) & 0xFF);
         const char model[] = "KDC101";
         std::copy(model, model + 6, d.begin() + 4);
-        d[12] = 16;                        // hw type
-        d[14] = 7; d[15] = 0; d[16] = 3;   // firmware minor, interim, major
-        d[78] = 2;                         // hw version
-        d[82] = 1;                         // channels
+        d[12] = 16;  // hw type
+        d[14] = 7;
+        d[15] = 0;
+        d[16] = 3;  // firmware minor, interim, major
+        d[78] = 2;  // hw version
+        d[82] = 1;  // channels
         Queue(Reply(apt::kHwGetInfo, d));
         break;
       }
@@ -87,7 +94,8 @@ struct FakeController {
         break;
       case apt::kMotReqPosCounter: {
         Bytes d = {0x01, 0x00};
-        for (int i = 0; i < 4; ++i) d.push_back(static_cast<uint8_t>((static_cast<uint32_t>(position) >> (8 * i)) & 0xFF));
+        for (int i = 0; i < 4; ++i)
+          d.push_back(static_cast<uint8_t>((static_cast<uint32_t>(position) >> (8 * i)) & 0xFF));
         Queue(Reply(apt::kMotGetPosCounter, d));
         break;
       }
@@ -190,10 +198,11 @@ TEST_F(AptStageTest, ConnectSetsUpFtdiAndIdentifiesController) {
                                      ControlCall{0x04, 0x0008, 0x0000}, ControlCall{0x00, 0x0001, 0x0000},
                                      ControlCall{0x00, 0x0002, 0x0000}, ControlCall{0x02, 0x0000, 0x0100},
                                      ControlCall{0x01, 0x0202, 0x0000}));
-  EXPECT_THAT(controller_->written, ::testing::ElementsAre(Bytes{0x18, 0x00, 0x00, 0x00, 0x50, 0x01},   // NO_FLASH_PROGRAMMING
-                                                           Bytes{0x05, 0x00, 0x00, 0x00, 0x50, 0x01},   // HW_REQ_INFO
-                                                           Bytes{0x10, 0x02, 0x01, 0x01, 0x50, 0x01},   // enable channel 1
-                                                           Bytes{0x23, 0x02, 0x00, 0x00, 0x50, 0x01})); // MOD_IDENTIFY
+  EXPECT_THAT(controller_->written,
+              ::testing::ElementsAre(Bytes{0x18, 0x00, 0x00, 0x00, 0x50, 0x01},    // NO_FLASH_PROGRAMMING
+                                     Bytes{0x05, 0x00, 0x00, 0x00, 0x50, 0x01},    // HW_REQ_INFO
+                                     Bytes{0x10, 0x02, 0x01, 0x01, 0x50, 0x01},    // enable channel 1
+                                     Bytes{0x23, 0x02, 0x00, 0x00, 0x50, 0x01}));  // MOD_IDENTIFY
   const DeviceInfo info = stage->info();
   EXPECT_TRUE(info.connected);
   EXPECT_EQ(info.driver, "apt-usb");
@@ -227,8 +236,9 @@ TEST_F(AptStageTest, StatusRequestReportsBitsAndIsAcknowledged) {
   controller_->written.clear();
   StatusOr<apt::MotorStatus> st = stage->QueryStatus();
   ASSERT_TRUE(st.ok()) << st.status().ToString();
-  EXPECT_THAT(controller_->written, ::testing::ElementsAre(Bytes{0x90, 0x04, 0x01, 0x00, 0x50, 0x01},    // REQ_DCSTATUSUPDATE
-                                                           Bytes{0x92, 0x04, 0x00, 0x00, 0x50, 0x01}));  // ACK
+  EXPECT_THAT(controller_->written,
+              ::testing::ElementsAre(Bytes{0x90, 0x04, 0x01, 0x00, 0x50, 0x01},    // REQ_DCSTATUSUPDATE
+                                     Bytes{0x92, 0x04, 0x00, 0x00, 0x50, 0x01}));  // ACK
   EXPECT_EQ(st->channel, 1);
   EXPECT_EQ(st->position_counts, stage->CountsFromUm(250.0));
   EXPECT_EQ(st->status_bits, 0x80000410u);  // enabled, homed, moving forward
@@ -243,7 +253,8 @@ TEST_F(AptStageTest, MtsStageUsesItsOwnScale) {
   EXPECT_DOUBLE_EQ(stage->UmFromCounts(34304), 1000.0);
   controller_->written.clear();
   ASSERT_TRUE(stage->MoveTo(1000.0).ok());
-  EXPECT_EQ(controller_->written.at(0), (Bytes{0x53, 0x04, 0x06, 0x00, 0xD0, 0x01, 0x01, 0x00, 0x00, 0x86, 0x00, 0x00}));
+  EXPECT_EQ(controller_->written.at(0),
+            (Bytes{0x53, 0x04, 0x06, 0x00, 0xD0, 0x01, 0x01, 0x00, 0x00, 0x86, 0x00, 0x00}));
 }
 
 TEST_F(AptStageTest, HomeWaitsForHomedAndSkipsUnsolicitedStatus) {
@@ -257,7 +268,9 @@ TEST_F(AptStageTest, HomeWaitsForHomedAndSkipsUnsolicitedStatus) {
   ASSERT_GE(controller_->written.size(), 2u);
   EXPECT_EQ(controller_->written[0], (Bytes{0x43, 0x04, 0x01, 0x00, 0x50, 0x01}));
   // Both the unsolicited status update and MOVE_HOMED were acknowledged.
-  EXPECT_EQ(std::count(controller_->written.begin(), controller_->written.end(), Bytes{0x92, 0x04, 0x00, 0x00, 0x50, 0x01}), 2);
+  EXPECT_EQ(
+      std::count(controller_->written.begin(), controller_->written.end(), Bytes{0x92, 0x04, 0x00, 0x00, 0x50, 0x01}),
+      2);
 }
 
 TEST_F(AptStageTest, TravelLimitsRejectMovesWithoutTouchingTheBus) {

@@ -8,6 +8,8 @@
 
 #include <arv.h>
 #include <fcntl.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/file.h>
@@ -20,9 +22,6 @@
 #include <cstdio>
 #include <string>
 #include <vector>
-
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
 
 #include "core/sff_engine.h"
 #include "devices/rig_config.h"

@@ -1,15 +1,14 @@
 // Framebuffer projector against a file-backed stand-in: the exact bytes blitted for 8/16/24/32
 // bpp, stride and panning offsets, the calibrated region and flips, and failure statuses.
-#include "devices/drivers/framebuffer_projector.h"
-
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
+#include "devices/drivers/framebuffer_projector.h"
 
 namespace inspection {
 namespace {
@@ -18,9 +17,8 @@ namespace fs = std::filesystem;
 class FramebufferProjectorTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    path_ = fs::temp_directory_path() /
-            ("fb_test_" + std::to_string(::getpid()) + "_" +
-             ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    path_ = fs::temp_directory_path() / ("fb_test_" + std::to_string(::getpid()) + "_" +
+                                         ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove(path_);
     std::ofstream(path_).close();
   }
@@ -80,7 +78,8 @@ TEST_F(FramebufferProjectorTest, Rgb565PacksTopBitsOfEachChannel) {
   ASSERT_TRUE(p.Connect().ok());
   ASSERT_TRUE(p.Show(Pattern3x2()).ok());
   // 128 -> r 16, g 32, b 16 -> 0x8410; 255 -> 0xFFFF; 16 -> r2 g4 b2 -> 0x1082; 32 -> 0x2104; 64 -> 0x4208.
-  EXPECT_EQ(FileBytes(), (std::vector<uint8_t>{0x00, 0x00, 0x10, 0x84, 0xFF, 0xFF, 0x82, 0x10, 0x04, 0x21, 0x08, 0x42}));
+  EXPECT_EQ(FileBytes(),
+            (std::vector<uint8_t>{0x00, 0x00, 0x10, 0x84, 0xFF, 0xFF, 0x82, 0x10, 0x04, 0x21, 0x08, 0x42}));
 }
 
 TEST_F(FramebufferProjectorTest, Bgr888WithStrideAndPanOffset) {

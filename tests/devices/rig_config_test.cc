@@ -2,13 +2,12 @@
 // and CreateRig's start-up policy for absent devices (fail, or start degraded and say why).
 #include "devices/rig_config.h"
 
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
-
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
 
 namespace inspection {
 namespace {
@@ -26,7 +25,8 @@ std::string RealConfig(const std::string& fb_path) {
     "stage": {"driver": "apt-usb", "serial": "27999999", "stage_type": "MTS25-Z8",
               "min_z_um": 100, "max_z_um": 20000, "move_timeout_ms": 5000, "settle_ms": 30,
               "vendor_id": "0x0403", "product_id": "0xfaf0"},
-    "projector": {"driver": "framebuffer", "device": ")" + fb_path + R"(",
+    "projector": {"driver": "framebuffer", "device": ")" +
+         fb_path + R"(",
                   "mode": {"width": 8, "height": 4, "bits_per_pixel": 16},
                   "region": {"x": 2, "y": 0, "width": 4, "height": 4}, "flip_horizontal": true},
     "scan_defaults": {"z_start_um": 200, "z_end_um": 400, "z_step_um": 2.5}
@@ -105,18 +105,22 @@ TEST(RigConfigTest, ErrorsNameTheKey) {
   EXPECT_THAT(ParseError(R"({"camera": {"driver": "aravis", "pixel_format": "RGB8"}, )" + base + "}").message(),
               HasSubstr("camera.pixel_format"));
   EXPECT_THAT(ParseError(R"({"camera": {"driver": "gige"}})").message(), HasSubstr("camera.driver 'gige' is unknown"));
-  EXPECT_THAT(ParseError(R"({"camera": {"driver": "aravis"}, "stage": {"driver": "apt-usb"}, "projector": {"driver": "none"}})")
-                  .message(),
-              HasSubstr("pixel_size_um is required"));
+  EXPECT_THAT(
+      ParseError(R"({"camera": {"driver": "aravis"}, "stage": {"driver": "apt-usb"}, "projector": {"driver": "none"}})")
+          .message(),
+      HasSubstr("pixel_size_um is required"));
   EXPECT_THAT(ParseError(R"({"camera": {"driver": "aravis"}})").message(), HasSubstr("mixing simulated and real"));
   EXPECT_THAT(ParseError(R"({"camera": {"driver": "aravis"}, "pixel_size_um": 1, "stage": {"driver": "apt-usb",
-      "stage_type": "Z806", "max_z_um": 9000}, "projector": {"driver": "none"}})").message(),
+      "stage_type": "Z806", "max_z_um": 9000}, "projector": {"driver": "none"}})")
+                  .message(),
               HasSubstr("stage.max_z_um must be <= the Z806 travel (6000 µm)"));
   EXPECT_THAT(ParseError(R"({"camera": {"driver": "aravis"}, "pixel_size_um": 1, "stage": {"driver": "apt-usb",
-      "vendor_id": "FTDI"}, "projector": {"driver": "none"}})").message(),
+      "vendor_id": "FTDI"}, "projector": {"driver": "none"}})")
+                  .message(),
               HasSubstr("stage.vendor_id"));
   EXPECT_THAT(ParseError(R"({"camera": {"driver": "aravis"}, "pixel_size_um": 1, "stage": {"driver": "apt-usb"},
-      "projector": {"driver": "framebuffer", "mode": {"width": 8, "height": 4, "bits_per_pixel": 12}}})").message(),
+      "projector": {"driver": "framebuffer", "mode": {"width": 8, "height": 4, "bits_per_pixel": 12}}})")
+                  .message(),
               HasSubstr("projector.mode.bits_per_pixel"));
   EXPECT_THAT(ParseError(R"({"simulation": {"camera_bit_depth": 10}})").message(),
               HasSubstr("simulation.camera_bit_depth must be 8 or 12"));

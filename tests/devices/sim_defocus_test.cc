@@ -1,11 +1,11 @@
 // Defocus PSF of the simulated rig (thesis 4.3.3): width grows with |h - z|, Gaussian near
 // focus, pillbox far from it; the fast spatially varying blur reproduces the model's width.
-#include "devices/sim/defocus.h"
+#include <gtest/gtest.h>
 
 #include <cmath>
-
-#include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
+
+#include "devices/sim/defocus.h"
 
 namespace inspection {
 namespace {

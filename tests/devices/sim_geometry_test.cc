@@ -1,11 +1,11 @@
 // Projector-to-camera mapping of the simulated rig against its defined geometry (thesis 4.3.2):
 // scale 3.4, axes swapped and inverted, 0.1 degree skew, barrel distortion, box pixels.
-#include "devices/sim/projector_camera_geometry.h"
+#include <gtest/gtest.h>
 
 #include <cmath>
-
-#include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
+
+#include "devices/sim/projector_camera_geometry.h"
 
 namespace inspection {
 namespace {

@@ -1,11 +1,11 @@
 // The renderer's chain (thesis 5.1.1, eq. 5.1-5.4) on analytic scenes: each stage in order,
 // light only where the projector reaches, defocus applied on the way in and on the way out.
-#include "devices/sim/image_formation.h"
+#include <gtest/gtest.h>
 
 #include <cmath>
-
-#include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
+
+#include "devices/sim/image_formation.h"
 
 namespace inspection {
 namespace {

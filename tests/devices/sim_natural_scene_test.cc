@@ -1,16 +1,15 @@
 // Natural focal stacks (devices/sim/natural_scene.h): deterministic per seed, truth in frame
 // units where focus actually peaks, and defocused foregrounds spreading over the background
 // (layered occlusion), which a per-pixel blur of one depth map would not do.
-#include "devices/sim/natural_scene.h"
+#include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
-
-#include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
 #include "core/colour.h"
 #include "core/focus_measure.h"
+#include "devices/sim/natural_scene.h"
 
 namespace inspection {
 namespace {
@@ -38,12 +37,12 @@ TEST(NaturalSceneTest, DeterministicPerSeedWithTruthInsideTheStack) {
 
   double lo, hi;
   cv::minMaxLoc(a->depth_frames, &lo, &hi);
-  EXPECT_GE(lo, 0.5);     // every surface comes into focus inside the stack
+  EXPECT_GE(lo, 0.5);  // every surface comes into focus inside the stack
   EXPECT_LE(hi, 15 - 0.5);
   EXPECT_GT(hi - lo, 6);  // and the scene is deep
   const double textured = cv::countNonZero(a->textured) / double(a->textured.total());
   EXPECT_GT(textured, 0.3);
-  EXPECT_LT(textured, 0.9);  // large textureless areas
+  EXPECT_LT(textured, 0.9);                            // large textureless areas
   EXPECT_GT(cv::countNonZero(a->occlusion_edge), 50);  // depth discontinuities
 
   NaturalSceneOptions g = Small(3);

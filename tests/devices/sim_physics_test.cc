@@ -2,10 +2,10 @@
 // patterns sharp only in focus, saturation on the cutter, standard SFF failing on the
 // textureless lens where a projected checkerboard succeeds (thesis 5.2, 6.1, 6.2), the
 // projector-to-camera mapping seen through the camera, and the 1 um step resolved.
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <cstdio>
-
-#include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
 #include "core/sff_engine.h"

@@ -1,11 +1,11 @@
 // Projector response (thesis eq. 5.1) and camera exposure/response/noise (eq. 5.3, 5.4) of the
 // simulated rig, checked against their analytic definitions.
-#include "devices/sim/radiometry.h"
+#include <gtest/gtest.h>
 
 #include <cmath>
-
-#include <gtest/gtest.h>
 #include <opencv2/core/utility.hpp>
+
+#include "devices/sim/radiometry.h"
 
 namespace inspection {
 namespace {

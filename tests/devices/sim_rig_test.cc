@@ -1,12 +1,11 @@
 // Simulated rig end to end: defaults, exposure, ground truth and a Tenengrad SFF scan of the
 // tilted textured plane compared to ground truth (thesis 6.2: SKEW5).
-#include "devices/sim/simulated_rig.h"
+#include <gtest/gtest.h>
 
 #include <cmath>
 
-#include <gtest/gtest.h>
-
 #include "core/sff_engine.h"
+#include "devices/sim/simulated_rig.h"
 
 namespace inspection {
 namespace {
@@ -83,8 +82,8 @@ TEST(SimulatedRigTest, Skew5ScanMatchesGroundTruth) {
   ScanResult r = Scan(*rig, d);
   double valid = 0;
   const double rmse = DepthRmse(r.depth.depth_um, rig->simulation()->GroundTruthDepthUm(), 8, &valid);
-  std::printf("skew5 256x192: %zu frames, rmse %.3f um, valid %.3f, exposure %.0f us\n", r.frames.size(), rmse,
-              valid, d.exposure_us);
+  std::printf("skew5 256x192: %zu frames, rmse %.3f um, valid %.3f, exposure %.0f us\n", r.frames.size(), rmse, valid,
+              d.exposure_us);
   EXPECT_LT(rmse, 0.25 * d.z_step_um);
   EXPECT_GT(valid, 0.95);
 }

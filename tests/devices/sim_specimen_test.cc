@@ -1,18 +1,17 @@
 // Specimen library and rig-level behaviour of the simulated rig: built-in geometry (ground
 // truth), user scenes from scene.json with errors naming the key, specimen switching,
 // determinism, stage repeatability and option validation.
-#include "devices/sim/specimen.h"
+#include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
 #include <thread>
 
-#include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
-#include <unistd.h>
-
 #include "devices/sim/simulated_rig.h"
+#include "devices/sim/specimen.h"
 
 namespace inspection {
 namespace {
@@ -46,7 +45,8 @@ TEST(SpecimenTest, EveryBuiltinHasConsistentMaps) {
 TEST(SpecimenTest, BuiltinHeightsFollowTheirGeometry) {
   const double w = 256 * 0.74;
   // Tilted planes: the height range is the field width times tan(tilt).
-  for (const auto& [name, deg] : std::vector<std::pair<std::string, double>>{{"plane", 0}, {"skew5", 5}, {"skew10", 10}}) {
+  for (const auto& [name, deg] :
+       std::vector<std::pair<std::string, double>>{{"plane", 0}, {"skew5", 5}, {"skew10", 10}}) {
     auto s = MakeSpecimen(name, kGrid);
     ASSERT_TRUE(s.ok());
     const auto r = Range(s->height_um);
@@ -60,12 +60,15 @@ TEST(SpecimenTest, BuiltinHeightsFollowTheirGeometry) {
   // Wedge: a 120 degree ridge, both flanks at 30 degrees.
   auto wedge = MakeSpecimen("wedge", kGrid);
   ASSERT_TRUE(wedge.ok());
-  EXPECT_NEAR((wedge->height_um.at<float>(5, 30) - wedge->height_um.at<float>(5, 20)) / (10 * 0.74), std::tan(30 * kDeg), 1e-3);
-  EXPECT_NEAR((wedge->height_um.at<float>(5, 220) - wedge->height_um.at<float>(5, 230)) / (10 * 0.74), std::tan(30 * kDeg), 1e-3);
+  EXPECT_NEAR((wedge->height_um.at<float>(5, 30) - wedge->height_um.at<float>(5, 20)) / (10 * 0.74),
+              std::tan(30 * kDeg), 1e-3);
+  EXPECT_NEAR((wedge->height_um.at<float>(5, 220) - wedge->height_um.at<float>(5, 230)) / (10 * 0.74),
+              std::tan(30 * kDeg), 1e-3);
   // Chamfer: P2 falls at 60 degrees between the flat P1 and P3.
   auto chamfer = MakeSpecimen("chamfer", kGrid);
   ASSERT_TRUE(chamfer.ok());
-  EXPECT_NEAR((chamfer->height_um.at<float>(5, 124) - chamfer->height_um.at<float>(5, 132)) / (8 * 0.74), std::tan(60 * kDeg), 1e-3);
+  EXPECT_NEAR((chamfer->height_um.at<float>(5, 124) - chamfer->height_um.at<float>(5, 132)) / (8 * 0.74),
+              std::tan(60 * kDeg), 1e-3);
   EXPECT_FLOAT_EQ(chamfer->height_um.at<float>(5, 10), chamfer->height_um.at<float>(5, 80));
   EXPECT_NEAR(Range(chamfer->height_um).second - 200.0, 0.1 * w * std::tan(60 * kDeg), 1e-3);
   // Lens: a cylinder of radius 3 field widths, apex at the centre.
@@ -236,7 +239,8 @@ TEST(SimulatedRigBehaviourTest, SpecimenSwitchWhileCapturingFromAnotherThread) {
     }
   });
   int switched = 0;
-  for (const std::string name : {"plane", "cutter", "lens", "skew10"}) switched += (*rig)->simulation()->SetSpecimen(name).ok();
+  for (const std::string name : {"plane", "cutter", "lens", "skew10"})
+    switched += (*rig)->simulation()->SetSpecimen(name).ok();
   worker.join();
   EXPECT_EQ(captured, 20);
   EXPECT_EQ(switched, 4);
@@ -334,8 +338,14 @@ TEST(SimulatedRigOptionsTest, ValidateNamesTheField) {
   };
   for (const Case& c : std::vector<Case>{
            {[](SimulatedRigOptions& o) { o.camera_bit_depth = 10; }, "camera_bit_depth"},
-           {[](SimulatedRigOptions& o) { o.camera_size = {8, 8}; }, "camera_size"},
-           {[](SimulatedRigOptions& o) { o.projector_size = {0, 720}; }, "projector_size"},
+           {[](SimulatedRigOptions& o) {
+              o.camera_size = {8, 8};
+            },
+            "camera_size"},
+           {[](SimulatedRigOptions& o) {
+              o.projector_size = {0, 720};
+            },
+            "projector_size"},
            {[](SimulatedRigOptions& o) { o.pixel_size_um = 0; }, "pixel_size_um"},
            {[](SimulatedRigOptions& o) { o.stage_repeatability_um = -1; }, "stage_repeatability_um"},
            {[](SimulatedRigOptions& o) { o.numerical_aperture = 1.2; }, "numerical_aperture"},

@@ -2,9 +2,9 @@
 // vendor/product id and serial, FTDI control transfers and APT bulk traffic as recorded in
 // data/kdc101_move.ioctl. Runs only under umockdev-run (ctest does that); not sanitised, since
 // umockdev's LD_PRELOAD and ASan do not mix.
-#include <cstdlib>
-
 #include <gtest/gtest.h>
+
+#include <cstdlib>
 
 #include "devices/drivers/apt_stage.h"
 #include "devices/drivers/libusb_transport.h"

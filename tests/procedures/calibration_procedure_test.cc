@@ -3,13 +3,13 @@
 // prediction error is bounded, and step selection, dependencies and cancellation behave.
 #include "server/procedures/calibration_procedure.h"
 
+#include <gtest/gtest.h>
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-
-#include <gtest/gtest.h>
 
 #include "devices/sim/image_formation.h"
 #include "devices/sim/projector_camera_geometry.h"
@@ -45,8 +45,8 @@ class CalibrationProcedureTest : public ::testing::Test {
     ASSERT_TRUE(rig.ok()) << rig.status().ToString();
     std::atomic<bool> cancel{false};
     std::vector<CalibrationProgress> events;
-    auto b = RunCalibration(**rig, FastOptions(), nullptr,
-                            [&](const CalibrationProgress& p) { events.push_back(p); }, cancel);
+    auto b = RunCalibration(
+        **rig, FastOptions(), nullptr, [&](const CalibrationProgress& p) { events.push_back(p); }, cancel);
     ASSERT_TRUE(b.ok()) << b.status().ToString();
     bundle_ = new CalibrationBundle(std::move(b).value());
     events_ = new std::vector<CalibrationProgress>(std::move(events));
@@ -205,7 +205,8 @@ TEST(CalibrationProcedureStepsTest, SingleStepCarriesOverPreviousModels) {
   // The scatter matrix alone needs a projector response: refused before any frame.
   o.steps = {CalibrationStep::kScatterMatrix};
   int progress_calls = 0;
-  auto refused = RunCalibration(**rig, o, &*first, [&](const CalibrationProgress&) { ++progress_calls; }, cancel);
+  auto refused = RunCalibration(
+      **rig, o, &*first, [&](const CalibrationProgress&) { ++progress_calls; }, cancel);
   EXPECT_EQ(refused.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(refused.status().message().find("projector_response"), std::string::npos);
   EXPECT_EQ(progress_calls, 0);
@@ -213,8 +214,8 @@ TEST(CalibrationProcedureStepsTest, SingleStepCarriesOverPreviousModels) {
   // Projector response alone on top of the first bundle: everything else carried over intact.
   o.steps = {CalibrationStep::kProjectorResponse};
   std::vector<std::string> steps_seen;
-  auto second = RunCalibration(**rig, o, &*first,
-                               [&](const CalibrationProgress& p) { steps_seen.push_back(p.step); }, cancel);
+  auto second = RunCalibration(
+      **rig, o, &*first, [&](const CalibrationProgress& p) { steps_seen.push_back(p.step); }, cancel);
   ASSERT_TRUE(second.ok()) << second.status().ToString();
   EXPECT_TRUE(second->HasModel(CalibrationStep::kProjectorResponse));
   EXPECT_EQ(second->camera_response->log_exposure, first->camera_response->log_exposure);
@@ -245,12 +246,13 @@ TEST(CalibrationProcedureStepsTest, CancellationStopsBetweenFrames) {
   CalibrationOptions o = FastOptions();
   o.steps = {CalibrationStep::kGeometry};
   int items_after_cancel = 0;
-  auto r = RunCalibration(**rig, o, nullptr,
-                          [&](const CalibrationProgress& p) {
-                            if (cancel.load()) ++items_after_cancel;
-                            if (p.item == 5) cancel.store(true);
-                          },
-                          cancel);
+  auto r = RunCalibration(
+      **rig, o, nullptr,
+      [&](const CalibrationProgress& p) {
+        if (cancel.load()) ++items_after_cancel;
+        if (p.item == 5) cancel.store(true);
+      },
+      cancel);
   EXPECT_EQ(r.status().code(), StatusCode::kCancelled);
   EXPECT_EQ(items_after_cancel, 0);
 }
@@ -286,8 +288,8 @@ TEST(CalibrationProcedureStepsTest, TwelveBitCameraResponsesMatchSimulator) {
   const double t_mid = std::log(f.camera.RelativeExposureForGrey(2048));
   double worst = 0;
   for (int z = 256; z <= 3840; ++z) {
-    worst = std::max(worst, std::abs(b->camera_response->log_exposure[z] -
-                                     (std::log(f.camera.RelativeExposureForGrey(z)) - t_mid)));
+    worst = std::max(
+        worst, std::abs(b->camera_response->log_exposure[z] - (std::log(f.camera.RelativeExposureForGrey(z)) - t_mid)));
   }
   std::printf("12-bit crf worst |error| z 256..3840: %.4f ln\n", worst);
   EXPECT_LT(worst, 0.05);

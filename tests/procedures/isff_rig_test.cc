@@ -4,12 +4,12 @@
 // noise (the thesis's ISFF was 1.6x / 2.1x / 7x STD); the thesis's eq. 5.26 sum with the same
 // template is far worse; ISFF-FAST at its default threshold skips >= 30 % of the work with < 2 %
 // wrong maxima; a bundle without the step is refused naming it.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <atomic>
 #include <filesystem>
 #include <map>
-
-#include <gtest/gtest.h>
-#include <unistd.h>
 
 #include "core/depth_metrics.h"
 #include "core/integral_sff.h"
@@ -99,9 +99,7 @@ RigRun Prepare(double read_noise_dn) {
   return run;
 }
 
-DepthErrorStats Error(const cv::Mat& depth_um, const Scanned& s) {
-  return CompareDepth(depth_um, s.truth_um, 10.0, 7);
-}
+DepthErrorStats Error(const cv::Mat& depth_um, const Scanned& s) { return CompareDepth(depth_um, s.truth_um, 10.0, 7); }
 
 class IsffRigTest : public ::testing::Test {
  protected:

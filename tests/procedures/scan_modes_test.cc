@@ -5,18 +5,17 @@
 // empty, TEXTURE makes the textureless lens measurable, HF+ADAPT has fewer outliers than STD on
 // the coin, ADAPT's image reaches the target grey within 3 frames, and missing calibration
 // steps are named.
-#include "server/procedures/scan_procedure.h"
+#include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 
-#include <gtest/gtest.h>
-
 #include "core/depth_metrics.h"
 #include "devices/sim/simulated_rig.h"
 #include "server/procedures/calibration_procedure.h"
+#include "server/procedures/scan_procedure.h"
 
 namespace inspection {
 namespace {
@@ -78,14 +77,14 @@ class ScanModesTest : public ::testing::Test {
   }
 
   static StatusOr<ModeRun> Scan(const std::string& specimen, IlluminationMode mode, IlluminationParams params = {},
-                                int window_px = 9, double z_step_um = 0,
-                                std::vector<ScanFrameEvent>* events = nullptr, bool downwards = false) {
+                                int window_px = 9, double z_step_um = 0, std::vector<ScanFrameEvent>* events = nullptr,
+                                bool downwards = false) {
     INSPECT_RETURN_IF_ERROR(rig_->simulation()->SetSpecimen(specimen));
     const ScanDefaults d = rig_->scan_defaults();
     const double step = z_step_um > 0 ? z_step_um : d.z_step_um;
-    INSPECT_ASSIGN_OR_RETURN(ScanPlan plan, downwards
-                                                ? MakeScanPlan(d.z_end_um, d.z_start_um, step, d.exposure_us, rig_->stage())
-                                                : MakeScanPlan(d.z_start_um, d.z_end_um, step, d.exposure_us, rig_->stage()));
+    INSPECT_ASSIGN_OR_RETURN(ScanPlan plan,
+                             downwards ? MakeScanPlan(d.z_end_um, d.z_start_um, step, d.exposure_us, rig_->stage())
+                                       : MakeScanPlan(d.z_start_um, d.z_end_um, step, d.exposure_us, rig_->stage()));
     plan.mode = mode;
     plan.params = params;
     plan.sff.window_px = window_px;
@@ -122,10 +121,10 @@ fs::path* ScanModesTest::dir_ = nullptr;
 // measures >= 95 % of a textured specimen must stay within the bias bound, up and down.
 TEST_F(ScanModesTest, BiasWithinBoundForEveryModeOnTexturedSpecimens) {
   ASSERT_NE(bundle_, nullptr);
-  const IlluminationMode all[] = {IlluminationMode::kStd,     IlluminationMode::kHdr,
-                                  IlluminationMode::kAdaptIterative, IlluminationMode::kAdapt,
-                                  IlluminationMode::kTexture, IlluminationMode::kHfAdapt,
-                                  IlluminationMode::kAdaptedHf};
+  const IlluminationMode all[] = {
+      IlluminationMode::kStd,      IlluminationMode::kHdr,     IlluminationMode::kAdaptIterative,
+      IlluminationMode::kAdapt,    IlluminationMode::kTexture, IlluminationMode::kHfAdapt,
+      IlluminationMode::kAdaptedHf};
   auto check = [](const std::string& what, const StatusOr<ModeRun>& r) {
     ASSERT_TRUE(r.ok()) << what << ": " << r.status().ToString();
     EXPECT_GE(r->error.valid_percent, 95.0) << what;
@@ -214,8 +213,9 @@ TEST_F(ScanModesTest, AdaptReachesTargetGreyWithinThreeFrames) {
   ASSERT_GE(adapt->captures.size(), 3u);
   for (int k = 0; k < 3; ++k) {
     std::printf("frame %d: STD mean %.1f sd %.1f sat %.2f %% | ADAPT mean %.1f sd %.1f sat %.2f %%\n", k,
-                std_run->captures[k].mean_grey, std_run->captures[k].stddev_grey, std_run->captures[k].saturated_percent,
-                adapt->captures[k].mean_grey, adapt->captures[k].stddev_grey, adapt->captures[k].saturated_percent);
+                std_run->captures[k].mean_grey, std_run->captures[k].stddev_grey,
+                std_run->captures[k].saturated_percent, adapt->captures[k].mean_grey, adapt->captures[k].stddev_grey,
+                adapt->captures[k].saturated_percent);
   }
   EXPECT_GT(std_run->captures[0].saturated_percent, 5.0);
   const FrameStatistics& third = adapt->captures[2];

@@ -4,12 +4,12 @@
 // all (specimen, measurement, seed) triples and for at least 2 of 3 seeds of each pair, while
 // staying informative; and without the z-linearity term the step height is not covered, which
 // is why the model has it.
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <map>
-
-#include <gtest/gtest.h>
 
 #include "core/measurement.h"
 #include "core/z_linearity.h"
@@ -31,7 +31,9 @@ class UncertaintyCoverageTest : public ::testing::Test {
   static constexpr int kSeeds = 3;
   const cv::Size camera_{160, 120};
 
-  void SetUp() override { dir_ = fs::temp_directory_path() / ("uncertainty_coverage_test_" + std::to_string(::getpid())); }
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("uncertainty_coverage_test_" + std::to_string(::getpid()));
+  }
   void TearDown() override {
     std::error_code ec;
     fs::remove_all(dir_, ec);
@@ -44,9 +46,11 @@ class UncertaintyCoverageTest : public ::testing::Test {
     o.specimen = specimen;
     INSPECT_ASSIGN_OR_RETURN(std::unique_ptr<Rig> rig, CreateSimulatedRig(o));
     const ScanDefaults d = rig->scan_defaults();
-    INSPECT_ASSIGN_OR_RETURN(ScanPlan plan, MakeScanPlan(d.z_start_um, d.z_end_um, d.z_step_um, d.exposure_us, rig->stage()));
+    INSPECT_ASSIGN_OR_RETURN(ScanPlan plan,
+                             MakeScanPlan(d.z_start_um, d.z_end_um, d.z_step_um, d.exposure_us, rig->stage()));
     std::atomic<bool> cancel{false};
-    INSPECT_ASSIGN_OR_RETURN(ScanOutcome out, RunScan(*rig, plan, dir_ / (specimen + std::to_string(seed)), nullptr, cancel));
+    INSPECT_ASSIGN_OR_RETURN(ScanOutcome out,
+                             RunScan(*rig, plan, dir_ / (specimen + std::to_string(seed)), nullptr, cancel));
     return ScanData{out.depth.depth_um, out.ground_truth_um, plan.z_um, plan.sff.window_px};
   }
 
@@ -86,7 +90,8 @@ TEST_F(UncertaintyCoverageTest, ExpandedUncertaintyCoversTheDeviationsFromTruth)
     cases[1].specs.push_back({MeasurementKindName(k), Spec(k, inner)});
   }
   cases[2].specimen = "step1um";
-  MeasurementSpec step = Spec(MeasurementKind::kStepHeight, RegionOfInterest::Rectangle(w / 2 + 12, b, w / 2 - 12 - b, h - 2 * b));
+  MeasurementSpec step =
+      Spec(MeasurementKind::kStepHeight, RegionOfInterest::Rectangle(w / 2 + 12, b, w / 2 - 12 - b, h - 2 * b));
   step.reference_roi = RegionOfInterest::Rectangle(b, b, w / 2 - 12 - b, h - 2 * b);
   cases[2].specs.push_back({"step_height", step});
 
@@ -111,7 +116,8 @@ TEST_F(UncertaintyCoverageTest, ExpandedUncertaintyCoversTheDeviationsFromTruth)
       const auto measured = MeasureAll(specs, ctx);
       const auto truth = MeasureAll(specs, truth_ctx);
       for (size_t i = 0; i < specs.size(); ++i) {
-        ASSERT_TRUE(measured[i].ok()) << c.specimen << " " << c.specs[i].first << ": " << measured[i].status().ToString();
+        ASSERT_TRUE(measured[i].ok()) << c.specimen << " " << c.specs[i].first << ": "
+                                      << measured[i].status().ToString();
         ASSERT_TRUE(truth[i].ok()) << truth[i].status().ToString();
         const double dev = measured[i]->value - truth[i]->value;
         const double big_u = 2.0 * measured[i]->uncertainty.standard_uncertainty;

@@ -1,9 +1,9 @@
 // Access policy: identities from tokens and certificates, roles per RPC, the codes a caller gets.
 #include "server/access_control.h"
 
-#include <fstream>
-
 #include <gtest/gtest.h>
+
+#include <fstream>
 
 namespace inspection {
 namespace {
@@ -66,8 +66,7 @@ TEST(AccessControlTest, MissingOrUnknownCredentialsAreUnauthenticated) {
   ASSERT_TRUE(p.ok());
   AccessControl ac(std::move(*p));
   EXPECT_EQ(ac.Authorize(Token(""), "GetRigStatus").status().code(), StatusCode::kUnauthenticated);
-  EXPECT_EQ(ac.Authorize(Token("s7-0123456789abcdeX"), "GetRigStatus").status().code(),
-            StatusCode::kUnauthenticated);
+  EXPECT_EQ(ac.Authorize(Token("s7-0123456789abcdeX"), "GetRigStatus").status().code(), StatusCode::kUnauthenticated);
   // A valid token whose identity the policy does not list: known, but not allowed anything.
   auto stranger = ac.Authorize(Token("st-0123456789abcdef"), "GetRigStatus");
   EXPECT_EQ(stranger.status().code(), StatusCode::kPermissionDenied);

@@ -1,9 +1,9 @@
 // Audit log: one JSON object per line, read back; rotation by size; no secrets, cut free text.
 #include "server/audit_log.h"
 
-#include <fstream>
-
 #include <gtest/gtest.h>
+
+#include <fstream>
 #include <nlohmann/json.hpp>
 
 namespace inspection {
@@ -21,8 +21,8 @@ std::vector<nlohmann::json> ReadLines(const fs::path& p) {
 class AuditLogTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("audit-" + std::to_string(::getpid()) + "-" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    dir_ = fs::temp_directory_path() / ("audit-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir_);
   }
   void TearDown() override { fs::remove_all(dir_); }
@@ -86,8 +86,7 @@ TEST_F(AuditLogTest, RotatesBySizeAndKeepsTheNewestFiles) {
   EXPECT_EQ(current.back()["target"], "job-99");
   auto older = ReadLines(dir_ / "audit.jsonl.1");
   ASSERT_FALSE(older.empty());
-  EXPECT_EQ(older.back()["target"].get<std::string>(),
-            "job-" + std::to_string(99 - static_cast<int>(current.size())));
+  EXPECT_EQ(older.back()["target"].get<std::string>(), "job-" + std::to_string(99 - static_cast<int>(current.size())));
 }
 
 TEST_F(AuditLogTest, BadOptionsAreRefused) {

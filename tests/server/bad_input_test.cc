@@ -1,7 +1,7 @@
 // Bad input gets a clear status naming the field or frame, and loses nothing.
-#include <fstream>
-
 #include <gtest/gtest.h>
+
+#include <fstream>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/stack.h"
@@ -155,9 +155,24 @@ TEST_F(BadInputTest, BadScanRequestsNameTheField) {
     const char* field;
   };
   const std::vector<Case> cases = {
-      {[](v1::ScanRequest& r) { r.set_z_start_um(0); r.set_z_end_um(50); r.set_z_step_um(-1); }, "z_step_um"},
-      {[](v1::ScanRequest& r) { r.set_z_start_um(0); r.set_z_end_um(5); r.set_z_step_um(5); }, "fewer than 3 frames"},
-      {[](v1::ScanRequest& r) { r.set_z_start_um(-1e9); r.set_z_end_um(0); r.set_z_step_um(5); }, "z_start_um"},
+      {[](v1::ScanRequest& r) {
+         r.set_z_start_um(0);
+         r.set_z_end_um(50);
+         r.set_z_step_um(-1);
+       },
+       "z_step_um"},
+      {[](v1::ScanRequest& r) {
+         r.set_z_start_um(0);
+         r.set_z_end_um(5);
+         r.set_z_step_um(5);
+       },
+       "fewer than 3 frames"},
+      {[](v1::ScanRequest& r) {
+         r.set_z_start_um(-1e9);
+         r.set_z_end_um(0);
+         r.set_z_step_um(5);
+       },
+       "z_start_um"},
       {[](v1::ScanRequest& r) { r.mutable_reconstruction()->set_window_px(4); }, "window_px"},
       {[](v1::ScanRequest& r) { r.mutable_reconstruction()->set_window_px(33); }, "window_px"},
       {[](v1::ScanRequest& r) { r.set_exposure_us(-3); }, "exposure_us"},

@@ -23,9 +23,12 @@ TEST_F(CalibrationServiceTest, CameraResponseStepIsStoredActiveAndRecordedByScan
   req.add_steps(v1::CALIBRATION_STEP_CAMERA_RESPONSE);
   std::vector<std::string> steps_seen;
   v1::Job job;
-  grpc::Status s = client_->Calibrate(req, [&](const v1::JobEvent& e) {
-    if (!e.step().empty()) steps_seen.push_back(e.step());
-  }, &job);
+  grpc::Status s = client_->Calibrate(
+      req,
+      [&](const v1::JobEvent& e) {
+        if (!e.step().empty()) steps_seen.push_back(e.step());
+      },
+      &job);
   ASSERT_TRUE(s.ok()) << s.error_message();
   ASSERT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED);
   const std::string id = job.result().calibration_id();

@@ -71,7 +71,10 @@ TEST_F(CliTest, ImageFolderIsOrderedNaturallyWithRegularZAndReconstructsLikeTheS
   setenv("TMPDIR", tmp.c_str(), 1);
   CliResult r = Run({"--json", "reconstruct", "--images", images.string(), "--z-start", std::to_string(z_um[0]),
                      "--z-step", std::to_string(step_um), "--pixel-size", "0.74", "--out", (work_ / "rec").string()});
-  if (old_tmp) setenv("TMPDIR", saved_tmp.c_str(), 1); else unsetenv("TMPDIR");
+  if (old_tmp)
+    setenv("TMPDIR", saved_tmp.c_str(), 1);
+  else
+    unsetenv("TMPDIR");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.err, "");  // --pixel-size given: no note
   EXPECT_TRUE(fs::is_empty(tmp)) << "temporary stack folder left behind";
@@ -147,8 +150,8 @@ TEST_F(CliTest, ImageFolderZFromACsvAndImagesFromAGlob) {
   // A glob picks f1..f9 only ('f?.png'), in natural order; other files do not count.
   std::ofstream(images / "g1.png") << "not part of the pattern";
   const fs::path kept_glob = work_ / "kept_glob";
-  r = Run({"reconstruct", "--images", (images / "f?.png").string(), "--z-step", "1", "--keep-stack",
-           kept_glob.string(), "--out", (work_ / "rec_glob").string()});
+  r = Run({"reconstruct", "--images", (images / "f?.png").string(), "--z-step", "1", "--keep-stack", kept_glob.string(),
+           "--out", (work_ / "rec_glob").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   manifest = json::parse(ReadAll(kept_glob / "stack.json"));
   ASSERT_EQ(manifest["frames"].size(), 9u);

@@ -115,10 +115,10 @@ TEST_F(CliTest, UnknownIdsAreNotFoundExit4) {
 TEST_F(CliTest, UsageErrorsExit2AndUnreachableServerExits3) {
   StartServer();
   EXPECT_EQ(Run({}).exit_code, 2);
-  EXPECT_EQ(Run({"scan"}).exit_code, 2);                                      // --out missing
+  EXPECT_EQ(Run({"scan"}).exit_code, 2);  // --out missing
   EXPECT_EQ(Run({"scan", "--out", "d", "--focus-measure", "nope"}).exit_code, 2);
   EXPECT_EQ(Run({"scan", "--out", "d", "--export", "jpeg"}).exit_code, 2);
-  EXPECT_EQ(Run({"reconstruct", "--out", "d"}).exit_code, 2);                 // no source
+  EXPECT_EQ(Run({"reconstruct", "--out", "d"}).exit_code, 2);  // no source
   EXPECT_EQ(Run({"reconstruct", "--out", "d", "--scan-id", "a", "--stack", work_.string()}).exit_code, 2);
   EXPECT_EQ(Run({"calibrate", "--step", "everything"}).exit_code, 2);
   EXPECT_EQ(Run({"--help"}).exit_code, 0);
@@ -306,7 +306,7 @@ TEST_F(CliTest, BadArgumentsOfEveryCommandExit2BeforeAnyCall) {
            {"specimen", "set"},
            {"watch"},
            {"cancel"},
-           {"download", "some-id"},  // --out missing
+           {"download", "some-id"},                          // --out missing
            {"scan", "--out", "d", "--illumination", "HDR"},  // mode names are lower case
            {"scan", "--out", "d", "--window", "seven"},
            {"scan", "--out", "d", "--lambda", "a"},
@@ -351,7 +351,8 @@ TEST_F(CliTest, TokenFileIsTrimmedAndSentAndAnUnusableTokenOrCaFileExits2) {
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(JsonLines(r.out).at(0)["state"], "RIG_STATE_READY");
 
-  for (const auto& args : std::vector<std::vector<std::string>>{{"status"}, {"--token-file", wrong.string(), "status"}}) {
+  for (const auto& args :
+       std::vector<std::vector<std::string>>{{"status"}, {"--token-file", wrong.string(), "status"}}) {
     r = Run(args);
     EXPECT_EQ(r.exit_code, 4);
     EXPECT_EQ(r.err.rfind("inspectctl: UNAUTHENTICATED: ", 0), 0u) << r.err;
@@ -417,8 +418,8 @@ TEST_F(CliTest, QuietScanPrintsOnlyTheFolderAndARunningJobHasNoResultsToDownload
   const std::string job_id = NewestJobId();
   CliResult r = Run({"download", job_id, "--out", (work_ / "early").string()});
   EXPECT_EQ(r.exit_code, 4);
-  EXPECT_EQ(r.err, "inspectctl: FAILED_PRECONDITION: job " + job_id +
-                       " is running; only a succeeded job has results\n");
+  EXPECT_EQ(r.err,
+            "inspectctl: FAILED_PRECONDITION: job " + job_id + " is running; only a succeeded job has results\n");
   EXPECT_FALSE(fs::exists(work_ / "early"));
   control_->Release();
   r = scan->Finish();

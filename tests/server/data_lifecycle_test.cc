@@ -1,9 +1,9 @@
 // Data lifecycle: the retention selection on hand-made job lists, the disk-full mapping, the reserve.
 #include "server/data_lifecycle.h"
 
-#include <cerrno>
-
 #include <gtest/gtest.h>
+
+#include <cerrno>
 
 namespace inspection {
 namespace {
@@ -16,9 +16,9 @@ TEST(DataLifecycleTest, AgeLimitDeletesOldFinishedJobsOldestFirst) {
   RetentionPolicy p;
   p.max_age_s = 3600;
   const int64_t now = 100000;
-  auto del = SelectJobsToDelete({Job("new", now - 10, 5), Job("old2", now - 7200, 5), Job("old1", now - 9000, 5),
-                                 Job("edge", now - 3600, 5)},
-                                p, now);
+  auto del = SelectJobsToDelete(
+      {Job("new", now - 10, 5), Job("old2", now - 7200, 5), Job("old1", now - 9000, 5), Job("edge", now - 3600, 5)}, p,
+      now);
   EXPECT_EQ(del, (std::vector<std::string>{"old1", "old2"}));  // exactly max_age is kept
 }
 

@@ -1,11 +1,11 @@
 // End-to-end: the real server on loopback, driven through the real client library, on the
 // simulated rig. Mid-scan actions use a held capture (RigControl), never sleeps.
-#include <fstream>
-#include <set>
-
 #include <google/protobuf/util/time_util.h>
 #include <gtest/gtest.h>
+
+#include <fstream>
 #include <opencv2/imgcodecs.hpp>
+#include <set>
 
 #include "core/depth_export.h"
 #include "core/depth_metrics.h"
@@ -63,7 +63,8 @@ TEST_F(EndToEndTest, ScanOfTiltedPlaneMatchesGroundTruth) {
 
   std::vector<v1::JobEvent> events;
   v1::Job job;
-  grpc::Status s = client_->Scan(v1::ScanRequest(), [&](const v1::JobEvent& e) { events.push_back(e); }, &job);
+  grpc::Status s = client_->Scan(
+      v1::ScanRequest(), [&](const v1::JobEvent& e) { events.push_back(e); }, &job);
   ASSERT_TRUE(s.ok()) << s.error_message();
   ASSERT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED);
 
@@ -86,8 +87,8 @@ TEST_F(EndToEndTest, ScanOfTiltedPlaneMatchesGroundTruth) {
   const fs::path out = UniqueTempDir("out");
   std::vector<fs::path> written;
   ASSERT_TRUE(client_->DownloadResults(job, out, false, &written).ok());
-  for (const char* f : {"depth.tiff", "confidence.tiff", "all_in_focus.png", "depth_preview.png",
-                        "ground_truth_depth.tiff"}) {
+  for (const char* f :
+       {"depth.tiff", "confidence.tiff", "all_in_focus.png", "depth_preview.png", "ground_truth_depth.tiff"}) {
     EXPECT_TRUE(fs::exists(out / f)) << f;
   }
   auto depth = ReadDepthTiff(out / "depth.tiff");
@@ -138,7 +139,8 @@ TEST_F(EndToEndTest, WatchJobReattachesAfterDisconnectAndGetsTheResult) {
   auto second = NewClient();
   std::vector<v1::JobEvent> events;
   v1::Job job;
-  grpc::Status s = second->Watch(job_id, [&](const v1::JobEvent& e) { events.push_back(e); }, &job);
+  grpc::Status s = second->Watch(
+      job_id, [&](const v1::JobEvent& e) { events.push_back(e); }, &job);
   ASSERT_TRUE(s.ok()) << s.error_message();
   EXPECT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED);
   ASSERT_FALSE(events.empty());
@@ -251,10 +253,13 @@ TEST_F(EndToEndTest, CancelMidScanEndsCancelledWithoutArtifacts) {
   std::string job_id;
   std::mutex mu;
   std::thread t([&] {
-    scan_status = client_->Scan(SmallScan(), [&](const v1::JobEvent& e) {
-      std::lock_guard<std::mutex> l(mu);
-      job_id = e.job_id();
-    }, &job);
+    scan_status = client_->Scan(
+        SmallScan(),
+        [&](const v1::JobEvent& e) {
+          std::lock_guard<std::mutex> l(mu);
+          job_id = e.job_id();
+        },
+        &job);
   });
   ASSERT_TRUE(control_->WaitUntilHolding());
   auto other = NewClient();
@@ -318,7 +323,10 @@ TEST_F(EndToEndTest, JobsAndResultsSurviveARestart) {
   EXPECT_EQ(again.result().artifacts_size(), job.result().artifacts_size());
   std::vector<v1::JobEvent> replay;
   v1::Job watched;
-  ASSERT_TRUE(client_->Watch(job.job_id(), [&](const v1::JobEvent& e) { replay.push_back(e); }, &watched).ok());
+  ASSERT_TRUE(client_
+                  ->Watch(
+                      job.job_id(), [&](const v1::JobEvent& e) { replay.push_back(e); }, &watched)
+                  .ok());
   EXPECT_EQ(watched.job_id(), job.job_id());
   EXPECT_EQ(replay.back().state(), v1::JOB_STATE_SUCCEEDED);
   const fs::path out = UniqueTempDir("restart");
@@ -356,10 +364,13 @@ TEST_F(EndToEndTest, ShutdownCancelsTheRunningScanAndLeavesNothingPartial) {
   std::mutex mu;
   v1::Job j;
   std::thread t([&] {
-    client_->Scan(SmallScan(), [&](const v1::JobEvent& e) {
-      std::lock_guard<std::mutex> l(mu);
-      job_id = e.job_id();
-    }, &j);
+    client_->Scan(
+        SmallScan(),
+        [&](const v1::JobEvent& e) {
+          std::lock_guard<std::mutex> l(mu);
+          job_id = e.job_id();
+        },
+        &j);
   });
   ASSERT_TRUE(control_->WaitUntilHolding());
   control_->Release();

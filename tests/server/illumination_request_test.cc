@@ -2,12 +2,12 @@
 // field, modes whose calibration models are missing fail with FAILED_PRECONDITION naming the
 // calibration step before any job is created, and the default mode's depth (figures: sigma,
 // bias = mean signed error, RMSE against the simulated truth) has no z offset.
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-
-#include <gtest/gtest.h>
 
 #include "core/depth_export.h"
 #include "core/depth_metrics.h"
@@ -56,9 +56,9 @@ TEST_F(IlluminationRequestTest, ParametersOutOfRangeNameTheField) {
 
 TEST_F(IlluminationRequestTest, UncalibratedModesNameTheMissingStep) {
   const std::pair<v1::IlluminationMode, const char*> cases[] = {
-      {v1::ILLUMINATION_MODE_HDR, "camera_response"},      {v1::ILLUMINATION_MODE_ADAPT, "scatter_matrix"},
+      {v1::ILLUMINATION_MODE_HDR, "camera_response"},         {v1::ILLUMINATION_MODE_ADAPT, "scatter_matrix"},
       {v1::ILLUMINATION_MODE_ADAPT_IT, "projector_response"}, {v1::ILLUMINATION_MODE_TEXTURE, "psf"},
-      {v1::ILLUMINATION_MODE_HF_ADAPT, "geometry"},        {v1::ILLUMINATION_MODE_ADAPTED_HF, "scatter_matrix"},
+      {v1::ILLUMINATION_MODE_HF_ADAPT, "geometry"},           {v1::ILLUMINATION_MODE_ADAPTED_HF, "scatter_matrix"},
   };
   for (const auto& [mode, step] : cases) {
     v1::ScanRequest r;
@@ -106,12 +106,15 @@ TEST_F(CalibratedIlluminationTest, DefaultFallsBackToAdaptAndReportsConvergence)
   std::vector<v1::FrameStatistics> frames;
   std::vector<v1::FrameProgress> progress;
   v1::Job job;
-  s = client_->Scan(scan, [&](const v1::JobEvent& e) {
-    if (e.has_frame()) {
-      frames.push_back(e.frame().statistics());
-      progress.push_back(e.frame());
-    }
-  }, &job);
+  s = client_->Scan(
+      scan,
+      [&](const v1::JobEvent& e) {
+        if (e.has_frame()) {
+          frames.push_back(e.frame().statistics());
+          progress.push_back(e.frame());
+        }
+      },
+      &job);
   ASSERT_TRUE(s.ok()) << s.error_message();
   ASSERT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED) << job.error_message();
   ASSERT_EQ(frames.size(), 9u + 2u);

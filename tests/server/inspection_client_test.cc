@@ -3,15 +3,14 @@
 // treats what comes back (terminal job, stream status, sha256 integrity).
 #include "client_cli/inspection_client.h"
 
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <fstream>
 #include <map>
 #include <mutex>
 #include <random>
-
-#include <gtest/gtest.h>
-#include <grpcpp/grpcpp.h>
 
 namespace inspection::client {
 namespace {
@@ -147,7 +146,8 @@ class FakeService final : public v1::InspectionService::Service {
   }
   void Note(grpc::ServerContext* ctx) {
     auto range = ctx->client_metadata().equal_range("authorization");
-    for (auto it = range.first; it != range.second; ++it) authorization.emplace_back(it->second.data(), it->second.size());
+    for (auto it = range.first; it != range.second; ++it)
+      authorization.emplace_back(it->second.data(), it->second.size());
   }
 };
 
@@ -231,7 +231,8 @@ TEST_F(InspectionClientTest, UploadSendsManifestListedFramesAndGroundTruthInChun
   EXPECT_EQ(fake_.start.upload().total_bytes(), total);
   EXPECT_EQ(last_done, total);
   EXPECT_EQ(last_total, total);
-  EXPECT_EQ(fake_.file_order, (std::vector<std::string>{"stack.json", "f0.png", "sub/f1.png", "f2.png", "ground_truth_depth.tiff"}));
+  EXPECT_EQ(fake_.file_order,
+            (std::vector<std::string>{"stack.json", "f0.png", "sub/f1.png", "f2.png", "ground_truth_depth.tiff"}));
   EXPECT_EQ(fake_.files["sub/f1.png"].chunk_sizes, (std::vector<int64_t>{kMiB, kMiB / 2}));
   EXPECT_EQ(fake_.files["sub/f1.png"].bytes, ReadFile(stack / "sub/f1.png"));
   EXPECT_EQ(fake_.files["stack.json"].bytes, ReadFile(stack / "stack.json"));
@@ -267,7 +268,8 @@ TEST_F(InspectionClientTest, WatchReturnsTerminalJobAndTheStreamsError) {
   InspectionClient client(options_);
   int events = 0;
   v1::Job job;
-  grpc::Status s = client.Watch("job-failed", [&](const v1::JobEvent&) { ++events; }, &job);
+  grpc::Status s = client.Watch(
+      "job-failed", [&](const v1::JobEvent&) { ++events; }, &job);
   EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(s.error_message(), "window_px 4 must be odd");
   EXPECT_EQ(events, 2);
@@ -313,9 +315,8 @@ TEST_F(InspectionClientTest, DownloadWritesVerifiedFileAndResumesFromPart) {
   EXPECT_EQ(ReadFile(dest4), bytes);
 
   std::lock_guard<std::mutex> lock(fake_.mu);
-  EXPECT_EQ(fake_.download_offsets,
-            (std::vector<int64_t>{0, 1000, static_cast<int64_t>(bytes.size()), 0,
-                                  static_cast<int64_t>(bytes.size()) + 7, 0}));
+  EXPECT_EQ(fake_.download_offsets, (std::vector<int64_t>{0, 1000, static_cast<int64_t>(bytes.size()), 0,
+                                                          static_cast<int64_t>(bytes.size()) + 7, 0}));
 }
 
 TEST_F(InspectionClientTest, DownloadIntegrityFailureIsDataLossAndRemovesThePart) {

@@ -6,6 +6,9 @@
 // Synchronisation: the fake runner's condition variable and the jobs' event streams.
 #include "server/job_manager.h"
 
+#include <gtest/gtest.h>
+#include <unistd.h>
+
 #include <chrono>
 #include <condition_variable>
 #include <filesystem>
@@ -16,9 +19,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <gtest/gtest.h>
-#include <unistd.h>
 
 #include "server/data_store.h"
 
@@ -133,9 +133,12 @@ class JobManagerTest : public ::testing::Test {
     return manager_->Submit(kind, request_id, "label", [kind, prepared]() -> StatusOr<JobWork> {
       if (prepared) ++*prepared;
       switch (kind) {
-        case v1::JOB_KIND_CALIBRATE: return JobWork(CalibrateWork());
-        case v1::JOB_KIND_RECONSTRUCT: return JobWork(ReconstructWork());
-        default: return JobWork(ScanWork());
+        case v1::JOB_KIND_CALIBRATE:
+          return JobWork(CalibrateWork());
+        case v1::JOB_KIND_RECONSTRUCT:
+          return JobWork(ReconstructWork());
+        default:
+          return JobWork(ScanWork());
       }
     });
   }
@@ -443,9 +446,9 @@ TEST_F(JobManagerTest, JobsLeftQueuedOrRunningAreAbortedAtTheNextStart) {
     const v1::Job job = (*r)->Snapshot();
     EXPECT_EQ(job.state(), v1::JOB_STATE_FAILED) << id;
     EXPECT_EQ(job.error_code(), int(StatusCode::kAborted)) << id;
-    EXPECT_NE(job.error_message().find(state == v1::JOB_STATE_RUNNING ? "while the job was running"
-                                                                       : "before the job ran"),
-              std::string::npos)
+    EXPECT_NE(
+        job.error_message().find(state == v1::JOB_STATE_RUNNING ? "while the job was running" : "before the job ran"),
+        std::string::npos)
         << job.error_message();
     std::vector<v1::JobEvent> events = WaitForEnd(*r);
     ASSERT_EQ(events.size(), 2u);

@@ -2,13 +2,13 @@
 // the thread's ScopedLogJob.
 #include "server/log_format.h"
 
-#include <regex>
-#include <sstream>
-
 #include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
 #include <spdlog/logger.h>
 #include <spdlog/sinks/ostream_sink.h>
+
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <sstream>
 
 namespace inspection {
 namespace {
@@ -45,8 +45,8 @@ TEST(LogFormatTest, JsonLinesCarryTimeLevelMessageAndJob) {
   EXPECT_EQ(lines[0]["level"], "info");
   EXPECT_EQ(lines[0]["message"], "rig state READY -> BUSY");
   EXPECT_FALSE(lines[0].contains("job_id"));
-  EXPECT_TRUE(std::regex_match(lines[0]["time"].get<std::string>(),
-                               std::regex(R"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z)")))
+  EXPECT_TRUE(
+      std::regex_match(lines[0]["time"].get<std::string>(), std::regex(R"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z)")))
       << lines[0]["time"];
   EXPECT_EQ(lines[1]["level"], "warning");
   EXPECT_EQ(lines[1]["message"], "frame 3: \"quoted\"\nsecond line");
@@ -54,23 +54,24 @@ TEST(LogFormatTest, JsonLinesCarryTimeLevelMessageAndJob) {
   EXPECT_EQ(lines[2]["job_id"], "rec-1");
   EXPECT_EQ(lines[3]["job_id"], "scan-00ff");
   EXPECT_FALSE(lines[4].contains("job_id"));
-  EXPECT_EQ(std::vector<std::string>({"time", "level", "message"}),
-            [&] {
-              std::vector<std::string> keys;
-              for (auto it = lines[4].begin(); it != lines[4].end(); ++it) keys.push_back(it.key());
-              return keys;
-            }())
-      << "key order is stable for people reading raw lines";
+  EXPECT_EQ(std::vector<std::string>({"time", "level", "message"}), [&] {
+    std::vector<std::string> keys;
+    for (auto it = lines[4].begin(); it != lines[4].end(); ++it) keys.push_back(it.key());
+    return keys;
+  }()) << "key order is stable for people reading raw lines";
 }
 
 TEST(LogFormatTest, InvalidUtf8IsReplacedNotThrown) {
   std::ostringstream out;
   spdlog::logger logger("", std::make_shared<spdlog::sinks::ostream_sink_mt>(out));
   logger.set_formatter(std::make_unique<JsonLogFormatter>());
-  logger.info("file '{}'", std::string("a\xff" "b"));
+  logger.info("file '{}'", std::string("a\xff"
+                                       "b"));
   const auto lines = Lines(out.str());
   ASSERT_EQ(lines.size(), 1u);
-  EXPECT_EQ(lines[0]["message"], "file 'a\xEF\xBF\xBD" "b'");
+  EXPECT_EQ(lines[0]["message"],
+            "file 'a\xEF\xBF\xBD"
+            "b'");
 }
 
 TEST(LogFormatTest, OnlyTextAndJsonAreFormats) {

@@ -2,12 +2,12 @@
 // accounting from a synthetic event stream.
 #include "server/http/metrics_registry.h"
 
+#include <google/protobuf/util/time_util.h>
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <limits>
 #include <thread>
-
-#include <google/protobuf/util/time_util.h>
-#include <gtest/gtest.h>
 
 #include "server/http/server_metrics.h"
 
@@ -26,9 +26,9 @@ TEST(MetricsRegistryTest, CounterGaugeAndHistogramRenderExactly) {
   jobs.Add({"reconstruct", "failed"});
   jobs.Add({"scan", "failed"}, -5);  // counters never go down: ignored (no series either)
   free.Set({}, 123456789012.0);
-  wait.Observe({"scan"}, 0.5);   // on a bound: counts in that bucket (le is <=)
+  wait.Observe({"scan"}, 0.5);  // on a bound: counts in that bucket (le is <=)
   wait.Observe({"scan"}, 0.75);
-  wait.Observe({"scan"}, 7);     // only in +Inf
+  wait.Observe({"scan"}, 7);  // only in +Inf
   EXPECT_EQ(r.Render(),
             "# HELP t_jobs_total Jobs.\n"
             "# TYPE t_jobs_total counter\n"
@@ -52,11 +52,12 @@ TEST(MetricsRegistryTest, UnlabelledFamiliesShowZeroBeforeTheFirstUpdate) {
   r.AddCounter("t_frames_total", "Frames.");
   r.AddHistogram("t_d_seconds", "D.", {1});
   r.AddGauge("t_state", "State.", {"state"});  // labelled: no series until one is set
-  EXPECT_EQ(r.Render(),
-            "# HELP t_frames_total Frames.\n# TYPE t_frames_total counter\nt_frames_total 0\n"
-            "# HELP t_d_seconds D.\n# TYPE t_d_seconds histogram\n"
-            "t_d_seconds_bucket{le=\"1\"} 0\nt_d_seconds_bucket{le=\"+Inf\"} 0\nt_d_seconds_sum 0\nt_d_seconds_count 0\n"
-            "# HELP t_state State.\n# TYPE t_state gauge\n");
+  EXPECT_EQ(
+      r.Render(),
+      "# HELP t_frames_total Frames.\n# TYPE t_frames_total counter\nt_frames_total 0\n"
+      "# HELP t_d_seconds D.\n# TYPE t_d_seconds histogram\n"
+      "t_d_seconds_bucket{le=\"1\"} 0\nt_d_seconds_bucket{le=\"+Inf\"} 0\nt_d_seconds_sum 0\nt_d_seconds_count 0\n"
+      "# HELP t_state State.\n# TYPE t_state gauge\n");
 }
 
 TEST(MetricsRegistryTest, LabelValuesAreEscaped) {

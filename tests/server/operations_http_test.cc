@@ -2,6 +2,7 @@
 // Prometheus exposition after a scan, the dashboard's JSON and images, bearer-token checks, and
 // `--no-rig` (reconstruct only) through gRPC.
 #include <grpcpp/generic/generic_stub.h>
+
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
@@ -128,8 +129,7 @@ TEST_F(OperationsHttpTest, MetricsAfterAScanCountTheJobFramesAndCalls) {
   EXPECT_TRUE(HasLine(text, "inspectd_job_duration_seconds_bucket{kind=\"scan\",le=\"+Inf\"} 1")) << text;
   EXPECT_TRUE(HasLine(text, "inspectd_job_queue_wait_seconds_count{kind=\"scan\"} 1")) << text;
   EXPECT_TRUE(HasLine(text, "inspectd_reconstruct_engine_seconds_count{kind=\"scan\"} 1")) << text;
-  EXPECT_TRUE(HasLine(text, "inspectd_artifact_bytes_total{kind=\"scan\"} " + std::to_string(artifact_bytes)))
-      << text;
+  EXPECT_TRUE(HasLine(text, "inspectd_artifact_bytes_total{kind=\"scan\"} " + std::to_string(artifact_bytes))) << text;
   EXPECT_TRUE(HasLine(text, "inspectd_grpc_calls_total{method=\"inspection.v1.InspectionService/Scan\",code=\"OK\"} 1"))
       << text;
   EXPECT_NE(text.find("\ninspectd_data_disk_free_bytes "), std::string::npos);
@@ -291,8 +291,9 @@ TEST_F(OperationsHttpTest, NoRigServesReconstructsAndRefusesRigCalls) {
   const std::string text = Get("/metrics");
   EXPECT_TRUE(HasLine(text, "inspectd_rig_present 0")) << text;
   EXPECT_TRUE(HasLine(text, "inspectd_jobs_total{kind=\"reconstruct\",state=\"succeeded\"} 1")) << text;
-  EXPECT_TRUE(HasLine(text, "inspectd_grpc_calls_total{method=\"inspection.v1.InspectionService/Scan\","
-                            "code=\"FAILED_PRECONDITION\"} 1"))
+  EXPECT_TRUE(HasLine(text,
+                      "inspectd_grpc_calls_total{method=\"inspection.v1.InspectionService/Scan\","
+                      "code=\"FAILED_PRECONDITION\"} 1"))
       << text;
   Json status = Json::parse(Get("/api/status"));
   EXPECT_EQ(status["no_rig"], true);

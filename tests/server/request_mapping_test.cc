@@ -4,9 +4,9 @@
 // eq. 5.15).
 #include "server/request_mapping.h"
 
-#include <string>
-
 #include <gtest/gtest.h>
+
+#include <string>
 
 namespace inspection {
 namespace {
@@ -34,8 +34,12 @@ CalibrationBundle BundleWith(std::initializer_list<CalibrationStep> steps) {
   CalibrationBundle b;
   for (CalibrationStep s : steps) {
     switch (s) {
-      case CalibrationStep::kCameraResponse: b.camera_response.emplace(); break;
-      case CalibrationStep::kProjectorResponse: b.projector_response.emplace(); break;
+      case CalibrationStep::kCameraResponse:
+        b.camera_response.emplace();
+        break;
+      case CalibrationStep::kProjectorResponse:
+        b.projector_response.emplace();
+        break;
       case CalibrationStep::kGeometry:
         b.geometry.emplace();
         b.geometry->camera_px_per_projector_px = 2.0;
@@ -44,8 +48,12 @@ CalibrationBundle BundleWith(std::initializer_list<CalibrationStep> steps) {
         b.psf.emplace();
         b.psf->influence_radius_px = 3.0;
         break;
-      case CalibrationStep::kScatterMatrix: b.scatter.emplace(); break;
-      case CalibrationStep::kIntegralPsf: b.integral_psf.emplace(); break;
+      case CalibrationStep::kScatterMatrix:
+        b.scatter.emplace();
+        break;
+      case CalibrationStep::kIntegralPsf:
+        b.integral_psf.emplace();
+        break;
     }
   }
   return b;
@@ -113,7 +121,8 @@ TEST_F(ScanMappingTest, RequestFieldsReachThePlan) {
   EXPECT_EQ(work->plan.sff.window_px, 9);
   EXPECT_EQ(work->plan.sff.interpolation, DepthInterpolation::kLineFit);
   EXPECT_DOUBLE_EQ(work->plan.sff.min_confidence, 0.3);
-  EXPECT_EQ(work->extra_exports, (std::vector<DepthExportKind>{DepthExportKind::kDepthX3p, DepthExportKind::kDepthPly}));
+  EXPECT_EQ(work->extra_exports,
+            (std::vector<DepthExportKind>{DepthExportKind::kDepthX3p, DepthExportKind::kDepthPly}));
 }
 
 TEST_F(ScanMappingTest, BadFieldsAreNamed) {
@@ -123,7 +132,8 @@ TEST_F(ScanMappingTest, BadFieldsAreNamed) {
   };
   const Case cases[] = {
       {[](v1::ScanRequest& r) { r.set_illumination(static_cast<v1::IlluminationMode>(42)); }, "illumination"},
-      {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_lambda(2.5); }, "illumination_parameters.lambda"},
+      {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_lambda(2.5); },
+       "illumination_parameters.lambda"},
       {[](v1::ScanRequest& r) { r.mutable_illumination_parameters()->set_target_grey(0); },
        "illumination_parameters.target_grey"},
       {[](v1::ScanRequest& r) { r.set_exposure_us(-1); }, "exposure_us"},

@@ -1,7 +1,7 @@
 // Rig state and health: a device failure mid-scan fails the job with a clear status, moves the
 // rig to Error (health NOT_SERVING, rig jobs refused) until ResetRig reconnects it.
-#include <gtest/gtest.h>
 #include <grpcpp/generic/generic_stub.h>
+#include <gtest/gtest.h>
 
 #include "tests/server/server_fixture.h"
 
@@ -89,7 +89,8 @@ TEST_F(ServerTest, DegradedStartReportsWhyAndServesNotServing) {
   opt.data_dir = data_dir_;
   auto sim = CreateSimulatedRig(SimOptions());
   ASSERT_TRUE(sim.ok());
-  auto server = InspectionServer::Start(opt, std::move(*sim), Status::Unavailable("stage apt-usb (serial 27000001) not found"));
+  auto server =
+      InspectionServer::Start(opt, std::move(*sim), Status::Unavailable("stage apt-usb (serial 27000001) not found"));
   ASSERT_TRUE(server.ok());
   server_ = std::move(*server);
   client_ = NewClient();

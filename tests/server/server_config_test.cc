@@ -2,12 +2,11 @@
 // JSON file > defaults, strict keys and types, --print-config output read back.
 #include "server/server_config.h"
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
-
-#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 namespace inspection {
@@ -54,7 +53,7 @@ TEST(ServerConfig, NamesDerivedFromTheKey) {
   EXPECT_EQ(key->FlagName(), "--auth-token-file");
   EXPECT_EQ(key->EnvironmentName(), "INSPECTD_AUTH_TOKEN_FILE");
   EXPECT_EQ(FindConfigKey("auth-token-file"), nullptr);  // file keys use '_' only
-  EXPECT_EQ(InspectdConfigKeys().size(), 16u);  // every inspectd flag before --config
+  EXPECT_EQ(InspectdConfigKeys().size(), 16u);           // every inspectd flag before --config
 }
 
 TEST(ServerConfig, OperationsSettingsAreCheckedAndReachServerOptions) {
@@ -98,8 +97,10 @@ TEST_F(ConfigFileTest, FlagsOverrideEnvironmentOverrideFileOverrideDefaults) {
   })");
   ConfigLayers layers;
   layers.config_flag = file;
-  layers.environment = {{"INSPECTD_LISTEN", "0.0.0.0:2002"}, {"INSPECTD_QUEUE_CAPACITY", "9"},
-                        {"INSPECTD_REFLECTION", "on"}, {"PATH", "/usr/bin"}};
+  layers.environment = {{"INSPECTD_LISTEN", "0.0.0.0:2002"},
+                        {"INSPECTD_QUEUE_CAPACITY", "9"},
+                        {"INSPECTD_REFLECTION", "on"},
+                        {"PATH", "/usr/bin"}};
   layers.flags = {{"listen", "127.0.0.1:3003"}, {"reflection", "false"}};
   auto r = ResolveInspectdConfig(layers);
   ASSERT_TRUE(r.ok()) << r.status().ToString();

@@ -2,11 +2,11 @@
 // and connects the real client library to it.
 #pragma once
 
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <memory>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "client_cli/inspection_client.h"
 #include "server/inspection_server.h"
