@@ -7,6 +7,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "server/no_rig_service.h"
+#include "tests/server/grpc_health_check.h"
 #include "tests/server/server_fixture.h"
 #include "tests/server/test_certs.h"
 
@@ -75,32 +76,6 @@ class OperationsHttpTest : public ServerTest {
 
   std::unique_ptr<httplib::Client> http_;
 };
-
-// grpc.health.v1.Health/Check as raw protocol bytes (Debian ships no health stubs): 1 = SERVING.
-// As in rig_health_test.cc.
-int HealthStatus(const std::shared_ptr<grpc::Channel>& channel, const std::string& service) {
-  std::string req = {0x0a, char(service.size())};
-  req += service;
-  grpc::Slice slice(req);
-  grpc::ByteBuffer request(&slice, 1);
-  grpc::GenericStub stub(channel);
-  grpc::CompletionQueue cq;
-  grpc::ClientContext ctx;
-  auto call = stub.PrepareUnaryCall(&ctx, "/grpc.health.v1.Health/Check", request, &cq);
-  call->StartCall();
-  grpc::ByteBuffer response;
-  grpc::Status status;
-  call->Finish(&response, &status, reinterpret_cast<void*>(1));
-  void* tag = nullptr;
-  bool ok = false;
-  EXPECT_TRUE(cq.Next(&tag, &ok));
-  if (!status.ok()) return -int(status.error_code());
-  std::vector<grpc::Slice> slices;
-  EXPECT_TRUE(response.Dump(&slices).ok());
-  std::string bytes;
-  for (const auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
-  return bytes.size() == 2 && bytes[0] == 0x08 ? bytes[1] : 0;
-}
 
 bool HasLine(const std::string& text, const std::string& line) {
   return text.find("\n" + line + "\n") != std::string::npos;
