@@ -18,18 +18,8 @@ import sys
 import tempfile
 import time
 
-DEADLINE_S = 120
-
-
-def wait_for(what, condition, deadline_s=DEADLINE_S, interval_s=0.1):
-    end = time.monotonic() + deadline_s
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > end:
-            raise SystemExit(f"FAIL: timed out after {deadline_s} s waiting for {what}")
-        time.sleep(interval_s)  # poll interval; the condition decides
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from ops_common import DEADLINE_S, stop_processes, wait_for  # noqa: E402
 
 
 def main():
@@ -134,14 +124,7 @@ def main():
     finally:
         if driver:
             driver.quit()
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.terminate()
-                try:
-                    p.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+        stop_processes(procs)
         shutil.rmtree(work, ignore_errors=True)
 
 

@@ -20,19 +20,8 @@ import urllib.error
 import urllib.parse
 import urllib.request
 
-DEADLINE_S = 120  # generous for a loaded 2-core machine; the test normally needs ~10 s
-
-
-def wait_for(what, condition, deadline_s=DEADLINE_S, interval_s=0.2):
-    """Polls condition() until it returns a true value; fails the test naming `what` at the deadline."""
-    end = time.monotonic() + deadline_s
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > end:
-            raise SystemExit(f"FAIL: timed out after {deadline_s} s waiting for {what}")
-        time.sleep(interval_s)  # poll interval, not synchronisation: the condition decides
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from ops_common import DEADLINE_S, stop_processes, wait_for  # noqa: E402
 
 
 def free_port():
@@ -162,14 +151,7 @@ scrape_configs:
         print("PASS")
         return 0
     finally:
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.terminate()
-                try:
-                    p.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+        stop_processes(procs)
         shutil.rmtree(work, ignore_errors=True)
 
 
