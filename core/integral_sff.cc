@@ -279,6 +279,40 @@ Status CheckIntegralPsfFor(const CalibrationBundle* bundle) {
   return Status::Ok();
 }
 
+namespace {
+
+// Pass 1 of ISFF (thesis 5.4.1): the summed stack, its noise estimate and the restored focused
+// image, from frames 0..count-1 as get_frame returns them.
+struct RestoredTemplate {
+  cv::Mat restored;
+  double frame_noise_sigma = 0;
+  double integral_seconds = 0;
+  double restore_seconds = 0;
+};
+
+template <typename GetFrame>
+StatusOr<RestoredTemplate> RestoreFromIntegralImage(size_t count, GetFrame&& get_frame, const IntegralPsf& ipsf,
+                                                    const IsffOptions& options) {
+  const auto t0 = Clock::now();
+  IntegralImageAccumulator acc;
+  for (size_t i = 0; i < count; ++i) {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, get_frame(i));
+    INSPECT_RETURN_IF_ERROR(acc.Add(f));
+  }
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat integral, acc.IntegralImage());
+  RestoredTemplate t;
+  t.frame_noise_sigma =
+      std::isnan(options.restoration.frame_noise_sigma) ? acc.FrameNoiseSigma() : options.restoration.frame_noise_sigma;
+  t.integral_seconds = SecondsSince(t0);
+  const auto t1 = Clock::now();
+  INSPECT_ASSIGN_OR_RETURN(
+      t.restored, RestoreFocusedImage(integral, acc.frame_count(), t.frame_noise_sigma, ipsf, options.restoration));
+  t.restore_seconds = SecondsSince(t1);
+  return t;
+}
+
+}  // namespace
+
 StatusOr<IsffResult> ReconstructIntegralSff(const std::vector<cv::Mat>& frames, const std::vector<double>& z_um,
                                             const IntegralPsf* ipsf, const IsffOptions& options) {
   if (ipsf == nullptr) {
@@ -288,23 +322,13 @@ StatusOr<IsffResult> ReconstructIntegralSff(const std::vector<cv::Mat>& frames, 
   INSPECT_RETURN_IF_ERROR(options.Validate());
   INSPECT_RETURN_IF_ERROR(ipsf->Validate());
   INSPECT_RETURN_IF_ERROR(CheckFrames(frames, z_um));
-  const auto t0 = Clock::now();
-  IntegralImageAccumulator acc;
-  for (const cv::Mat& f : frames) INSPECT_RETURN_IF_ERROR(acc.Add(f));
-  INSPECT_ASSIGN_OR_RETURN(cv::Mat integral, acc.IntegralImage());
-  const double noise =
-      std::isnan(options.restoration.frame_noise_sigma) ? acc.FrameNoiseSigma() : options.restoration.frame_noise_sigma;
-  const double integral_s = SecondsSince(t0);
-  const auto t1 = Clock::now();
-  INSPECT_ASSIGN_OR_RETURN(cv::Mat restored,
-                           RestoreFocusedImage(integral, acc.frame_count(), noise, *ipsf, options.restoration));
-  const double restore_s = SecondsSince(t1);
-  INSPECT_ASSIGN_OR_RETURN(IsffResult r, CorrelateFrames(
-                                             frames.size(), [&](size_t i) -> StatusOr<cv::Mat> { return frames[i]; },
-                                             z_um, restored, frames[0].type(), options));
-  r.frame_noise_sigma = noise;
-  r.integral_seconds = integral_s;
-  r.restore_seconds = restore_s;
+  auto frame = [&](size_t i) -> StatusOr<cv::Mat> { return frames[i]; };
+  INSPECT_ASSIGN_OR_RETURN(RestoredTemplate t, RestoreFromIntegralImage(frames.size(), frame, *ipsf, options));
+  INSPECT_ASSIGN_OR_RETURN(IsffResult r,
+                           CorrelateFrames(frames.size(), frame, z_um, t.restored, frames[0].type(), options));
+  r.frame_noise_sigma = t.frame_noise_sigma;
+  r.integral_seconds = t.integral_seconds;
+  r.restore_seconds = t.restore_seconds;
   return r;
 }
 
@@ -334,11 +358,10 @@ StatusOr<IsffResult> ReconstructIntegralSffStack(const std::filesystem::path& di
   INSPECT_ASSIGN_OR_RETURN(StackManifest manifest, ReadStackManifest(dir));
   std::vector<double> z_um;
   for (const StackFrame& f : manifest.frames) z_um.push_back(f.z_um);
-  const auto t0 = Clock::now();
-  IntegralImageAccumulator acc;
   int frame_type = -1;
   cv::Size size;
-  for (size_t i = 0; i < manifest.frames.size(); ++i) {
+  // Pass 1 takes frame 0's type and size; every later read (pass 1 and 2) must match them.
+  auto first_pass_frame = [&](size_t i) -> StatusOr<cv::Mat> {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat f, LoadStackFrame(dir, manifest, i));
     if (i == 0) {
       frame_type = f.type();
@@ -347,31 +370,23 @@ StatusOr<IsffResult> ReconstructIntegralSffStack(const std::filesystem::path& di
       return Status::InvalidArgument("frame " + std::to_string(i) + " (" + manifest.frames[i].file +
                                      "): size or bit depth differs from frame 0");
     }
-    INSPECT_RETURN_IF_ERROR(acc.Add(f));
-  }
-  INSPECT_ASSIGN_OR_RETURN(cv::Mat integral, acc.IntegralImage());
-  const double noise =
-      std::isnan(options.restoration.frame_noise_sigma) ? acc.FrameNoiseSigma() : options.restoration.frame_noise_sigma;
-  const double integral_s = SecondsSince(t0);
-  const auto t1 = Clock::now();
-  INSPECT_ASSIGN_OR_RETURN(cv::Mat restored,
-                           RestoreFocusedImage(integral, acc.frame_count(), noise, *ipsf, options.restoration));
-  const double restore_s = SecondsSince(t1);
-  INSPECT_ASSIGN_OR_RETURN(IsffResult r, CorrelateFrames(
-                                             manifest.frames.size(),
-                                             [&](size_t i) -> StatusOr<cv::Mat> {
-                                               INSPECT_ASSIGN_OR_RETURN(cv::Mat f, LoadStackFrame(dir, manifest, i));
-                                               if (f.type() != frame_type || f.size() != size) {
-                                                 return Status::InvalidArgument("frame " + std::to_string(i) + " (" +
-                                                                                manifest.frames[i].file +
-                                                                                "): changed between the two passes");
-                                               }
-                                               return f;
-                                             },
-                                             z_um, restored, frame_type, options));
-  r.frame_noise_sigma = noise;
-  r.integral_seconds = integral_s;
-  r.restore_seconds = restore_s;
+    return f;
+  };
+  INSPECT_ASSIGN_OR_RETURN(RestoredTemplate t,
+                           RestoreFromIntegralImage(manifest.frames.size(), first_pass_frame, *ipsf, options));
+  auto second_pass_frame = [&](size_t i) -> StatusOr<cv::Mat> {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, LoadStackFrame(dir, manifest, i));
+    if (f.type() != frame_type || f.size() != size) {
+      return Status::InvalidArgument("frame " + std::to_string(i) + " (" + manifest.frames[i].file +
+                                     "): changed between the two passes");
+    }
+    return f;
+  };
+  INSPECT_ASSIGN_OR_RETURN(
+      IsffResult r, CorrelateFrames(manifest.frames.size(), second_pass_frame, z_um, t.restored, frame_type, options));
+  r.frame_noise_sigma = t.frame_noise_sigma;
+  r.integral_seconds = t.integral_seconds;
+  r.restore_seconds = t.restore_seconds;
   return r;
 }
 
