@@ -32,6 +32,7 @@ const std::map<std::string, v1::DepthInterpolation>& Interpolations() {
       {"maximum", v1::DEPTH_INTERPOLATION_MAXIMUM},
       {"line-fit", v1::DEPTH_INTERPOLATION_LINE_FIT},
       {"gaussian", v1::DEPTH_INTERPOLATION_GAUSSIAN},
+      {"defocus-parabola", v1::DEPTH_INTERPOLATION_DEFOCUS_PARABOLA},
   };
   return m;
 }
@@ -51,7 +52,7 @@ void ReconstructionFlags::Add(CLI::App* cmd) {
   cmd->add_option("--focus-measure", focus_measure, "Focus measure (default tenengrad)")
       ->check(CLI::IsMember(Keys(FocusMeasures()), CLI::ignore_case));
   cmd->add_option("--window", window_px, "Focus measure window, odd 3..31 px (default 7)");
-  cmd->add_option("--interpolation", interpolation, "Depth interpolation between frames (default gaussian)")
+  cmd->add_option("--interpolation", interpolation, "Depth interpolation between frames (default defocus-parabola)")
       ->check(CLI::IsMember(Keys(Interpolations()), CLI::ignore_case));
   cmd->add_option("--min-confidence", min_confidence, "Pixels below this confidence get no depth (0..1)");
   cmd->add_option("--export", exports, "Extra export, repeatable: png16, ply, x3p")

@@ -90,6 +90,16 @@ FocusPeak InterpolatePeak(DepthInterpolation method, const double* z, const doub
         return GaussianPeak(z[m - 1], z[m], z[m + 1], f[m - 1], f[m], f[m + 1]);
       }
       break;
+    case DepthInterpolation::kDefocusParabola:
+      if (before >= 1 && after >= 1) {
+        const int m = before;
+        FocusPeak p;
+        p.z_um = DefocusParabolaPeakZ(z[m - 1], z[m], z[m + 1], f[m - 1], f[m], f[m + 1]);
+        p.height = f[m];
+        p.interpolated = p.z_um != z[m];
+        return p;
+      }
+      break;
   }
   FocusPeak p;
   p.z_um = z[before];

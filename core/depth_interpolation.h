@@ -40,6 +40,41 @@ inline double GaussianPeakZ(double z1, double z2, double z3, double f1, double f
   return z2 + mu;
 }
 
+// Defocus parabola: the vertex of the parabola through (z1, f1^-1/2), (z2, f2^-1/2), (z3, f3^-1/2)
+// (f2 the sampled maximum, so the vertex is a minimum of f^-1/2).
+// Why f^-1/2: a gradient-energy focus measure (Tenengrad, eq. 3.14) of a texture with a flat
+// spectrum, blurred by a PSF of second moment sigma_b^2, falls as sigma_b^-4, and sigma_b^2 =
+// sigma_0^2 + k^2 (z - z_f)^2 (the in-focus blur plus the defocus blur, which grows linearly in
+// |z - z_f|). So F^-1/2 = c (sigma_0^2 + k^2 (z - z_f)^2) is exactly a parabola in z with its
+// vertex at the focus z_f, whatever sigma_0, k and the texture's contrast; ln F (the Gaussian of
+// eq. 3.30) is not, and its error depends on where the focus lies between two frames, which on
+// a flat part (every pixel between the same two frames) is a bias of the whole depth map.
+// With u = z - z2 and the drops a = sqrt(f2/f1) - 1, b = sqrt(f2/f3) - 1 (f^-1/2 scaled by
+// sqrt(f2), which leaves the vertex unchanged) the vertex is the Gaussian's mu formula with these
+// a and b. Falls back to z2 like GaussianPeakZ.
+inline double DefocusParabolaPeakZ(double z1, double z2, double z3, double f1, double f2, double f3) {
+  if (!(f1 > 0.0 && f2 > 0.0 && f3 > 0.0)) return z2;
+  const double u1 = z1 - z2, u3 = z3 - z2;
+  const double a = std::sqrt(f2 / f1) - 1.0, b = std::sqrt(f2 / f3) - 1.0;
+  const double den = a * u3 - b * u1;
+  const double num_var = u1 * u3 * (u1 - u3);
+  if (!(den * num_var > 0.0) || !std::isfinite(den)) return z2;
+  const double mu = (a * u3 * u3 - b * u1 * u1) / (2.0 * den);
+  if (!(mu >= std::min(u1, u3) && mu <= std::max(u1, u3))) return z2;
+  return z2 + mu;
+}
+
+// The three-point peak position of `method` (kGaussian or kDefocusParabola; the engines' per-pixel
+// hot path for those two methods).
+inline double ThreePointPeakZ(DepthInterpolation method, double z1, double z2, double z3, double f1, double f2,
+                              double f3) {
+  return method == DepthInterpolation::kDefocusParabola ? DefocusParabolaPeakZ(z1, z2, z3, f1, f2, f3)
+                                                        : GaussianPeakZ(z1, z2, z3, f1, f2, f3);
+}
+inline bool IsThreePointMethod(DepthInterpolation method) {
+  return method == DepthInterpolation::kGaussian || method == DepthInterpolation::kDefocusParabola;
+}
+
 // Malik & Choi line fit (eq. 3.25-3.29). z/f hold the samples m - before .. m + after around the
 // maximum at position `before` (so count = before + after + 1). DS1 = the `before` samples and
 // the maximum, DS2 = the maximum and the `after` samples; a least-squares line through each,
@@ -49,7 +84,7 @@ inline double GaussianPeakZ(double z1, double z2, double z3, double f1, double f
 FocusPeak LineFitPeak(const double* z, const double* f, int before, int after);
 
 // Dispatches on the method; z/f/before/after as for LineFitPeak. kMaximum returns z[before];
-// kGaussian uses the direct neighbours of the maximum.
+// kGaussian and kDefocusParabola use the direct neighbours of the maximum.
 FocusPeak InterpolatePeak(DepthInterpolation method, const double* z, const double* f, int before, int after);
 
 // Whole-curve convenience (tests, offline use): finds the first discrete maximum of f and

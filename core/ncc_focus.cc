@@ -380,8 +380,8 @@ StatusOr<DepthResult> NccFocusEngine::Finish() {
       r.confidence.at<float>(y, x) = c;
       if (c >= m.o.min_confidence) {
         // Only kept pixels are interpolated (the logarithms are the costly part).
-        const double z_um = m.o.interpolation == DepthInterpolation::kGaussian && before == 1 && after == 1
-                                ? GaussianPeakZ(zw[0], zw[1], zw[2], fw[0], fw[1], fw[2])
+        const double z_um = IsThreePointMethod(m.o.interpolation) && before == 1 && after == 1
+                                ? ThreePointPeakZ(m.o.interpolation, zw[0], zw[1], zw[2], fw[0], fw[1], fw[2])
                                 : InterpolatePeak(m.o.interpolation, zw, fw, before, after).z_um;
         r.depth_um.at<float>(y, x) = float(z_um);
         ++v;

@@ -40,7 +40,9 @@ struct NccFocusOptions {
   // Side of the summation window U of eq. 5.26, odd, 1..31 (1 = the NCC of the pixel alone).
   int summation_window_px = 7;
   CorrelationFocusValue focus_value = CorrelationFocusValue::kContrastWeighted;
-  DepthInterpolation interpolation = DepthInterpolation::kGaussian;
+  // The engine's default (core/sff_options.h). Derived for gradient energy; on the correlation
+  // curve it also measured better than the Gaussian (tests/procedures/isff_rig_test.cc).
+  DepthInterpolation interpolation = DepthInterpolation::kDefocusParabola;
   int linefit_half_width = 2;  // line fit only, 1..4 (as SffOptions)
   // Pixels whose confidence (FocusConfidence, core/depth_interpolation.h) is below this get NaN
   // depth; the same rule and default as the other focus measures (SffOptions::min_confidence).

@@ -41,16 +41,19 @@ const char* DepthInterpolationName(DepthInterpolation i) {
       return "linefit";
     case DepthInterpolation::kGaussian:
       return "gaussian";
+    case DepthInterpolation::kDefocusParabola:
+      return "defocus_parabola";
   }
   return "unknown";
 }
 
 StatusOr<DepthInterpolation> ParseDepthInterpolation(const std::string& name) {
-  for (DepthInterpolation i :
-       {DepthInterpolation::kMaximum, DepthInterpolation::kLineFit, DepthInterpolation::kGaussian}) {
+  for (DepthInterpolation i : {DepthInterpolation::kMaximum, DepthInterpolation::kLineFit,
+                               DepthInterpolation::kGaussian, DepthInterpolation::kDefocusParabola}) {
     if (name == DepthInterpolationName(i)) return i;
   }
-  return Status::InvalidArgument("interpolation '" + name + "' is unknown (maximum, linefit, gaussian)");
+  return Status::InvalidArgument("interpolation '" + name +
+                                 "' is unknown (maximum, linefit, gaussian, defocus_parabola)");
 }
 
 Status SffOptions::Validate() const {
@@ -80,6 +83,7 @@ Status SffOptions::Validate() const {
     case DepthInterpolation::kMaximum:
     case DepthInterpolation::kLineFit:
     case DepthInterpolation::kGaussian:
+    case DepthInterpolation::kDefocusParabola:
       break;
     default:
       return Status::InvalidArgument("interpolation is unknown");

@@ -26,17 +26,23 @@ enum class DepthInterpolation {
   kMaximum,   // eq. 3.23-3.24
   kLineFit,   // Malik & Choi, eq. 3.25-3.29
   kGaussian,  // three-point Gaussian, eq. 3.30-3.34
+  // Three-point parabola through F^(-1/2) (core/depth_interpolation.h, DefocusParabolaPeakZ):
+  // exact for a gradient-energy measure of a blurred texture, whose F ~ 1 / sigma_blur^4 with
+  // sigma_blur^2 growing quadratically in the defocus; the Gaussian is not, and its sub-step
+  // error does not average out on flat parts.
+  kDefocusParabola,
 };
 
 const char* FocusMeasureName(FocusMeasure m);  // "tenengrad", "sml", ...
 StatusOr<FocusMeasure> ParseFocusMeasure(const std::string& name);
-const char* DepthInterpolationName(DepthInterpolation i);  // "maximum", "linefit", "gaussian"
+// "maximum", "linefit", "gaussian", "defocus_parabola"
+const char* DepthInterpolationName(DepthInterpolation i);
 StatusOr<DepthInterpolation> ParseDepthInterpolation(const std::string& name);
 
 struct SffOptions {
   FocusMeasure focus_measure = FocusMeasure::kTenengrad;
   int window_px = 7;  // odd, 3..31: side of the square summation window U of eq. 3.12/3.14
-  DepthInterpolation interpolation = DepthInterpolation::kGaussian;
+  DepthInterpolation interpolation = DepthInterpolation::kDefocusParabola;
   // Line fit only: samples j on each side of the maximum in DS1/DS2 (eq. 3.25-3.26), 1..4.
   int linefit_half_width = 2;
   // Pixels whose confidence (0..1, see FocusConfidence in core/depth_interpolation.h) is below

@@ -74,8 +74,8 @@ size_t FinishExactSpan(const StatePlanes<T, P>& st, size_t off, int count, const
     if (c >= o.min_confidence) {
       // Only kept pixels are interpolated (the logarithms are the costly part).
       double z_um;
-      if (o.interpolation == DepthInterpolation::kGaussian && before == 1 && after == 1) {
-        z_um = GaussianPeakZ(zw[0], zw[1], zw[2], fw[0], fw[1], fw[2]);
+      if (IsThreePointMethod(o.interpolation) && before == 1 && after == 1) {
+        z_um = ThreePointPeakZ(o.interpolation, zw[0], zw[1], zw[2], fw[0], fw[1], fw[2]);
       } else {
         z_um = InterpolatePeak(o.interpolation, zw, fw, before, after).z_um;
       }

@@ -125,9 +125,11 @@ struct TenengradKernels {
   // cannot change, so the loops keep them in registers.
   static void UpdateCompact(CompactPtrs s, int x_begin, int x_end, int k_begin, int k_end, int slot0,
                             const int32_t* vol_row, size_t slot_stride, const uint8_t* const* pix_rows);
-  // Portable and AVX2 (blocks of 8), pixels x_begin .. x_end-1.
-  static size_t FinishCompact(CompactPtrs s, int x_begin, int x_end, const float* zf, int n, bool gaussian,
-                              float min_confidence, uint32_t* depth, uint32_t* conf, uint8_t* aif);
+  // Portable and AVX2 (blocks of 8), pixels x_begin .. x_end-1. interpolation: kMaximum,
+  // kGaussian or kDefocusParabola (the line fit needs the exact state).
+  static size_t FinishCompact(CompactPtrs s, int x_begin, int x_end, const float* zf, int n,
+                              DepthInterpolation interpolation, float min_confidence, uint32_t* depth, uint32_t* conf,
+                              uint8_t* aif);
 };
 
 }  // namespace inspection::sff_internal

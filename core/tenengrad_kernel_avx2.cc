@@ -199,16 +199,15 @@ __attribute__((target("avx2"))) void TenengradKernels<Isa::kAvx2>::UpdateCompact
 }
 
 // Interpolation and confidence of a compact state row span, 8 pixels at a time in float (one
-// neighbour each side, maximum or Gaussian): the confidence of FocusConfidence and the Gaussian
-// position of GaussianPeakZ. The outputs may be the state's own buffers (PushFrame's Finish
-// writes depth into best and confidence into sum_idx): each block is read before it is written.
-// Pixels x_begin .. x_end-1 (x_end - x_begin a multiple of 8); returns the number kept.
+// neighbour each side: maximum, Gaussian or defocus parabola): the confidence of FocusConfidence
+// and the peak position of GaussianPeakZ / DefocusParabolaPeakZ. The outputs may be the state's
+// own buffers (PushFrame's Finish writes depth into best and confidence into sum_idx): each block
+// is read before it is written. Pixels x_begin .. x_end-1 (x_end - x_begin a multiple of 8);
+// returns the number kept.
 template <>
-__attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompact(CompactPtrs s, int x_begin,
-                                                                                   int x_end, const float* zf, int n,
-                                                                                   bool gaussian, float min_confidence,
-                                                                                   uint32_t* depth, uint32_t* conf,
-                                                                                   uint8_t* aif) {
+__attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompact(
+    CompactPtrs s, int x_begin, int x_end, const float* zf, int n, DepthInterpolation interpolation,
+    float min_confidence, uint32_t* depth, uint32_t* conf, uint8_t* aif) {
   size_t valid = 0;
   const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);
   const __m256i izero = _mm256_setzero_si256(), low8 = _mm256_set1_epi32(0xFF);
@@ -248,7 +247,7 @@ __attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompa
     // Depth: the frame's z, moved to the Gaussian's peak where the fit is valid.
     const __m256 z2 = _mm256_i32gather_ps(zf, m, 4);
     __m256 z_um = z2;
-    if (gaussian) {
+    if (interpolation == DepthInterpolation::kGaussian || interpolation == DepthInterpolation::kDefocusParabola) {
       const __m256i mm1 = _mm256_max_epi32(izero, _mm256_sub_epi32(m, _mm256_set1_epi32(1)));
       const __m256i mp1 = _mm256_min_epi32(last_frame, _mm256_add_epi32(m, _mm256_set1_epi32(1)));
       const __m256 u1 = _mm256_sub_ps(_mm256_i32gather_ps(zf, mm1, 4), z2);
@@ -256,11 +255,14 @@ __attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompa
       const __m256 ok_f =
           _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(f1, zero, _CMP_GT_OQ), _mm256_cmp_ps(f3, zero, _CMP_GT_OQ)),
                         _mm256_andnot_ps(AsPs(at_end), _mm256_cmp_ps(best, zero, _CMP_GT_OQ)));
-      // Logs only of positive finite ratios (others are masked out below).
+      // Transforms only of positive finite ratios (others are masked out below). The drops from
+      // the maximum to its neighbours: ln(f2/f) for the Gaussian, sqrt(f2/f) - 1 for the parabola.
       const __m256 safe1 = _mm256_blendv_ps(one, f1, ok_f), safe3 = _mm256_blendv_ps(one, f3, ok_f);
       const __m256 safe2 = _mm256_blendv_ps(one, best, ok_f);
-      const __m256 a = LogPositiveAvx2(_mm256_div_ps(safe2, safe1));
-      const __m256 b = LogPositiveAvx2(_mm256_div_ps(safe2, safe3));
+      const __m256 r1 = _mm256_div_ps(safe2, safe1), r3 = _mm256_div_ps(safe2, safe3);
+      const bool parabola = interpolation == DepthInterpolation::kDefocusParabola;
+      const __m256 a = parabola ? _mm256_sub_ps(_mm256_sqrt_ps(r1), one) : LogPositiveAvx2(r1);
+      const __m256 b = parabola ? _mm256_sub_ps(_mm256_sqrt_ps(r3), one) : LogPositiveAvx2(r3);
       const __m256 den = _mm256_sub_ps(_mm256_mul_ps(a, u3), _mm256_mul_ps(b, u1));
       const __m256 num_var = _mm256_mul_ps(_mm256_mul_ps(u1, u3), _mm256_sub_ps(u1, u3));
       const __m256 mu =

@@ -73,12 +73,11 @@ size_t FinishCompactRow(CompactState& st, size_t off, int count, const std::vect
                         uint32_t* depth, uint32_t* conf, uint8_t* aif) {
   const CompactPtrs s = st.Row(off);
   const int n = int(zf.size());
-  const bool gaussian = o.interpolation == DepthInterpolation::kGaussian;
   const float min_confidence = float(o.min_confidence);
   const int n8 = st.avx2 ? (count & ~7) : 0;
   size_t valid = 0;
-  if (n8 > 0) valid = Avx2::FinishCompact(s, 0, n8, zf.data(), n, gaussian, min_confidence, depth, conf, aif);
-  return valid + Portable::FinishCompact(s, n8, count, zf.data(), n, gaussian, min_confidence, depth, conf, aif);
+  if (n8 > 0) valid = Avx2::FinishCompact(s, 0, n8, zf.data(), n, o.interpolation, min_confidence, depth, conf, aif);
+  return valid + Portable::FinishCompact(s, n8, count, zf.data(), n, o.interpolation, min_confidence, depth, conf, aif);
 }
 
 }  // namespace sff_internal

@@ -128,8 +128,8 @@ inline float LogPositiveScalar(float x) {
 // per pixel, with the same in-place rule (core/tenengrad_kernel.h, FinishCompactRow).
 template <>
 size_t TenengradKernels<Isa::kPortable>::FinishCompact(CompactPtrs s, int x_begin, int x_end, const float* zf, int n,
-                                                       bool gaussian, float min_confidence, uint32_t* depth,
-                                                       uint32_t* conf, uint8_t* aif) {
+                                                       DepthInterpolation interpolation, float min_confidence,
+                                                       uint32_t* depth, uint32_t* conf, uint8_t* aif) {
   auto maxps = [](float a, float b) { return a > b ? a : b; };  // _mm256_max_ps(a, b)
   auto minps = [](float a, float b) { return a < b ? a : b; };  // _mm256_min_ps(a, b)
   size_t valid = 0;
@@ -158,11 +158,14 @@ size_t TenengradKernels<Isa::kPortable>::FinishCompact(CompactPtrs s, int x_begi
     if (at_end) c = c * 0.5f;
     const float z2 = zf[m];
     float z_um = z2;
-    if (gaussian) {
+    if (interpolation == DepthInterpolation::kGaussian || interpolation == DepthInterpolation::kDefocusParabola) {
       const float u1 = zf[std::max(0, m - 1)] - z2, u3 = zf[std::min(n - 1, m + 1)] - z2;
       const bool ok_f = f1 > 0.f && f3 > 0.f && !at_end && best > 0.f;
       if (ok_f) {
-        const float a = LogPositiveScalar(best / f1), b = LogPositiveScalar(best / f3);
+        const float r1 = best / f1, r3 = best / f3;
+        const bool parabola = interpolation == DepthInterpolation::kDefocusParabola;
+        const float a = parabola ? std::sqrt(r1) - 1.f : LogPositiveScalar(r1);
+        const float b = parabola ? std::sqrt(r3) - 1.f : LogPositiveScalar(r3);
         const float den = a * u3 - b * u1;
         const float num_var = (u1 * u3) * (u1 - u3);
         if (den * num_var > 0.f) {

@@ -36,13 +36,15 @@ StatusOr<FocusMeasure> MapFocusMeasure(v1::FocusMeasure m) {
 
 StatusOr<DepthInterpolation> MapInterpolation(v1::DepthInterpolation i, const std::string& field) {
   switch (i) {
-    case v1::DEPTH_INTERPOLATION_UNSPECIFIED:
     case v1::DEPTH_INTERPOLATION_GAUSSIAN:
       return DepthInterpolation::kGaussian;
     case v1::DEPTH_INTERPOLATION_MAXIMUM:
       return DepthInterpolation::kMaximum;
     case v1::DEPTH_INTERPOLATION_LINE_FIT:
       return DepthInterpolation::kLineFit;
+    case v1::DEPTH_INTERPOLATION_UNSPECIFIED:
+    case v1::DEPTH_INTERPOLATION_DEFOCUS_PARABOLA:
+      return DepthInterpolation::kDefocusParabola;
     default:
       return Status::InvalidArgument(field + ".interpolation " + std::to_string(int(i)) + " is unknown");
   }

@@ -445,8 +445,8 @@ int Main(int argc, char** argv) {
 
   PrintHeader("Table 2: depth interpolation (min confidence 0.4)");
   for (const EngineKey& k : {best, current}) {
-    for (DepthInterpolation in :
-         {DepthInterpolation::kMaximum, DepthInterpolation::kLineFit, DepthInterpolation::kGaussian}) {
+    for (DepthInterpolation in : {DepthInterpolation::kMaximum, DepthInterpolation::kLineFit,
+                                  DepthInterpolation::kGaussian, DepthInterpolation::kDefocusParabola}) {
       PrintRow(KeyName({k.measure, k.window, in}) + (in == DepthInterpolation::kGaussian ? " gaussian" : ""),
                Mean(EvaluateAll(scenes, Single({k.measure, k.window, in}), caches)));
     }

