@@ -1,5 +1,6 @@
 // Reconstruction options of `scan` and `reconstruct`: names accepted on the command line for
-// the proto's focus measures (thesis 3.1.3), depth interpolations (thesis 3.1.4) and exports.
+// the proto's reconstruction methods (thesis 3.1, 5.4, 6.4), focus measures (thesis 3.1.3),
+// depth interpolations (thesis 3.1.4) and exports.
 #include "client_cli/reconstruction_flags.h"
 
 #include <map>
@@ -9,6 +10,16 @@
 
 namespace inspection::client::cli {
 namespace {
+
+const std::map<std::string, v1::ReconstructionMethod>& Methods() {
+  static const std::map<std::string, v1::ReconstructionMethod> m = {
+      {"sff", v1::RECONSTRUCTION_METHOD_SFF},
+      {"isff", v1::RECONSTRUCTION_METHOD_ISFF},
+      {"isff-gt", v1::RECONSTRUCTION_METHOD_ISFF_GT},
+      {"isff-fast", v1::RECONSTRUCTION_METHOD_ISFF_FAST},
+  };
+  return m;
+}
 
 const std::map<std::string, v1::FocusMeasure>& FocusMeasures() {
   static const std::map<std::string, v1::FocusMeasure> m = {
@@ -49,6 +60,12 @@ const std::map<std::string, v1::ArtifactKind>& Exports() {
 }  // namespace
 
 void ReconstructionFlags::Add(CLI::App* cmd) {
+  cmd->add_option("--method", method,
+                  "Reconstruction: sff (default) | isff | isff-gt (simulated rig scans only) | isff-fast; "
+                  "the isff methods need the integral-psf calibration step")
+      ->check(CLI::IsMember(Keys(Methods()), CLI::ignore_case));
+  cmd->add_option("--isff-fast-threshold", isff_fast_threshold,
+                  "isff-fast: correlation a local maximum needs to stop the search, (0, 1] (default 0.9)");
   cmd->add_option("--focus-measure", focus_measure, "Focus measure (default tenengrad)")
       ->check(CLI::IsMember(Keys(FocusMeasures()), CLI::ignore_case));
   cmd->add_option("--window", window_px, "Focus measure window, odd 3..31 px (default 7)");
@@ -66,6 +83,8 @@ v1::ReconstructionOptions ReconstructionFlags::ToProto() const {
   if (!interpolation.empty()) o.set_interpolation(Interpolations().at(Lower(interpolation)));
   if (min_confidence) o.set_min_confidence(*min_confidence);
   for (const auto& e : exports) o.add_extra_exports(Exports().at(Lower(e)));
+  if (!method.empty()) o.set_method(Methods().at(Lower(method)));
+  if (isff_fast_threshold) o.set_isff_fast_threshold(*isff_fast_threshold);
   return o;
 }
 

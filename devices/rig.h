@@ -26,6 +26,10 @@ class SimulationControl {
   // Height map (CV_32FC1, µm) in the depth convention: the stage z at which each camera pixel
   // is in focus.
   virtual cv::Mat GroundTruthDepthUm() const = 0;
+  // The ground-truth texture (ISFF-GT's template, thesis 6.4.3): the specimen rendered with every
+  // point in focus and without noise, under `pattern` (CV_8UC1 of the projector size) at
+  // exposure_us and the camera's gain; the frames' type. INVALID_ARGUMENT for a bad pattern.
+  virtual StatusOr<cv::Mat> GroundTruthTexture(const cv::Mat& pattern, double exposure_us) const = 0;
   // The z range covering the specimen's heights, used for default scan ranges.
   virtual std::pair<double, double> SpecimenZRangeUm() const = 0;
 };

@@ -37,6 +37,7 @@ struct ReconstructWork {
   // ended, was cancelled while queued, or never got queued).
   std::shared_ptr<const OwnedFolder> upload;
   SffOptions sff;
+  ReconstructionMethodSettings method;  // SFF with sff, or an integral method (thesis 5.4, 6.4)
   std::vector<DepthExportKind> extra_exports;
 };
 

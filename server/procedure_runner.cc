@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <chrono>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -64,6 +65,27 @@ void EmitPhase(const JobContext& context, v1::JobPhase phase, double progress = 
   });
 }
 
+// The reconstruction method and, for the integral methods, their figures (DepthSummary).
+void RecordMethod(const ReconstructionMethodSettings& m, const IntegralSffFigures& figures, v1::DepthSummary* d) {
+  switch (m.method) {
+    case ReconstructionMethod::kSff:
+      d->set_method(v1::RECONSTRUCTION_METHOD_SFF);
+      return;
+    case ReconstructionMethod::kIsff:
+      d->set_method(v1::RECONSTRUCTION_METHOD_ISFF);
+      break;
+    case ReconstructionMethod::kIsffGroundTruth:
+      d->set_method(v1::RECONSTRUCTION_METHOD_ISFF_GT);
+      break;
+    case ReconstructionMethod::kIsffFast:
+      d->set_method(v1::RECONSTRUCTION_METHOD_ISFF_FAST);
+      d->set_isff_fast_threshold(m.isff_fast_threshold);
+      break;
+  }
+  d->set_frame_noise_sigma(figures.frame_noise_sigma);
+  d->set_frames_searched_fraction(figures.frames_searched_fraction);
+}
+
 }  // namespace
 
 StatusOr<v1::JobResult> ProcedureRunner::Run(const JobWork& work, const JobContext& context) {
@@ -114,6 +136,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
   *result.mutable_depth() =
       SummariseDepth(outcome.depth, outcome.manifest.pixel_size_um, outcome.ground_truth_um, plan.sff.window_px);
   result.mutable_depth()->set_engine_seconds(outcome.engine_finish_seconds);
+  RecordMethod(plan.reconstruction, outcome.isff, result.mutable_depth());
   const fs::path scan_dir = store_->scans_dir() / job_id;
   std::error_code ec;
   fs::rename(stack.path(), scan_dir, ec);
@@ -160,8 +183,20 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
       FillFrameEvent(v1::JOB_PHASE_RECONSTRUCTING, i, n, z, m.frames[i].exposure_us, st, &e);
     });
   };
-  INSPECT_ASSIGN_OR_RETURN(DepthResult depth,
-                           ReconstructStackFolder(work.stack_dir, m, work.sff, on_frame, *context.cancel));
+  const auto t0 = std::chrono::steady_clock::now();
+  DepthResult depth;
+  IntegralSffFigures isff;
+  if (work.method.integral()) {
+    // The calibration active now; two passes over the folder without per-frame events.
+    const std::shared_ptr<const CalibrationBundle> bundle = calibrations_->active();
+    INSPECT_ASSIGN_OR_RETURN(IsffResult r,
+                             ReconstructStackFolderIntegralSff(work.stack_dir, work.method, work.sff, bundle.get()));
+    depth = std::move(r.depth);
+    isff = FiguresOf(r);
+  } else {
+    INSPECT_ASSIGN_OR_RETURN(depth, ReconstructStackFolder(work.stack_dir, m, work.sff, on_frame, *context.cancel));
+  }
+  const double engine_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EmitPhase(context, v1::JOB_PHASE_STORING, 0.92);
 
   INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher, ResultPublisher::Create(store_, context.job_id));
@@ -185,6 +220,8 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   v1::JobResult result;
   result.set_scan_id(work.source_scan_id);
   *result.mutable_depth() = SummariseDepth(depth, m.pixel_size_um, truth, work.sff.window_px);
+  result.mutable_depth()->set_engine_seconds(engine_seconds);
+  RecordMethod(work.method, isff, result.mutable_depth());
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
   return result;
 }

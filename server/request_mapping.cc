@@ -82,6 +82,22 @@ StatusOr<CalibrationStep> MapCalibrationStep(int step, const std::string& field)
   }
 }
 
+StatusOr<ReconstructionMethod> MapReconstructionMethod(v1::ReconstructionMethod m, const std::string& field) {
+  switch (m) {
+    case v1::RECONSTRUCTION_METHOD_UNSPECIFIED:
+    case v1::RECONSTRUCTION_METHOD_SFF:
+      return ReconstructionMethod::kSff;
+    case v1::RECONSTRUCTION_METHOD_ISFF:
+      return ReconstructionMethod::kIsff;
+    case v1::RECONSTRUCTION_METHOD_ISFF_GT:
+      return ReconstructionMethod::kIsffGroundTruth;
+    case v1::RECONSTRUCTION_METHOD_ISFF_FAST:
+      return ReconstructionMethod::kIsffFast;
+    default:
+      return Status::InvalidArgument(field + ".method " + std::to_string(int(m)) + " is unknown");
+  }
+}
+
 bool IsCheckerboardMode(IlluminationMode mode) {
   return mode == IlluminationMode::kTexture || mode == IlluminationMode::kHfAdapt ||
          mode == IlluminationMode::kAdaptedHf;
@@ -110,6 +126,22 @@ StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::Reconstructi
   INSPECT_ASSIGN_OR_RETURN(s.interpolation, MapInterpolation(o.interpolation(), field));
   if (o.has_min_confidence()) s.min_confidence = o.min_confidence();
   INSPECT_RETURN_IF_ERROR(s.Validate().WithContext(field));
+  ReconstructionMethodSettings& m = out.method;
+  INSPECT_ASSIGN_OR_RETURN(m.method, MapReconstructionMethod(o.method(), field));
+  const std::string method_name = ReconstructionMethodName(m.method);
+  if (m.integral() && o.focus_measure() != v1::FOCUS_MEASURE_UNSPECIFIED) {
+    return Status::InvalidArgument(field + ".focus_measure must be unset with method " + method_name +
+                                   " (it correlates with a focused template, thesis eq. 5.24-5.26)");
+  }
+  if (o.has_isff_fast_threshold()) {
+    if (m.method != ReconstructionMethod::kIsffFast) {
+      return Status::InvalidArgument(
+          field + ".isff_fast_threshold applies to RECONSTRUCTION_METHOD_ISFF_FAST only (method " + method_name + ")");
+    }
+    m.isff_fast_threshold = o.isff_fast_threshold();
+  }
+  // Validate's message starts with the field name ("isff_fast_threshold must be in (0, 1] ...").
+  if (Status v = m.Validate(); !v.ok()) return Status::InvalidArgument(field + "." + v.message());
   for (int i = 0; i < o.extra_exports_size(); ++i) {
     INSPECT_ASSIGN_OR_RETURN(DepthExportKind k,
                              MapExtraExport(o.extra_exports(i), field + ".extra_exports[" + std::to_string(i) + "]"));
@@ -171,6 +203,15 @@ IlluminationMode DefaultIlluminationMode(const CalibrationBundle* calibration, i
 StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& req, const ScanContext& context) {
   INSPECT_ASSIGN_OR_RETURN(std::optional<IlluminationMode> requested, MapIlluminationMode(req.illumination()));
   INSPECT_ASSIGN_OR_RETURN(IlluminationParams params, MapIlluminationParameters(req.illumination_parameters()));
+  // A contradiction in the request comes before what the calibration lacks.
+  const v1::ReconstructionMethod method = req.reconstruction().method();
+  const bool integral = method != v1::RECONSTRUCTION_METHOD_UNSPECIFIED && method != v1::RECONSTRUCTION_METHOD_SFF;
+  if (integral && requested && *requested != IlluminationMode::kStd) {
+    // The integral image of eq. 5.19 is the blur of one fixed texture: uniform illumination.
+    return Status::InvalidArgument(
+        "illumination " + IlluminationModeName(*requested) + " cannot be used with reconstruction.method " +
+        v1::ReconstructionMethod_Name(method) + ": integral SFF needs illumination STD (thesis 5.4.1)");
+  }
   if (requested) INSPECT_RETURN_IF_ERROR(CheckCalibrationFor(*requested, context.calibration));
 
   // Range unset (both ends zero) = the rig's default range; step zero = the rig's default step.
@@ -187,10 +228,17 @@ StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& req, const ScanContext&
   INSPECT_ASSIGN_OR_RETURN(ReconstructionSettings rec,
                            MapReconstructionOptions(req.reconstruction(), "reconstruction"));
   work.plan.sff = rec.sff;
+  work.plan.reconstruction = rec.method;
   work.extra_exports = std::move(rec.extra_exports);
 
   const int window_px = work.plan.sff.window_px;
   IlluminationMode mode = requested ? *requested : DefaultIlluminationMode(context.calibration, window_px);
+  if (rec.method.integral()) {
+    mode = IlluminationMode::kStd;  // the only one it takes (checked above)
+    if (rec.method.method != ReconstructionMethod::kIsffGroundTruth) {
+      INSPECT_RETURN_IF_ERROR(CheckIntegralPsfFor(context.calibration));
+    }
+  }
   if (requested && IsCheckerboardMode(mode)) {
     auto period = CheckerboardPeriod(*context.calibration, window_px);
     if (!period.ok()) return period.status().WithContext("reconstruction.window_px " + std::to_string(window_px));
@@ -211,6 +259,10 @@ StatusOr<CalibrateWork> MapCalibrateRequest(const v1::CalibrateRequest& req) {
 }
 
 StatusOr<ReconstructSource> MapReconstructSource(const v1::ReconstructStart& start, int64_t max_upload_bytes) {
+  INSPECT_ASSIGN_OR_RETURN(ReconstructionSettings rec, MapReconstructionOptions(start.options(), "options"));
+  if (rec.method.method == ReconstructionMethod::kIsffGroundTruth) {
+    INSPECT_RETURN_IF_ERROR(CheckStackFolderMethod(rec.method, nullptr));
+  }
   ReconstructSource source;
   if (start.has_scan_id()) {
     if (!IsSafeId(start.scan_id())) {
@@ -256,6 +308,7 @@ StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start,
   work.source_scan_id = start.has_scan_id() ? start.scan_id() : std::string();
   work.upload = std::move(upload);
   work.sff = rec.sff;
+  work.method = rec.method;
   work.extra_exports = std::move(rec.extra_exports);
   return work;
 }

@@ -29,8 +29,12 @@ namespace inspection {
 
 // ReconstructionOptions -> engine options and the extra exports. `field` is the options' path
 // in the request ("reconstruction" in ScanRequest, "options" in ReconstructStart).
+// The method and its threshold are checked here (INVALID_ARGUMENT "<field>.isff_fast_threshold
+// must be in (0, 1]", a threshold without ISFF_FAST, a focus measure with an integral method);
+// what a method needs from the rig and calibration is checked by the job's request.
 struct ReconstructionSettings {
   SffOptions sff;
+  ReconstructionMethodSettings method;
   std::vector<DepthExportKind> extra_exports;
 };
 StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::ReconstructionOptions& options,
@@ -57,9 +61,12 @@ struct ScanContext {
   const Stage* stage = nullptr;
   const CalibrationBundle* calibration = nullptr;
 };
-// Checks, in order: illumination, illumination_parameters, the mode's calibration models,
-// exposure_us, the z range (z_start_um, z_end_um, z_step_um), reconstruction, and for the
-// checkerboard modes the focus window against the texture period.
+// Checks, in order: illumination, illumination_parameters, illumination against an integral
+// reconstruction.method (thesis 5.4, 6.4: STD only, and their default; another mode is
+// INVALID_ARGUMENT), the mode's calibration models, exposure_us, the z range (z_start_um,
+// z_end_um, z_step_um), reconstruction, for the checkerboard modes the focus window against the
+// texture period, and for ISFF and ISFF_FAST the integral_psf calibration step
+// (FAILED_PRECONDITION). ISFF_GT's simulated rig is checked when the scan starts (RunScan).
 StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& request, const ScanContext& context);
 
 StatusOr<CalibrateWork> MapCalibrateRequest(const v1::CalibrateRequest& request);
@@ -71,6 +78,9 @@ struct ReconstructSource {
   int64_t upload_total_bytes = 0;  // 0 = not announced
   int upload_file_count = 0;       // 0 = not announced
 };
+// Also checks start.options, so bad options and ISFF_GT (FAILED_PRECONDITION: a stored stack has
+// no ground-truth texture) are refused before an upload is received. ISFF's calibration step is
+// checked when the job runs, against the calibration active then.
 StatusOr<ReconstructSource> MapReconstructSource(const v1::ReconstructStart& start, int64_t max_upload_bytes);
 // One chunk of an uploaded stack on its own (path relative and plain, data at most
 // kMaxChunkBytes); the order of chunks is the receiver's to check.

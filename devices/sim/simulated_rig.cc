@@ -284,6 +284,27 @@ class SimulatedRig : public Rig, public SimulationControl {
     std::lock_guard<std::mutex> lock(s_->mu);
     return s_->renderer->specimen().height_um.clone();
   }
+  StatusOr<cv::Mat> GroundTruthTexture(const cv::Mat& pattern, double exposure_us) const override {
+    Specimen flat;
+    SimulatedRigOptions clean;
+    double gain_db = 0.0;
+    {
+      std::lock_guard<std::mutex> lock(s_->mu);
+      const Specimen& s = s_->renderer->specimen();
+      // Every point at height 0 and the stage at 0: in focus everywhere (defocus by |h - z|).
+      flat = {s.name, cv::Mat(s.height_um.size(), CV_32FC1, cv::Scalar(0.0f)), s.reflectance.clone(),
+              s.texture.clone()};
+      clean = s_->options;
+      gain_db = s_->gain_db;
+    }
+    // A renderer of its own: the rig's keeps its scratch buffers and noise untouched.
+    clean.read_noise_dn = 0.0;
+    clean.shot_noise = false;
+    INSPECT_ASSIGN_OR_RETURN(ImageFormationOptions options, ImageFormationOptionsFor(clean));
+    INSPECT_ASSIGN_OR_RETURN(std::unique_ptr<ImageFormation> renderer,
+                             ImageFormation::Create(options, std::move(flat)));
+    return renderer->Render(pattern, 0.0, exposure_us, gain_db, 1);
+  }
   std::pair<double, double> SpecimenZRangeUm() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
     return s_->z_range_um;

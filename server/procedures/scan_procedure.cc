@@ -207,6 +207,49 @@ class ScanRecorder : public ScanCaptureContext {
   ScanFrameEvent pending_;  // the last kUndecided capture, reported by DecideLastCapture
 };
 
+// What the stack frames stream into while they are captured: the SFF engine, ISFF-GT's NCC
+// engine with the ground-truth texture, or nothing (ISFF and ISFF-FAST read the stored stack
+// after the last frame).
+struct StreamingReconstruction {
+  std::unique_ptr<SffEngine> sff;
+  std::unique_ptr<NccFocusEngine> ncc;
+
+  Status PushFrame(const cv::Mat& frame, double z_um) {
+    if (sff) return sff->PushFrame(frame, z_um);
+    if (ncc) return ncc->PushFrame(frame, z_um);
+    return Status::Ok();
+  }
+};
+
+// Checks what the plan's reconstruction method needs before anything is captured.
+StatusOr<StreamingReconstruction> CreateStreamingReconstruction(Rig& rig, const ScanPlan& plan,
+                                                                const CalibrationBundle* bundle, int frame_type) {
+  const ReconstructionMethodSettings& method = plan.reconstruction;
+  StreamingReconstruction r;
+  if (!method.integral()) {
+    INSPECT_ASSIGN_OR_RETURN(r.sff, SffEngine::Create(plan.sff, rig.camera().frame_size(), frame_type));
+    return r;
+  }
+  INSPECT_RETURN_IF_ERROR(method.Validate());
+  INSPECT_RETURN_IF_ERROR(CheckIntegralIllumination(IlluminationModeName(plan.mode, plan.params.hdr_exposures)));
+  if (method.method != ReconstructionMethod::kIsffGroundTruth) {
+    INSPECT_RETURN_IF_ERROR(CheckIntegralPsfFor(bundle));
+    return r;
+  }
+  SimulationControl* sim = rig.simulation();
+  if (sim == nullptr) {
+    return Status::FailedPrecondition(
+        "ISFF-GT needs the simulated rig's ground-truth texture; this rig is not simulated (use ISFF)");
+  }
+  // STD shows one uniform grey at one exposure through the stack: the texture under the same.
+  const cv::Mat pattern(rig.projector().resolution(), CV_8UC1, cv::Scalar(plan.uniform_grey));
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat texture, sim->GroundTruthTexture(pattern, plan.exposure_us));
+  const IsffOptions options = IsffOptionsFor(method, plan.sff);
+  INSPECT_RETURN_IF_ERROR(options.Validate());
+  INSPECT_ASSIGN_OR_RETURN(r.ncc, NccFocusEngine::Create(options.ncc, texture, frame_type));
+  return r;
+}
+
 }  // namespace
 
 StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& stack_dir,
@@ -239,8 +282,9 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
   const std::unique_ptr<IlluminationStrategy> illumination =
       CreateIlluminationStrategy(plan, bundle, {camera.frame_size(), projector.resolution(), camera.bit_depth()});
   const int stack_bit_depth = illumination->stack_bit_depth();
-  INSPECT_ASSIGN_OR_RETURN(std::unique_ptr<SffEngine> engine,
-                           SffEngine::Create(plan.sff, camera.frame_size(), stack_bit_depth > 8 ? CV_16UC1 : CV_8UC1));
+  const int frame_type = stack_bit_depth > 8 ? CV_16UC1 : CV_8UC1;
+  INSPECT_ASSIGN_OR_RETURN(StreamingReconstruction engine,
+                           CreateStreamingReconstruction(rig, plan, bundle, frame_type));
 
   ScanOutcome out;
   StackManifest& m = out.manifest;
@@ -264,13 +308,26 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
     }
     // The commanded z is the stack coordinate: repeatability error is what the stage adds, and
     // the thesis evaluates against the nominal step positions.
-    INSPECT_RETURN_IF_ERROR(engine->PushFrame(frame.image, plan.z_um[size_t(i)]));
+    INSPECT_RETURN_IF_ERROR(engine.PushFrame(frame.image, plan.z_um[size_t(i)]));
     m.frames.push_back({name, plan.z_um[size_t(i)], frame.exposure_us, frame.pattern});
   }
   out.images_acquired = recorder.acquisitions();
   const auto t1 = Clock::now();
   INSPECT_RETURN_IF_ERROR(WriteStackManifest(stack_dir, m));
-  INSPECT_ASSIGN_OR_RETURN(out.depth, engine->Finish());
+  if (engine.sff) {
+    INSPECT_ASSIGN_OR_RETURN(out.depth, engine.sff->Finish());
+  } else if (engine.ncc) {
+    INSPECT_ASSIGN_OR_RETURN(out.depth, engine.ncc->Finish());
+    out.isff.frame_noise_sigma = 0.0;  // ISFF-GT's template is noise-free; nothing is estimated
+    out.isff.frames_searched_fraction = cv::mean(engine.ncc->frames_searched())[0] / double(count);
+  } else {
+    // ISFF, ISFF-FAST: the restored template needs the whole stack (core/integral_sff.h).
+    INSPECT_RETURN_IF_ERROR(recorder.CheckCancel(count));
+    INSPECT_ASSIGN_OR_RETURN(IsffResult isff,
+                             ReconstructStackFolderIntegralSff(stack_dir, plan.reconstruction, plan.sff, bundle));
+    out.depth = std::move(isff.depth);
+    out.isff = FiguresOf(isff);
+  }
   out.engine_finish_seconds = std::chrono::duration<double>(Clock::now() - t1).count();
   out.acquisition_seconds = std::chrono::duration<double>(t1 - t0).count();
   if (SimulationControl* sim = rig.simulation()) {

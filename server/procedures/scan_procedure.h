@@ -3,7 +3,9 @@
 // frame arrives. Illumination modes of thesis 5 and 6.2 (IlluminationMode below): STD, HDR-n,
 // ADAPT-IT, ADAPT, TEXTURE, HF+ADAPT, ADAPTED-HF, each a strategy (illumination_strategy.h).
 // Frames that are not stack frames (HDR exposures, ADAPT initialisation and iteration frames) are
-// stored under raw/ in the stack.
+// stored under raw/ in the stack. The integral methods (thesis 5.4, 6.4; reconstruction_method.h)
+// replace the SFF engine: ISFF-GT correlates the frames with the simulated rig's ground-truth
+// texture as they arrive; ISFF and ISFF-FAST run over the stored stack once it is complete.
 #pragma once
 
 #include <atomic>
@@ -19,6 +21,7 @@
 #include "core/stack.h"
 #include "core/status.h"
 #include "devices/rig.h"
+#include "server/procedures/reconstruction_method.h"
 
 namespace inspection {
 
@@ -65,7 +68,8 @@ struct ScanPlan {
   IlluminationMode mode = IlluminationMode::kStd;
   IlluminationParams params;
   SffOptions sff;
-  std::string calibration_id;  // recorded in stack.json
+  ReconstructionMethodSettings reconstruction;  // SFF (sff above) or an integral method
+  std::string calibration_id;                   // recorded in stack.json
 };
 
 // Builds the z positions from start to end (inclusive when end falls on the grid) with step
@@ -92,6 +96,7 @@ struct ScanOutcome {
   cv::Mat ground_truth_um;  // simulated rig only; empty otherwise
   double acquisition_seconds = 0.0;
   double engine_finish_seconds = 0.0;               // time from the last frame to the depth map
+  IntegralSffFigures isff;                          // integral methods only
   int images_acquired = 0;                          // every capture (thesis Table 6.3 #imgs)
   std::vector<FrameStatistics> capture_statistics;  // per capture, in order (Fig. 6.3)
   std::vector<bool> capture_is_stack_frame;
@@ -101,7 +106,9 @@ struct ScanOutcome {
 // Returns CANCELLED as soon as `cancel` is seen between frames; device errors pass through
 // (UNAVAILABLE, DEADLINE_EXCEEDED, OUT_OF_RANGE).
 // Modes other than STD need `bundle` (see CheckCalibrationFor); it must outlive the call and
-// match the rig's camera and projector size.
+// match the rig's camera and projector size. The integral methods need illumination STD, ISFF
+// and ISFF-FAST the bundle's IPSF, ISFF-GT the simulated rig (FAILED_PRECONDITION otherwise,
+// before the first capture).
 StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const std::filesystem::path& stack_dir,
                               const std::function<void(const ScanFrameEvent&)>& on_frame,
                               const std::atomic<bool>& cancel, const CalibrationBundle* bundle);

@@ -4,10 +4,14 @@
 // RMSE: Table 6.3 (and #images), Table 6.5 (STD vs TEXTURE on textureless specimens), Table 6.6
 // (outlier %), Fig. 6.3 (image mean / sd of the first frames), and every built-in specimen with
 // every mode at its default scan against the bias bound of README "Illumination modes".
+// Then integral SFF (thesis 6.4, tests/bench/isff_tables.h): Table 6.8, Table 6.9, Fig. 6.17 and
+// the calibration and reconstruction times, on their own rig (default camera 512x384).
 // Usage: inspect-evaluate [--camera WxH] [--projector WxH] [--seed N] [--bias-only] [--specimens a,b]
-//        [--modes STD,ADAPT,...]   (default 256x192, 96x72, seed 5, all tables, every specimen and mode)
-// --bias-only prints only the last table; --specimens / --modes restrict it (for quick checks).
-// Exit status 3 when a mode exceeds the bias bound.
+//        [--modes STD,ADAPT,...] [--isff-only | --no-isff]
+//        (default 256x192, 96x72, seed 5, all tables, every specimen and mode)
+// --bias-only prints only the bias table; --specimens / --modes restrict it (for quick checks).
+// --isff-only prints only the integral SFF part (--camera and --seed apply to it when given),
+// --no-isff leaves it out. Exit status 3 when a mode exceeds the bias bound, 1 on a failure.
 #include <unistd.h>
 
 #include <algorithm>
@@ -23,6 +27,7 @@
 #include "devices/sim/specimen.h"
 #include "server/procedures/calibration_procedure.h"
 #include "server/procedures/scan_procedure.h"
+#include "tests/bench/isff_tables.h"
 
 namespace inspection {
 namespace {
@@ -118,6 +123,7 @@ int Main(int argc, char** argv) {
   ro.projector_size = {96, 72};
   ro.seed = 5;
   bool bias_only = false;
+  bool isff_only = false, no_isff = false, camera_given = false;
   std::vector<std::string> specimens = BuiltinSpecimenNames();
   const IlluminationMode all_modes[] = {
       IlluminationMode::kStd,      IlluminationMode::kHdr,     IlluminationMode::kAdaptIterative,
@@ -126,11 +132,13 @@ int Main(int argc, char** argv) {
   std::vector<IlluminationMode> modes(std::begin(all_modes), std::end(all_modes));
   const char* usage =
       "usage: inspect-evaluate [--camera WxH] [--projector WxH] [--seed N] [--bias-only] [--specimens a,b] "
-      "[--modes STD,ADAPT,...]\n";
+      "[--modes STD,ADAPT,...] [--isff-only | --no-isff]\n";
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--bias-only") {
-      bias_only = true;
+    if (a == "--bias-only" || a == "--isff-only" || a == "--no-isff") {
+      bias_only |= a == "--bias-only";
+      isff_only |= a == "--isff-only";
+      no_isff |= a == "--no-isff";
       continue;
     }
     if (i + 1 >= argc) {
@@ -138,9 +146,10 @@ int Main(int argc, char** argv) {
       return 2;
     }
     const std::string v = argv[++i];
-    if (a == "--camera")
+    if (a == "--camera") {
       ro.camera_size = ParseSize(v.c_str());
-    else if (a == "--projector")
+      camera_given = true;
+    } else if (a == "--projector")
       ro.projector_size = ParseSize(v.c_str());
     else if (a == "--seed")
       ro.seed = std::strtoull(v.c_str(), nullptr, 10);
@@ -162,6 +171,14 @@ int Main(int argc, char** argv) {
       return 2;
     }
   }
+  if (isff_only && (no_isff || bias_only)) {
+    std::fprintf(stderr, "--isff-only excludes --no-isff and --bias-only\n%s", usage);
+    return 2;
+  }
+  IsffTablesOptions isff;
+  if (camera_given) isff.camera_size = ro.camera_size;
+  isff.seed = ro.seed;
+  if (isff_only) return PrintIsffTables(isff) ? 0 : 1;
   auto rig = CreateSimulatedRig(ro);
   if (!rig.ok()) {
     std::fprintf(stderr, "%s\n", rig.status().ToString().c_str());
@@ -193,7 +210,12 @@ int Main(int argc, char** argv) {
   const int violations = PrintBiasTable(ev, specimens, modes);
   std::error_code ec;
   fs::remove_all(ev.dir, ec);
-  return violations > 0 ? 3 : 0;
+  bool isff_ok = true;
+  if (!bias_only && !no_isff) {
+    std::printf("\nIntegral SFF (thesis 6.4)\n");
+    isff_ok = PrintIsffTables(isff);
+  }
+  return violations > 0 ? 3 : isff_ok ? 0 : 1;
 }
 
 // Tables 6.3, 6.5, 6.6 and Fig. 6.3.

@@ -218,6 +218,66 @@ TEST_F(ScanMappingTest, DefaultIlluminationFallsBackByCalibrationContents) {
   }
 }
 
+// Integral SFF (thesis 5.4, 6.4): the method and threshold reach the plan; the integral methods
+// scan under STD even where the calibration would pick HF+ADAPT, and name what they lack.
+TEST_F(ScanMappingTest, IntegralMethodsReachThePlanAndNameWhatTheyLack) {
+  const CalibrationBundle everything = BundleWith(
+      {CalibrationStep::kCameraResponse, CalibrationStep::kProjectorResponse, CalibrationStep::kScatterMatrix,
+       CalibrationStep::kGeometry, CalibrationStep::kPsf, CalibrationStep::kIntegralPsf});
+  v1::ScanRequest r;
+  auto sff = MapScanRequest(r, Context(&everything));
+  ASSERT_TRUE(sff.ok()) << sff.status().ToString();
+  EXPECT_EQ(sff->plan.reconstruction.method, ReconstructionMethod::kSff);
+  EXPECT_EQ(sff->plan.mode, IlluminationMode::kHfAdapt);
+
+  r.mutable_reconstruction()->set_method(v1::RECONSTRUCTION_METHOD_ISFF_FAST);
+  auto fast = MapScanRequest(r, Context(&everything));
+  ASSERT_TRUE(fast.ok()) << fast.status().ToString();
+  EXPECT_EQ(fast->plan.reconstruction.method, ReconstructionMethod::kIsffFast);
+  EXPECT_DOUBLE_EQ(fast->plan.reconstruction.isff_fast_threshold, 0.9);
+  EXPECT_EQ(fast->plan.mode, IlluminationMode::kStd);
+  const IsffOptions o = IsffOptionsFor(fast->plan.reconstruction, fast->plan.sff);
+  EXPECT_TRUE(o.ncc.stop_at_first_maximum);
+  EXPECT_EQ(o.ncc.correlation_window_px, 7);
+  EXPECT_EQ(o.ncc.summation_window_px, 7);
+
+  r.mutable_reconstruction()->set_isff_fast_threshold(0.75);
+  r.mutable_reconstruction()->set_window_px(9);
+  fast = MapScanRequest(r, Context(&everything));
+  ASSERT_TRUE(fast.ok()) << fast.status().ToString();
+  EXPECT_DOUBLE_EQ(fast->plan.reconstruction.isff_fast_threshold, 0.75);
+  EXPECT_DOUBLE_EQ(IsffOptionsFor(fast->plan.reconstruction, fast->plan.sff).ncc.stop_threshold, 0.75);
+  EXPECT_EQ(IsffOptionsFor(fast->plan.reconstruction, fast->plan.sff).ncc.correlation_window_px, 9);
+
+  for (double bad : {0.0, 1.5, -1.0}) {
+    r.mutable_reconstruction()->set_isff_fast_threshold(bad);
+    ExpectInvalidNaming(MapScanRequest(r, Context(&everything)).status(), "reconstruction.isff_fast_threshold");
+  }
+  r.mutable_reconstruction()->set_method(v1::RECONSTRUCTION_METHOD_ISFF);
+  r.mutable_reconstruction()->set_isff_fast_threshold(0.9);  // not ISFF-FAST
+  ExpectInvalidNaming(MapScanRequest(r, Context(&everything)).status(), "reconstruction.isff_fast_threshold");
+  r.mutable_reconstruction()->clear_isff_fast_threshold();
+  r.mutable_reconstruction()->set_focus_measure(v1::FOCUS_MEASURE_SUM_MODIFIED_LAPLACIAN);
+  ExpectInvalidNaming(MapScanRequest(r, Context(&everything)).status(), "reconstruction.focus_measure");
+  r.mutable_reconstruction()->clear_focus_measure();
+  r.set_illumination(v1::ILLUMINATION_MODE_HDR);
+  ExpectInvalidNaming(MapScanRequest(r, Context(&everything)).status(), "illumination");
+  r.set_illumination(v1::ILLUMINATION_MODE_STD);
+  EXPECT_TRUE(MapScanRequest(r, Context(&everything)).ok());
+
+  // No IPSF: FAILED_PRECONDITION naming the step; ISFF-GT needs no calibration.
+  const CalibrationBundle adapt = BundleWith(kAdaptSteps);
+  for (const CalibrationBundle* c : {static_cast<const CalibrationBundle*>(nullptr), &adapt}) {
+    const Status st = MapScanRequest(r, Context(c)).status();
+    EXPECT_EQ(st.code(), StatusCode::kFailedPrecondition) << st.ToString();
+    EXPECT_NE(st.message().find("integral_psf"), std::string::npos) << st.message();
+  }
+  r.mutable_reconstruction()->set_method(v1::RECONSTRUCTION_METHOD_ISFF_GT);
+  auto gt = MapScanRequest(r, Context(nullptr));
+  ASSERT_TRUE(gt.ok()) << gt.status().ToString();
+  EXPECT_EQ(gt->plan.reconstruction.method, ReconstructionMethod::kIsffGroundTruth);
+}
+
 TEST(CalibrateMappingTest, StepsMapInOrderAndBadOnesAreNamed) {
   v1::CalibrateRequest r;
   auto all = MapCalibrateRequest(r);
@@ -291,6 +351,26 @@ TEST(ReconstructMappingTest, OptionsAreNamedUnderOptions) {
   EXPECT_EQ(work->extra_exports, std::vector<DepthExportKind>{DepthExportKind::kDepthPng16});
   s.mutable_options()->add_extra_exports(v1::ARTIFACT_KIND_DEPTH_TIFF);  // always written, not an extra
   ExpectInvalidNaming(MapReconstructStart(s, "/data/scans/scan-1", nullptr).status(), "options.extra_exports[1]");
+}
+
+TEST(ReconstructMappingTest, IntegralMethodsAreCheckedBeforeTheStackArrives) {
+  v1::ReconstructStart s;
+  s.set_scan_id("scan-1");
+  s.mutable_options()->set_method(v1::RECONSTRUCTION_METHOD_ISFF_FAST);
+  s.mutable_options()->set_isff_fast_threshold(0.0);
+  ExpectInvalidNaming(MapReconstructSource(s, 1000).status(), "options.isff_fast_threshold");
+  s.mutable_options()->set_isff_fast_threshold(0.95);
+  ASSERT_TRUE(MapReconstructSource(s, 1000).ok());
+  auto work = MapReconstructStart(s, "/data/scans/scan-1", nullptr);
+  ASSERT_TRUE(work.ok()) << work.status().ToString();
+  EXPECT_EQ(work->method.method, ReconstructionMethod::kIsffFast);
+  EXPECT_DOUBLE_EQ(work->method.isff_fast_threshold, 0.95);
+  // A stored or uploaded stack has no ground-truth texture.
+  s.mutable_options()->clear_isff_fast_threshold();
+  s.mutable_options()->set_method(v1::RECONSTRUCTION_METHOD_ISFF_GT);
+  const Status gt = MapReconstructSource(s, 1000).status();
+  EXPECT_EQ(gt.code(), StatusCode::kFailedPrecondition) << gt.ToString();
+  EXPECT_NE(gt.message().find("simulated rig"), std::string::npos) << gt.message();
 }
 
 TEST(OtherRequestsTest, ListJobsPagesAndDownloadRanges) {
