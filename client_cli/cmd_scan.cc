@@ -21,7 +21,8 @@ const std::map<std::string, v1::IlluminationMode>& IlluminationModes() {
                                                                 {"adapt", v1::ILLUMINATION_MODE_ADAPT},
                                                                 {"texture", v1::ILLUMINATION_MODE_TEXTURE},
                                                                 {"hf+adapt", v1::ILLUMINATION_MODE_HF_ADAPT},
-                                                                {"adapted-hf", v1::ILLUMINATION_MODE_ADAPTED_HF}};
+                                                                {"adapted-hf", v1::ILLUMINATION_MODE_ADAPTED_HF},
+                                                                {"auto", v1::ILLUMINATION_MODE_AUTO}};
   return m;
 }
 
@@ -79,8 +80,8 @@ void RegisterScanCommand(CLI::App& app, CliContext& context) {
   cmd->add_option("--z-step", f->z_step_um, "z step, um > 0 (unset: rig default)");
   cmd->add_option("--exposure-us", f->exposure_us, "Camera exposure, us (unset: rig default)");
   cmd->add_option("--illumination", f->illumination,
-                  "std | hdr | adapt-it | adapt | texture | hf+adapt | adapted-hf (unset: server default)")
-      ->check(CLI::IsMember({"std", "hdr", "adapt-it", "adapt", "texture", "hf+adapt", "adapted-hf"}));
+                  "std | hdr | adapt-it | adapt | texture | hf+adapt | adapted-hf | auto (unset: server default)")
+      ->check(CLI::IsMember({"std", "hdr", "adapt-it", "adapt", "texture", "hf+adapt", "adapted-hf", "auto"}));
   cmd->add_option("--hdr-exposures", f->hdr_exposures, "HDR: exposures per z, 2..5 (thesis Table 6.2)");
   cmd->add_option("--lambda", f->lambda, "ADAPT family: prediction scale of eq. 5.12, 0..2");
   cmd->add_option("--gamma", f->gamma, "TEXTURE: checkerboard weight of eq. 5.16, 0..0.5");

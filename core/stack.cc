@@ -76,6 +76,7 @@ StatusOr<StackManifest> ParseStackManifest(const std::string& json_text) {
   INSPECT_RETURN_IF_ERROR(opt_string("specimen", m.specimen));
   INSPECT_RETURN_IF_ERROR(opt_string("calibration_id", m.calibration_id));
   INSPECT_RETURN_IF_ERROR(opt_string("illumination", m.illumination));
+  INSPECT_RETURN_IF_ERROR(opt_string("illumination_decision", m.illumination_decision));
 
   if (!j.contains("frames") || !j["frames"].is_array()) return Invalid("frames is missing or not an array");
   const json& frames = j["frames"];
@@ -136,6 +137,7 @@ Status WriteStackManifest(const fs::path& dir, const StackManifest& m) {
   if (!m.specimen.empty()) j["specimen"] = m.specimen;
   if (!m.calibration_id.empty()) j["calibration_id"] = m.calibration_id;
   if (!m.illumination.empty()) j["illumination"] = m.illumination;
+  if (!m.illumination_decision.empty()) j["illumination_decision"] = m.illumination_decision;
   j["frames"] = json::array();
   for (const auto& f : m.frames) {
     json jf = {{"file", f.file}, {"z_um", f.z_um}, {"exposure_us", f.exposure_us}};

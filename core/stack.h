@@ -38,6 +38,8 @@ struct StackManifest {
   std::string specimen;        // free text; the simulated rig writes its specimen name
   std::string calibration_id;  // calibration bundle active when acquired, empty if none
   std::string illumination;    // illumination mode, e.g. "STD"
+  // Set when the scan chose its mode itself (AUTO): the decision and its reasons.
+  std::string illumination_decision;
   std::vector<StackFrame> frames;
 };
 

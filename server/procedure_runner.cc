@@ -137,6 +137,8 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
       SummariseDepth(outcome.depth, outcome.manifest.pixel_size_um, outcome.ground_truth_um, plan.sff.window_px);
   result.mutable_depth()->set_engine_seconds(outcome.engine_finish_seconds);
   RecordMethod(plan.reconstruction, outcome.isff, result.mutable_depth());
+  result.mutable_depth()->set_illumination(outcome.manifest.illumination);
+  result.mutable_depth()->set_illumination_decision(outcome.illumination_decision);
   const fs::path scan_dir = store_->scans_dir() / job_id;
   std::error_code ec;
   fs::rename(stack.path(), scan_dir, ec);

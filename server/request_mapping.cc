@@ -6,6 +6,7 @@
 #include <string>
 
 #include "core/texture_pattern.h"
+#include "server/procedures/illumination_auto.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -168,6 +169,8 @@ StatusOr<std::optional<IlluminationMode>> MapIlluminationMode(v1::IlluminationMo
       return std::optional(IlluminationMode::kHfAdapt);
     case v1::ILLUMINATION_MODE_ADAPTED_HF:
       return std::optional(IlluminationMode::kAdaptedHf);
+    case v1::ILLUMINATION_MODE_AUTO:
+      return std::optional(IlluminationMode::kAuto);
     default:
       return Status::InvalidArgument("illumination " + std::to_string(int(mode)) + " is unknown");
   }
@@ -188,13 +191,9 @@ StatusOr<IlluminationParams> MapIlluminationParameters(const v1::IlluminationPar
 }
 
 IlluminationMode DefaultIlluminationMode(const CalibrationBundle* calibration, int window_px) {
-  // CheckCalibrationFor and the period choice answer "can this mode run?"; their messages only
-  // matter when the client asked for the mode itself.
-  const bool hf_adapt_ready = CheckCalibrationFor(IlluminationMode::kHfAdapt, calibration).ok() &&
-                              CheckerboardPeriod(*calibration, window_px).ok();
-  if (hf_adapt_ready) return IlluminationMode::kHfAdapt;
-  if (CheckCalibrationFor(IlluminationMode::kAdapt, calibration).ok()) return IlluminationMode::kAdapt;
-  return IlluminationMode::kStd;
+  // AUTO's probe only pays when it has a choice to make: TEXTURE or the ADAPT family available.
+  const IlluminationAvailability a = AvailableIlluminationModes(calibration, window_px);
+  return a.texture || a.adapt ? IlluminationMode::kAuto : IlluminationMode::kStd;
 }
 
 // ---------------------------------------------------------------------------------------------

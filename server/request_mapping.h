@@ -45,10 +45,10 @@ StatusOr<std::optional<IlluminationMode>> MapIlluminationMode(v1::IlluminationMo
 // Unset fields keep IlluminationParams' defaults; errors name "illumination_parameters.<field>".
 StatusOr<IlluminationParams> MapIlluminationParameters(const v1::IlluminationParameters& parameters);
 
-// Default illumination when a scan names none, for an unknown specimen: HF+ADAPT, which handles
-// both high dynamic range and missing texture (thesis 5.3, 6.2.3), when `calibration` holds its
-// models and a checkerboard period fits the focus window (eq. 5.15); else ADAPT when calibrated
-// for it; else STD. `calibration` may be null (uncalibrated rig: STD).
+// Default illumination when a scan names none, for an unknown specimen: AUTO (a probe capture
+// decides between HF+ADAPT, ADAPT, TEXTURE and STD, server/procedures/illumination_auto.h) when
+// `calibration` allows TEXTURE (a checkerboard period fitting the focus window, eq. 5.15) or the
+// ADAPT family; else STD. `calibration` may be null (uncalibrated rig: STD).
 IlluminationMode DefaultIlluminationMode(const CalibrationBundle* calibration, int window_px);
 
 // ---------------------------------------------------------------------------------------------

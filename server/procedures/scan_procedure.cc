@@ -8,6 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/depth_export.h"
+#include "server/procedures/illumination_auto.h"
 #include "server/procedures/illumination_strategy.h"
 
 namespace inspection {
@@ -73,6 +74,8 @@ std::string IlluminationModeName(IlluminationMode mode, int hdr_exposures) {
       return "HF+ADAPT";
     case IlluminationMode::kAdaptedHf:
       return "ADAPTED-HF";
+    case IlluminationMode::kAuto:
+      return "AUTO";
   }
   return "?";
 }
@@ -279,23 +282,33 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
   fs::create_directories(stack_dir / "raw", ec);
   if (ec) return Status::Internal("cannot create " + stack_dir.string() + ": " + ec.message());
 
-  const std::unique_ptr<IlluminationStrategy> illumination =
-      CreateIlluminationStrategy(plan, bundle, {camera.frame_size(), projector.resolution(), camera.bit_depth()});
+  const IlluminationSetup setup{camera.frame_size(), projector.resolution(), camera.bit_depth()};
+  ScanOutcome out;
+  ScanRecorder recorder(rig, plan, stack_dir, on_frame, cancel, out);
+  // AUTO probes the specimen first; from then on the scan runs the chosen mode's plan. Every
+  // mode AUTO can choose keeps the camera's bit depth, so the engine can be set up after it.
+  ScanPlan chosen = plan;
+  if (plan.mode == IlluminationMode::kAuto) {
+    INSPECT_ASSIGN_OR_RETURN(IlluminationChoice choice, ProbeAndChooseIllumination(recorder, plan, bundle, setup));
+    chosen.mode = choice.mode;
+    out.illumination_decision = choice.reasons;
+  }
+  out.illumination = chosen.mode;
+  const std::unique_ptr<IlluminationStrategy> illumination = CreateIlluminationStrategy(chosen, bundle, setup);
   const int stack_bit_depth = illumination->stack_bit_depth();
   const int frame_type = stack_bit_depth > 8 ? CV_16UC1 : CV_8UC1;
   INSPECT_ASSIGN_OR_RETURN(StreamingReconstruction engine,
-                           CreateStreamingReconstruction(rig, plan, bundle, frame_type));
+                           CreateStreamingReconstruction(rig, chosen, bundle, frame_type));
 
-  ScanOutcome out;
   StackManifest& m = out.manifest;
   m.pixel_size_um = rig.pixel_size_um();
   m.bit_depth = stack_bit_depth;
-  m.illumination = IlluminationModeName(plan.mode, plan.params.hdr_exposures);
+  m.illumination = IlluminationModeName(chosen.mode, chosen.params.hdr_exposures);
+  m.illumination_decision = out.illumination_decision;
   m.calibration_id = plan.calibration_id;
   if (SimulationControl* sim = rig.simulation()) m.specimen = sim->specimen();
   const int count = int(plan.z_um.size());
 
-  ScanRecorder recorder(rig, plan, stack_dir, on_frame, cancel, out);
   INSPECT_RETURN_IF_ERROR(illumination->Prepare(recorder));
   for (int i = 0; i < count; ++i) {
     INSPECT_RETURN_IF_ERROR(recorder.CheckCancel(i));

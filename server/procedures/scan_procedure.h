@@ -35,6 +35,9 @@ enum class IlluminationMode {
   kTexture,         // checkerboard of eq. 5.16, period from eq. 5.15, exposure for STD's mean irradiance
   kHfAdapt,         // ADAPT with the modified checkerboard added (eq. 5.17-5.18)
   kAdaptedHf,       // ADAPT towards a 25 %/75 % checkerboard camera image (5.3.2)
+  // One probe capture, then one of STD, TEXTURE, ADAPT, HF+ADAPT (illumination_auto.h); the
+  // outcome records the mode that ran and why.
+  kAuto,
 };
 
 struct IlluminationParams {
@@ -100,6 +103,9 @@ struct ScanOutcome {
   int images_acquired = 0;                          // every capture (thesis Table 6.3 #imgs)
   std::vector<FrameStatistics> capture_statistics;  // per capture, in order (Fig. 6.3)
   std::vector<bool> capture_is_stack_frame;
+  // The mode that ran (AUTO: the one it chose) and, for AUTO, the decision and its reasons.
+  IlluminationMode illumination = IlluminationMode::kStd;
+  std::string illumination_decision;
 };
 
 // Acquires into stack_dir (created; the caller owns clean-up on failure) and reconstructs.

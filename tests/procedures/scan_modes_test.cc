@@ -15,6 +15,7 @@
 #include "core/depth_metrics.h"
 #include "devices/sim/simulated_rig.h"
 #include "server/procedures/calibration_procedure.h"
+#include "server/procedures/illumination_strategy.h"
 #include "server/procedures/scan_procedure.h"
 
 namespace inspection {
@@ -35,6 +36,8 @@ struct ModeRun {
   std::vector<FrameStatistics> captures;
   cv::Mat depth_um, truth_um;
   double z_step_um = 0;
+  IlluminationMode ran = IlluminationMode::kStd;  // AUTO: the mode it chose
+  StackManifest manifest;                         // read back from the stack folder
 };
 
 // README "Illumination modes": |bias| <= 0.1 um or 0.02 z steps, whichever is larger.
@@ -101,6 +104,8 @@ class ScanModesTest : public ::testing::Test {
     r.depth_um = o.depth.depth_um;
     r.truth_um = o.ground_truth_um;
     r.z_step_um = step;
+    r.ran = o.illumination;
+    INSPECT_ASSIGN_OR_RETURN(r.manifest, ReadStackManifest(stack));
     std::printf("%-8s %-10s%s sigma %.3f um  bias %+.3f um  RMSE %.3f um  valid %.1f %%  outliers %.2f %%  images %d\n",
                 specimen.c_str(), IlluminationModeName(mode, params.hdr_exposures).c_str(), downwards ? " (down)" : "",
                 r.error.stddev_error_um, r.error.mean_error_um, r.error.rmse_um, r.error.valid_percent,
@@ -173,6 +178,38 @@ TEST_F(ScanModesTest, BiasWithinBoundOnTexturedFlatAndSaturatingSpecimens) {
 // The cause, kept as a regression guard: with the thesis's per-pixel eq. 5.5 for corrections
 // shown at the next z (reflectance window 1), HF+ADAPT's depth is shifted towards the start of
 // the scan, whichever its direction (-0.4 um up, +0.4 um down on the wedge; windowed: ~0).
+// AUTO (illumination_auto.h): the probe finds the cutter's glints and runs HF+ADAPT, finds none
+// on the wedge and runs TEXTURE; each within 10 % of the better single mode's RMSE, at most STD's
+// frames + 3, the decision in stack.json and the probe under raw/.
+TEST_F(ScanModesTest, AutoChoosesCompensationForGlintsAndTextureOtherwise) {
+  ASSERT_NE(bundle_, nullptr);
+  struct Case {
+    const char* specimen;
+    IlluminationMode expected;
+  };
+  for (const Case c : {Case{"cutter", IlluminationMode::kHfAdapt}, Case{"wedge", IlluminationMode::kTexture}}) {
+    auto std_run = Scan(c.specimen, IlluminationMode::kStd);
+    auto texture = Scan(c.specimen, IlluminationMode::kTexture);
+    auto hf_adapt = Scan(c.specimen, IlluminationMode::kHfAdapt);
+    auto automatic = Scan(c.specimen, IlluminationMode::kAuto);
+    ASSERT_TRUE(std_run.ok() && texture.ok() && hf_adapt.ok() && automatic.ok()) << c.specimen;
+    EXPECT_EQ(automatic->ran, c.expected) << c.specimen;
+    EXPECT_EQ(automatic->manifest.illumination, IlluminationModeName(c.expected));
+    EXPECT_EQ(automatic->manifest.illumination_decision.rfind("AUTO -> " + IlluminationModeName(c.expected), 0), 0u)
+        << automatic->manifest.illumination_decision;
+    EXPECT_LE(automatic->images, std_run->images + 3) << c.specimen;
+    const double best = std::min(texture->error.rmse_um, hf_adapt->error.rmse_um);
+    std::printf(
+        "%s: AUTO ran %s, RMSE %.3f um against the better of TEXTURE and HF+ADAPT %.3f um; %d frames (STD %d)\n",
+        c.specimen, IlluminationModeName(automatic->ran).c_str(), automatic->error.rmse_um, best, automatic->images,
+        std_run->images);
+    EXPECT_LE(automatic->error.rmse_um, 1.1 * best) << c.specimen;
+    EXPECT_GE(automatic->error.valid_percent, 99.0) << c.specimen;
+    const int mid = int(automatic->manifest.frames.size()) / 2;
+    EXPECT_TRUE(fs::exists(*dir_ / (std::string(c.specimen) + "_AUTO") / "raw" / RawFrameName(mid, "probe", 0)));
+  }
+}
+
 TEST_F(ScanModesTest, PerPixelReflectanceForTheNextZShiftsDepthAgainstTheScanDirection) {
   ASSERT_NE(bundle_, nullptr);
   IlluminationParams per_pixel;

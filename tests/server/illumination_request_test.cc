@@ -82,12 +82,13 @@ class CalibratedIlluminationTest : public ServerTest {
   }
 };
 
-// With the models ADAPT needs (but no PSF), the default mode is ADAPT (HF+ADAPT needs sigma_p):
-// STD's frames + 2 initialisation frames, each reported with its grey statistics, and the first
-// frames converge towards the target grey; over the specimen's whole range its depth has no
-// offset against the truth (README "Illumination modes": |bias| <= max(0.1 um, 0.02 z steps));
-// TEXTURE names the missing psf step.
-TEST_F(CalibratedIlluminationTest, DefaultFallsBackToAdaptAndReportsConvergence) {
+// With the models ADAPT needs (but no PSF): ADAPT takes STD's frames + 2 initialisation frames,
+// each reported with its grey statistics, and the first frames converge towards the target grey.
+// The default is AUTO: its probe finds no saturation on the textured plane and, without the
+// texture models, runs STD, says so in the result, and its depth has no offset against the truth
+// (README "Illumination modes": |bias| <= max(0.1 um, 0.02 z steps)); TEXTURE names the missing
+// psf step.
+TEST_F(CalibratedIlluminationTest, AdaptReportsConvergenceAndAutoChoosesWithoutTextureModels) {
   StartServer();
   v1::CalibrateRequest req;
   for (auto step : {v1::CALIBRATION_STEP_CAMERA_RESPONSE, v1::CALIBRATION_STEP_PROJECTOR_RESPONSE,
@@ -103,6 +104,7 @@ TEST_F(CalibratedIlluminationTest, DefaultFallsBackToAdaptAndReportsConvergence)
   scan.set_z_start_um(180);
   scan.set_z_end_um(220);
   scan.set_z_step_um(5);  // 9 stack frames
+  scan.set_illumination(v1::ILLUMINATION_MODE_ADAPT);
   std::vector<v1::FrameStatistics> frames;
   std::vector<v1::FrameProgress> progress;
   v1::Job job;
@@ -143,8 +145,14 @@ TEST_F(CalibratedIlluminationTest, DefaultFallsBackToAdaptAndReportsConvergence)
   auto truth = ReadDepthTiff(out / "ground_truth_depth.tiff");
   ASSERT_TRUE(depth.ok() && truth.ok());
   const DepthErrorStats e = CompareDepth(*depth, *truth, 2.0 * step, /*border_px=*/9);
-  std::printf("skew5, default mode (ADAPT): sigma %.3f um, bias %+.3f um, RMSE %.3f um, valid %.1f %%, %d frames\n",
-              e.stddev_error_um, e.mean_error_um, e.rmse_um, e.valid_percent, full.result().depth().frame_count());
+  std::printf("skew5, default mode (%s): sigma %.3f um, bias %+.3f um, RMSE %.3f um, valid %.1f %%, %d frames\n",
+              full.result().depth().illumination_decision().c_str(), e.stddev_error_um, e.mean_error_um, e.rmse_um,
+              e.valid_percent, full.result().depth().frame_count());
+  EXPECT_EQ(full.result().depth().illumination(), "STD");
+  EXPECT_EQ(full.result().depth().illumination_decision().rfind(
+                "AUTO -> STD: no saturation and no texture models in the calibration (probe: ", 0),
+            0u)
+      << full.result().depth().illumination_decision();
   EXPECT_GT(e.valid_percent, 95.0);
   EXPECT_LE(std::abs(e.mean_error_um), std::max(0.1, 0.02 * step));
   EXPECT_LT(e.rmse_um, 0.1 * step);

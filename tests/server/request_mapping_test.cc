@@ -1,6 +1,6 @@
 // Request mapping without a server: requests become the work and options the engine and the
 // procedures get, every bad field is INVALID_ARGUMENT naming it, and the default illumination
-// falls back HF+ADAPT -> ADAPT -> STD with what the active calibration holds (thesis 5.3, 6.2.3,
+// is AUTO when the active calibration allows TEXTURE or ADAPT, else STD (thesis 5.3, 6.2.3,
 // eq. 5.15).
 #include "server/request_mapping.h"
 
@@ -203,8 +203,8 @@ TEST_F(ScanMappingTest, DefaultIlluminationFallsBackByCalibrationContents) {
   };
   const Case cases[] = {
       {nullptr, 7, IlluminationMode::kStd},      {&none, 7, IlluminationMode::kStd},
-      {&camera_only, 7, IlluminationMode::kStd}, {&adapt, 7, IlluminationMode::kAdapt},
-      {&full, 7, IlluminationMode::kHfAdapt},    {&full, 5, IlluminationMode::kAdapt},  // window too small
+      {&camera_only, 7, IlluminationMode::kStd}, {&adapt, 7, IlluminationMode::kAuto},
+      {&full, 7, IlluminationMode::kAuto},       {&full, 5, IlluminationMode::kAuto},  // AUTO: ADAPT or STD
   };
   for (const Case& c : cases) {
     EXPECT_EQ(DefaultIlluminationMode(c.calibration, c.window_px), c.expected)
@@ -228,7 +228,7 @@ TEST_F(ScanMappingTest, IntegralMethodsReachThePlanAndNameWhatTheyLack) {
   auto sff = MapScanRequest(r, Context(&everything));
   ASSERT_TRUE(sff.ok()) << sff.status().ToString();
   EXPECT_EQ(sff->plan.reconstruction.method, ReconstructionMethod::kSff);
-  EXPECT_EQ(sff->plan.mode, IlluminationMode::kHfAdapt);
+  EXPECT_EQ(sff->plan.mode, IlluminationMode::kAuto);
 
   r.mutable_reconstruction()->set_method(v1::RECONSTRUCTION_METHOD_ISFF_FAST);
   auto fast = MapScanRequest(r, Context(&everything));
