@@ -263,6 +263,45 @@ TEST_F(IsffApiTest, GroundTruthMethodIsRefusedForStoredAndUploadedStacks) {
   EXPECT_EQ(JobCount(), 1);  // only the scan
 }
 
+// The reconstruct-only pool (`inspectd --no-rig`): ISFF takes the IPSF of the calibration active
+// in its data directory, and without one fails naming the step.
+TEST_F(IsffApiTest, NoRigServerUsesTheStoredCalibrationOrNamesTheMissingStep) {
+  CalibrateIntegralPsf();
+  const v1::Job isff = Scan(ScanWith(v1::RECONSTRUCTION_METHOD_ISFF));
+  const std::string scan_id = isff.result().scan_id();
+  const fs::path stack = UniqueTempDir("isff_stack");
+  fs::copy(data_dir_ / "scans" / scan_id, stack, fs::copy_options::recursive);
+  StopServer();
+
+  auto start_no_rig = [&](const fs::path& data_dir) {
+    ServerOptions opt;
+    opt.listen_address = "127.0.0.1:0";
+    opt.data_dir = data_dir;
+    opt.simulation = SimOptions();
+    opt.no_rig = true;
+    auto server = InspectionServer::Start(opt, nullptr);
+    ASSERT_TRUE(server.ok()) << server.status().ToString();
+    server_ = std::move(*server);
+    client_ = NewClient();
+  };
+  start_no_rig(data_dir_);  // the rig server's data directory: its calibration is active
+  const v1::Job again = ReconstructScan(scan_id, v1::RECONSTRUCTION_METHOD_ISFF);
+  EXPECT_NEAR(again.result().depth().rmse_um(), isff.result().depth().rmse_um(), 1e-6);
+  StopServer();
+
+  const fs::path empty = UniqueTempDir("isff_no_rig");
+  start_no_rig(empty);
+  v1::ReconstructStart start;
+  start.mutable_options()->set_method(v1::RECONSTRUCTION_METHOD_ISFF);
+  v1::Job rec;
+  grpc::Status s = client_->ReconstructUpload(stack, start, nullptr, &rec);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(s.error_message().find("integral_psf"), std::string::npos) << s.error_message();
+  StopServer();
+  fs::remove_all(empty);
+  fs::remove_all(stack);
+}
+
 // inspectctl: --method and --isff-fast-threshold reach the server; bad values exit with one line.
 class IsffCliTest : public CliTest {
  protected:
