@@ -434,10 +434,10 @@ bool PrintIsffTables(const IsffTablesOptions& options) {
   }
   std::printf(
       "Simulated rig: camera %dx%d, seed %llu, STD illumination, 5 um steps; Tenengrad %dx%d and NCC %dx%d "
-      "(summed over %dx%d); Gaussian interpolation; IPSF: the INTEGRAL_PSF calibration step with its default "
+      "(summed over %dx%d); %s interpolation; IPSF: the INTEGRAL_PSF calibration step with its default "
       "regulariser (gradient_l2) unless noted\n",
       ro.camera_size.width, ro.camera_size.height, (unsigned long long)ro.seed, kWindowPx, kWindowPx, kWindowPx,
-      kWindowPx, kWindowPx, kWindowPx);
+      kWindowPx, kWindowPx, kWindowPx, DepthInterpolationName(SffOptions().interpolation));
   std::printf(
       "Calibration (INTEGRAL_PSF step: 17 frames at +-40 um, central %d px, kernel radius 8), seconds wall / "
       "process CPU:\n",

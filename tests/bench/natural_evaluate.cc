@@ -38,6 +38,7 @@ namespace inspection {
 namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
+const DepthInterpolation kDefaultInterpolation = SffOptions().interpolation;
 
 constexpr int kBorderPx = 8;  // left out of every comparison (focus windows see the image edge)
 constexpr double kOutlierFrames = 2.0;
@@ -64,7 +65,7 @@ struct EngineKey {
 
 std::string KeyName(const EngineKey& k) {
   std::string s = std::string(FocusMeasureName(k.measure)) + " " + std::to_string(k.window);
-  if (k.interp != DepthInterpolation::kGaussian) s += " " + std::string(DepthInterpolationName(k.interp));
+  if (k.interp != kDefaultInterpolation) s += " " + std::string(DepthInterpolationName(k.interp));
   return s;
 }
 
@@ -401,7 +402,7 @@ int Main(int argc, char** argv) {
     PrintRow("focus-stack", Mean(v));
   }
 
-  const EngineKey current{FocusMeasure::kTenengrad, 7, DepthInterpolation::kGaussian};
+  const EngineKey current{FocusMeasure::kTenengrad, 7, kDefaultInterpolation};
   // The recommended default: the current engine options plus the consistency step (README).
   const EngineKey recommended_key = current;
   auto Single = [](const EngineKey& k, std::string name = "") {
@@ -423,8 +424,10 @@ int Main(int argc, char** argv) {
   };
   const Candidate recommended = Consistent(recommended_key, 0, 1.0);
 
-  // Table 1: measure x window, Gaussian interpolation, confidence 0.4.
-  PrintHeader("Table 1: focus measure x window (Gaussian interpolation, min confidence 0.4, no post-processing)");
+  // Table 1: measure x window, the default interpolation, confidence 0.4.
+  PrintHeader((std::string("Table 1: focus measure x window (") + DepthInterpolationName(kDefaultInterpolation) +
+               " interpolation, min confidence 0.4, no post-processing)")
+                  .c_str());
   const FocusMeasure measures[] = {
       FocusMeasure::kTenengrad,         FocusMeasure::kSumModifiedLaplacian,   FocusMeasure::kModifiedLaplacian,
       FocusMeasure::kGreyLevelVariance, FocusMeasure::kGreyLevelLocalVariance, FocusMeasure::kHelmliMean,
@@ -432,7 +435,7 @@ int Main(int argc, char** argv) {
   std::vector<std::pair<double, EngineKey>> ranked;
   for (FocusMeasure fm : measures) {
     for (int w : {3, 5, 7, 9, 11, 15}) {
-      const Candidate c = Single({fm, w, DepthInterpolation::kGaussian});
+      const Candidate c = Single({fm, w, kDefaultInterpolation});
       const Metrics m = Mean(EvaluateAll(scenes, c, caches));
       PrintRow(c.name + (fm == current.measure && w == current.window ? " (current default)" : ""), m);
       // Rank by RMSE at comparable coverage: leaving half the scene empty is not better for it.
@@ -447,7 +450,7 @@ int Main(int argc, char** argv) {
   for (const EngineKey& k : {best, current}) {
     for (DepthInterpolation in : {DepthInterpolation::kMaximum, DepthInterpolation::kLineFit,
                                   DepthInterpolation::kGaussian, DepthInterpolation::kDefocusParabola}) {
-      PrintRow(KeyName({k.measure, k.window, in}) + (in == DepthInterpolation::kGaussian ? " gaussian" : ""),
+      PrintRow(KeyName({k.measure, k.window, in}) + (in == kDefaultInterpolation ? " (default interpolation)" : ""),
                Mean(EvaluateAll(scenes, Single({k.measure, k.window, in}), caches)));
     }
   }
@@ -469,20 +472,19 @@ int Main(int argc, char** argv) {
       "in z steps; radius focus window / 2 + 1 unless given), min confidence 0.4");
   for (int w : {7, 9, 11, 13, 15}) {
     for (double steps : {0.75, 1.0, 1.5}) {
-      PrintRow(
-          Consistent({FocusMeasure::kTenengrad, w, DepthInterpolation::kGaussian}, 0, steps).name,
-          Mean(EvaluateAll(scenes, Consistent({FocusMeasure::kTenengrad, w, DepthInterpolation::kGaussian}, 0, steps),
-                           caches)));
+      PrintRow(Consistent({FocusMeasure::kTenengrad, w, kDefaultInterpolation}, 0, steps).name,
+               Mean(EvaluateAll(scenes, Consistent({FocusMeasure::kTenengrad, w, kDefaultInterpolation}, 0, steps),
+                                caches)));
     }
   }
   for (int w : {7, 9, 11}) {
-    const Candidate c = Consistent({FocusMeasure::kTenengrad, w, DepthInterpolation::kGaussian}, w / 2 + 2, 1.0);
+    const Candidate c = Consistent({FocusMeasure::kTenengrad, w, kDefaultInterpolation}, w / 2 + 2, 1.0);
     PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
   }
   for (FocusMeasure fm :
        {FocusMeasure::kSumModifiedLaplacian, FocusMeasure::kChebyshevMoments, FocusMeasure::kGreyLevelLocalVariance}) {
     for (int w : {9, 11}) {
-      const Candidate c = Consistent({fm, w, DepthInterpolation::kGaussian}, 0, 1.0);
+      const Candidate c = Consistent({fm, w, kDefaultInterpolation}, 0, 1.0);
       PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
     }
   }
@@ -497,17 +499,16 @@ int Main(int argc, char** argv) {
   PrintHeader("Table 5: multi-window and measure fusion (min confidence 0.4)");
   const std::vector<std::pair<std::string, std::vector<EngineKey>>> fusions = {
       {"tenengrad 5+11",
-       {{FocusMeasure::kTenengrad, 5, DepthInterpolation::kGaussian},
-        {FocusMeasure::kTenengrad, 11, DepthInterpolation::kGaussian}}},
+       {{FocusMeasure::kTenengrad, 5, kDefaultInterpolation}, {FocusMeasure::kTenengrad, 11, kDefaultInterpolation}}},
       {"tenengrad 3+7+15",
-       {{FocusMeasure::kTenengrad, 3, DepthInterpolation::kGaussian},
+       {{FocusMeasure::kTenengrad, 3, kDefaultInterpolation},
         current,
-        {FocusMeasure::kTenengrad, 15, DepthInterpolation::kGaussian}}},
+        {FocusMeasure::kTenengrad, 15, kDefaultInterpolation}}},
       {KeyName(best) + " + tenengrad 7", {best, current}},
-      {"tenengrad 7 + sml 7", {current, {FocusMeasure::kSumModifiedLaplacian, 7, DepthInterpolation::kGaussian}}},
+      {"tenengrad 7 + sml 7", {current, {FocusMeasure::kSumModifiedLaplacian, 7, kDefaultInterpolation}}},
       {"sml 9 + glvm 9",
-       {{FocusMeasure::kSumModifiedLaplacian, 9, DepthInterpolation::kGaussian},
-        {FocusMeasure::kGreyLevelLocalVariance, 9, DepthInterpolation::kGaussian}}},
+       {{FocusMeasure::kSumModifiedLaplacian, 9, kDefaultInterpolation},
+        {FocusMeasure::kGreyLevelLocalVariance, 9, kDefaultInterpolation}}},
   };
   for (const auto& [name, keys] : fusions) {
     for (DepthFusionRule rule :
