@@ -6,11 +6,14 @@
 #include <grpcpp/grpcpp.h>
 
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "core/status.h"
 #include "devices/rig.h"
 #include "devices/sim/simulated_rig.h"
+#include "server/access_control.h"
+#include "server/audit_log.h"
 #include "server/calibration_store.h"
 #include "server/data_store.h"
 #include "server/http/operations_http.h"
@@ -26,10 +29,20 @@ struct ServerOptions {
   std::string listen_address = "127.0.0.1:50051";  // port 0 picks a free port (see port())
   std::filesystem::path data_dir = "./inspection-data";
   int rig_queue_capacity = 4;
-  bool reflection = true;
-  std::string tls_cert_file;  // PEM; with tls_key_file enables TLS
+  // gRPC server reflection; unset = on without authentication, off when any is configured
+  // (reflection hands an unauthenticated scanner the whole API).
+  std::optional<bool> reflection;
+  std::string tls_cert_file;  // PEM; with tls_key_file enables TLS (files reloaded on change)
   std::string tls_key_file;
-  std::string auth_token;          // empty = no authentication
+  std::string tls_client_ca_file;       // PEM CA bundle: client certificates mandatory (mTLS)
+  bool insecure = false;                // allow plaintext on a non-loopback address
+  unsigned tls_reload_interval_s = 10;  // how often the certificate files are checked for changes
+  std::string auth_token;               // single bearer token (identity "token", admin); empty = none
+  std::string token_file;               // named tokens, "identity token" per line (access_control.h)
+  std::string policy_file;              // identities -> roles, JSON (access_control.h)
+  std::filesystem::path scene_dir;      // simulated rig: user scenes by name; empty = built-ins only
+  // Audit trail of mutating and denied calls (JSON Lines); empty = <data_dir>/audit/audit.jsonl.
+  std::filesystem::path audit_log;
   SimulatedRigOptions simulation;  // used when no rig is given to Start
   // Reconstruct only (the scale-out pool): no rig is opened; rig calls answer FAILED_PRECONDITION.
   bool no_rig = false;
@@ -61,11 +74,20 @@ class InspectionServer {
   JobManager& jobs() { return *jobs_; }
   RigController& rig() { return *rig_; }  // not with no_rig
   OperationsHttp& operations() { return *ops_; }
+  // Re-reads the policy and token files (SIGHUP); keeps the old policy if the new one is bad.
+  Status ReloadAccessPolicy() { return access_->Reload(); }
+  bool authentication_enabled() const { return access_->enabled(); }
+  bool reflection_enabled() const { return reflection_; }
+  const std::filesystem::path& audit_log_path() const { return audit_path_; }
 
  private:
   InspectionServer() = default;
 
   ServerOptions options_;
+  std::unique_ptr<AccessControl> access_;  // outlives the services that ask it
+  std::unique_ptr<AuditLog> audit_;        // outlives the gRPC server whose interceptor writes it
+  std::filesystem::path audit_path_;
+  bool reflection_ = false;
   std::unique_ptr<OperationsHttp> ops_;  // outlives the JobManager and the gRPC server that feed it
   std::unique_ptr<DataStore> store_;
   std::unique_ptr<RigController> rig_;

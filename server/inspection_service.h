@@ -4,9 +4,12 @@
 // gRPC status built by ToGrpcStatus (grpc_status.h); no exception crosses this boundary.
 #pragma once
 
+#include <filesystem>
 #include <string>
+#include <string_view>
 
 #include "inspection/v1/inspection.grpc.pb.h"
+#include "server/access_control.h"
 #include "server/calibration_store.h"
 #include "server/data_store.h"
 #include "server/job_manager.h"
@@ -16,9 +19,18 @@ namespace inspection {
 
 struct ServiceOptions {
   std::string server_version;
-  std::string auth_token;  // when set, every call needs "authorization: Bearer <token>"
+  // Who may call what (access_control.h); nullptr = no authentication: every caller is
+  // "anonymous" with every role.
+  const AccessControl* access = nullptr;
   int64_t max_upload_bytes = int64_t(2) << 30;
+  // User scenes of the simulated rig: SetSpecimen takes a scene by NAME from this folder
+  // (<name>.json); empty = built-in specimens only. Paths ("file:...") are always refused.
+  std::filesystem::path scene_dir;
 };
+
+// Authenticates the caller and checks the role `method` needs: UNAUTHENTICATED without or with
+// unknown credentials, PERMISSION_DENIED naming the missing role. Shared by every service.
+StatusOr<Identity> AuthorizeCall(grpc::ServerContext* ctx, const AccessControl* access, std::string_view method);
 
 class InspectionServiceImpl final : public v1::InspectionService::Service {
  public:
@@ -43,7 +55,9 @@ class InspectionServiceImpl final : public v1::InspectionService::Service {
                                 v1::ListCalibrationsResponse*) override;
 
  private:
-  grpc::Status CheckAuth(grpc::ServerContext* ctx) const;
+  StatusOr<Identity> CheckAuth(grpc::ServerContext* ctx, std::string_view method) const {
+    return AuthorizeCall(ctx, options_.access, method);
+  }
   void FillRigStatus(v1::RigStatus* status);
 
   ServiceOptions options_;
@@ -64,8 +78,5 @@ class SimulationServiceImpl final : public v1::SimulationService::Service {
   ServiceOptions options_;
   RigController* rig_;
 };
-
-// Shared by both services: constant-time bearer token check.
-grpc::Status CheckBearerToken(grpc::ServerContext* ctx, const std::string& token);
 
 }  // namespace inspection

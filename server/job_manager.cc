@@ -189,7 +189,8 @@ void JobManager::Shutdown() {
 }
 
 StatusOr<std::shared_ptr<JobRecord>> JobManager::Submit(v1::JobKind kind, const std::string& request_id,
-                                                        const std::string& label, const Prepare& prepare) {
+                                                        const std::string& label, const Prepare& prepare,
+                                                        const std::string& owner) {
   if (!request_id.empty()) {
     std::lock_guard<std::mutex> lock(mu_);
     INSPECT_ASSIGN_OR_RETURN(RecordPtr existing, FindDuplicate(kind, request_id));
@@ -211,6 +212,7 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::Submit(v1::JobKind kind, const 
   job.set_state(v1::JOB_STATE_QUEUED);
   job.set_request_id(request_id);
   job.set_label(label);
+  job.set_owner(owner);
   *job.mutable_create_time() = TimeUtil::GetCurrentTime();
   FillQueuedJob(work, &job);
   INSPECT_RETURN_IF_ERROR(store_->PutJob(job));

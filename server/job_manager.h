@@ -100,10 +100,10 @@ class JobManager {
   // manager's lock) and queues it. With a request id that an earlier job of this kind carries,
   // returns that job and does not call `prepare`. Errors of `prepare` come back unchanged; then,
   // and for UNAVAILABLE (shutting down), ABORTED and RESOURCE_EXHAUSTED (see above), no job is
-  // created.
+  // created. `owner` is the identity that started the job (recorded in Job.owner).
   using Prepare = std::function<StatusOr<JobWork>()>;
   StatusOr<std::shared_ptr<JobRecord>> Submit(v1::JobKind kind, const std::string& request_id, const std::string& label,
-                                              const Prepare& prepare);
+                                              const Prepare& prepare, const std::string& owner = "");
 
   // A live record, or one rebuilt from the store (events included) for a job of an earlier run.
   StatusOr<std::shared_ptr<JobRecord>> Find(const std::string& job_id);
