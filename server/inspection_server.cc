@@ -62,6 +62,9 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   std::unique_ptr<InspectionServer> s(new InspectionServer());
   s->options_ = options;
   if (options.rig_queue_capacity < 0) return Status::InvalidArgument("queue capacity must be >= 0");
+  if (options.min_free_mb < 0) return Status::InvalidArgument("min_free_mb must be >= 0");
+  if (options.retention_interval_s < 1) return Status::InvalidArgument("retention_interval_s must be >= 1");
+  INSPECT_RETURN_IF_ERROR(options.retention.Validate());
   // Who may call, and over what transport: settled before anything starts.
   INSPECT_ASSIGN_OR_RETURN(s->access_, MakeAccessControl(options));
   TransportSecurityOptions tso;
@@ -94,13 +97,25 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   JobManagerOptions jo;
   jo.rig_queue_capacity = options.rig_queue_capacity;
   jo.on_event = [ops = s->ops_.get()](const v1::JobEvent& e) { ops->OnJobEvent(e); };
+  // "Full" for a failed job's write: below the reserve, or below what one default scan needs
+  // (~38 MiB for its stack, as much again for the archive and the depth files).
+  const int64_t min_free_bytes = options.min_free_mb << 20;
+  jo.disk_full = [dir = options.data_dir, full_below = std::max<int64_t>(min_free_bytes, int64_t(64) << 20)] {
+    auto free_bytes = FreeDiskBytes(dir);
+    return free_bytes.ok() && *free_bytes < full_below;
+  };
   s->jobs_ = std::make_unique<JobManager>(jo, s->store_.get(), s->runner_.get());
   INSPECT_RETURN_IF_ERROR(s->jobs_->Start());
+  s->janitor_ = std::make_unique<DataJanitor>(s->store_.get(), s->jobs_.get());
+  s->sweeper_ = std::make_unique<RetentionSweeper>(s->janitor_.get(), options.retention,
+                                                   std::chrono::seconds(options.retention_interval_s));
 
   ServiceOptions so;
   so.server_version = INSPECT_VERSION;
   so.access = s->access_->enabled() ? s->access_.get() : nullptr;
   so.scene_dir = options.scene_dir;
+  so.janitor = s->janitor_.get();
+  so.min_free_bytes = min_free_bytes;
   s->service_ = std::make_unique<InspectionServiceImpl>(so, s->store_.get(), s->jobs_.get(), s->rig_.get(),
                                                         s->calibrations_.get());
   if (options.no_rig) {
@@ -157,6 +172,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
     spdlog::info("metrics and dashboard on {}://{}/", options.tls_cert_file.empty() ? "http" : "https",
                  s->ops_->address());
   }
+  s->sweeper_->Start();
   spdlog::info("inspectd listening on {} (data dir {}, rig {}, state {})", s->address(), options.data_dir.string(),
                !s->rig_               ? "none (reconstruct only)"
                : s->rig_->simulated() ? "simulated"
@@ -175,6 +191,7 @@ void InspectionServer::Shutdown() {
   if (shut_down_) return;
   shut_down_ = true;
   ops_->Stop();  // its handlers read the jobs and the store
+  if (sweeper_) sweeper_->Stop();
   // Jobs first, so streaming handlers see terminal events and return; then the transport.
   jobs_->Shutdown();
   server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));

@@ -15,12 +15,14 @@
 #include "server/access_control.h"
 #include "server/audit_log.h"
 #include "server/calibration_store.h"
+#include "server/data_lifecycle.h"
 #include "server/data_store.h"
 #include "server/http/operations_http.h"
 #include "server/inspection_service.h"
 #include "server/job_manager.h"
 #include "server/no_rig_service.h"
 #include "server/procedure_runner.h"
+#include "server/retention_sweeper.h"
 #include "server/rig_controller.h"
 
 namespace inspection {
@@ -43,6 +45,11 @@ struct ServerOptions {
   std::filesystem::path scene_dir;      // simulated rig: user scenes by name; empty = built-ins only
   // Audit trail of mutating and denied calls (JSON Lines); empty = <data_dir>/audit/audit.jsonl.
   std::filesystem::path audit_log;
+  // Data lifecycle: new scans and uploads are refused (RESOURCE_EXHAUSTED) below this much free
+  // space on the data disk; 0 = no reserve.
+  int64_t min_free_mb = 0;
+  RetentionPolicy retention;       // enforced by a background sweeper; no limits = no sweeper
+  int retention_interval_s = 600;  // how often the sweeper runs
   SimulatedRigOptions simulation;  // used when no rig is given to Start
   // Reconstruct only (the scale-out pool): no rig is opened; rig calls answer FAILED_PRECONDITION.
   bool no_rig = false;
@@ -79,6 +86,7 @@ class InspectionServer {
   bool authentication_enabled() const { return access_->enabled(); }
   bool reflection_enabled() const { return reflection_; }
   const std::filesystem::path& audit_log_path() const { return audit_path_; }
+  RetentionSweeper& retention() { return *sweeper_; }
 
  private:
   InspectionServer() = default;
@@ -94,6 +102,8 @@ class InspectionServer {
   std::unique_ptr<CalibrationStore> calibrations_;
   std::unique_ptr<ProcedureRunner> runner_;
   std::unique_ptr<JobManager> jobs_;  // declared after what its jobs use: destroyed (joined) first
+  std::unique_ptr<DataJanitor> janitor_;
+  std::unique_ptr<RetentionSweeper> sweeper_;  // destroyed (joined) before the jobs and the store
   std::unique_ptr<InspectionServiceImpl> service_;
   std::unique_ptr<SimulationServiceImpl> sim_service_;
   std::unique_ptr<NoRigInspectionService> no_rig_service_;

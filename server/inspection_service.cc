@@ -5,11 +5,13 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <fstream>
 #include <map>
 
 #include "core/stack.h"
 #include "server/audit_interceptor.h"
+#include "server/data_lifecycle.h"
 #include "server/grpc_status.h"
 #include "server/request_mapping.h"
 
@@ -78,8 +80,10 @@ Status ReceiveUpload(grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructReque
     const fs::path target = dir / c.path();
     fs::create_directories(target.parent_path(), ec);
     std::ofstream out(target, std::ios::binary | (c.offset() == 0 ? std::ios::trunc : std::ios::app));
-    if (!out.write(c.data().data(), std::streamsize(c.data().size()))) {
-      return Status::Internal("cannot write uploaded file '" + c.path() + "'");
+    errno = 0;
+    if (!out.write(c.data().data(), std::streamsize(c.data().size())) || !out.flush()) {
+      // ENOSPC: RESOURCE_EXHAUSTED "data disk full"; the upload folder goes with the request.
+      return WriteFailure(errno ? errno : EIO, "cannot write uploaded file '" + c.path() + "'");
     }
     sizes[c.path()] += int64_t(c.data().size());
     if (c.last()) complete[c.path()] = true;
@@ -143,6 +147,8 @@ grpc::Status InspectionServiceImpl::Scan(grpc::ServerContext* ctx, const v1::Sca
   auto who = CheckAuth(ctx, "Scan");
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
+  // Refused before the rig moves: a scan that cannot be stored is not worth taking.
+  if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
   auto r = jobs_->Submit(
       v1::JOB_KIND_SCAN, req->request_id(), req->label(),
       [&]() -> StatusOr<JobWork> {
@@ -194,6 +200,7 @@ grpc::Status InspectionServiceImpl::Reconstruct(
   fs::path dir;
   std::shared_ptr<const OwnedFolder> upload;  // removed on every early return
   if (source->upload) {
+    if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
     upload = std::make_shared<const OwnedFolder>(store_->uploads_dir() / NewId("upload"));
     dir = upload->path();
     if (Status s = ReceiveUpload(stream, *source, dir, options_.max_upload_bytes); !s.ok()) return Grpc(s);
@@ -336,6 +343,46 @@ grpc::Status InspectionServiceImpl::ListCalibrations(grpc::ServerContext* ctx, c
   auto list = calibrations_->List();
   if (!list.ok()) return Grpc(list.status());
   for (const v1::Calibration& c : *list) *out->add_calibrations() = c;
+  return grpc::Status::OK;
+}
+
+grpc::Status InspectionServiceImpl::DeleteJob(grpc::ServerContext* ctx, const v1::DeleteJobRequest* req,
+                                              v1::DeleteResponse* out) {
+  auto who = CheckAuth(ctx, "DeleteJob");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
+  if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
+  auto deleted = options_.janitor->DeleteJob(req->job_id());
+  if (!deleted.ok()) return Grpc(deleted.status());
+  out->set_id(deleted->id);
+  out->set_bytes_freed(deleted->bytes_freed);
+  out->set_artifacts_deleted(deleted->artifacts_deleted);
+  return grpc::Status::OK;
+}
+
+grpc::Status InspectionServiceImpl::DeleteScan(grpc::ServerContext* ctx, const v1::DeleteScanRequest* req,
+                                               v1::DeleteResponse* out) {
+  auto who = CheckAuth(ctx, "DeleteScan");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
+  if (req->scan_id().empty()) return Grpc(Status::InvalidArgument("scan_id is empty"));
+  auto deleted = options_.janitor->DeleteScan(req->scan_id());
+  if (!deleted.ok()) return Grpc(deleted.status());
+  out->set_id(deleted->id);
+  out->set_bytes_freed(deleted->bytes_freed);
+  out->set_artifacts_deleted(deleted->artifacts_deleted);
+  return grpc::Status::OK;
+}
+
+grpc::Status InspectionServiceImpl::PinJob(grpc::ServerContext* ctx, const v1::PinJobRequest* req,
+                                           v1::PinJobResponse* out) {
+  auto who = CheckAuth(ctx, "PinJob");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
+  if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
+  if (Status s = options_.janitor->Pin(req->job_id(), req->pinned()); !s.ok()) return Grpc(s);
+  out->set_job_id(req->job_id());
+  out->set_pinned(req->pinned());
   return grpc::Status::OK;
 }
 

@@ -13,6 +13,7 @@
 #include "server/calibration_store.h"
 #include "server/data_store.h"
 #include "server/job_manager.h"
+#include "server/retention_sweeper.h"
 #include "server/rig_controller.h"
 
 namespace inspection {
@@ -26,6 +27,11 @@ struct ServiceOptions {
   // User scenes of the simulated rig: SetSpecimen takes a scene by NAME from this folder
   // (<name>.json); empty = built-in specimens only. Paths ("file:...") are always refused.
   std::filesystem::path scene_dir;
+  // Deletion, pins (retention_sweeper.h); must outlive the service.
+  DataJanitor* janitor = nullptr;
+  // New scans and uploads are refused with RESOURCE_EXHAUSTED while the data disk has less free
+  // space than this (0 = no reserve).
+  int64_t min_free_bytes = 0;
 };
 
 // Authenticates the caller and checks the role `method` needs: UNAUTHENTICATED without or with
@@ -53,6 +59,9 @@ class InspectionServiceImpl final : public v1::InspectionService::Service {
   grpc::Status GetCalibration(grpc::ServerContext*, const v1::GetCalibrationRequest*, v1::Calibration*) override;
   grpc::Status ListCalibrations(grpc::ServerContext*, const v1::ListCalibrationsRequest*,
                                 v1::ListCalibrationsResponse*) override;
+  grpc::Status DeleteJob(grpc::ServerContext*, const v1::DeleteJobRequest*, v1::DeleteResponse*) override;
+  grpc::Status DeleteScan(grpc::ServerContext*, const v1::DeleteScanRequest*, v1::DeleteResponse*) override;
+  grpc::Status PinJob(grpc::ServerContext*, const v1::PinJobRequest*, v1::PinJobResponse*) override;
 
  private:
   StatusOr<Identity> CheckAuth(grpc::ServerContext* ctx, std::string_view method) const {

@@ -174,6 +174,16 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
       {"audit_log", &C::audit_log,
        "audit trail (JSON Lines, rotated at 16 MiB, 8 kept) of every mutating or denied call; empty: "
        "<data_dir>/audit/audit.jsonl"},
+      {"min_free_mb", &C::min_free_mb,
+       "free-space reserve of the data disk (MiB): below it new scans and uploads are refused with RESOURCE_EXHAUSTED; "
+       "0: none"},
+      {"retention_max_age_s", &C::retention_max_age_s,
+       "retention: finished jobs older than this (seconds) are deleted, oldest first; 0: no age limit"},
+      {"retention_max_mb", &C::retention_max_mb,
+       "retention: finished jobs' data (artifacts and stored stacks) is kept below this many MiB; 0: no limit"},
+      {"retention_keep_last", &C::retention_keep_last,
+       "retention: the newest N finished jobs are kept whatever the limits (pinned jobs always are)"},
+      {"retention_interval_s", &C::retention_interval_s, "retention: seconds between sweeps"},
   };
   return keys;
 }
@@ -325,6 +335,13 @@ Status ValidateConfig(const InspectdConfig& c) {
   if (!c.policy.empty() && c.token_file.empty() && c.tls_client_ca.empty()) {
     return Status::InvalidArgument("policy needs identities: token_file or tls_client_ca");
   }
+  if (c.min_free_mb < 0) return bad("min_free_mb", std::to_string(c.min_free_mb), "must be >= 0");
+  if (c.retention_keep_last < 0) {
+    return bad("retention_keep_last", std::to_string(c.retention_keep_last), "must be >= 0");
+  }
+  if (c.retention_interval_s < 1) {
+    return bad("retention_interval_s", std::to_string(c.retention_interval_s), "must be >= 1");
+  }
   if (c.tls_cert.empty() != c.tls_key.empty()) {
     return Status::InvalidArgument("TLS needs both tls_cert and tls_key (only " +
                                    std::string(c.tls_cert.empty() ? "tls_key" : "tls_cert") + " is set)");
@@ -355,6 +372,11 @@ StatusOr<ServerOptions> ToServerOptions(const InspectdConfig& c) {
   o.policy_file = c.policy;
   o.scene_dir = c.scene_dir;
   o.audit_log = c.audit_log;
+  o.min_free_mb = c.min_free_mb;
+  o.retention.max_age_s = int64_t(std::min<uint64_t>(c.retention_max_age_s, uint64_t(1) << 40));
+  o.retention.max_bytes = int64_t(std::min<uint64_t>(c.retention_max_mb, uint64_t(1) << 40) << 20);
+  o.retention.keep_last = c.retention_keep_last;
+  o.retention_interval_s = c.retention_interval_s;
   o.no_rig = c.no_rig;
   o.http_listen_address = c.http_listen;
   o.simulation.specimen = c.specimen;

@@ -36,11 +36,16 @@ struct InspectdConfig {
   uint64_t seed = SimulatedRigOptions{}.seed;
   std::string camera_size = "1024x768";  // simulated rig: WIDTHxHEIGHT
   std::string log_level = "info";
-  std::string log_format = "text";  // text or json (one object per line)
-  bool no_rig = false;              // reconstruct only: no rig is opened
-  std::string http_listen;          // host:port for /metrics and the dashboard; empty = none
-  std::string scene_dir;            // simulated rig: user scenes by name; empty = built-ins only
-  std::string audit_log;            // JSON Lines audit trail; empty = <data_dir>/audit/audit.jsonl
+  std::string log_format = "text";   // text or json (one object per line)
+  bool no_rig = false;               // reconstruct only: no rig is opened
+  std::string http_listen;           // host:port for /metrics and the dashboard; empty = none
+  std::string scene_dir;             // simulated rig: user scenes by name; empty = built-ins only
+  std::string audit_log;             // JSON Lines audit trail; empty = <data_dir>/audit/audit.jsonl
+  int min_free_mb = 0;               // free-space reserve for new scans and uploads; 0 = none
+  uint64_t retention_max_age_s = 0;  // finished jobs older than this are deleted; 0 = no limit
+  uint64_t retention_max_mb = 0;     // finished jobs' data above this is deleted, oldest first; 0 = none
+  int retention_keep_last = 0;       // the newest N finished jobs are always kept
+  int retention_interval_s = ServerOptions{}.retention_interval_s;
 
   bool operator==(const InspectdConfig&) const = default;
 };

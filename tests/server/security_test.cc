@@ -188,6 +188,16 @@ TEST_F(SecurityTest, OperatorsCancelOnlyTheirOwnJobsAdminsAny) {
   EXPECT_TRUE(WithToken("al-0123456789abcdef")->CancelJob(job.job_id(), &out).ok());
   EXPECT_TRUE(WithToken("ad-0123456789abcdef")->CancelJob(job.job_id(), &out).ok());
   EXPECT_EQ(out.state(), v1::JOB_STATE_SUCCEEDED);  // it had ended: returned unchanged
+  // Deleting and pinning are the admin's.
+  v1::DeleteResponse deleted;
+  grpc::Status del = WithToken("al-0123456789abcdef")->DeleteJob(job.job_id(), &deleted);
+  EXPECT_EQ(del.error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_EQ(del.error_message(), "DeleteJob needs role admin; 'alice' has role operator");
+  v1::PinJobResponse pin;
+  EXPECT_EQ(WithToken("al-0123456789abcdef")->PinJob(job.job_id(), true, &pin).error_code(),
+            grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_TRUE(WithToken("ad-0123456789abcdef")->PinJob(job.job_id(), true, &pin).ok());
+  EXPECT_TRUE(WithToken("ad-0123456789abcdef")->DeleteJob(job.job_id(), &deleted).ok());
 }
 
 TEST_F(SecurityTest, AuditLogHoldsMutatingAndDeniedCallsWithoutSecrets) {
