@@ -7,8 +7,11 @@
 #include <unistd.h>
 
 #include <cstring>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <thread>
 
+#include "core/stack.h"
 #include "server/retention_sweeper.h"
 #include "tests/server/server_fixture.h"
 
@@ -226,6 +229,33 @@ TEST_F(DiskFullTest, ScanThatFillsTheDiskFailsResourceExhaustedLeavingNothingPar
   EXPECT_EQ(stored.state(), v1::JOB_STATE_FAILED);
   EXPECT_EQ(stored.error_code(), int(StatusCode::kResourceExhausted));
   EXPECT_EQ(stored.error_message(), job.error_message());
+}
+
+TEST_F(DiskFullTest, UploadThatFillsTheDiskIsResourceExhaustedAndLeavesNoUpload) {
+  StartServer();
+  // A valid stack folder on the ordinary disk, larger than the data directory's tmpfs: noise
+  // frames barely compress (about 300 KiB each).
+  const fs::path stack = UniqueTempDir("bigstack");
+  StackManifest m;
+  m.pixel_size_um = 1.0;
+  cv::RNG rng(5);
+  for (int i = 0; i < 8; ++i) {
+    cv::Mat noise(480, 640, CV_8UC1);
+    rng.fill(noise, cv::RNG::UNIFORM, 0, 256);
+    const std::string name = "frame_" + std::to_string(i) + ".png";
+    ASSERT_TRUE(cv::imwrite((stack / name).string(), noise));
+    m.frames.push_back({name, 10.0 * i, 1000.0});
+  }
+  ASSERT_TRUE(WriteStackManifest(stack, m).ok());
+  v1::Job job;
+  grpc::Status s = client_->ReconstructUpload(stack, v1::ReconstructStart(), {}, &job);
+  fs::remove_all(stack);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << s.error_message();
+  EXPECT_EQ(s.error_message().rfind("data disk full: cannot write uploaded file 'frame_", 0), 0u) << s.error_message();
+  EXPECT_EQ(CountEntries(data_dir_ / "uploads"), 0);  // the partial upload went with the request
+  v1::ListJobsResponse list;
+  ASSERT_TRUE(client_->ListJobs(v1::ListJobsRequest(), &list).ok());
+  EXPECT_EQ(list.jobs_size(), 0);
 }
 
 }  // namespace
