@@ -1,5 +1,5 @@
-// inspectctl jobs / watch / cancel / download: list jobs, re-attach to one, cancel one, fetch
-// results or one artifact (USAGE.md "jobs", "watch", "cancel", "download").
+// inspectctl jobs / watch / cancel / delete / pin / download: list jobs, re-attach to one, cancel
+// one, delete or pin one (data lifecycle), fetch results or one artifact (USAGE.md).
 #include <algorithm>
 #include <iostream>
 #include <map>
@@ -105,6 +105,41 @@ int RunCancel(const std::string& job_id, Session& session) {
   return kExitOk;
 }
 
+struct DeleteFlags {
+  std::string id;
+  bool scan_only = false;
+};
+
+int RunDelete(const DeleteFlags& f, Session& session) {
+  v1::DeleteResponse deleted;
+  const grpc::Status s =
+      f.scan_only ? session.client.DeleteScan(f.id, &deleted) : session.client.DeleteJob(f.id, &deleted);
+  if (!s.ok()) return ReportError(s);
+  if (session.out.json) {
+    PrintJsonLine(ProtoJson(deleted));
+  } else {
+    std::cout << (f.scan_only ? "deleted the stack of scan " : "deleted job ") << deleted.id() << ": "
+              << deleted.bytes_freed() << " bytes, " << deleted.artifacts_deleted() << " artifacts\n";
+  }
+  return kExitOk;
+}
+
+struct PinFlags {
+  std::string id;
+  bool unpin = false;
+};
+
+int RunPin(const PinFlags& f, Session& session) {
+  v1::PinJobResponse pinned;
+  if (grpc::Status s = session.client.PinJob(f.id, !f.unpin, &pinned); !s.ok()) return ReportError(s);
+  if (session.out.json) {
+    PrintJsonLine(ProtoJson(pinned));
+  } else {
+    std::cout << "job " << pinned.job_id() << (pinned.pinned() ? " pinned" : " unpinned") << '\n';
+  }
+  return kExitOk;
+}
+
 struct DownloadFlags {
   std::string id, out;
   bool resume = false;
@@ -171,6 +206,19 @@ void RegisterJobCommands(CLI::App& app, CliContext& context) {
   auto cancel_job_id = std::make_shared<std::string>();
   cancel_cmd->add_option("job_id", *cancel_job_id, "Job id")->required();
   context.AddCommand(cancel_cmd, [cancel_job_id](Session& session) { return RunCancel(*cancel_job_id, session); });
+
+  auto* delete_cmd = app.add_subcommand("delete", "Delete a finished job, its artifacts and stored stack (admin)");
+  auto del = std::make_shared<DeleteFlags>();
+  delete_cmd->add_option("job_id", del->id, "Job id (with --scan-only: the scan id)")->required();
+  delete_cmd->add_flag("--scan-only", del->scan_only,
+                       "delete only the scan's raw stack; keep the job and depth results");
+  context.AddCommand(delete_cmd, [del](Session& session) { return RunDelete(*del, session); });
+
+  auto* pin_cmd = app.add_subcommand("pin", "Pin a job so retention never deletes it (admin)");
+  auto pin = std::make_shared<PinFlags>();
+  pin_cmd->add_option("job_id", pin->id, "Job id")->required();
+  pin_cmd->add_flag("--unpin", pin->unpin, "remove the pin");
+  context.AddCommand(pin_cmd, [pin](Session& session) { return RunPin(*pin, session); });
 
   auto* download_cmd = app.add_subcommand("download", "Download an artifact to a file, or a job's results to a folder");
   auto download = std::make_shared<DownloadFlags>();

@@ -12,7 +12,7 @@ namespace inspection::client::cli {
 void RegisterStatusCommands(CLI::App& app, CliContext& context);       // status, reset
 void RegisterScanCommand(CLI::App& app, CliContext& context);          // scan
 void RegisterReconstructCommand(CLI::App& app, CliContext& context);   // reconstruct
-void RegisterJobCommands(CLI::App& app, CliContext& context);          // jobs, watch, cancel, download
+void RegisterJobCommands(CLI::App& app, CliContext& context);          // jobs, watch, cancel, delete, pin, download
 void RegisterCalibrationCommands(CLI::App& app, CliContext& context);  // calibrate, calibration show|list
 void RegisterSpecimenCommands(CLI::App& app, CliContext& context);     // specimen list|set
 

@@ -374,6 +374,37 @@ grpc::Status InspectionClient::CancelJob(const std::string& job_id, v1::Job* job
   return stub_->CancelJob(&ctx, request, job);
 }
 
+grpc::Status InspectionClient::DeleteJob(const std::string& job_id, v1::DeleteResponse* response) {
+  if (!init_status_.ok()) return init_status_;
+  grpc::ClientContext ctx;
+  Prepare(&ctx);
+  SetUnaryDeadline(&ctx);
+  v1::DeleteJobRequest request;
+  request.set_job_id(job_id);
+  return stub_->DeleteJob(&ctx, request, response);
+}
+
+grpc::Status InspectionClient::DeleteScan(const std::string& scan_id, v1::DeleteResponse* response) {
+  if (!init_status_.ok()) return init_status_;
+  grpc::ClientContext ctx;
+  Prepare(&ctx);
+  SetUnaryDeadline(&ctx);
+  v1::DeleteScanRequest request;
+  request.set_scan_id(scan_id);
+  return stub_->DeleteScan(&ctx, request, response);
+}
+
+grpc::Status InspectionClient::PinJob(const std::string& job_id, bool pinned, v1::PinJobResponse* response) {
+  if (!init_status_.ok()) return init_status_;
+  grpc::ClientContext ctx;
+  Prepare(&ctx);
+  SetUnaryDeadline(&ctx);
+  v1::PinJobRequest request;
+  request.set_job_id(job_id);
+  request.set_pinned(pinned);
+  return stub_->PinJob(&ctx, request, response);
+}
+
 grpc::Status InspectionClient::DownloadRange(const std::string& artifact_id, int64_t offset, int64_t limit,
                                              std::string* data, std::string* sha256_hex, int64_t* total_size) {
   if (!init_status_.ok()) return init_status_;

@@ -62,6 +62,11 @@ class InspectionClient {
   grpc::Status GetJob(const std::string& job_id, v1::Job* job);
   grpc::Status ListJobs(const v1::ListJobsRequest& request, v1::ListJobsResponse* response);
   grpc::Status CancelJob(const std::string& job_id, v1::Job* job);
+  // Data lifecycle (role admin): delete a finished job or only a scan's raw stack; pin a job
+  // so retention keeps it.
+  grpc::Status DeleteJob(const std::string& job_id, v1::DeleteResponse* response);
+  grpc::Status DeleteScan(const std::string& scan_id, v1::DeleteResponse* response);
+  grpc::Status PinJob(const std::string& job_id, bool pinned, v1::PinJobResponse* response);
 
   // Downloads an artifact to `dest`. With resume, an existing partial `dest` is continued from
   // its size. The whole file's sha256 is verified against the server's (DATA_LOSS on mismatch,

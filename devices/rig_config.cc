@@ -236,7 +236,7 @@ StatusOr<RigConfig> ParseRigConfig(const std::string& text) {
   json root;
   try {
     root = json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for a number overflow
     return Status::InvalidArgument(std::string("rig config: not valid JSON: ") + e.what());
   }
   if (!root.is_object()) return Status::InvalidArgument("rig config: the top level must be a JSON object");

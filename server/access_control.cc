@@ -120,7 +120,7 @@ Role RequiredRole(std::string_view method) {
   return Role::kAdmin;
 }
 
-CallerCredentials CredentialsFromContext(const grpc::ServerContext& context) {
+CallerCredentials CredentialsFromContext(const grpc::ServerContextBase& context) {
   CallerCredentials c;
   const auto& md = context.client_metadata();
   if (auto it = md.find("authorization"); it != md.end()) {

@@ -23,7 +23,7 @@
 #include "core/status.h"
 
 namespace grpc {
-class ServerContext;
+class ServerContextBase;
 }
 
 namespace inspection {
@@ -44,7 +44,7 @@ struct CallerCredentials {
   std::vector<std::string> cert_names;  // verified client certificate: CN first, then SANs
   std::string peer;                     // "ipv4:127.0.0.1:5432"
 };
-CallerCredentials CredentialsFromContext(const grpc::ServerContext& context);
+CallerCredentials CredentialsFromContext(const grpc::ServerContextBase& context);
 
 struct Identity {
   std::string name;  // certificate CN/SAN or token identity; "anonymous" when auth is off
@@ -99,6 +99,10 @@ class AccessControl {
   Status Reload();  // keeps the old policy when the new one does not parse
 
   bool enabled() const { return snapshot()->enabled(); }
+  // Who the caller is, without a role check (the audit log names denied callers with it).
+  StatusOr<Identity> Authenticate(const CallerCredentials& credentials) const {
+    return snapshot()->Authenticate(credentials);
+  }
   // Authenticate and check the role for one call of `method`.
   StatusOr<Identity> Authorize(const CallerCredentials& credentials, std::string_view method) const;
 

@@ -51,7 +51,9 @@ std::vector<std::string> SelectJobsToDelete(std::vector<StoredJob> jobs, const R
                                             int64_t now_unix_s) {
   std::vector<std::string> out;
   if (!policy.enabled()) return out;
-  // Newest first, so the first keep_last finished jobs are the protected ones.
+  // Newest first, so the first keep_last finished jobs are the protected ones. Jobs that ended
+  // in the same second keep their input order reversed: later in the input is newer.
+  std::reverse(jobs.begin(), jobs.end());
   std::stable_sort(jobs.begin(), jobs.end(),
                    [](const StoredJob& a, const StoredJob& b) { return a.end_unix_s > b.end_unix_s; });
   int64_t finished_bytes = 0;

@@ -45,7 +45,8 @@ struct StoredJob {
 
 // The jobs to delete, oldest first, so that afterwards no finished, unpinned job outside the
 // newest `keep_last` is older than max_age_s and the finished jobs' bytes are <= max_bytes as
-// far as deleting unpinned ones can get. Unfinished and pinned jobs are never selected.
+// far as deleting unpinned ones can get. Unfinished and pinned jobs are never selected. Jobs
+// with the same end second are ordered as given (later = newer).
 std::vector<std::string> SelectJobsToDelete(std::vector<StoredJob> jobs, const RetentionPolicy& policy,
                                             int64_t now_unix_s);
 

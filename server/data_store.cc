@@ -2,6 +2,7 @@
 
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <random>
 
 namespace inspection {
@@ -91,6 +92,8 @@ StatusOr<std::unique_ptr<DataStore>> DataStore::Open(const fs::path& data_dir) {
     CREATE TABLE IF NOT EXISTS calibrations (
       calibration_id TEXT PRIMARY KEY, create_ns INTEGER NOT NULL, calibration BLOB NOT NULL);
     CREATE TABLE IF NOT EXISTS settings (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+    CREATE TABLE IF NOT EXISTS pins (job_id TEXT PRIMARY KEY);
+    CREATE INDEX IF NOT EXISTS artifacts_by_job ON artifacts(job_id);
   )sql"));
   return store;
 }
@@ -246,6 +249,96 @@ bool DataStore::CalibrationInUse(const std::string& id) {
   Stmt st(db_, "SELECT 1 FROM jobs WHERE calibration_id = ? LIMIT 1");
   st.Text(1, id);
   return st.Step() == SQLITE_ROW;
+}
+
+Status DataStore::SetPinned(const std::string& job_id, bool pinned) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, pinned ? "INSERT OR IGNORE INTO pins(job_id) VALUES(?)" : "DELETE FROM pins WHERE job_id = ?");
+  st.Text(1, job_id);
+  if (st.Step() != SQLITE_DONE) return DbError(db_, "SetPinned");
+  return Status::Ok();
+}
+
+StatusOr<std::vector<std::string>> DataStore::PinnedJobs() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT job_id FROM pins");
+  std::vector<std::string> ids;
+  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) ids.push_back(st.ColumnText(0));
+  return ids;
+}
+
+StatusOr<std::vector<v1::Job>> DataStore::FinishedJobs() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT job FROM jobs WHERE state IN (?, ?, ?)");
+  st.Int(1, v1::JOB_STATE_SUCCEEDED).Int(2, v1::JOB_STATE_FAILED).Int(3, v1::JOB_STATE_CANCELLED);
+  std::vector<v1::Job> jobs;
+  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
+    v1::Job job;
+    if (job.ParseFromString(st.ColumnBlob(0))) jobs.push_back(std::move(job));
+  }
+  return jobs;
+}
+
+Status DataStore::DeleteJobRecords(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  INSPECT_RETURN_IF_ERROR(Exec("BEGIN IMMEDIATE"));
+  for (const char* sql : {"DELETE FROM artifacts WHERE job_id = ?", "DELETE FROM events WHERE job_id = ?",
+                          "DELETE FROM pins WHERE job_id = ?", "DELETE FROM jobs WHERE job_id = ?"}) {
+    Stmt st(db_, sql);
+    st.Text(1, job_id);
+    if (st.Step() != SQLITE_DONE) {
+      Status s = DbError(db_, "DeleteJobRecords");
+      Exec("ROLLBACK").IgnoreError();
+      return s;
+    }
+  }
+  return Exec("COMMIT");
+}
+
+StatusOr<std::vector<StoredArtifact>> DataStore::DeleteArtifactsOfKind(const std::string& job_id,
+                                                                       v1::ArtifactKind kind) {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::vector<StoredArtifact> removed;
+  {
+    Stmt st(db_, "SELECT path, artifact FROM artifacts WHERE job_id = ?");
+    st.Text(1, job_id);
+    for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
+      StoredArtifact a;
+      a.job_id = job_id;
+      a.path = st.ColumnText(0);
+      if (a.artifact.ParseFromString(st.ColumnBlob(1)) && a.artifact.kind() == kind) removed.push_back(std::move(a));
+    }
+  }
+  v1::Job job;
+  {
+    Stmt st(db_, "SELECT job FROM jobs WHERE job_id = ?");
+    st.Text(1, job_id);
+    if (st.Step() != SQLITE_ROW) return Status::NotFound("job_id '" + job_id + "' not found");
+    if (!job.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("job " + job_id + " record is corrupt");
+  }
+  auto* artifacts = job.mutable_result()->mutable_artifacts();
+  artifacts->erase(
+      std::remove_if(artifacts->begin(), artifacts->end(), [&](const v1::Artifact& a) { return a.kind() == kind; }),
+      artifacts->end());
+  INSPECT_RETURN_IF_ERROR(Exec("BEGIN IMMEDIATE"));
+  bool ok = true;
+  for (const StoredArtifact& a : removed) {
+    Stmt st(db_, "DELETE FROM artifacts WHERE artifact_id = ?");
+    st.Text(1, a.artifact.artifact_id());
+    ok = ok && st.Step() == SQLITE_DONE;
+  }
+  {
+    Stmt st(db_, "UPDATE jobs SET job = ? WHERE job_id = ?");
+    st.Blob(1, job.SerializeAsString()).Text(2, job_id);
+    ok = ok && st.Step() == SQLITE_DONE;
+  }
+  if (!ok) {
+    Status s = DbError(db_, "DeleteArtifactsOfKind");
+    Exec("ROLLBACK").IgnoreError();
+    return s;
+  }
+  INSPECT_RETURN_IF_ERROR(Exec("COMMIT"));
+  return removed;
 }
 
 Status DataStore::SetSetting(const std::string& key, const std::string& value) {

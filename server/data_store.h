@@ -63,6 +63,18 @@ class DataStore {
   // True if a stored scan refers to this calibration (then it must never be overwritten).
   bool CalibrationInUse(const std::string& calibration_id);
 
+  // Data lifecycle. Pinned jobs are kept by the retention sweeper.
+  Status SetPinned(const std::string& job_id, bool pinned);
+  StatusOr<std::vector<std::string>> PinnedJobs();
+  // Jobs that ended (SUCCEEDED, FAILED, CANCELLED), in no particular order.
+  StatusOr<std::vector<v1::Job>> FinishedJobs();
+  // Removes a job's rows (job, events, artifacts, pin) in one transaction; its files are the
+  // caller's to remove afterwards (nothing is served from files without a row).
+  Status DeleteJobRecords(const std::string& job_id);
+  // Removes the job's artifacts of `kind`: their rows and their entries in the stored
+  // Job.result, in one transaction. Returns the removed artifacts (paths for the caller).
+  StatusOr<std::vector<StoredArtifact>> DeleteArtifactsOfKind(const std::string& job_id, v1::ArtifactKind kind);
+
   Status SetSetting(const std::string& key, const std::string& value);
   std::string GetSetting(const std::string& key);
 

@@ -4,21 +4,57 @@
 #include <grpcpp/health_check_service_interface.h>
 #include <spdlog/spdlog.h>
 
-#include <fstream>
-#include <sstream>
+#include <algorithm>
 
 #include "server/access_control.h"
+#include "server/audit_interceptor.h"
+#include "server/transport_security.h"
 
 namespace inspection {
 
 namespace {
-StatusOr<std::string> ReadFile(const std::string& path, const char* what) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Status::InvalidArgument(std::string(what) + " '" + path + "' cannot be read");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
+
+// Adds or removes the reflection service for one server. (grpc's InitProtoReflectionServerBuilderPlugin
+// is process-wide: once called, every later server of the process would offer reflection.)
+class ReflectionOption final : public grpc::ServerBuilderOption {
+ public:
+  explicit ReflectionOption(bool on) : on_(on) {}
+  void UpdateArguments(grpc::ChannelArguments*) override {}
+  void UpdatePlugins(std::vector<std::unique_ptr<grpc::ServerBuilderPlugin>>* plugins) override {
+    auto is_reflection = [](const std::unique_ptr<grpc::ServerBuilderPlugin>& p) {
+      return p->name() == "proto_server_reflection";
+    };
+    plugins->erase(std::remove_if(plugins->begin(), plugins->end(), is_reflection), plugins->end());
+    if (on_) plugins->push_back(std::make_unique<grpc::reflection::ProtoServerReflectionPlugin>());
+  }
+
+ private:
+  bool on_;
+};
+
+// The access policy from the options: a single token, named tokens and/or client certificates
+// with a policy file, or none (every caller anonymous admin, as before authentication existed).
+StatusOr<std::unique_ptr<AccessControl>> MakeAccessControl(const ServerOptions& o) {
+  const bool mtls = !o.tls_client_ca_file.empty();
+  if (!o.auth_token.empty() && !o.token_file.empty()) {
+    return Status::InvalidArgument("give either auth_token_file (one token) or token_file (named tokens), not both");
+  }
+  if (!o.policy_file.empty() && o.token_file.empty() && !mtls) {
+    return Status::InvalidArgument("policy_file needs identities: token_file or tls_client_ca (client certificates)");
+  }
+  if (!o.auth_token.empty()) {
+    INSPECT_ASSIGN_OR_RETURN(AccessPolicy p, AccessPolicy::Parse("", o.auth_token, mtls));
+    return std::make_unique<AccessControl>(std::move(p));
+  }
+  if (o.token_file.empty() && o.policy_file.empty() && !mtls) {
+    return std::make_unique<AccessControl>(AccessPolicy::Open());
+  }
+  INSPECT_ASSIGN_OR_RETURN(AccessPolicy p, AccessPolicy::Load(o.policy_file, o.token_file, mtls));
+  auto access = std::make_unique<AccessControl>(std::move(p));
+  access->SetSource(o.policy_file, o.token_file, mtls);
+  return access;
 }
+
 }  // namespace
 
 StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const ServerOptions& options,
@@ -26,6 +62,25 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   std::unique_ptr<InspectionServer> s(new InspectionServer());
   s->options_ = options;
   if (options.rig_queue_capacity < 0) return Status::InvalidArgument("queue capacity must be >= 0");
+  if (options.min_free_mb < 0) return Status::InvalidArgument("min_free_mb must be >= 0");
+  if (options.retention_interval_s < 1) return Status::InvalidArgument("retention_interval_s must be >= 1");
+  INSPECT_RETURN_IF_ERROR(options.retention.Validate());
+  // Who may call, and over what transport: settled before anything starts.
+  INSPECT_ASSIGN_OR_RETURN(s->access_, MakeAccessControl(options));
+  TransportSecurityOptions tso;
+  tso.tls_cert_file = options.tls_cert_file;
+  tso.tls_key_file = options.tls_key_file;
+  tso.tls_client_ca_file = options.tls_client_ca_file;
+  tso.insecure = options.insecure;
+  tso.reload_interval_s = options.tls_reload_interval_s;
+  INSPECT_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> creds,
+                           MakeServerCredentials(tso, options.listen_address));
+  s->reflection_ = options.reflection.value_or(!s->access_->enabled());
+  AuditLogOptions audit;
+  audit.path = options.audit_log.empty() ? options.data_dir / "audit" / "audit.jsonl" : options.audit_log;
+  s->audit_path_ = audit.path;
+  INSPECT_ASSIGN_OR_RETURN(s->audit_, AuditLog::Open(audit));
+
   s->ops_ = std::make_unique<OperationsHttp>(INSPECT_VERSION);
   INSPECT_ASSIGN_OR_RETURN(s->store_, DataStore::Open(options.data_dir));
   if (options.no_rig) {
@@ -42,12 +97,25 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   JobManagerOptions jo;
   jo.rig_queue_capacity = options.rig_queue_capacity;
   jo.on_event = [ops = s->ops_.get()](const v1::JobEvent& e) { ops->OnJobEvent(e); };
+  // "Full" for a failed job's write: below the reserve, or below what one default scan needs
+  // (~38 MiB for its stack, as much again for the archive and the depth files).
+  const int64_t min_free_bytes = options.min_free_mb << 20;
+  jo.disk_full = [dir = options.data_dir, full_below = std::max<int64_t>(min_free_bytes, int64_t(64) << 20)] {
+    auto free_bytes = FreeDiskBytes(dir);
+    return free_bytes.ok() && *free_bytes < full_below;
+  };
   s->jobs_ = std::make_unique<JobManager>(jo, s->store_.get(), s->runner_.get());
   INSPECT_RETURN_IF_ERROR(s->jobs_->Start());
+  s->janitor_ = std::make_unique<DataJanitor>(s->store_.get(), s->jobs_.get());
+  s->sweeper_ = std::make_unique<RetentionSweeper>(s->janitor_.get(), options.retention,
+                                                   std::chrono::seconds(options.retention_interval_s));
 
   ServiceOptions so;
   so.server_version = INSPECT_VERSION;
-  so.auth_token = options.auth_token;
+  so.access = s->access_->enabled() ? s->access_.get() : nullptr;
+  so.scene_dir = options.scene_dir;
+  so.janitor = s->janitor_.get();
+  so.min_free_bytes = min_free_bytes;
   s->service_ = std::make_unique<InspectionServiceImpl>(so, s->store_.get(), s->jobs_.get(), s->rig_.get(),
                                                         s->calibrations_.get());
   if (options.no_rig) {
@@ -58,22 +126,8 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   }
 
   grpc::EnableDefaultHealthCheckService(true);
-  if (options.reflection) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
-  std::shared_ptr<grpc::ServerCredentials> creds;
-  if (!options.tls_cert_file.empty() || !options.tls_key_file.empty()) {
-    if (options.tls_cert_file.empty() || options.tls_key_file.empty()) {
-      return Status::InvalidArgument("TLS needs both --tls-cert and --tls-key");
-    }
-    grpc::SslServerCredentialsOptions ssl;
-    grpc::SslServerCredentialsOptions::PemKeyCertPair pair;
-    INSPECT_ASSIGN_OR_RETURN(pair.private_key, ReadFile(options.tls_key_file, "--tls-key"));
-    INSPECT_ASSIGN_OR_RETURN(pair.cert_chain, ReadFile(options.tls_cert_file, "--tls-cert"));
-    ssl.pem_key_cert_pairs.push_back(pair);
-    creds = grpc::SslServerCredentials(ssl);
-  } else {
-    creds = grpc::InsecureServerCredentials();
-  }
+  builder.SetOption(std::make_unique<ReflectionOption>(s->reflection_));
   builder.AddListeningPort(options.listen_address, creds, &s->port_);
   if (options.no_rig) {
     builder.RegisterService(s->no_rig_service_.get());
@@ -84,6 +138,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   }
   std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
   interceptors.push_back(s->ops_->NewInterceptorFactory());  // inspectd_grpc_calls_total
+  interceptors.push_back(std::make_unique<AuditInterceptorFactory>(s->audit_.get(), s->access_.get()));
   builder.experimental().SetInterceptorCreators(std::move(interceptors));
   // Uploads arrive in 1 MiB chunks; keep headroom for the envelope.
   builder.SetMaxReceiveMessageSize(4 << 20);
@@ -117,6 +172,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
     spdlog::info("metrics and dashboard on {}://{}/", options.tls_cert_file.empty() ? "http" : "https",
                  s->ops_->address());
   }
+  s->sweeper_->Start();
   spdlog::info("inspectd listening on {} (data dir {}, rig {}, state {})", s->address(), options.data_dir.string(),
                !s->rig_               ? "none (reconstruct only)"
                : s->rig_->simulated() ? "simulated"
@@ -135,6 +191,7 @@ void InspectionServer::Shutdown() {
   if (shut_down_) return;
   shut_down_ = true;
   ops_->Stop();  // its handlers read the jobs and the store
+  if (sweeper_) sweeper_->Stop();
   // Jobs first, so streaming handlers see terminal events and return; then the transport.
   jobs_->Shutdown();
   server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));

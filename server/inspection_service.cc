@@ -1,13 +1,17 @@
 // gRPC handlers: translate through the request mapping, delegate, stream job events back.
 #include "server/inspection_service.h"
 
-#include <openssl/crypto.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
 #include <fstream>
 #include <map>
 
 #include "core/stack.h"
+#include "server/audit_interceptor.h"
+#include "server/data_lifecycle.h"
 #include "server/grpc_status.h"
 #include "server/request_mapping.h"
 
@@ -63,6 +67,7 @@ Status ReceiveUpload(grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructReque
     if (!msg.has_file_chunk()) return Status::InvalidArgument("after start, only file_chunk messages may follow");
     const v1::StackFileChunk& c = msg.file_chunk();
     INSPECT_RETURN_IF_ERROR(CheckUploadChunk(c));
+    INSPECT_RETURN_IF_ERROR(CheckRequestTextLimits(msg));
     if (complete[c.path()]) return Status::InvalidArgument("file '" + c.path() + "' was already completed");
     if (c.offset() != sizes[c.path()]) {
       return Status::InvalidArgument("file_chunk.offset " + std::to_string(c.offset()) + " of '" + c.path() +
@@ -75,8 +80,10 @@ Status ReceiveUpload(grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructReque
     const fs::path target = dir / c.path();
     fs::create_directories(target.parent_path(), ec);
     std::ofstream out(target, std::ios::binary | (c.offset() == 0 ? std::ios::trunc : std::ios::app));
-    if (!out.write(c.data().data(), std::streamsize(c.data().size()))) {
-      return Status::Internal("cannot write uploaded file '" + c.path() + "'");
+    errno = 0;
+    if (!out.write(c.data().data(), std::streamsize(c.data().size())) || !out.flush()) {
+      // ENOSPC: RESOURCE_EXHAUSTED "data disk full"; the upload folder goes with the request.
+      return WriteFailure(errno ? errno : EIO, "cannot write uploaded file '" + c.path() + "'");
     }
     sizes[c.path()] += int64_t(c.data().size());
     if (c.last()) complete[c.path()] = true;
@@ -93,20 +100,15 @@ Status ReceiveUpload(grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructReque
 
 }  // namespace
 
-grpc::Status CheckBearerToken(grpc::ServerContext* ctx, const std::string& token) {
-  if (token.empty()) return grpc::Status::OK;
-  const auto& md = ctx->client_metadata();
-  auto it = md.find("authorization");
-  const std::string expected = "Bearer " + token;
-  if (it == md.end() || it->second.size() != expected.size() ||
-      CRYPTO_memcmp(it->second.data(), expected.data(), expected.size()) != 0) {
-    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "missing or wrong bearer token");
+StatusOr<Identity> AuthorizeCall(grpc::ServerContext* ctx, const AccessControl* access, std::string_view method) {
+  if (!access) {
+    Identity anonymous;
+    anonymous.name = "anonymous";
+    anonymous.role = Role::kAdmin;
+    anonymous.peer = ctx->peer();
+    return anonymous;
   }
-  return grpc::Status::OK;
-}
-
-grpc::Status InspectionServiceImpl::CheckAuth(grpc::ServerContext* ctx) const {
-  return CheckBearerToken(ctx, options_.auth_token);
+  return access->Authorize(CredentialsFromContext(*ctx), method);
 }
 
 void InspectionServiceImpl::FillRigStatus(v1::RigStatus* st) {
@@ -120,13 +122,15 @@ void InspectionServiceImpl::FillRigStatus(v1::RigStatus* st) {
 
 grpc::Status InspectionServiceImpl::GetRigStatus(grpc::ServerContext* ctx, const v1::GetRigStatusRequest*,
                                                  v1::RigStatus* out) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
+  auto who = CheckAuth(ctx, "GetRigStatus");
+  if (!who.ok()) return Grpc(who.status());
   FillRigStatus(out);
   return grpc::Status::OK;
 }
 
 grpc::Status InspectionServiceImpl::ResetRig(grpc::ServerContext* ctx, const v1::ResetRigRequest*, v1::RigStatus* out) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
+  auto who = CheckAuth(ctx, "ResetRig");
+  if (!who.ok()) return Grpc(who.status());
   auto lock = rig_->TryAcquire();
   if (!lock.owns_lock()) {
     return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, "a rig job is running; cancel it before a reset");
@@ -140,46 +144,63 @@ grpc::Status InspectionServiceImpl::ResetRig(grpc::ServerContext* ctx, const v1:
 
 grpc::Status InspectionServiceImpl::Scan(grpc::ServerContext* ctx, const v1::ScanRequest* req,
                                          grpc::ServerWriter<v1::JobEvent>* writer) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
-  auto r = jobs_->Submit(v1::JOB_KIND_SCAN, req->request_id(), req->label(), [&]() -> StatusOr<JobWork> {
-    INSPECT_RETURN_IF_ERROR(rig_->CheckUsable());
-    const std::shared_ptr<const CalibrationBundle> calibration = calibrations_->active();
-    ScanContext context;
-    context.defaults = rig_->rig().scan_defaults();
-    context.stage = &rig_->rig().stage();
-    context.calibration = calibration.get();
-    INSPECT_ASSIGN_OR_RETURN(ScanWork work, MapScanRequest(*req, context));
-    return JobWork(std::move(work));
-  });
+  auto who = CheckAuth(ctx, "Scan");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
+  // Refused before the rig moves: a scan that cannot be stored is not worth taking.
+  if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
+  auto r = jobs_->Submit(
+      v1::JOB_KIND_SCAN, req->request_id(), req->label(),
+      [&]() -> StatusOr<JobWork> {
+        INSPECT_RETURN_IF_ERROR(rig_->CheckUsable());
+        const std::shared_ptr<const CalibrationBundle> calibration = calibrations_->active();
+        ScanContext context;
+        context.defaults = rig_->rig().scan_defaults();
+        context.stage = &rig_->rig().stage();
+        context.calibration = calibration.get();
+        INSPECT_ASSIGN_OR_RETURN(ScanWork work, MapScanRequest(*req, context));
+        return JobWork(std::move(work));
+      },
+      who->name);
   if (!r.ok()) return Grpc(r.status());
+  SetAuditTarget(ctx, (*r)->job_id());
   return StreamJob(ctx, *r, writer);
 }
 
 grpc::Status InspectionServiceImpl::Calibrate(grpc::ServerContext* ctx, const v1::CalibrateRequest* req,
                                               grpc::ServerWriter<v1::JobEvent>* writer) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
-  auto r = jobs_->Submit(v1::JOB_KIND_CALIBRATE, req->request_id(), req->label(), [&]() -> StatusOr<JobWork> {
-    INSPECT_ASSIGN_OR_RETURN(CalibrateWork work, MapCalibrateRequest(*req));
-    INSPECT_RETURN_IF_ERROR(rig_->CheckUsable());
-    return JobWork(std::move(work));
-  });
+  auto who = CheckAuth(ctx, "Calibrate");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
+  auto r = jobs_->Submit(
+      v1::JOB_KIND_CALIBRATE, req->request_id(), req->label(),
+      [&]() -> StatusOr<JobWork> {
+        INSPECT_ASSIGN_OR_RETURN(CalibrateWork work, MapCalibrateRequest(*req));
+        INSPECT_RETURN_IF_ERROR(rig_->CheckUsable());
+        return JobWork(std::move(work));
+      },
+      who->name);
   if (!r.ok()) return Grpc(r.status());
+  SetAuditTarget(ctx, (*r)->job_id());
   return StreamJob(ctx, *r, writer);
 }
 
 grpc::Status InspectionServiceImpl::Reconstruct(
     grpc::ServerContext* ctx, grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructRequest>* stream) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
+  auto who = CheckAuth(ctx, "Reconstruct");
+  if (!who.ok()) return Grpc(who.status());
   v1::ReconstructRequest first;
   if (!stream->Read(&first) || !first.has_start()) {
     return Grpc(Status::InvalidArgument("the first message must be start"));
   }
+  if (Status s = CheckRequestTextLimits(first); !s.ok()) return Grpc(s);
   const v1::ReconstructStart& start = first.start();
   auto source = MapReconstructSource(start, options_.max_upload_bytes);
   if (!source.ok()) return Grpc(source.status());
   fs::path dir;
   std::shared_ptr<const OwnedFolder> upload;  // removed on every early return
   if (source->upload) {
+    if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
     upload = std::make_shared<const OwnedFolder>(store_->uploads_dir() / NewId("upload"));
     dir = upload->path();
     if (Status s = ReceiveUpload(stream, *source, dir, options_.max_upload_bytes); !s.ok()) return Grpc(s);
@@ -193,18 +214,23 @@ grpc::Status InspectionServiceImpl::Reconstruct(
   if (!valid.ok()) return Grpc(valid);
   // The upload moves into the job's work: it goes when the job ends, or with the request when
   // no job is queued (invalid options, a duplicate request id, a full queue).
-  auto r = jobs_->Submit(v1::JOB_KIND_RECONSTRUCT, start.request_id(), start.label(),
-                         [&, upload = std::move(upload)]() -> StatusOr<JobWork> {
-                           INSPECT_ASSIGN_OR_RETURN(ReconstructWork work, MapReconstructStart(start, dir, upload));
-                           return JobWork(std::move(work));
-                         });
+  auto r = jobs_->Submit(
+      v1::JOB_KIND_RECONSTRUCT, start.request_id(), start.label(),
+      [&, upload = std::move(upload)]() -> StatusOr<JobWork> {
+        INSPECT_ASSIGN_OR_RETURN(ReconstructWork work, MapReconstructStart(start, dir, upload));
+        return JobWork(std::move(work));
+      },
+      who->name);
   if (!r.ok()) return Grpc(r.status());
+  SetAuditTarget(ctx, (*r)->job_id());
   return StreamJob(ctx, *r, stream);
 }
 
 grpc::Status InspectionServiceImpl::WatchJob(grpc::ServerContext* ctx, const v1::WatchJobRequest* req,
                                              grpc::ServerWriter<v1::JobEvent>* writer) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
+  auto who = CheckAuth(ctx, "WatchJob");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
   auto r = jobs_->Find(req->job_id());
   if (!r.ok()) return Grpc(r.status());
@@ -212,7 +238,9 @@ grpc::Status InspectionServiceImpl::WatchJob(grpc::ServerContext* ctx, const v1:
 }
 
 grpc::Status InspectionServiceImpl::GetJob(grpc::ServerContext* ctx, const v1::GetJobRequest* req, v1::Job* out) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
+  auto who = CheckAuth(ctx, "GetJob");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
   auto r = jobs_->Find(req->job_id());
   if (!r.ok()) return Grpc(r.status());
@@ -222,7 +250,9 @@ grpc::Status InspectionServiceImpl::GetJob(grpc::ServerContext* ctx, const v1::G
 
 grpc::Status InspectionServiceImpl::ListJobs(grpc::ServerContext* ctx, const v1::ListJobsRequest* req,
                                              v1::ListJobsResponse* out) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
+  auto who = CheckAuth(ctx, "ListJobs");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   auto query = MapListJobsRequest(*req);
   if (!query.ok()) return Grpc(query.status());
   const int limit = query->limit;
@@ -238,8 +268,19 @@ grpc::Status InspectionServiceImpl::ListJobs(grpc::ServerContext* ctx, const v1:
 }
 
 grpc::Status InspectionServiceImpl::CancelJob(grpc::ServerContext* ctx, const v1::CancelJobRequest* req, v1::Job* out) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
+  auto who = CheckAuth(ctx, "CancelJob");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
+  // Operators cancel their own jobs; another identity's job needs an admin.
+  auto found = jobs_->Find(req->job_id());
+  if (!found.ok()) return Grpc(found.status());
+  const std::string owner = (*found)->Snapshot().owner();
+  if (owner != who->name) {
+    if (Status s = CheckRole(*who, Role::kAdmin, "CancelJob of another identity's job ('" + owner + "')"); !s.ok()) {
+      return Grpc(s);
+    }
+  }
   auto job = jobs_->Cancel(req->job_id());
   if (!job.ok()) return Grpc(job.status());
   *out = *job;
@@ -248,7 +289,9 @@ grpc::Status InspectionServiceImpl::CancelJob(grpc::ServerContext* ctx, const v1
 
 grpc::Status InspectionServiceImpl::DownloadArtifact(grpc::ServerContext* ctx, const v1::DownloadArtifactRequest* req,
                                                      grpc::ServerWriter<v1::ArtifactChunk>* writer) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
+  auto who = CheckAuth(ctx, "DownloadArtifact");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   auto range = MapDownloadRequest(*req);
   if (!range.ok()) return Grpc(range.status());
   auto a = store_->GetArtifact(range->artifact_id);
@@ -284,7 +327,9 @@ grpc::Status InspectionServiceImpl::DownloadArtifact(grpc::ServerContext* ctx, c
 
 grpc::Status InspectionServiceImpl::GetCalibration(grpc::ServerContext* ctx, const v1::GetCalibrationRequest* req,
                                                    v1::Calibration* out) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
+  auto who = CheckAuth(ctx, "GetCalibration");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   auto c = calibrations_->Get(req->calibration_id());
   if (!c.ok()) return Grpc(c.status());
   *out = *c;
@@ -293,36 +338,140 @@ grpc::Status InspectionServiceImpl::GetCalibration(grpc::ServerContext* ctx, con
 
 grpc::Status InspectionServiceImpl::ListCalibrations(grpc::ServerContext* ctx, const v1::ListCalibrationsRequest*,
                                                      v1::ListCalibrationsResponse* out) {
-  if (auto a = CheckAuth(ctx); !a.ok()) return a;
+  auto who = CheckAuth(ctx, "ListCalibrations");
+  if (!who.ok()) return Grpc(who.status());
   auto list = calibrations_->List();
   if (!list.ok()) return Grpc(list.status());
   for (const v1::Calibration& c : *list) *out->add_calibrations() = c;
   return grpc::Status::OK;
 }
 
+grpc::Status InspectionServiceImpl::DeleteJob(grpc::ServerContext* ctx, const v1::DeleteJobRequest* req,
+                                              v1::DeleteResponse* out) {
+  auto who = CheckAuth(ctx, "DeleteJob");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
+  if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
+  auto deleted = options_.janitor->DeleteJob(req->job_id());
+  if (!deleted.ok()) return Grpc(deleted.status());
+  out->set_id(deleted->id);
+  out->set_bytes_freed(deleted->bytes_freed);
+  out->set_artifacts_deleted(deleted->artifacts_deleted);
+  return grpc::Status::OK;
+}
+
+grpc::Status InspectionServiceImpl::DeleteScan(grpc::ServerContext* ctx, const v1::DeleteScanRequest* req,
+                                               v1::DeleteResponse* out) {
+  auto who = CheckAuth(ctx, "DeleteScan");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
+  if (req->scan_id().empty()) return Grpc(Status::InvalidArgument("scan_id is empty"));
+  auto deleted = options_.janitor->DeleteScan(req->scan_id());
+  if (!deleted.ok()) return Grpc(deleted.status());
+  out->set_id(deleted->id);
+  out->set_bytes_freed(deleted->bytes_freed);
+  out->set_artifacts_deleted(deleted->artifacts_deleted);
+  return grpc::Status::OK;
+}
+
+grpc::Status InspectionServiceImpl::PinJob(grpc::ServerContext* ctx, const v1::PinJobRequest* req,
+                                           v1::PinJobResponse* out) {
+  auto who = CheckAuth(ctx, "PinJob");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
+  if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
+  if (Status s = options_.janitor->Pin(req->job_id(), req->pinned()); !s.ok()) return Grpc(s);
+  out->set_job_id(req->job_id());
+  out->set_pinned(req->pinned());
+  return grpc::Status::OK;
+}
+
+namespace {
+
+// A user scene's name: letters, digits, '_', '-' and '.', not starting with '.'; never a path.
+bool IsSceneName(const std::string& name) {
+  if (name.empty() || name.front() == '.' || name.find("..") != std::string::npos) return false;
+  return std::all_of(name.begin(), name.end(),
+                     [](unsigned char c) { return std::isalnum(c) || c == '_' || c == '-' || c == '.'; });
+}
+
+fs::path ScenePath(const fs::path& scene_dir, const std::string& name) { return scene_dir / (name + ".json"); }
+
+// The user scenes of the scene directory, by name (<name>.json).
+std::vector<std::string> SceneNames(const fs::path& scene_dir) {
+  std::vector<std::string> names;
+  if (scene_dir.empty()) return names;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(scene_dir, ec)) {
+    const std::string stem = e.path().stem().string();
+    if (e.path().extension() == ".json" && e.is_regular_file(ec) && IsSceneName(stem)) names.push_back(stem);
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+// What the simulation calls the specimen, as the API shows it: a user scene by its name.
+std::string ShownSpecimen(const std::string& current, const fs::path& scene_dir) {
+  if (scene_dir.empty() || current.rfind("file:", 0) != 0) return current;
+  const fs::path p(current.substr(5));
+  if (p.parent_path() == scene_dir && p.extension() == ".json") return p.stem().string();
+  return current;
+}
+
+// A built-in specimen name as it is, a scene name as the "file:" path the simulation loads.
+// Paths from the caller are refused: the server must not open files a caller names.
+StatusOr<std::string> ResolveSpecimen(const std::string& name, const std::vector<std::string>& builtins,
+                                      const fs::path& scene_dir) {
+  INSPECT_RETURN_IF_ERROR(CheckSpecimenName(name));
+  if (std::find(builtins.begin(), builtins.end(), name) != builtins.end()) return name;
+  if (name.rfind("file:", 0) == 0 || !IsSceneName(name)) {
+    return Status::InvalidArgument("specimen '" + name +
+                                   "' is not a specimen name: give a built-in specimen or the name of a scene in "
+                                   "the server's scene directory (--scene-dir), not a path");
+  }
+  std::string known;
+  for (const auto& n : builtins) known += (known.empty() ? "" : ", ") + n;
+  for (const auto& n : SceneNames(scene_dir)) known += ", " + n;
+  std::error_code ec;
+  if (scene_dir.empty() || !fs::is_regular_file(ScenePath(scene_dir, name), ec)) {
+    return Status::InvalidArgument("unknown specimen '" + name + "'; known: " + known);
+  }
+  return "file:" + ScenePath(scene_dir, name).string();
+}
+
+void FillSpecimens(SimulationControl* sim, const fs::path& scene_dir, v1::ListSpecimensResponse* out) {
+  for (const std::string& n : sim->specimen_names()) out->add_specimens(n);
+  for (const std::string& n : SceneNames(scene_dir)) out->add_specimens(n);
+  out->set_current(ShownSpecimen(sim->specimen(), scene_dir));
+}
+
+}  // namespace
+
 grpc::Status SimulationServiceImpl::ListSpecimens(grpc::ServerContext* ctx, const v1::ListSpecimensRequest*,
                                                   v1::ListSpecimensResponse* out) {
-  if (auto a = CheckBearerToken(ctx, options_.auth_token); !a.ok()) return a;
+  auto who = AuthorizeCall(ctx, options_.access, "ListSpecimens");
+  if (!who.ok()) return Grpc(who.status());
   SimulationControl* sim = rig_->rig().simulation();
   if (!sim) return Grpc(Status::FailedPrecondition("the rig is not simulated"));
-  for (const std::string& s : sim->specimen_names()) out->add_specimens(s);
-  out->set_current(sim->specimen());
+  FillSpecimens(sim, options_.scene_dir, out);
   return grpc::Status::OK;
 }
 
 grpc::Status SimulationServiceImpl::SetSpecimen(grpc::ServerContext* ctx, const v1::SetSpecimenRequest* req,
                                                 v1::ListSpecimensResponse* out) {
-  if (auto a = CheckBearerToken(ctx, options_.auth_token); !a.ok()) return a;
+  auto who = AuthorizeCall(ctx, options_.access, "SetSpecimen");
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   SimulationControl* sim = rig_->rig().simulation();
   if (!sim) return Grpc(Status::FailedPrecondition("the rig is not simulated"));
-  if (Status s = CheckSpecimenName(req->specimen()); !s.ok()) return Grpc(s);
+  auto specimen = ResolveSpecimen(req->specimen(), sim->specimen_names(), options_.scene_dir);
+  if (!specimen.ok()) return Grpc(specimen.status());
   auto lock = rig_->TryAcquire();
   if (!lock.owns_lock()) return Grpc(Status::Aborted("a rig job is running; change the specimen after it"));
-  Status s = sim->SetSpecimen(req->specimen());
+  Status s = sim->SetSpecimen(*specimen);
   if (!s.ok()) return Grpc(s.code() == StatusCode::kNotFound ? Status::InvalidArgument(s.message()) : s);
   spdlog::info("simulated specimen set to {}", req->specimen());
-  for (const std::string& n : sim->specimen_names()) out->add_specimens(n);
-  out->set_current(sim->specimen());
+  FillSpecimens(sim, options_.scene_dir, out);
   return grpc::Status::OK;
 }
 

@@ -4,21 +4,39 @@
 // gRPC status built by ToGrpcStatus (grpc_status.h); no exception crosses this boundary.
 #pragma once
 
+#include <filesystem>
 #include <string>
+#include <string_view>
 
 #include "inspection/v1/inspection.grpc.pb.h"
+#include "server/access_control.h"
 #include "server/calibration_store.h"
 #include "server/data_store.h"
 #include "server/job_manager.h"
+#include "server/retention_sweeper.h"
 #include "server/rig_controller.h"
 
 namespace inspection {
 
 struct ServiceOptions {
   std::string server_version;
-  std::string auth_token;  // when set, every call needs "authorization: Bearer <token>"
+  // Who may call what (access_control.h); nullptr = no authentication: every caller is
+  // "anonymous" with every role.
+  const AccessControl* access = nullptr;
   int64_t max_upload_bytes = int64_t(2) << 30;
+  // User scenes of the simulated rig: SetSpecimen takes a scene by NAME from this folder
+  // (<name>.json); empty = built-in specimens only. Paths ("file:...") are always refused.
+  std::filesystem::path scene_dir;
+  // Deletion, pins (retention_sweeper.h); must outlive the service.
+  DataJanitor* janitor = nullptr;
+  // New scans and uploads are refused with RESOURCE_EXHAUSTED while the data disk has less free
+  // space than this (0 = no reserve).
+  int64_t min_free_bytes = 0;
 };
+
+// Authenticates the caller and checks the role `method` needs: UNAUTHENTICATED without or with
+// unknown credentials, PERMISSION_DENIED naming the missing role. Shared by every service.
+StatusOr<Identity> AuthorizeCall(grpc::ServerContext* ctx, const AccessControl* access, std::string_view method);
 
 class InspectionServiceImpl final : public v1::InspectionService::Service {
  public:
@@ -41,9 +59,14 @@ class InspectionServiceImpl final : public v1::InspectionService::Service {
   grpc::Status GetCalibration(grpc::ServerContext*, const v1::GetCalibrationRequest*, v1::Calibration*) override;
   grpc::Status ListCalibrations(grpc::ServerContext*, const v1::ListCalibrationsRequest*,
                                 v1::ListCalibrationsResponse*) override;
+  grpc::Status DeleteJob(grpc::ServerContext*, const v1::DeleteJobRequest*, v1::DeleteResponse*) override;
+  grpc::Status DeleteScan(grpc::ServerContext*, const v1::DeleteScanRequest*, v1::DeleteResponse*) override;
+  grpc::Status PinJob(grpc::ServerContext*, const v1::PinJobRequest*, v1::PinJobResponse*) override;
 
  private:
-  grpc::Status CheckAuth(grpc::ServerContext* ctx) const;
+  StatusOr<Identity> CheckAuth(grpc::ServerContext* ctx, std::string_view method) const {
+    return AuthorizeCall(ctx, options_.access, method);
+  }
   void FillRigStatus(v1::RigStatus* status);
 
   ServiceOptions options_;
@@ -64,8 +87,5 @@ class SimulationServiceImpl final : public v1::SimulationService::Service {
   ServiceOptions options_;
   RigController* rig_;
 };
-
-// Shared by both services: constant-time bearer token check.
-grpc::Status CheckBearerToken(grpc::ServerContext* ctx, const std::string& token);
 
 }  // namespace inspection

@@ -33,6 +33,17 @@ const char* IdPrefix(v1::JobKind kind) {
   }
 }
 
+// A job that failed writing while the data disk was full failed because of the disk: the
+// admin's fix is space, not a bug report. Other failures, and cancellations, stay as they are.
+Status DiskFullOr(const Status& failure, bool disk_full_seen) {
+  if (!disk_full_seen) return failure;
+  const StatusCode c = failure.code();
+  const bool write_failure = c == StatusCode::kInternal || c == StatusCode::kUnknown || c == StatusCode::kDataLoss ||
+                             failure.message().find("cannot write") != std::string::npos;
+  if (!write_failure) return failure;
+  return Status::ResourceExhausted("data disk full: " + failure.message());
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -189,7 +200,8 @@ void JobManager::Shutdown() {
 }
 
 StatusOr<std::shared_ptr<JobRecord>> JobManager::Submit(v1::JobKind kind, const std::string& request_id,
-                                                        const std::string& label, const Prepare& prepare) {
+                                                        const std::string& label, const Prepare& prepare,
+                                                        const std::string& owner) {
   if (!request_id.empty()) {
     std::lock_guard<std::mutex> lock(mu_);
     INSPECT_ASSIGN_OR_RETURN(RecordPtr existing, FindDuplicate(kind, request_id));
@@ -205,18 +217,25 @@ StatusOr<std::shared_ptr<JobRecord>> JobManager::Submit(v1::JobKind kind, const 
     if (existing) return existing;
   }
   INSPECT_RETURN_IF_ERROR(Admit(kind));
+  const auto* reconstruct = std::get_if<ReconstructWork>(&work);
+  const std::string source_scan = reconstruct ? reconstruct->source_scan_id : std::string();
+  if (!source_scan.empty() && deleting_.count(source_scan)) {
+    return Status::NotFound("scan_id '" + source_scan + "' is being deleted");
+  }
   v1::Job job;
   job.set_job_id(NewId(IdPrefix(kind)));
   job.set_kind(kind);
   job.set_state(v1::JOB_STATE_QUEUED);
   job.set_request_id(request_id);
   job.set_label(label);
+  job.set_owner(owner);
   *job.mutable_create_time() = TimeUtil::GetCurrentTime();
   FillQueuedJob(work, &job);
   INSPECT_RETURN_IF_ERROR(store_->PutJob(job));
   auto r = std::make_shared<JobRecord>(std::move(job));
   const std::string description = DescribeWork(work);
   live_[r->job_id()] = r;
+  if (!source_scan.empty()) scan_readers_[r->job_id()] = source_scan;
   Queue& queue = QueueFor(kind);
   queue.push_back({r, std::move(work)});
   // Emitted under mu_, so the QUEUED event is the job's first even if a worker takes it at once.
@@ -306,6 +325,32 @@ StatusOr<v1::Job> JobManager::Cancel(const std::string& job_id) {
   return r->Snapshot();
 }
 
+Status JobManager::BeginDeletion(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (auto it = live_.find(job_id); it != live_.end() && !it->second->terminal()) {
+    return Status::FailedPrecondition("job " + job_id + " is " + v1::JobState_Name(it->second->Snapshot().state()) +
+                                      "; cancel it before deleting it");
+  }
+  for (const auto& [reader, scan] : scan_readers_) {
+    if (scan == job_id) {
+      return Status::FailedPrecondition("scan " + job_id + " is being reconstructed by job " + reader +
+                                        "; delete it after that job ends");
+    }
+  }
+  if (!deleting_.insert(job_id).second) return Status::Aborted("job " + job_id + " is being deleted already");
+  return Status::Ok();
+}
+
+void JobManager::EndDeletion(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  deleting_.erase(job_id);
+}
+
+void JobManager::Forget(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (auto it = live_.find(job_id); it != live_.end() && it->second->terminal()) live_.erase(it);
+}
+
 int JobManager::queued_rig_jobs() const {
   std::lock_guard<std::mutex> lock(mu_);
   return int(rig_queue_.size());
@@ -342,7 +387,12 @@ void JobManager::Finish(const RecordPtr& r, const StatusOr<v1::JobResult>& outco
     if (!s.ok()) spdlog::error("job {}: cannot persist event: {}", e.job_id(), s.ToString());
     if (options_.on_event) options_.on_event(e);
   };
-  if (!r->End(outcome, fill, persist)) return;
+  const bool ended = r->End(outcome, fill, persist);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    scan_readers_.erase(r->job_id());  // its reads are over, whichever way it ended
+  }
+  if (!ended) return;
   if (status.ok()) {
     spdlog::info("job {} succeeded", job.job_id());
   } else {
@@ -382,12 +432,20 @@ void JobManager::Worker(Queue* queue, bool rig) {
       } else {
         Status s = store_->PutJob(r->MarkRunning());
         if (!s.ok()) spdlog::error("job {}: cannot persist: {}", r->job_id(), s.ToString());
+        bool disk_full_seen = false;
         JobContext context;
         context.job_id = r->job_id();
         context.cancel = &r->cancel_requested;
-        context.emit = [this, &r](const EventFill& fill) { Emit(r, fill); };
+        context.emit = [this, &r, &disk_full_seen](const EventFill& fill) {
+          Emit(r, fill);
+          if (options_.disk_full && !disk_full_seen) disk_full_seen = options_.disk_full();
+        };
         const ScopedLogJob log_job(r->job_id());  // log lines of the work name the job
         outcome = runner_->Run(job->work, context);
+        if (!outcome->ok() && options_.disk_full) {
+          disk_full_seen = disk_full_seen || options_.disk_full();
+          outcome = StatusOr<v1::JobResult>(DiskFullOr(outcome->status(), disk_full_seen));
+        }
       }
     }  // the work (an uploaded stack with it) is gone before the job ends
     if (rig) {

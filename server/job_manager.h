@@ -20,6 +20,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -83,6 +84,12 @@ struct JobManagerOptions {
   // Sees every event once it is persisted (metrics, dashboard). Called on the emitting thread,
   // sometimes under the manager's lock: it must be quick and must not call the manager.
   std::function<void(const v1::JobEvent&)> on_event;
+  // True when the data disk is (nearly) full now. Sampled at every event of a running job and
+  // when it ends: a job that failed writing (INTERNAL, UNKNOWN, DATA_LOSS, or "cannot write")
+  // while the disk was full ends RESOURCE_EXHAUSTED "data disk full" instead. The work folders
+  // it wrote are gone by then (the runner removes them before returning), so the free space
+  // seen after the failure alone would not tell. Empty = never.
+  std::function<bool()> disk_full;
 };
 
 class JobManager {
@@ -100,10 +107,10 @@ class JobManager {
   // manager's lock) and queues it. With a request id that an earlier job of this kind carries,
   // returns that job and does not call `prepare`. Errors of `prepare` come back unchanged; then,
   // and for UNAVAILABLE (shutting down), ABORTED and RESOURCE_EXHAUSTED (see above), no job is
-  // created.
+  // created. `owner` is the identity that started the job (recorded in Job.owner).
   using Prepare = std::function<StatusOr<JobWork>()>;
   StatusOr<std::shared_ptr<JobRecord>> Submit(v1::JobKind kind, const std::string& request_id, const std::string& label,
-                                              const Prepare& prepare);
+                                              const Prepare& prepare, const std::string& owner = "");
 
   // A live record, or one rebuilt from the store (events included) for a job of an earlier run.
   StatusOr<std::shared_ptr<JobRecord>> Find(const std::string& job_id);
@@ -111,6 +118,14 @@ class JobManager {
   std::shared_ptr<JobRecord> FindLive(const std::string& job_id);
   // Cancels a queued job at once; a running job is asked to stop (its runner sees the flag).
   StatusOr<v1::Job> Cancel(const std::string& job_id);
+
+  // Data lifecycle. Marks a finished job as being deleted: FAILED_PRECONDITION while it is
+  // queued or running or while a queued or running reconstruction reads its scan; meanwhile a
+  // reconstruction of that scan is refused (NOT_FOUND). EndDeletion lifts the mark.
+  Status BeginDeletion(const std::string& job_id);
+  void EndDeletion(const std::string& job_id);
+  // Drops a finished job's record from memory so the store's copy is served (after it changed).
+  void Forget(const std::string& job_id);
 
   int queued_rig_jobs() const;
   int rig_queue_capacity() const { return options_.rig_queue_capacity; }
@@ -150,6 +165,8 @@ class JobManager {
   Queue rig_queue_;
   Queue reconstruct_queue_;
   RecordPtr running_rig_;
+  std::map<std::string, std::string> scan_readers_;  // unfinished reconstruct job -> scan it reads
+  std::set<std::string> deleting_;                   // jobs (and so scans) being deleted
 
   std::thread rig_thread_, reconstruct_thread_;
 };

@@ -99,12 +99,16 @@ int main(int argc, char** argv) {
     return 2;
   }
   ServerOptions opt = std::move(*options);
+  // Reflection not set anywhere: on without authentication, off with it (InspectionServer).
+  if (resolved->sources.at("reflection") == "default") opt.reflection.reset();
 
   // Block termination signals in every thread; one thread waits for them and shuts down.
+  // SIGHUP re-reads the access policy and token files (certificates reload by themselves).
   sigset_t signals;
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   std::unique_ptr<Rig> rig;
@@ -138,10 +142,22 @@ int main(int argc, char** argv) {
                       std::string("inspectd http on ") + scheme + "://" + (*server)->http_address() + "/");
   }
   std::thread waiter([&] {
-    int sig = 0;
-    sigwait(&signals, &sig);
-    spdlog::info("signal {}: shutting down", sig);
-    (*server)->Shutdown();
+    for (;;) {
+      int sig = 0;
+      sigwait(&signals, &sig);
+      if (sig == SIGHUP) {
+        Status s = (*server)->ReloadAccessPolicy();
+        if (s.ok()) {
+          spdlog::info("SIGHUP: access policy and tokens reloaded");
+        } else {
+          spdlog::error("SIGHUP: access policy not reloaded, the previous one stays: {}", s.message());
+        }
+        continue;
+      }
+      spdlog::info("signal {}: shutting down", sig);
+      (*server)->Shutdown();
+      return;
+    }
   });
   (*server)->Wait();
   waiter.join();

@@ -1,6 +1,8 @@
 // inspectd --no-rig: rig calls refused with FAILED_PRECONDITION, the rest served (no_rig_service.h).
 #include "server/no_rig_service.h"
 
+#include "server/grpc_status.h"
+
 namespace inspection {
 
 std::string NoRigMessage(std::string_view method) {
@@ -9,9 +11,10 @@ std::string NoRigMessage(std::string_view method) {
 }
 
 namespace {
-// Authentication first: an unauthenticated caller learns nothing about the server's role.
+// Authentication and the method's role first: an unauthenticated caller learns nothing about
+// the server's role.
 grpc::Status RefuseAfterAuth(grpc::ServerContext* ctx, const ServiceOptions& options, std::string_view method) {
-  if (auto a = CheckBearerToken(ctx, options.auth_token); !a.ok()) return a;
+  if (auto who = AuthorizeCall(ctx, options.access, method); !who.ok()) return ToGrpcStatus(who.status());
   return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, NoRigMessage(method));
 }
 }  // namespace

@@ -21,9 +21,9 @@ std::string NoRigMessage(std::string_view method);
 // the service (a test checks this against the proto, so a new RPC cannot fall through as
 // UNIMPLEMENTED unnoticed).
 inline constexpr std::array<std::string_view, 4> kRigOnlyMethods = {"GetRigStatus", "Calibrate", "Scan", "ResetRig"};
-inline constexpr std::array<std::string_view, 8> kNoRigServedMethods = {
-    "Reconstruct", "WatchJob",         "GetJob",         "ListJobs",
-    "CancelJob",   "DownloadArtifact", "GetCalibration", "ListCalibrations"};
+inline constexpr std::array<std::string_view, 11> kNoRigServedMethods = {
+    "Reconstruct",    "WatchJob",         "GetJob",    "ListJobs",   "CancelJob", "DownloadArtifact",
+    "GetCalibration", "ListCalibrations", "DeleteJob", "DeleteScan", "PinJob"};
 
 class NoRigInspectionService final : public v1::InspectionService::Service {
  public:
@@ -63,6 +63,15 @@ class NoRigInspectionService final : public v1::InspectionService::Service {
   grpc::Status ListCalibrations(grpc::ServerContext* c, const v1::ListCalibrationsRequest* r,
                                 v1::ListCalibrationsResponse* o) override {
     return served_->ListCalibrations(c, r, o);
+  }
+  grpc::Status DeleteJob(grpc::ServerContext* c, const v1::DeleteJobRequest* r, v1::DeleteResponse* o) override {
+    return served_->DeleteJob(c, r, o);
+  }
+  grpc::Status DeleteScan(grpc::ServerContext* c, const v1::DeleteScanRequest* r, v1::DeleteResponse* o) override {
+    return served_->DeleteScan(c, r, o);
+  }
+  grpc::Status PinJob(grpc::ServerContext* c, const v1::PinJobRequest* r, v1::PinJobResponse* o) override {
+    return served_->PinJob(c, r, o);
   }
 
  private:

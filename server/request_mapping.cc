@@ -360,4 +360,37 @@ Status CheckSpecimenName(const std::string& specimen) {
   return Status::Ok();
 }
 
+namespace {
+Status CheckTextFields(const google::protobuf::Message& message, const std::string& prefix, int depth) {
+  using google::protobuf::FieldDescriptor;
+  if (depth > 8) return Status::InvalidArgument(prefix + " nests too deep");  // no request nests this far
+  const google::protobuf::Reflection* reflection = message.GetReflection();
+  std::vector<const FieldDescriptor*> fields;
+  reflection->ListFields(message, &fields);  // only fields that are set: unset text is empty
+  for (const FieldDescriptor* f : fields) {
+    const std::string path = prefix.empty() ? f->name() : prefix + "." + f->name();
+    const int count = f->is_repeated() ? reflection->FieldSize(message, f) : 1;
+    for (int i = 0; i < count; ++i) {
+      const std::string item = f->is_repeated() ? path + "[" + std::to_string(i) + "]" : path;
+      if (f->type() == FieldDescriptor::TYPE_STRING) {
+        std::string scratch;
+        const std::string& text = f->is_repeated() ? reflection->GetRepeatedStringReference(message, f, i, &scratch)
+                                                   : reflection->GetStringReference(message, f, &scratch);
+        if (text.size() > kMaxRequestTextBytes) {
+          return Status::InvalidArgument(item + " is " + std::to_string(text.size()) + " bytes; at most " +
+                                         std::to_string(kMaxRequestTextBytes));
+        }
+      } else if (f->cpp_type() == FieldDescriptor::CPPTYPE_MESSAGE) {
+        const google::protobuf::Message& nested =
+            f->is_repeated() ? reflection->GetRepeatedMessage(message, f, i) : reflection->GetMessage(message, f);
+        INSPECT_RETURN_IF_ERROR(CheckTextFields(nested, item, depth + 1));
+      }
+    }
+  }
+  return Status::Ok();
+}
+}  // namespace
+
+Status CheckRequestTextLimits(const google::protobuf::Message& request) { return CheckTextFields(request, "", 0); }
+
 }  // namespace inspection

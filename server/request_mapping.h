@@ -117,4 +117,12 @@ StatusOr<ArtifactRange> MapDownloadRequest(const v1::DownloadArtifactRequest& re
 
 Status CheckSpecimenName(const std::string& specimen);
 
+// Free text a caller can make the server keep, list or log (label, request_id, ids, paths,
+// names, page tokens) is bounded: every string field of `request`, nested messages and
+// repeated fields included, holds at most kMaxRequestTextBytes bytes. INVALID_ARGUMENT names
+// the field path ("start.label is 3145728 bytes; at most 256"). Bytes fields (file data) are
+// not text and are not checked here.
+inline constexpr size_t kMaxRequestTextBytes = 256;
+Status CheckRequestTextLimits(const google::protobuf::Message& request);
+
 }  // namespace inspection

@@ -147,10 +147,16 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
       {"listen", &C::listen, "host:port to listen on (port 0 = any free port)"},
       {"data_dir", &C::data_dir, "where scans, artifacts, calibrations and the job database live"},
       {"queue_capacity", &C::queue_capacity, "rig jobs that may wait behind the running one"},
-      {"reflection", &C::reflection, "gRPC server reflection"},
-      {"tls_cert", &C::tls_cert, "PEM certificate chain; enables TLS with tls_key"},
+      {"reflection", &C::reflection,
+       "gRPC server reflection (by default off when authentication is configured, else on)"},
+      {"tls_cert", &C::tls_cert, "PEM certificate chain; enables TLS with tls_key (reloaded when the file changes)"},
       {"tls_key", &C::tls_key, "PEM private key"},
+      {"tls_client_ca", &C::tls_client_ca,
+       "PEM CA bundle: client certificates become mandatory (mTLS); the identity is the certificate's CN or a SAN"},
+      {"insecure", &C::insecure, "allow plaintext (no TLS) on a non-loopback listen address"},
       {"auth_token_file", &C::auth_token_file, "file holding a bearer token that every call must present"},
+      {"token_file", &C::token_file, "named bearer tokens, one 'identity token' line per identity"},
+      {"policy", &C::policy, "JSON access policy: identities -> roles (viewer, operator, engineer, admin)"},
       {"rig_config", &C::rig_config, "rig configuration file (JSON, devices/README.md); empty: the simulated rig"},
       {"degraded", &C::degraded, "start even when configured devices are absent (health NOT_SERVING until ResetRig)"},
       {"specimen", &C::specimen, "simulated rig: specimen name or file:/path/scene.json"},
@@ -163,6 +169,21 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
        "FAILED_PRECONDITION"},
       {"http_listen", &C::http_listen,
        "host:port for Prometheus /metrics and the web dashboard (port 0 = any); empty: off"},
+      {"scene_dir", &C::scene_dir,
+       "simulated rig: folder of user scenes (<name>.json) that SetSpecimen accepts by name; empty: built-ins only"},
+      {"audit_log", &C::audit_log,
+       "audit trail (JSON Lines, rotated at 16 MiB, 8 kept) of every mutating or denied call; empty: "
+       "<data_dir>/audit/audit.jsonl"},
+      {"min_free_mb", &C::min_free_mb,
+       "free-space reserve of the data disk (MiB): below it new scans and uploads are refused with RESOURCE_EXHAUSTED; "
+       "0: none"},
+      {"retention_max_age_s", &C::retention_max_age_s,
+       "retention: finished jobs older than this (seconds) are deleted, oldest first; 0: no age limit"},
+      {"retention_max_mb", &C::retention_max_mb,
+       "retention: finished jobs' data (artifacts and stored stacks) is kept below this many MiB; 0: no limit"},
+      {"retention_keep_last", &C::retention_keep_last,
+       "retention: the newest N finished jobs are kept whatever the limits (pinned jobs always are)"},
+      {"retention_interval_s", &C::retention_interval_s, "retention: seconds between sweeps"},
   };
   return keys;
 }
@@ -305,6 +326,22 @@ Status ValidateConfig(const InspectdConfig& c) {
   if (c.no_rig && !c.rig_config.empty()) {
     return Status::InvalidArgument("no_rig and rig_config exclude each other (rig_config '" + c.rig_config + "')");
   }
+  if (!c.tls_client_ca.empty() && c.tls_cert.empty()) {
+    return Status::InvalidArgument("tls_client_ca needs tls_cert and tls_key (mTLS is TLS first)");
+  }
+  if (!c.auth_token_file.empty() && !c.token_file.empty()) {
+    return Status::InvalidArgument("auth_token_file and token_file exclude each other (one token, or named tokens)");
+  }
+  if (!c.policy.empty() && c.token_file.empty() && c.tls_client_ca.empty()) {
+    return Status::InvalidArgument("policy needs identities: token_file or tls_client_ca");
+  }
+  if (c.min_free_mb < 0) return bad("min_free_mb", std::to_string(c.min_free_mb), "must be >= 0");
+  if (c.retention_keep_last < 0) {
+    return bad("retention_keep_last", std::to_string(c.retention_keep_last), "must be >= 0");
+  }
+  if (c.retention_interval_s < 1) {
+    return bad("retention_interval_s", std::to_string(c.retention_interval_s), "must be >= 1");
+  }
   if (c.tls_cert.empty() != c.tls_key.empty()) {
     return Status::InvalidArgument("TLS needs both tls_cert and tls_key (only " +
                                    std::string(c.tls_cert.empty() ? "tls_key" : "tls_cert") + " is set)");
@@ -329,6 +366,17 @@ StatusOr<ServerOptions> ToServerOptions(const InspectdConfig& c) {
   o.reflection = c.reflection;
   o.tls_cert_file = c.tls_cert;
   o.tls_key_file = c.tls_key;
+  o.tls_client_ca_file = c.tls_client_ca;
+  o.insecure = c.insecure;
+  o.token_file = c.token_file;
+  o.policy_file = c.policy;
+  o.scene_dir = c.scene_dir;
+  o.audit_log = c.audit_log;
+  o.min_free_mb = c.min_free_mb;
+  o.retention.max_age_s = int64_t(std::min<uint64_t>(c.retention_max_age_s, uint64_t(1) << 40));
+  o.retention.max_bytes = int64_t(std::min<uint64_t>(c.retention_max_mb, uint64_t(1) << 40) << 20);
+  o.retention.keep_last = c.retention_keep_last;
+  o.retention_interval_s = c.retention_interval_s;
   o.no_rig = c.no_rig;
   o.http_listen_address = c.http_listen;
   o.simulation.specimen = c.specimen;

@@ -22,19 +22,30 @@ struct InspectdConfig {
   std::string listen = ServerOptions{}.listen_address;
   std::string data_dir = ServerOptions{}.data_dir.string();
   int queue_capacity = ServerOptions{}.rig_queue_capacity;
-  bool reflection = ServerOptions{}.reflection;
+  bool reflection = true;  // as a default: on unless authentication is configured (main.cc)
   std::string tls_cert;
   std::string tls_key;
+  std::string tls_client_ca;  // PEM CA bundle: client certificates become mandatory (mTLS)
+  bool insecure = false;      // plaintext beyond loopback
   std::string auth_token_file;
+  std::string token_file;  // named tokens: "identity token" per line
+  std::string policy;      // JSON policy file: identities -> roles
   std::string rig_config;  // empty = the simulated rig
   bool degraded = false;
   std::string specimen = SimulatedRigOptions{}.specimen;
   uint64_t seed = SimulatedRigOptions{}.seed;
   std::string camera_size = "1024x768";  // simulated rig: WIDTHxHEIGHT
   std::string log_level = "info";
-  std::string log_format = "text";  // text or json (one object per line)
-  bool no_rig = false;              // reconstruct only: no rig is opened
-  std::string http_listen;          // host:port for /metrics and the dashboard; empty = none
+  std::string log_format = "text";   // text or json (one object per line)
+  bool no_rig = false;               // reconstruct only: no rig is opened
+  std::string http_listen;           // host:port for /metrics and the dashboard; empty = none
+  std::string scene_dir;             // simulated rig: user scenes by name; empty = built-ins only
+  std::string audit_log;             // JSON Lines audit trail; empty = <data_dir>/audit/audit.jsonl
+  int min_free_mb = 0;               // free-space reserve for new scans and uploads; 0 = none
+  uint64_t retention_max_age_s = 0;  // finished jobs older than this are deleted; 0 = no limit
+  uint64_t retention_max_mb = 0;     // finished jobs' data above this is deleted, oldest first; 0 = none
+  int retention_keep_last = 0;       // the newest N finished jobs are always kept
+  int retention_interval_s = ServerOptions{}.retention_interval_s;
 
   bool operator==(const InspectdConfig&) const = default;
 };

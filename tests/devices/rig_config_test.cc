@@ -212,3 +212,20 @@ TEST_F(RealRigTest, ProjectorNoneAcceptsOnlyUniformPatterns) {
 
 }  // namespace
 }  // namespace inspection
+
+namespace inspection {
+namespace {
+
+// Found by fuzz_rig_config (tests/fuzz/regressions/fuzz_rig_config/): a number that overflows a
+// double made nlohmann throw out_of_range, which ParseRigConfig did not catch (terminate).
+TEST(RigConfigRegressionTest, NumberOverflowIsInvalidArgumentNotACrash) {
+  StatusOr<RigConfig> c = ParseRigConfig(R"({"m": 0.755545555555e55555555 "x"})");
+  ASSERT_FALSE(c.ok());
+  EXPECT_EQ(c.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(c.status().message(),
+            "rig config: not valid JSON: [json.exception.out_of_range.406] number overflow parsing "
+            "'0.755545555555e55555555'");
+}
+
+}  // namespace
+}  // namespace inspection

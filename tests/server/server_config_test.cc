@@ -39,7 +39,9 @@ TEST(ServerConfig, DefaultsAreTheServerDefaults) {
   EXPECT_EQ(options->listen_address, d.listen_address);
   EXPECT_EQ(options->data_dir, d.data_dir);
   EXPECT_EQ(options->rig_queue_capacity, d.rig_queue_capacity);
-  EXPECT_EQ(options->reflection, d.reflection);
+  // Set as configured; main.cc leaves it unset (on unless authentication) when no layer set it.
+  EXPECT_EQ(options->reflection, std::optional<bool>(true));
+  EXPECT_FALSE(d.reflection.has_value());
   EXPECT_EQ(options->tls_cert_file, "");
   EXPECT_EQ(options->auth_token, "");
   EXPECT_EQ(options->simulation.specimen, d.simulation.specimen);
@@ -53,7 +55,7 @@ TEST(ServerConfig, NamesDerivedFromTheKey) {
   EXPECT_EQ(key->FlagName(), "--auth-token-file");
   EXPECT_EQ(key->EnvironmentName(), "INSPECTD_AUTH_TOKEN_FILE");
   EXPECT_EQ(FindConfigKey("auth-token-file"), nullptr);  // file keys use '_' only
-  EXPECT_EQ(InspectdConfigKeys().size(), 16u);           // every inspectd flag before --config
+  EXPECT_EQ(InspectdConfigKeys().size(), 27u);           // every inspectd flag before --config
 }
 
 TEST(ServerConfig, OperationsSettingsAreCheckedAndReachServerOptions) {
@@ -292,6 +294,44 @@ TEST_F(ConfigFileTest, TokenFileReadIntoServerOptions) {
   EXPECT_EQ(o.status().message(), "auth_token_file '" + c.auth_token_file + "' is unreadable or empty");
   c.auth_token_file = (dir_ / "absent").string();
   EXPECT_FALSE(ToServerOptions(c).ok());
+}
+
+}  // namespace
+}  // namespace inspection
+
+namespace inspection {
+namespace {
+
+TEST(ServerConfigTrust, TrustSettingsReachServerOptionsAndAreCheckedTogether) {
+  InspectdConfig c;
+  c.tls_cert = "/pki/server.pem";
+  c.tls_key = "/pki/server.key";
+  c.tls_client_ca = "/pki/clients.pem";
+  c.insecure = true;
+  c.token_file = "/pki/tokens";
+  c.policy = "/pki/policy.json";
+  c.scene_dir = "/srv/scenes";
+  c.audit_log = "/var/log/inspectd/audit.jsonl";
+  auto o = ToServerOptions(c);
+  ASSERT_TRUE(o.ok()) << o.status().ToString();
+  EXPECT_EQ(o->tls_client_ca_file, "/pki/clients.pem");
+  EXPECT_TRUE(o->insecure);
+  EXPECT_EQ(o->token_file, "/pki/tokens");
+  EXPECT_EQ(o->policy_file, "/pki/policy.json");
+  EXPECT_EQ(o->scene_dir, "/srv/scenes");
+  EXPECT_EQ(o->audit_log, "/var/log/inspectd/audit.jsonl");
+
+  InspectdConfig no_tls;
+  no_tls.tls_client_ca = "/pki/clients.pem";
+  EXPECT_EQ(ValidateConfig(no_tls).message(), "tls_client_ca needs tls_cert and tls_key (mTLS is TLS first)");
+  InspectdConfig both_tokens;
+  both_tokens.auth_token_file = "/a";
+  both_tokens.token_file = "/b";
+  EXPECT_EQ(ValidateConfig(both_tokens).message(),
+            "auth_token_file and token_file exclude each other (one token, or named tokens)");
+  InspectdConfig lonely_policy;
+  lonely_policy.policy = "/pki/policy.json";
+  EXPECT_EQ(ValidateConfig(lonely_policy).message(), "policy needs identities: token_file or tls_client_ca");
 }
 
 }  // namespace
