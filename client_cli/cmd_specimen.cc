@@ -33,7 +33,8 @@ void RegisterSpecimenCommands(CLI::App& app, CliContext& context) {
     return PrintSpecimens(list, session.out);
   });
 
-  auto* set_cmd = specimen_cmd->add_subcommand("set", "Load a specimen (name or file:/path/scene.json)");
+  auto* set_cmd = specimen_cmd->add_subcommand(
+      "set", "Load a specimen: a built-in name or a scene of the server's --scene-dir, by name");
   auto specimen = std::make_shared<std::string>();
   set_cmd->add_option("name", *specimen, "Specimen")->required();
   context.AddCommand(set_cmd, [specimen](Session& session) {
