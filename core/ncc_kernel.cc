@@ -45,8 +45,13 @@ TemplateStats MakeTemplateStats(const cv::Mat& templ, int correlation_window_px)
 namespace {
 
 // Row kernels, kept apart so they vectorise (AVX2 where the CPU has it, chosen at run time by
-// target_clones).
+// target_clones). Clang rejects target_clones on function templates; its builds (the libFuzzer
+// targets, tests/fuzz/run_fuzz.sh) get the portable code, which is the same arithmetic.
+#if defined(__clang__)
+#define INSPECT_NCC_ROW_KERNEL
+#else
 #define INSPECT_NCC_ROW_KERNEL __attribute__((target_clones("avx2", "default")))
+#endif
 
 // out[x] = sum of v[x .. x + k - 1], x = 0..count-1.
 template <typename A>
