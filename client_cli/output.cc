@@ -114,6 +114,19 @@ void PrintDepthSummary(const v1::DepthSummary& d) {
                       d.height(), d.pixel_size_um(), d.frame_count(), d.valid_percent(), d.z_min_um(), d.z_max_um());
   if (d.engine_seconds() > 0.0) std::cout << Format(", engine %.3f s", d.engine_seconds());
   std::cout << '\n';
+  // Scans: the mode that ran and, for AUTO, why; the integral methods with their figures.
+  if (!d.illumination().empty()) {
+    std::cout << "illumination: " << d.illumination();
+    if (!d.illumination_decision().empty()) std::cout << " (" << d.illumination_decision() << ')';
+    std::cout << '\n';
+  }
+  if (d.method() != v1::RECONSTRUCTION_METHOD_UNSPECIFIED && d.method() != v1::RECONSTRUCTION_METHOD_SFF) {
+    std::cout << "method: "
+              << v1::ReconstructionMethod_Name(d.method()).substr(std::string("RECONSTRUCTION_METHOD_").size());
+    if (d.method() == v1::RECONSTRUCTION_METHOD_ISFF_FAST)
+      std::cout << Format(", threshold %.2f", d.isff_fast_threshold());
+    std::cout << Format(", frames searched %.0f %%", 100.0 * d.frames_searched_fraction()) << '\n';
+  }
   if (d.has_ground_truth()) {
     std::cout << Format("vs ground truth: RMSE %.3f um, mean |error| %.3f um\n", d.rmse_um(), d.mean_abs_error_um());
   }

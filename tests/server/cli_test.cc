@@ -44,6 +44,9 @@ TEST_F(CliTest, ScanWritesResultFilesAndPrintsFolderAndDepthSummary) {
   char rmse[64];
   std::snprintf(rmse, sizeof rmse, "RMSE %.3f um", job.result().depth().rmse_um());
   EXPECT_NE(r.out.find(rmse), std::string::npos) << r.out;
+  // The uncalibrated server's default illumination, named in the summary.
+  EXPECT_EQ(job.result().depth().illumination(), "STD");
+  EXPECT_NE(r.out.find("\nillumination: STD\n"), std::string::npos) << r.out;
 }
 
 TEST_F(CliTest, JsonScanIsOneEventPerLineThenOneResultObject) {
