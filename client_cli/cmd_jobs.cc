@@ -38,6 +38,7 @@ std::string JobLine(const v1::Job& job) {
   if (job.state() == v1::JOB_STATE_QUEUED && job.queue_position() > 0)
     line += Format(" queue#%d", job.queue_position());
   if (!job.label().empty()) line += " label=" + job.label();
+  if (job.pinned()) line += " pinned";
   if (job.state() == v1::JOB_STATE_FAILED) {
     line += std::string(" ") + CodeName(static_cast<grpc::StatusCode>(job.error_code())) + ": " + job.error_message();
   }

@@ -15,5 +15,6 @@ void RegisterReconstructCommand(CLI::App& app, CliContext& context);   // recons
 void RegisterJobCommands(CLI::App& app, CliContext& context);          // jobs, watch, cancel, delete, pin, download
 void RegisterCalibrationCommands(CLI::App& app, CliContext& context);  // calibrate, calibration show|list
 void RegisterSpecimenCommands(CLI::App& app, CliContext& context);     // specimen list|set
+void RegisterRecipeCommands(CLI::App& app, CliContext& context);       // recipe create|update|get|list|delete
 
 }  // namespace inspection::client::cli

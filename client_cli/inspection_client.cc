@@ -588,4 +588,9 @@ grpc::Status InspectionClient::SetSpecimen(const std::string& specimen, v1::List
   return sim_stub_->SetSpecimen(&ctx, request, response);
 }
 
+void InspectionClient::PrepareUnary(grpc::ClientContext* ctx) const {
+  Prepare(ctx);
+  SetUnaryDeadline(ctx);
+}
+
 }  // namespace inspection::client

@@ -91,10 +91,19 @@ class InspectionClient {
   grpc::Status ListSpecimens(v1::ListSpecimensResponse* response);
   grpc::Status SetSpecimen(const std::string& specimen, v1::ListSpecimensResponse* response);
 
+  // Recipes (inspection_client_recipes.cc). version 0 = the current one.
+  grpc::Status CreateRecipe(const v1::Recipe& recipe, v1::Recipe* stored);
+  grpc::Status UpdateRecipe(const v1::Recipe& recipe, int expected_version, v1::Recipe* stored);
+  grpc::Status GetRecipe(const std::string& recipe_id, int version, v1::Recipe* recipe);
+  grpc::Status ListRecipes(v1::ListRecipesResponse* response);
+  grpc::Status DeleteRecipe(const std::string& recipe_id, v1::DeleteResponse* response);
+
   std::shared_ptr<grpc::Channel> channel() const { return channel_; }
 
  private:
   void Prepare(grpc::ClientContext* ctx) const;
+  // Credentials and the unary deadline: every unary call's context.
+  void PrepareUnary(grpc::ClientContext* ctx) const;
   grpc::Status FollowStream(grpc::ClientReaderInterface<v1::JobEvent>* reader, const EventCallback& on_event,
                             v1::Job* job);
 

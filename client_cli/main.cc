@@ -24,6 +24,7 @@ int Main(int argc, char** argv) {
   RegisterJobCommands(app, context);
   RegisterCalibrationCommands(app, context);
   RegisterSpecimenCommands(app, context);
+  RegisterRecipeCommands(app, context);
 
   try {
     app.parse(argc, argv);

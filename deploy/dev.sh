@@ -2,10 +2,12 @@
 # One entry point for a fresh Debian 12 machine (README "Quick start"):
 #   deploy/dev.sh demo   install what is missing, build, start inspectd on the simulated rig,
 #                        scan, write the depth map files and print where they are
-#   deploy/dev.sh test   install what is missing, build, run the whole test suite, then build
-#                        and run the unit tests again under AddressSanitizer + UBSan
+#   deploy/dev.sh test   install what is missing, build, run the whole test suite, run every
+#                        libFuzzer target for FUZZ_SECONDS from its seed corpus, then build and
+#                        run the unit tests again under AddressSanitizer + UBSan
 # Environment: BUILD_DIR (default build), JOBS (default 2), SKIP_SANITIZERS=1 to skip the
-# sanitizer pass, DEMO_OUT (default out/scan-<time>).
+# sanitizer pass, FUZZ_SECONDS (default 30 per target; 0 skips fuzzing), DEMO_OUT (default
+# out/scan-<time>).
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -26,6 +28,7 @@ packages=(
   python3 python3-yaml  # deploy/validate_manifests.sh, tests/fault/kill9_test.sh (Debian's /usr/bin/python3)
   libcpp-httplib-dev  # inspectd's HTTP port: /metrics and the dashboard
   prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
+  clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
 )
 
 install_missing() {
@@ -76,6 +79,10 @@ demo() {
 test_all() {
   configure_and_build "$build"
   (cd "$build" && ctest --output-on-failure -j "$jobs" --timeout 600)
+  if [[ "${FUZZ_SECONDS:-30}" != 0 ]]; then
+    echo "== libFuzzer targets, ${FUZZ_SECONDS:-30} s each"
+    FUZZ_BUILD_DIR="$build-fuzz" JOBS="$jobs" tests/fuzz/run_fuzz.sh "${FUZZ_SECONDS:-30}"
+  fi
   if [[ "${SKIP_SANITIZERS:-0}" != 1 ]]; then
     echo "== AddressSanitizer + UndefinedBehaviorSanitizer build"
     # -O1 -g1: sanitizers need no more, and the build stays quick on two cores.

@@ -4,9 +4,13 @@
 #include <zip.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstdio>
 #include <fstream>
 #include <memory>
 #include <vector>
+
+#include "server/data_lifecycle.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -63,6 +67,64 @@ Status ZipFolder(const fs::path& folder, const fs::path& zip_path) {
     Status s = Status::Internal("cannot write " + zip_path.string() + ": " + zip_strerror(za));
     zip_discard(za);
     return s;
+  }
+  return Status::Ok();
+}
+
+namespace {
+
+// Relative, no "..", no absolute or drive-qualified root: an entry cannot leave the folder.
+bool SafeEntryName(const std::string& name) {
+  if (name.empty() || name.front() == '/' || name.find('\\') != std::string::npos) return false;
+  const fs::path p(name);
+  if (p.has_root_path()) return false;
+  for (const fs::path& part : p) {
+    if (part == ".." || part == ".") return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+Status UnzipToFolder(const fs::path& zip_path, const fs::path& folder) {
+  int err = 0;
+  std::unique_ptr<zip_t, decltype(&zip_discard)> za(zip_open(zip_path.c_str(), ZIP_RDONLY, &err), zip_discard);
+  if (!za) return Status::DataLoss("cannot open the stored stack " + zip_path.filename().string());
+  std::error_code ec;
+  fs::create_directories(folder, ec);
+  if (ec) return WriteFailure(ec.value(), "cannot create " + folder.string());
+  const zip_int64_t n = zip_get_num_entries(za.get(), 0);
+  std::vector<char> buf(1 << 20);
+  for (zip_int64_t i = 0; i < n; ++i) {
+    zip_stat_t st;
+    if (zip_stat_index(za.get(), zip_uint64_t(i), 0, &st) != 0 || (st.valid & ZIP_STAT_NAME) == 0) {
+      return Status::DataLoss("stored stack " + zip_path.filename().string() + ": unreadable entry " +
+                              std::to_string(i));
+    }
+    const std::string name = st.name;
+    if (!name.empty() && name.back() == '/') continue;  // a directory entry; files create their folders
+    if (!SafeEntryName(name)) {
+      return Status::DataLoss("stored stack " + zip_path.filename().string() + ": entry '" + name +
+                              "' is not a relative path inside the stack");
+    }
+    const fs::path target = folder / fs::path(name);
+    fs::create_directories(target.parent_path(), ec);
+    if (ec) return WriteFailure(ec.value(), "cannot create " + target.parent_path().string());
+    std::unique_ptr<zip_file_t, decltype(&zip_fclose)> in(zip_fopen_index(za.get(), zip_uint64_t(i), 0), zip_fclose);
+    if (!in) return Status::DataLoss("stored stack: cannot read entry '" + name + "'");
+    std::unique_ptr<FILE, decltype(&std::fclose)> out(std::fopen(target.c_str(), "wb"), std::fclose);
+    if (!out) return WriteFailure(errno, "cannot write " + target.string());
+    for (;;) {
+      const zip_int64_t got = zip_fread(in.get(), buf.data(), buf.size());
+      if (got < 0) return Status::DataLoss("stored stack: entry '" + name + "' is corrupt");
+      if (got == 0) break;
+      if (std::fwrite(buf.data(), 1, size_t(got), out.get()) != size_t(got)) {
+        return WriteFailure(errno, "cannot write " + target.string());
+      }
+    }
+    if (std::fflush(out.get()) != 0) return WriteFailure(errno, "cannot write " + target.string());
+    FILE* f = out.release();
+    if (std::fclose(f) != 0) return WriteFailure(errno, "cannot write " + target.string());
   }
   return Status::Ok();
 }

@@ -15,4 +15,10 @@ StatusOr<std::string> Sha256File(const std::filesystem::path& path);
 // compression: the frames are PNG/TIFF already, and storing keeps the archive fast to write.
 Status ZipFolder(const std::filesystem::path& folder, const std::filesystem::path& zip_path);
 
+// Extracts every file of `zip_path` into `folder` (created). Entry names must be relative paths
+// without ".." (anything else: DATA_LOSS naming the entry, nothing is written outside `folder`).
+// A failed write returns WriteFailure's status (RESOURCE_EXHAUSTED "data disk full" on ENOSPC);
+// on any error the caller removes `folder`.
+Status UnzipToFolder(const std::filesystem::path& zip_path, const std::filesystem::path& folder);
+
 }  // namespace inspection

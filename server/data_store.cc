@@ -29,6 +29,7 @@ class Stmt {
     return *this;
   }
   int Step() { return sqlite3_step(stmt_); }
+  sqlite3_stmt* stmt() { return stmt_; }
   std::string ColumnBlob(int i) {
     const void* p = sqlite3_column_blob(stmt_, i);
     return p ? std::string(static_cast<const char*>(p), size_t(sqlite3_column_bytes(stmt_, i))) : std::string();
@@ -93,6 +94,9 @@ StatusOr<std::unique_ptr<DataStore>> DataStore::Open(const fs::path& data_dir) {
       calibration_id TEXT PRIMARY KEY, create_ns INTEGER NOT NULL, calibration BLOB NOT NULL);
     CREATE TABLE IF NOT EXISTS settings (key TEXT PRIMARY KEY, value TEXT NOT NULL);
     CREATE TABLE IF NOT EXISTS pins (job_id TEXT PRIMARY KEY);
+    CREATE TABLE IF NOT EXISTS recipes (
+      recipe_id TEXT NOT NULL, version INTEGER NOT NULL, deleted INTEGER NOT NULL DEFAULT 0,
+      recipe BLOB NOT NULL, PRIMARY KEY(recipe_id, version));
     CREATE INDEX IF NOT EXISTS artifacts_by_job ON artifacts(job_id);
   )sql"));
   return store;
@@ -339,6 +343,71 @@ StatusOr<std::vector<StoredArtifact>> DataStore::DeleteArtifactsOfKind(const std
   }
   INSPECT_RETURN_IF_ERROR(Exec("COMMIT"));
   return removed;
+}
+
+StatusOr<v1::Recipe> DataStore::StoreRecipe(v1::Recipe recipe, bool create, int expected_version) {
+  std::lock_guard<std::mutex> lock(mu_);
+  const std::string& id = recipe.recipe_id();
+  Stmt q(db_, "SELECT MAX(version), MAX(CASE WHEN deleted = 0 THEN version END) FROM recipes WHERE recipe_id = ?");
+  q.Text(1, id);
+  if (q.Step() != SQLITE_ROW) return DbError(db_, "StoreRecipe");
+  const int64_t highest = sqlite3_column_int64(q.stmt(), 0);  // NULL reads as 0
+  const bool in_use = sqlite3_column_type(q.stmt(), 1) != SQLITE_NULL;
+  const int64_t current = in_use ? sqlite3_column_int64(q.stmt(), 1) : 0;
+  if (create && in_use) {
+    return Status(StatusCode::kAlreadyExists, "recipe_id '" + id + "' exists (version " + std::to_string(current) +
+                                                  "); UpdateRecipe makes a new version");
+  }
+  if (!create && !in_use) return Status::NotFound("recipe_id '" + id + "' not found");
+  if (!create && expected_version > 0 && expected_version != current) {
+    return Status::Aborted("recipe '" + id + "' is at version " + std::to_string(current) + ", not expected_version " +
+                           std::to_string(expected_version) + " (updated meanwhile)");
+  }
+  recipe.set_version(int32_t(highest + 1));
+  Stmt st(db_, "INSERT INTO recipes(recipe_id, version, deleted, recipe) VALUES(?,?,0,?)");
+  st.Text(1, id).Int(2, recipe.version()).Blob(3, recipe.SerializeAsString());
+  if (st.Step() != SQLITE_DONE) return DbError(db_, "StoreRecipe");
+  return recipe;
+}
+
+StatusOr<v1::Recipe> DataStore::GetRecipe(const std::string& recipe_id, int version) {
+  std::lock_guard<std::mutex> lock(mu_);
+  // A hidden recipe's versions stay readable by version for the results that ran them.
+  Stmt st(db_, version > 0 ? "SELECT recipe FROM recipes WHERE recipe_id = ?1 AND version = ?2"
+                           : "SELECT recipe FROM recipes WHERE recipe_id = ?1 AND deleted = 0 "
+                             "ORDER BY version DESC LIMIT 1");
+  st.Text(1, recipe_id);
+  if (version > 0) st.Int(2, version);
+  if (st.Step() != SQLITE_ROW) {
+    return Status::NotFound("recipe_id '" + recipe_id + "'" +
+                            (version > 0 ? " version " + std::to_string(version) : std::string()) + " not found");
+  }
+  v1::Recipe recipe;
+  if (!recipe.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("recipe " + recipe_id + " record is corrupt");
+  return recipe;
+}
+
+StatusOr<std::vector<v1::Recipe>> DataStore::ListRecipes() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_,
+          "SELECT recipe FROM recipes r WHERE deleted = 0 AND version = "
+          "(SELECT MAX(version) FROM recipes WHERE recipe_id = r.recipe_id) ORDER BY recipe_id");
+  std::vector<v1::Recipe> out;
+  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
+    v1::Recipe recipe;
+    if (recipe.ParseFromString(st.ColumnBlob(0))) out.push_back(std::move(recipe));
+  }
+  return out;
+}
+
+StatusOr<int> DataStore::DeleteRecipe(const std::string& recipe_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "UPDATE recipes SET deleted = 1 WHERE recipe_id = ? AND deleted = 0");
+  st.Text(1, recipe_id);
+  if (st.Step() != SQLITE_DONE) return DbError(db_, "DeleteRecipe");
+  const int n = sqlite3_changes(db_);
+  if (n == 0) return Status::NotFound("recipe_id '" + recipe_id + "' not found");
+  return n;
 }
 
 Status DataStore::SetSetting(const std::string& key, const std::string& value) {

@@ -1,7 +1,7 @@
 // DataStore: the server's durable state under --data-dir, so scans, jobs and their results
 // survive a restart. Metadata lives in SQLite (inspection.db, WAL); bulk data in folders:
-//   scans/<scan_id>/         stack folders (core/stack.h format)
-//   artifacts/<job_id>/      result files of a succeeded job
+//   artifacts/<job_id>/      result files of a succeeded job; a scan's stack only as stack.zip
+//   scans/<scan_id>/         stack folders of the earlier layout (read in place, deleted)
 //   calibrations/<id>/       calibration bundles
 //   uploads/, tmp/           work areas, emptied at start-up
 // Thread-safe: one connection guarded by a mutex (writes are small; bulk I/O is outside).
@@ -74,6 +74,20 @@ class DataStore {
   // Removes the job's artifacts of `kind`: their rows and their entries in the stored
   // Job.result, in one transaction. Returns the removed artifacts (paths for the caller).
   StatusOr<std::vector<StoredArtifact>> DeleteArtifactsOfKind(const std::string& job_id, v1::ArtifactKind kind);
+
+  // Recipes. Every version is kept (results name the version they ran); deleting a recipe hides
+  // all its versions, and a recipe created again under the same id continues the numbering, so a
+  // (recipe_id, version) pair always means one document.
+  // create: the id must not be in use (ALREADY_EXISTS); the stored version is 1 + the highest
+  // ever stored. update: the id must be in use (NOT_FOUND); expected_version > 0 must be the
+  // current version (ABORTED otherwise: someone else updated it first). Returns the stored recipe.
+  StatusOr<v1::Recipe> StoreRecipe(v1::Recipe recipe, bool create, int expected_version);
+  // version 0 = the current one. NOT_FOUND naming the id (and version).
+  StatusOr<v1::Recipe> GetRecipe(const std::string& recipe_id, int version);
+  // The current version of every recipe in use, by id.
+  StatusOr<std::vector<v1::Recipe>> ListRecipes();
+  // Hides every version; NOT_FOUND when the id is not in use. Returns the versions hidden.
+  StatusOr<int> DeleteRecipe(const std::string& recipe_id);
 
   Status SetSetting(const std::string& key, const std::string& value);
   std::string GetSetting(const std::string& key);

@@ -8,12 +8,14 @@
 #include <cerrno>
 #include <fstream>
 #include <map>
+#include <set>
 
 #include "core/stack.h"
 #include "server/audit_interceptor.h"
 #include "server/data_lifecycle.h"
 #include "server/grpc_status.h"
 #include "server/request_mapping.h"
+#include "server/stored_stack.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -205,8 +207,12 @@ grpc::Status InspectionServiceImpl::Reconstruct(
     dir = upload->path();
     if (Status s = ReceiveUpload(stream, *source, dir, options_.max_upload_bytes); !s.ok()) return Grpc(s);
   } else {
-    dir = store_->scans_dir() / source->scan_id;
-    if (!fs::is_directory(dir)) return Grpc(Status::NotFound("scan_id '" + source->scan_id + "' not found"));
+    // The stack is stored once, as the scan's stack.zip: the job reads its own extraction.
+    if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
+    auto stored = OpenStoredStack(*store_, source->scan_id);
+    if (!stored.ok()) return Grpc(stored.status());
+    dir = stored->dir;
+    upload = std::move(stored->extraction);
   }
   // Validate the whole stack before a job exists: bad input never becomes a failed job.
   auto manifest = ReadStackManifest(dir);
@@ -245,6 +251,9 @@ grpc::Status InspectionServiceImpl::GetJob(grpc::ServerContext* ctx, const v1::G
   auto r = jobs_->Find(req->job_id());
   if (!r.ok()) return Grpc(r.status());
   *out = (*r)->Snapshot();
+  auto pinned = store_->PinnedJobs();
+  if (!pinned.ok()) return Grpc(pinned.status());
+  out->set_pinned(std::find(pinned->begin(), pinned->end(), out->job_id()) != pinned->end());
   return grpc::Status::OK;
 }
 
@@ -258,10 +267,15 @@ grpc::Status InspectionServiceImpl::ListJobs(grpc::ServerContext* ctx, const v1:
   const int limit = query->limit;
   auto jobs = store_->ListJobs(query->kind, query->state, limit + 1, query->before_create_ns);
   if (!jobs.ok()) return Grpc(jobs.status());
+  auto pinned_ids = store_->PinnedJobs();
+  if (!pinned_ids.ok()) return Grpc(pinned_ids.status());
+  const std::set<std::string> pinned(pinned_ids->begin(), pinned_ids->end());
   for (int i = 0; i < int(jobs->size()) && i < limit; ++i) {
     // Live jobs carry fresher state than their last stored copy.
     const std::shared_ptr<JobRecord> live = jobs_->FindLive((*jobs)[i].job_id());
-    *out->add_jobs() = live ? live->Snapshot() : (*jobs)[i];
+    v1::Job* job = out->add_jobs();
+    *job = live ? live->Snapshot() : (*jobs)[i];
+    job->set_pinned(pinned.count(job->job_id()) > 0);
   }
   if (int(jobs->size()) > limit) out->set_next_page_token(NextPageToken((*jobs)[limit - 1].create_time()));
   return grpc::Status::OK;

@@ -62,6 +62,12 @@ class InspectionServiceImpl final : public v1::InspectionService::Service {
   grpc::Status DeleteJob(grpc::ServerContext*, const v1::DeleteJobRequest*, v1::DeleteResponse*) override;
   grpc::Status DeleteScan(grpc::ServerContext*, const v1::DeleteScanRequest*, v1::DeleteResponse*) override;
   grpc::Status PinJob(grpc::ServerContext*, const v1::PinJobRequest*, v1::PinJobResponse*) override;
+  // Recipes (inspection_service_recipes.cc).
+  grpc::Status CreateRecipe(grpc::ServerContext*, const v1::CreateRecipeRequest*, v1::Recipe*) override;
+  grpc::Status UpdateRecipe(grpc::ServerContext*, const v1::UpdateRecipeRequest*, v1::Recipe*) override;
+  grpc::Status GetRecipe(grpc::ServerContext*, const v1::GetRecipeRequest*, v1::Recipe*) override;
+  grpc::Status ListRecipes(grpc::ServerContext*, const v1::ListRecipesRequest*, v1::ListRecipesResponse*) override;
+  grpc::Status DeleteRecipe(grpc::ServerContext*, const v1::DeleteRecipeRequest*, v1::DeleteResponse*) override;
 
  private:
   StatusOr<Identity> CheckAuth(grpc::ServerContext* ctx, std::string_view method) const {

@@ -33,7 +33,8 @@ struct CalibrateWork {
 struct ReconstructWork {
   std::filesystem::path stack_dir;
   std::string source_scan_id;  // the stored scan read; empty for an upload
-  // Set for an uploaded stack: the folder goes when the last copy of the work does (the job
+  // Set for an uploaded stack or a stored scan's extraction (server/stored_stack.h): the folder
+  // goes when the last copy of the work does (the job
   // ended, was cancelled while queued, or never got queued).
   std::shared_ptr<const OwnedFolder> upload;
   SffOptions sff;

@@ -139,13 +139,9 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
   RecordMethod(plan.reconstruction, outcome.isff, result.mutable_depth());
   result.mutable_depth()->set_illumination(outcome.manifest.illumination);
   result.mutable_depth()->set_illumination_decision(outcome.illumination_decision);
-  const fs::path scan_dir = store_->scans_dir() / job_id;
-  std::error_code ec;
-  fs::rename(stack.path(), scan_dir, ec);
-  if (ec) return Status::Internal("cannot store the scan: " + ec.message());
-  stack = OwnedFolder(scan_dir);  // a scan without its published result is removed again
+  // The stack is stored once, as stack.zip (server/stored_stack.h): the folder in tmp/ goes
+  // with `stack` whether or not publication succeeds.
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
-  stack.Release();
   return result;
 }
 

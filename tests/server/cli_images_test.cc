@@ -11,16 +11,17 @@ namespace {
 
 // A stored scan's frames renamed f1.png, f2.png, ... f10.png ... (the natural-sort trap: a plain
 // sort puts f10 before f2) in a plain folder, with their z; returns the scan's --json result.
-json ImageFolderFromScan(const fs::path& scans, const fs::path& dir, std::vector<double>* z_um,
+json ImageFolderFromScan(const fs::path& data_dir, const fs::path& dir, std::vector<double>* z_um,
                          const std::function<json(const std::string&)>& scan) {
   const json result = scan("scan");
   const std::string scan_id = result["job"]["result"]["scan_id"];
-  const json manifest = json::parse(ReadAll(scans / scan_id / "stack.json"));
+  const fs::path stack = ExtractStoredStack(data_dir, scan_id, dir.parent_path() / (scan_id + ".stack"));
+  const json manifest = json::parse(ReadAll(stack / "stack.json"));
   fs::create_directories(dir);
   z_um->clear();
   for (size_t i = 0; i < manifest["frames"].size(); ++i) {
     const json& frame = manifest["frames"][i];
-    fs::copy_file(scans / scan_id / frame["file"].get<std::string>(), dir / ("f" + std::to_string(i + 1) + ".png"));
+    fs::copy_file(stack / frame["file"].get<std::string>(), dir / ("f" + std::to_string(i + 1) + ".png"));
     z_um->push_back(frame["z_um"].get<double>());
   }
   return result;
@@ -54,8 +55,8 @@ TEST_F(CliTest, ImageFolderIsOrderedNaturallyWithRegularZAndReconstructsLikeTheS
   StartServer();
   const fs::path images = work_ / "images";
   std::vector<double> z_um;
-  const json scan = ImageFolderFromScan(data_dir_ / "scans", images, &z_um,
-                                        [this](const std::string& name) { return JsonScan(name); });
+  const json scan =
+      ImageFolderFromScan(data_dir_, images, &z_um, [this](const std::string& name) { return JsonScan(name); });
   const size_t n = z_um.size();
   ASSERT_GE(n, 11u);  // f10 and f11 exist: a byte-wise sort would break the z order
   const double step_um = z_um[1] - z_um[0];
@@ -121,7 +122,7 @@ TEST_F(CliTest, ImageFolderZFromACsvAndImagesFromAGlob) {
   StartServer();
   const fs::path images = work_ / "images";
   std::vector<double> z_um;
-  ImageFolderFromScan(data_dir_ / "scans", images, &z_um, [this](const std::string& name) { return JsonScan(name); });
+  ImageFolderFromScan(data_dir_, images, &z_um, [this](const std::string& name) { return JsonScan(name); });
   const size_t n = z_um.size();
   ASSERT_GE(n, 11u);
   // CSV in reversed line order with a header: z is looked up per file, the order stays natural.

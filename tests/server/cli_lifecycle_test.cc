@@ -13,16 +13,22 @@ TEST_F(CliTest, DeleteAndPinAJob) {
   CliResult r = Run({"pin", job.job_id()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.out, "job " + job.job_id() + " pinned\n");
+  r = Run({"jobs"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find(" pinned"), std::string::npos) << r.out;
   r = Run({"pin", job.job_id(), "--unpin"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.out, "job " + job.job_id() + " unpinned\n");
+  r = Run({"jobs"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.find(" pinned"), std::string::npos) << r.out;
 
   r = Run({"delete", job.job_id()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.out.rfind("deleted job " + job.job_id() + ": ", 0), 0u) << r.out;
   EXPECT_NE(r.out.find(" bytes, " + std::to_string(job.result().artifacts_size()) + " artifacts\n"), std::string::npos)
       << r.out;
-  EXPECT_FALSE(std::filesystem::exists(data_dir_ / "scans" / job.job_id()));
+  EXPECT_FALSE(std::filesystem::exists(data_dir_ / "artifacts" / job.job_id()));
 
   r = Run({"delete", job.job_id()});
   EXPECT_NE(r.exit_code, 0);

@@ -141,7 +141,7 @@ TEST_F(CliTest, UploadedStackReconstructsLikeTheScanAndABrokenStackFailsBeforeAn
   ASSERT_FALSE(scan_id.empty());
   // The stored stack folder is exactly what a user would upload.
   const fs::path stack = work_ / "stack";
-  fs::copy(data_dir_ / "scans" / scan_id, stack, fs::copy_options::recursive);
+  ExtractStoredStack(data_dir_, scan_id, stack);
 
   const fs::path rec_dir = work_ / "rec";
   CliResult r = Run({"--json", "reconstruct", "--stack", stack.string(), "--out", rec_dir.string()});

@@ -29,7 +29,6 @@ class DataLifecycleServerTest : public ServerTest {
     EXPECT_TRUE(s.ok()) << s.error_message();
     return job;
   }
-  fs::path ScanDir(const std::string& id) { return data_dir_ / "scans" / id; }
   fs::path ArtifactDir(const std::string& id) { return data_dir_ / "artifacts" / id; }
   static int CountEntries(const fs::path& dir) {
     std::error_code ec;
@@ -42,9 +41,8 @@ class DataLifecycleServerTest : public ServerTest {
 TEST_F(DataLifecycleServerTest, DeleteJobRemovesRecordEventsArtifactsAndStack) {
   StartServer();
   const v1::Job job = ScanOk();
-  ASSERT_TRUE(fs::is_directory(ScanDir(job.job_id())));
   ASSERT_TRUE(fs::is_directory(ArtifactDir(job.job_id())));
-  const int64_t bytes = FolderBytes(ScanDir(job.job_id())) + FolderBytes(ArtifactDir(job.job_id()));
+  const int64_t bytes = FolderBytes(ArtifactDir(job.job_id()));
   ASSERT_GT(bytes, 0);
   const std::string artifact_id = job.result().artifacts(0).artifact_id();
 
@@ -53,7 +51,6 @@ TEST_F(DataLifecycleServerTest, DeleteJobRemovesRecordEventsArtifactsAndStack) {
   EXPECT_EQ(deleted.id(), job.job_id());
   EXPECT_EQ(deleted.bytes_freed(), bytes);
   EXPECT_EQ(deleted.artifacts_deleted(), job.result().artifacts_size());
-  EXPECT_FALSE(fs::exists(ScanDir(job.job_id())));
   EXPECT_FALSE(fs::exists(ArtifactDir(job.job_id())));
   v1::Job gone;
   EXPECT_EQ(client_->GetJob(job.job_id(), &gone).error_code(), grpc::StatusCode::NOT_FOUND);
@@ -77,13 +74,12 @@ TEST_F(DataLifecycleServerTest, DeleteScanKeepsTheJobAndItsDepthResults) {
   ASSERT_FALSE(zip_id.empty());
   ASSERT_FALSE(depth_id.empty());
   const int64_t zip_bytes = fs::file_size(ArtifactDir(job.job_id()) / "stack.zip");
-  const int64_t stack_bytes = FolderBytes(ScanDir(job.job_id()));
 
   v1::DeleteResponse deleted;
   ASSERT_TRUE(client_->DeleteScan(job.job_id(), &deleted).ok());
-  EXPECT_EQ(deleted.bytes_freed(), zip_bytes + stack_bytes);
+  EXPECT_EQ(deleted.bytes_freed(), zip_bytes);
   EXPECT_EQ(deleted.artifacts_deleted(), 1);
-  EXPECT_FALSE(fs::exists(ScanDir(job.job_id())));
+  EXPECT_FALSE(fs::exists(ArtifactDir(job.job_id()) / "stack.zip"));
   v1::Job kept;
   ASSERT_TRUE(client_->GetJob(job.job_id(), &kept).ok());
   EXPECT_EQ(kept.state(), v1::JOB_STATE_SUCCEEDED);
@@ -97,6 +93,38 @@ TEST_F(DataLifecycleServerTest, DeleteScanKeepsTheJobAndItsDepthResults) {
   v1::Job rec;
   EXPECT_EQ(client_->ReconstructStored(start, {}, &rec).error_code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(client_->DeleteScan(job.job_id(), &deleted).error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
+// The raw stack is stored once, as the stack.zip artifact; a reconstruction of the stored scan
+// reads a private extraction that goes with its job.
+TEST_F(DataLifecycleServerTest, TheStackIsStoredOnceAndReconstructionsReadTheArchive) {
+  StartServer();
+  const v1::Job job = ScanOk();
+  int64_t zip_bytes = 0, frame_count = job.result().depth().frame_count();
+  for (const auto& a : job.result().artifacts()) {
+    if (a.kind() == v1::ARTIFACT_KIND_STACK_ZIP) zip_bytes = a.size_bytes();
+  }
+  ASSERT_GT(zip_bytes, 0);
+  EXPECT_EQ(CountEntries(data_dir_ / "scans"), 0);
+  EXPECT_EQ(CountEntries(data_dir_ / "tmp"), 0);
+  // Every byte of the job is its artifacts: the frames are not kept a second time.
+  int64_t artifact_sum = 0;
+  for (const auto& a : job.result().artifacts()) artifact_sum += a.size_bytes();
+  EXPECT_EQ(FolderBytes(ArtifactDir(job.job_id())), artifact_sum);
+  std::cout << "scan of " << frame_count << " frames: " << artifact_sum << " bytes stored, stack.zip " << zip_bytes
+            << "\n";
+
+  v1::ReconstructStart start;
+  start.set_scan_id(job.job_id());
+  v1::Job rec;
+  grpc::Status s = client_->ReconstructStored(start, {}, &rec);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  ASSERT_EQ(rec.state(), v1::JOB_STATE_SUCCEEDED);
+  EXPECT_EQ(rec.result().depth().frame_count(), frame_count);
+  // Same stack, same engine, same options: the same depth map as the scan's streaming one.
+  EXPECT_TRUE(rec.result().depth().has_ground_truth());
+  EXPECT_NEAR(rec.result().depth().rmse_um(), job.result().depth().rmse_um(), 1e-6);
+  EXPECT_EQ(CountEntries(data_dir_ / "uploads"), 0);  // the extraction went with the job
 }
 
 TEST_F(DataLifecycleServerTest, RunningJobsAreNeverDeleted) {
@@ -139,9 +167,14 @@ TEST_F(DataLifecycleServerTest, RetentionSweepDeletesOldestUnpinnedAndKeepsTheNe
   v1::PinJobResponse pin;
   ASSERT_TRUE(client_->PinJob(jobs[0].job_id(), true, &pin).ok());
   EXPECT_TRUE(pin.pinned());
+  v1::Job pinned;
+  ASSERT_TRUE(client_->GetJob(jobs[0].job_id(), &pinned).ok());
+  EXPECT_TRUE(pinned.pinned());
+  ASSERT_TRUE(client_->GetJob(jobs[1].job_id(), &pinned).ok());
+  EXPECT_FALSE(pinned.pinned());
   int64_t bytes_before = 0, bytes_kept = 0;
   for (const auto& j : jobs) {
-    const int64_t b = FolderBytes(ScanDir(j.job_id())) + FolderBytes(ArtifactDir(j.job_id()));
+    const int64_t b = FolderBytes(ArtifactDir(j.job_id()));
     bytes_before += b;
     if (j.job_id() == jobs[0].job_id() || j.job_id() == jobs[3].job_id()) bytes_kept += b;
   }
@@ -158,8 +191,10 @@ TEST_F(DataLifecycleServerTest, RetentionSweepDeletesOldestUnpinnedAndKeepsTheNe
   ASSERT_EQ(list.jobs_size(), 2);
   EXPECT_EQ(list.jobs(0).job_id(), jobs[3].job_id());
   EXPECT_EQ(list.jobs(1).job_id(), jobs[0].job_id());
-  EXPECT_TRUE(fs::exists(ScanDir(jobs[0].job_id())));
-  EXPECT_FALSE(fs::exists(ScanDir(jobs[1].job_id())));
+  EXPECT_FALSE(list.jobs(0).pinned());
+  EXPECT_TRUE(list.jobs(1).pinned());
+  EXPECT_TRUE(fs::exists(ArtifactDir(jobs[0].job_id()) / "stack.zip"));
+  EXPECT_FALSE(fs::exists(ArtifactDir(jobs[1].job_id())));
   // Unpinned, the oldest goes at the next sweep; the newest stays (keep_last).
   ASSERT_TRUE(client_->PinJob(jobs[0].job_id(), false, &pin).ok());
   report = server_->retention().SweepNow();

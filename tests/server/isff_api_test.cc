@@ -63,7 +63,9 @@ class IsffApiTest : public ServerTest {
     EXPECT_TRUE(client_->DownloadResults(job, out, false, &written).ok());
     auto depth = ReadDepthTiff(out / "depth.tiff");
     auto truth = ReadDepthTiff(out / "ground_truth_depth.tiff");
-    if (!truth.ok()) truth = ReadDepthTiff(data_dir_ / "scans" / job.result().scan_id() / "ground_truth_depth.tiff");
+    // A reconstruction of a stored scan: the scan job's ground-truth artifact.
+    if (!truth.ok())
+      truth = ReadDepthTiff(data_dir_ / "artifacts" / job.result().scan_id() / "ground_truth_depth.tiff");
     EXPECT_TRUE(depth.ok() && truth.ok());
     for (const char* f : {"depth.tiff", "confidence.tiff", "all_in_focus.png", "depth_preview.png"}) {
       EXPECT_TRUE(fs::exists(out / f)) << f;
@@ -248,7 +250,7 @@ TEST_F(IsffApiTest, BadThresholdAndConflictingOptionsNameTheField) {
 
 TEST_F(IsffApiTest, GroundTruthMethodIsRefusedForStoredAndUploadedStacks) {
   const v1::Job std_scan = Scan(v1::ScanRequest());
-  const fs::path stored = data_dir_ / "scans" / std_scan.result().scan_id();
+  const fs::path stored = ExtractStoredStack(data_dir_, std_scan.result().scan_id(), UniqueTempDir("isff_gt_stack"));
   ASSERT_TRUE(fs::exists(stored / "stack.json"));
   v1::ReconstructStart start;
   start.mutable_options()->set_method(v1::RECONSTRUCTION_METHOD_ISFF_GT);
@@ -269,8 +271,7 @@ TEST_F(IsffApiTest, NoRigServerUsesTheStoredCalibrationOrNamesTheMissingStep) {
   CalibrateIntegralPsf();
   const v1::Job isff = Scan(ScanWith(v1::RECONSTRUCTION_METHOD_ISFF));
   const std::string scan_id = isff.result().scan_id();
-  const fs::path stack = UniqueTempDir("isff_stack");
-  fs::copy(data_dir_ / "scans" / scan_id, stack, fs::copy_options::recursive);
+  const fs::path stack = ExtractStoredStack(data_dir_, scan_id, UniqueTempDir("isff_stack"));
   StopServer();
 
   auto start_no_rig = [&](const fs::path& data_dir) {

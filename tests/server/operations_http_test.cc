@@ -231,7 +231,7 @@ TEST_F(OperationsHttpTest, NoRigServesReconstructsAndRefusesRigCalls) {
   const v1::Job scan = SmallScan();
   const fs::path stack = data_dir_.parent_path() / (data_dir_.filename().string() + "_stack");
   fs::remove_all(stack);
-  fs::copy(data_dir_ / "scans" / scan.job_id(), stack, fs::copy_options::recursive);
+  ExtractStoredStack(data_dir_, scan.job_id(), stack);
   client_.reset();
   server_.reset();
   fs::remove_all(data_dir_);

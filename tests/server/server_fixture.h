@@ -9,6 +9,7 @@
 #include <string>
 
 #include "client_cli/inspection_client.h"
+#include "server/artifact_files.h"
 #include "server/inspection_server.h"
 #include "tests/server/test_rig.h"
 
@@ -24,6 +25,15 @@ inline std::filesystem::path UniqueTempDir(const std::string& tag) {
   std::filesystem::remove_all(p);
   std::filesystem::create_directories(p);
   return p;
+}
+
+// A stored scan's stack folder as a user would upload it: the server keeps the stack only as the
+// scan's stack.zip artifact (artifacts/<scan id>/stack.zip), so this extracts that into `dest`.
+inline std::filesystem::path ExtractStoredStack(const std::filesystem::path& data_dir, const std::string& scan_id,
+                                                const std::filesystem::path& dest) {
+  const Status s = UnzipToFolder(data_dir / "artifacts" / scan_id / "stack.zip", dest);
+  EXPECT_TRUE(s.ok()) << s.ToString();
+  return dest;
 }
 
 class ServerTest : public ::testing::Test {
