@@ -35,6 +35,8 @@ struct ScanFlags {
   std::optional<double> lambda, gamma, psi, target_grey;
   ReconstructionFlags reconstruction;
   std::string label, request_id;
+  std::string part_id, station, recipe_id;
+  int recipe_version = 0;
   bool include_stack = false;
 };
 
@@ -42,6 +44,10 @@ int RunScan(const ScanFlags& f, Session& session) {
   v1::ScanRequest request;
   request.set_request_id(f.request_id);
   request.set_label(f.label);
+  request.set_part_id(f.part_id);
+  request.set_station(f.station);
+  request.set_recipe_id(f.recipe_id);
+  request.set_recipe_version(f.recipe_version);
   if (f.z_start_um || f.z_end_um || f.z_step_um) {
     // A partial range is completed from the rig's defaults; all unset leaves them to the server.
     v1::ScanDefaults defaults;
@@ -64,6 +70,8 @@ int RunScan(const ScanFlags& f, Session& session) {
   if (f.max_iterations) ip->set_max_iterations(*f.max_iterations);
   if (f.target_grey) ip->set_target_grey(*f.target_grey);
   *request.mutable_reconstruction() = f.reconstruction.ToProto();
+  if (request.illumination_parameters().ByteSizeLong() == 0) request.clear_illumination_parameters();
+  if (request.reconstruction().ByteSizeLong() == 0) request.clear_reconstruction();
   FollowOutcome outcome = Follow(
       session.printer, [&](const EventCallback& cb, v1::Job* job) { return session.client.Scan(request, cb, job); });
   return FinishJob(session.client, session.out, session.printer, outcome, fs::path(f.out_dir), f.include_stack);
@@ -90,6 +98,11 @@ void RegisterScanCommand(CLI::App& app, CliContext& context) {
   cmd->add_option("--target-grey", f->target_grey, "ADAPT family: desired camera grey, 8-bit units, 0..255");
   f->reconstruction.Add(cmd);
   cmd->add_option("--label", f->label, "Free text kept with the job");
+  cmd->add_option("--recipe", f->recipe_id, "Run this stored recipe: its scan, then its measurements and verdicts");
+  cmd->add_option("--recipe-version", f->recipe_version, "With --recipe: this version (default: the current one)")
+      ->check(CLI::Range(1, 1 << 30));
+  cmd->add_option("--part-id", f->part_id, "Part id kept with the job and its inspection result");
+  cmd->add_option("--station", f->station, "Station or operator kept with the job and its inspection result");
   cmd->add_option("--request-id", f->request_id, "Idempotency key: repeating it returns the same job");
   cmd->add_flag("--include-stack", f->include_stack, "Also download the raw stack as stack.zip");
   context.AddCommand(cmd, [f](Session& session) { return RunScan(*f, session); });

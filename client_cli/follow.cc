@@ -165,6 +165,7 @@ int FinishJob(InspectionClient& client, const Output& out, ProgressPrinter& prin
     }
   }
   if (job.result().has_depth()) PrintDepthSummary(job.result().depth());
+  if (job.result().has_inspection()) PrintInspection(job.result().inspection());
   if (job.kind() == v1::JOB_KIND_CALIBRATE) {
     std::cout << "calibration: " << job.result().calibration_id() << '\n';
     PrintFigures(job.result().calibration(), "  ");

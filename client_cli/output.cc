@@ -132,6 +132,26 @@ void PrintDepthSummary(const v1::DepthSummary& d) {
   }
 }
 
+void PrintInspection(const v1::InspectionResult& r) {
+  auto verdict = [](v1::Verdict v) { return Short(v1::Verdict_Name(v), "VERDICT_"); };
+  std::cout << "inspection: recipe " << r.recipe_id() << " v" << r.recipe_version();
+  if (!r.part_id().empty()) std::cout << ", part " << r.part_id();
+  if (!r.station().empty()) std::cout << ", station " << r.station();
+  std::cout << ": " << verdict(r.verdict()) << '\n';
+  for (const v1::MeasurementResult& m : r.measurements()) {
+    std::cout << Format("  %-16s %-12s ", m.name().c_str(), m.parameter().c_str());
+    if (m.measured()) {
+      std::cout << Format("%.4g %s  U %.2g  coverage %.1f %%  ", m.value(), m.unit().c_str(), m.expanded_uncertainty(),
+                          m.coverage_percent());
+    } else {
+      std::cout << "not measured  ";
+    }
+    std::cout << verdict(m.verdict());
+    if (m.verdict() != v1::VERDICT_OK) std::cout << " (" << m.reason() << ')';
+    std::cout << '\n';
+  }
+}
+
 void PrintFigures(const v1::CalibrationSummary& summary, const std::string& indent) {
   if (summary.steps_size() > 0) {
     std::cout << indent << "steps:";

@@ -62,6 +62,9 @@ void PrintJsonLine(const json& j);
 
 // "depth: WxH px ...", and the error against ground truth when the server had one.
 void PrintDepthSummary(const v1::DepthSummary& d);
+// "inspection: recipe R v2, part P, station S: NOT_OK", then one line per measurement: name,
+// parameter, value and unit, U (k = 2), coverage, verdict, and the reason when not OK.
+void PrintInspection(const v1::InspectionResult& inspection);
 // A calibration's steps and its figures sorted by name, one per line, each line indented.
 void PrintFigures(const v1::CalibrationSummary& summary, const std::string& indent);
 

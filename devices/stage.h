@@ -20,6 +20,9 @@ class Stage {
   virtual Status MoveTo(double z_um) = 0;
   // Position as last reported by the device (simulated: includes repeatability error).
   virtual StatusOr<double> position_um() = 0;
+  // +- bound of the uniform error of one move (datasheet or measured), for measurement
+  // uncertainty (core/depth_noise_model.h); 0 = not characterised.
+  virtual double repeatability_um() const { return 0.0; }
 };
 
 }  // namespace inspection

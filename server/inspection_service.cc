@@ -14,6 +14,7 @@
 #include "server/audit_interceptor.h"
 #include "server/data_lifecycle.h"
 #include "server/grpc_status.h"
+#include "server/recipe_scan.h"
 #include "server/request_mapping.h"
 #include "server/stored_stack.h"
 
@@ -160,7 +161,10 @@ grpc::Status InspectionServiceImpl::Scan(grpc::ServerContext* ctx, const v1::Sca
         context.defaults = rig_->rig().scan_defaults();
         context.stage = &rig_->rig().stage();
         context.calibration = calibration.get();
-        INSPECT_ASSIGN_OR_RETURN(ScanWork work, MapScanRequest(*req, context));
+        Rig& rig = rig_->rig();
+        INSPECT_ASSIGN_OR_RETURN(
+            ScanWork work,
+            MapScanRequestWithRecipe(*req, context, *store_, rig.camera().frame_size(), rig.pixel_size_um()));
         return JobWork(std::move(work));
       },
       who->name);

@@ -103,6 +103,16 @@ grpc::Status InspectionServiceImpl::DeleteRecipe(grpc::ServerContext* ctx, const
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return ToGrpcStatus(s);
   if (Status s = CheckRecipeName(req->recipe_id(), "recipe_id"); !s.ok()) return ToGrpcStatus(s);
   SetAuditTarget(ctx, req->recipe_id());
+  // A queued scan holds its own copy of the recipe; refusing keeps "what will run" and "what
+  // the recipe list shows" the same while it waits.
+  auto unfinished = store_->UnfinishedJobs();
+  if (!unfinished.ok()) return ToGrpcStatus(unfinished.status());
+  for (const v1::Job& job : *unfinished) {
+    if (job.recipe_id() == req->recipe_id()) {
+      return ToGrpcStatus(Status::FailedPrecondition("recipe '" + req->recipe_id() + "' is used by " +
+                                                     v1::JobState_Name(job.state()) + " job " + job.job_id()));
+    }
+  }
   auto n = store_->DeleteRecipe(req->recipe_id());
   if (!n.ok()) return ToGrpcStatus(n.status());
   out->set_id(req->recipe_id());

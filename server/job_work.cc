@@ -20,6 +20,14 @@ v1::JobKind KindOf(const JobWork& work) {
 }
 
 void FillQueuedJob(const JobWork& work, v1::Job* job) {
+  if (const auto* w = std::get_if<ScanWork>(&work)) {
+    job->set_part_id(w->part_id);
+    job->set_station(w->station);
+    if (w->recipe) {
+      job->set_recipe_id(w->recipe->recipe.recipe_id());
+      job->set_recipe_version(w->recipe->recipe.version());
+    }
+  }
   if (const auto* w = std::get_if<ReconstructWork>(&work); w && !w->source_scan_id.empty()) {
     job->mutable_result()->set_scan_id(w->source_scan_id);
   }
@@ -33,6 +41,10 @@ std::string DescribeWork(const JobWork& work) {
                             s << ", z " << w.plan.z_um.front() << ".." << w.plan.z_um.back() << " um";
                           }
                           s << ", " << IlluminationModeName(w.plan.mode, w.plan.params.hdr_exposures);
+                          if (w.recipe) {
+                            s << ", recipe " << w.recipe->recipe.recipe_id() << " v" << w.recipe->recipe.version();
+                          }
+                          if (!w.part_id.empty()) s << ", part " << w.part_id;
                         },
                         [&](const CalibrateWork& w) {
                           s << "calibration of ";

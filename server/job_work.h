@@ -11,6 +11,7 @@
 
 #include "core/sff_engine.h"
 #include "inspection/v1/inspection.pb.h"
+#include "server/inspection_result.h"
 #include "server/owned_folder.h"
 #include "server/procedures/calibration_procedure.h"
 #include "server/procedures/reconstruct_procedure.h"
@@ -22,6 +23,11 @@ namespace inspection {
 struct ScanWork {
   ScanPlan plan;  // calibration_id is filled in when the scan starts (the bundle active then)
   std::vector<DepthExportKind> extra_exports;
+  std::string part_id;  // the MES context of the request (ScanRequest.part_id, station)
+  std::string station;
+  // Set when the request named a recipe (server/recipe_scan.h): measured and judged on the depth
+  // map (server/inspection_result.h).
+  std::shared_ptr<const RecipeRun> recipe;
 };
 
 // Run calibration steps on the rig (thesis 4.3, 5.4.1).

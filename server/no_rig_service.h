@@ -1,7 +1,7 @@
 // The gRPC services of `inspectd --no-rig`: a reconstruct-only server for the scale-out pool
 // (deploy/k8s/reconstruct). Job, artifact, calibration and Reconstruct calls go to the ordinary
-// handlers; the calls that need a rig (GetRigStatus, Scan, Calibrate, ResetRig and the
-// simulation's specimen calls) answer FAILED_PRECONDITION saying why, after the same
+// handlers; the calls that need a rig (GetRigStatus, Scan, Calibrate, ResetRig, the recipes and
+// the simulation's specimen calls) answer FAILED_PRECONDITION saying why, after the same
 // authentication as every call.
 #pragma once
 
@@ -20,7 +20,10 @@ std::string NoRigMessage(std::string_view method);
 // InspectionService methods by what --no-rig does with them. Together they are every method of
 // the service (a test checks this against the proto, so a new RPC cannot fall through as
 // UNIMPLEMENTED unnoticed).
-inline constexpr std::array<std::string_view, 4> kRigOnlyMethods = {"GetRigStatus", "Calibrate", "Scan", "ResetRig"};
+// Recipes live on the rig's server: they are checked against its camera and run by its scans.
+inline constexpr std::array<std::string_view, 9> kRigOnlyMethods = {"GetRigStatus", "Calibrate",    "Scan",
+                                                                    "ResetRig",     "CreateRecipe", "UpdateRecipe",
+                                                                    "GetRecipe",    "ListRecipes",  "DeleteRecipe"};
 inline constexpr std::array<std::string_view, 11> kNoRigServedMethods = {
     "Reconstruct",    "WatchJob",         "GetJob",    "ListJobs",   "CancelJob", "DownloadArtifact",
     "GetCalibration", "ListCalibrations", "DeleteJob", "DeleteScan", "PinJob"};
@@ -72,6 +75,21 @@ class NoRigInspectionService final : public v1::InspectionService::Service {
   }
   grpc::Status PinJob(grpc::ServerContext* c, const v1::PinJobRequest* r, v1::PinJobResponse* o) override {
     return served_->PinJob(c, r, o);
+  }
+  grpc::Status CreateRecipe(grpc::ServerContext* c, const v1::CreateRecipeRequest*, v1::Recipe*) override {
+    return Refuse(c, "CreateRecipe");
+  }
+  grpc::Status UpdateRecipe(grpc::ServerContext* c, const v1::UpdateRecipeRequest*, v1::Recipe*) override {
+    return Refuse(c, "UpdateRecipe");
+  }
+  grpc::Status GetRecipe(grpc::ServerContext* c, const v1::GetRecipeRequest*, v1::Recipe*) override {
+    return Refuse(c, "GetRecipe");
+  }
+  grpc::Status ListRecipes(grpc::ServerContext* c, const v1::ListRecipesRequest*, v1::ListRecipesResponse*) override {
+    return Refuse(c, "ListRecipes");
+  }
+  grpc::Status DeleteRecipe(grpc::ServerContext* c, const v1::DeleteRecipeRequest*, v1::DeleteResponse*) override {
+    return Refuse(c, "DeleteRecipe");
   }
 
  private:

@@ -139,6 +139,15 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
   RecordMethod(plan.reconstruction, outcome.isff, result.mutable_depth());
   result.mutable_depth()->set_illumination(outcome.manifest.illumination);
   result.mutable_depth()->set_illumination_decision(outcome.illumination_decision);
+  if (work.recipe) {
+    EmitPhase(context, v1::JOB_PHASE_STORING, 0.95, "measuring recipe " + work.recipe->recipe.recipe_id());
+    DepthNoiseOptions noise;
+    noise.window_px = plan.sff.window_px;
+    noise.z_positions_um = plan.z_um;
+    noise.stage_repeatability_um = rig_->rig().stage().repeatability_um();
+    *result.mutable_inspection() =
+        Inspect(*work.recipe, outcome.depth, outcome.manifest.pixel_size_um, noise, work.part_id, work.station);
+  }
   // The stack is stored once, as stack.zip (server/stored_stack.h): the folder in tmp/ goes
   // with `stack` whether or not publication succeeds.
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));

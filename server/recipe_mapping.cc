@@ -123,8 +123,8 @@ StatusOr<MeasurementSpec> MapMeasurement(const v1::RecipeMeasurement& m, const s
   return spec;
 }
 
-StatusOr<std::optional<Tolerance>> MapTolerance(const v1::RecipeMeasurement& m, const std::string& field) {
-  if (!m.has_tolerance()) return std::optional<Tolerance>();
+StatusOr<Tolerance> MapTolerance(const v1::RecipeMeasurement& m, const std::string& field) {
+  if (!m.has_tolerance()) return Invalid(field + ".tolerance", "is required (nominal and a lower and/or upper limit)");
   const v1::RecipeTolerance& t = m.tolerance();
   Tolerance tol;
   tol.nominal = t.nominal();
@@ -132,7 +132,7 @@ StatusOr<std::optional<Tolerance>> MapTolerance(const v1::RecipeMeasurement& m, 
   if (t.has_upper()) tol.upper = t.upper();
   tol.min_coverage_percent = t.min_coverage_percent();
   INSPECT_RETURN_IF_ERROR(tol.Validate(field + ".tolerance"));
-  return std::optional<Tolerance>(tol);
+  return tol;
 }
 
 }  // namespace

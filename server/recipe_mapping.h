@@ -24,11 +24,11 @@ inline constexpr int kMaxRecipeMeasurements = 64;
 // MES tags. INVALID_ARGUMENT naming `field`.
 Status CheckRecipeName(const std::string& name, const std::string& field);
 
-// One recipe measurement as core/ measures it, and its tolerance (absent: report only).
+// One recipe measurement as core/ measures it, and its tolerance.
 struct RecipeMeasurementPlan {
   std::string name;
   MeasurementSpec spec;
-  std::optional<Tolerance> tolerance;
+  Tolerance tolerance;
 };
 
 // Everything that can be checked without a depth map: ids and names, sizes, parameter names,

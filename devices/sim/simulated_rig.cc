@@ -240,6 +240,10 @@ class SimulatedStage : public Stage {
     s_->stage_z_um = z_um + (r > 0.0 ? err(s_->stage_rng) : 0.0);
     return Status::Ok();
   }
+  double repeatability_um() const override {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->options.stage_repeatability_um;
+  }
   StatusOr<double> position_um() override {
     std::lock_guard<std::mutex> lock(s_->mu);
     if (s_->faults.stage_unplugged) return Unplugged();

@@ -83,5 +83,21 @@ TEST_F(CliTest, RecipeDocumentsWithUnknownFieldsOrBadValuesAreRefused) {
   EXPECT_NE(r.err.find("cannot read recipe file"), std::string::npos) << r.err;
 }
 
+TEST_F(CliTest, ScanWithARecipePrintsTheVerdicts) {
+  StartServer();  // skew5: a plane tilted by 5 deg
+  const fs::path file = work_ / "tilt.json";
+  std::ofstream(file) << R"({"recipe_id": "tilt-check", "measurements": [
+      {"name": "tilt_in", "parameter": "tilt", "tolerance": {"nominal": 5.0, "lower": -0.5, "upper": 0.5}}]})";
+  ASSERT_EQ(Run({"recipe", "create", file.string()}).exit_code, 0);
+  CliResult r = Run(
+      {"scan", "--recipe", "tilt-check", "--part-id", "4711", "--station", "st-7", "--out", (work_ / "part").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("inspection: recipe tilt-check v1, part 4711, station st-7: OK\n"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("  tilt_in          tilt         "), std::string::npos) << r.out;
+  r = Run({"scan", "--recipe", "tilt-check", "--z-step", "2", "--out", (work_ / "bad").string()});
+  EXPECT_EQ(r.exit_code, 4);
+  EXPECT_EQ(r.err, "inspectctl: INVALID_ARGUMENT: z_start_um is fixed by recipe 'tilt-check'; leave it unset\n");
+}
+
 }  // namespace
 }  // namespace inspection::testing

@@ -250,6 +250,10 @@ TEST_F(OperationsHttpTest, NoRigServesReconstructsAndRefusesRigCalls) {
   EXPECT_EQ(client_->Calibrate(v1::CalibrateRequest(), nullptr, &job).error_code(),
             grpc::StatusCode::FAILED_PRECONDITION);
   EXPECT_EQ(client_->ResetRig(&rig_status).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  v1::ListRecipesResponse recipes;
+  s = client_->ListRecipes(&recipes);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_EQ(s.error_message(), NoRigMessage("ListRecipes"));
   v1::ListSpecimensResponse specimens;
   EXPECT_EQ(client_->ListSpecimens(&specimens).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
 

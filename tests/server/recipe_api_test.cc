@@ -140,6 +140,10 @@ TEST_F(RecipeApiTest, BadDocumentsNameTheFieldAndStoreNothing) {
   ExpectInvalidNaming(r, "recipe.measurements[0].tolerance");
 
   r = PadRecipe();
+  r.mutable_measurements(1)->clear_tolerance();
+  ExpectInvalidNaming(r, "recipe.measurements[1].tolerance is required");
+
+  r = PadRecipe();
   r.mutable_measurements(1)->set_parameter("Sx");
   ExpectInvalidNaming(r, "recipe.measurements[1].parameter");
 
