@@ -38,7 +38,24 @@ struct ScanFlags {
   std::string part_id, station, recipe_id;
   int recipe_version = 0;
   bool include_stack = false;
+  bool auto_range = false;    // automatic z range (ScanRequest.z_range_search)
+  std::string search_window;  // "A:B" um
+  std::optional<double> coarse_step_um, margin_um;
 };
+
+// "A:B" -> (A, B); false when it does not parse.
+bool ParseWindow(const std::string& text, double* a, double* b) {
+  const size_t colon = text.find(':');
+  if (colon == std::string::npos) return false;
+  try {
+    size_t used_a = 0, used_b = 0;
+    *a = std::stod(text.substr(0, colon), &used_a);
+    *b = std::stod(text.substr(colon + 1), &used_b);
+    return used_a == colon && used_b == text.size() - colon - 1;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
 
 int RunScan(const ScanFlags& f, Session& session) {
   v1::ScanRequest request;
@@ -48,7 +65,20 @@ int RunScan(const ScanFlags& f, Session& session) {
   request.set_station(f.station);
   request.set_recipe_id(f.recipe_id);
   request.set_recipe_version(f.recipe_version);
-  if (f.z_start_um || f.z_end_um || f.z_step_um) {
+  if (f.auto_range) {
+    // The range comes from the search; only the step is the user's (unset: rig default).
+    v1::ZRangeSearch* z = request.mutable_z_range_search();
+    z->set_enabled(true);
+    double a = 0.0, b = 0.0;
+    if (!f.search_window.empty()) {
+      ParseWindow(f.search_window, &a, &b);  // checked when parsing the flags
+      z->set_window_start_um(a);
+      z->set_window_end_um(b);
+    }
+    if (f.coarse_step_um) z->set_coarse_step_um(*f.coarse_step_um);
+    if (f.margin_um) z->set_margin_um(*f.margin_um);
+    if (f.z_step_um) request.set_z_step_um(*f.z_step_um);
+  } else if (f.z_start_um || f.z_end_um || f.z_step_um) {
     // A partial range is completed from the rig's defaults; all unset leaves them to the server.
     v1::ScanDefaults defaults;
     if (!(f.z_start_um && f.z_end_um && f.z_step_um)) {
@@ -83,10 +113,24 @@ void RegisterScanCommand(CLI::App& app, CliContext& context) {
   auto* cmd = app.add_subcommand("scan", "Acquire a stack through focus and reconstruct its depth map");
   auto f = std::make_shared<ScanFlags>();
   cmd->add_option("--out", f->out_dir, "Folder for the results")->required();
-  cmd->add_option("--z-start", f->z_start_um, "First z position, um (unset: rig default)");
-  cmd->add_option("--z-end", f->z_end_um, "Last z position, um (unset: rig default)");
+  auto* z_start = cmd->add_option("--z-start", f->z_start_um, "First z position, um (unset: rig default)");
+  auto* z_end = cmd->add_option("--z-end", f->z_end_um, "Last z position, um (unset: rig default)");
   cmd->add_option("--z-step", f->z_step_um, "z step, um > 0 (unset: rig default)");
   cmd->add_option("--exposure-us", f->exposure_us, "Camera exposure, us (unset: rig default)");
+  auto* auto_range = cmd->add_flag("--auto-range", f->auto_range,
+                                   "Find the z range with a coarse sweep first, then scan it at --z-step");
+  auto_range->excludes(z_start)->excludes(z_end);
+  cmd->add_option("--search-window", f->search_window,
+                  "--auto-range: search window A:B, um (unset: the rig's default range)")
+      ->needs(auto_range)
+      ->check([](const std::string& v) {
+        double a = 0.0, b = 0.0;
+        return ParseWindow(v, &a, &b) ? std::string() : std::string("expected A:B in um, e.g. 100:600");
+      });
+  cmd->add_option("--coarse-step", f->coarse_step_um, "--auto-range: coarse sweep step, um (unset: 4 z steps)")
+      ->needs(auto_range);
+  cmd->add_option("--margin", f->margin_um, "--auto-range: margin added each side, um (unset: 1.5 z steps)")
+      ->needs(auto_range);
   cmd->add_option("--illumination", f->illumination,
                   "std | hdr | adapt-it | adapt | texture | hf+adapt | adapted-hf | auto (unset: server default)")
       ->check(CLI::IsMember({"std", "hdr", "adapt-it", "adapt", "texture", "hf+adapt", "adapted-hf", "auto"}));

@@ -120,6 +120,14 @@ void PrintDepthSummary(const v1::DepthSummary& d) {
     if (!d.illumination_decision().empty()) std::cout << " (" << d.illumination_decision() << ')';
     std::cout << '\n';
   }
+  if (d.has_z_range_search()) {  // automatic z range: the range chosen and what it cost
+    const v1::ZRangeSearchResult& z = d.z_range_search();
+    std::cout << Format(
+        "z range: automatic, %.2f .. %.2f um (focus found at %.2f .. %.2f um, margin %.2f um); "
+        "%d coarse frames over %.2f .. %.2f um at %.2f um, %.2f s\n",
+        z.z_start_um(), z.z_end_um(), z.focus_low_um(), z.focus_high_um(), z.margin_um(), z.coarse_frame_count(),
+        z.window_start_um(), z.window_end_um(), z.coarse_step_um(), z.search_seconds());
+  }
   if (d.method() != v1::RECONSTRUCTION_METHOD_UNSPECIFIED && d.method() != v1::RECONSTRUCTION_METHOD_SFF) {
     std::cout << "method: "
               << v1::ReconstructionMethod_Name(d.method()).substr(std::string("RECONSTRUCTION_METHOD_").size());
@@ -216,10 +224,11 @@ void ProgressPrinter::Finish() {
 std::string ProgressPrinter::EventText(const v1::JobEvent& e, bool terminal) {
   std::string text;
   const bool frame = e.has_frame() && e.frame().frame_count() > 0;
-  // On a terminal a frame line leaves out the phase (it is always acquiring) to fit 80 columns.
+  // On a terminal a frame line leaves out the phase to fit 80 columns when it is acquiring (the
+  // automatic z range's FOCUS_SEARCH frames keep it).
   if (e.state() >= v1::JOB_STATE_SUCCEEDED) {
     text = Short(v1::JobState_Name(e.state()), "JOB_STATE_");
-  } else if (!(frame && terminal)) {
+  } else if (!(frame && terminal) || e.phase() == v1::JOB_PHASE_FOCUS_SEARCH) {
     text = Short(v1::JobPhase_Name(e.phase()), "JOB_PHASE_");
   }
   if (frame) {

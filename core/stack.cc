@@ -144,6 +144,24 @@ Status WriteStackManifest(const fs::path& dir, const StackManifest& m) {
     if (!f.pattern.empty()) jf["pattern"] = f.pattern;
     j["frames"].push_back(std::move(jf));
   }
+  if (const auto& r = m.z_range_search) {
+    json jr = {{"window_start_um", r->window_start_um},
+               {"window_end_um", r->window_end_um},
+               {"coarse_step_um", r->coarse_step_um},
+               {"margin_um", r->margin_um},
+               {"focus_low_um", r->focus_low_um},
+               {"focus_high_um", r->focus_high_um},
+               {"resolved_percent", r->resolved_percent},
+               {"z_start_um", r->z_start_um},
+               {"z_end_um", r->z_end_um},
+               {"search_seconds", r->search_seconds},
+               {"coarse_frames", json::array()}};
+    for (const auto& f : r->coarse_frames) {
+      jr["coarse_frames"].push_back(
+          {{"file", f.file}, {"z_um", f.z_um}, {"exposure_us", f.exposure_us}, {"pattern", f.pattern}});
+    }
+    j["z_range_search"] = std::move(jr);
+  }
   const fs::path tmp = dir / (std::string(kStackManifestName) + ".tmp");
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);

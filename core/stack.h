@@ -17,6 +17,7 @@
 
 #include <filesystem>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,22 @@ struct StackFrame {
   std::string pattern;       // projector pattern, e.g. "uniform:128", "checkerboard:8", "file:p/0001.png"
 };
 
+// An automatic z range search that chose the stack's range (server/procedures/z_range_search.h):
+// written to stack.json as "z_range_search" (not read back: it documents the scan).
+struct ZRangeSearchRecord {
+  double window_start_um = 0.0;  // searched window (low .. high)
+  double window_end_um = 0.0;
+  double coarse_step_um = 0.0;
+  double margin_um = 0.0;
+  std::vector<StackFrame> coarse_frames;  // raw/ files of the coarse sweep, in acquisition order
+  double focus_low_um = 0.0;              // where the sweep found focus (percentiles of the peaks)
+  double focus_high_um = 0.0;
+  double resolved_percent = 0.0;  // share of the field with a resolved focus peak
+  double z_start_um = 0.0;        // the range chosen for the stack (frames above)
+  double z_end_um = 0.0;
+  double search_seconds = 0.0;  // the sweep and its analysis, wall time
+};
+
 struct StackManifest {
   int version = 1;
   double pixel_size_um = 0.0;  // lateral size of one camera pixel on the specimen
@@ -41,6 +58,7 @@ struct StackManifest {
   // Set when the scan chose its mode itself (AUTO): the decision and its reasons.
   std::string illumination_decision;
   std::vector<StackFrame> frames;
+  std::optional<ZRangeSearchRecord> z_range_search;  // automatic z range only
 };
 
 inline constexpr const char* kStackManifestName = "stack.json";

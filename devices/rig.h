@@ -30,8 +30,13 @@ class SimulationControl {
   // point in focus and without noise, under `pattern` (CV_8UC1 of the projector size) at
   // exposure_us and the camera's gain; the frames' type. INVALID_ARGUMENT for a bad pattern.
   virtual StatusOr<cv::Mat> GroundTruthTexture(const cv::Mat& pattern, double exposure_us) const = 0;
-  // The z range covering the specimen's heights, used for default scan ranges.
+  // The z range covering the specimen's heights (including its z offset).
   virtual std::pair<double, double> SpecimenZRangeUm() const = 0;
+  // Places the specimen offset_um higher (a part of unknown height, for automatic z range
+  // tests); 0 = as built. The rig's scan defaults stay at the unshifted specimen's range, like a
+  // real rig's configured range. Kept across SetSpecimen. INVALID_ARGUMENT when the shifted
+  // specimen leaves the stage travel.
+  virtual Status SetSpecimenZOffsetUm(double offset_um) = 0;
 };
 
 struct ScanDefaults {

@@ -36,7 +36,13 @@ void FillQueuedJob(const JobWork& work, v1::Job* job) {
 std::string DescribeWork(const JobWork& work) {
   std::ostringstream s;
   std::visit(Overloaded{[&](const ScanWork& w) {
-                          s << "scan of " << w.plan.z_um.size() << " frames";
+                          if (const auto& z = w.plan.z_range_search) {
+                            s << "scan with automatic z range (window " << z->window_start_um << ".."
+                              << z->window_end_um << " um, coarse step " << z->coarse_step_um << " um, step "
+                              << w.plan.z_step_um << " um)";
+                          } else {
+                            s << "scan of " << w.plan.z_um.size() << " frames";
+                          }
                           if (!w.plan.z_um.empty()) {
                             s << ", z " << w.plan.z_um.front() << ".." << w.plan.z_um.back() << " um";
                           }

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -13,6 +14,7 @@
 #include "core/depth_export.h"
 #include "core/stack.h"
 #include "server/owned_folder.h"
+#include "server/procedures/z_range_search.h"
 #include "server/result_publisher.h"
 
 namespace inspection {
@@ -56,6 +58,12 @@ void FillFrameEvent(v1::JobPhase phase, int index, int count, double z_um, doubl
   e->set_progress(0.9 * done / count);
   e->set_remaining_seconds(e->elapsed_seconds() / done * (count - done));
 }
+
+// Frames of a scan with an automatic z range, for its progress (RunScan below).
+struct ProgressFrames {
+  int coarse = 0;         // the sweep's frames (known from its first event)
+  int fine_estimate = 0;  // the fine scan's frames until its first event tells
+};
 
 void EmitPhase(const JobContext& context, v1::JobPhase phase, double progress = 0.0, const std::string& message = "") {
   context.emit([&](v1::JobEvent& e) {
@@ -104,18 +112,41 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
   ScanPlan plan = work.plan;
   plan.calibration_id = calibrations_->active_id();
   const std::shared_ptr<const CalibrationBundle> bundle = calibrations_->active();
-  EmitPhase(context, v1::JOB_PHASE_PREPARING, 0.0, "scan of " + std::to_string(plan.z_um.size()) + " frames");
+  const bool search = plan.z_range_search.has_value();
+  EmitPhase(context, v1::JOB_PHASE_PREPARING, 0.0,
+            search ? "scan with automatic z range" : "scan of " + std::to_string(plan.z_um.size()) + " frames");
 
   OwnedFolder stack(store_->tmp_dir() / (job_id + ".stack"));
+  // Automatic z range: the sweep's frames come first (JOB_PHASE_FOCUS_SEARCH), then the scan's.
+  // Progress and remaining time count both; until the fine range is known its frame count is
+  // taken as the whole window's at the fine step (an upper bound, so progress never goes back).
+  ProgressFrames frames;
+  if (search) {
+    const ZRangeSearchSettings& s = *plan.z_range_search;
+    frames.fine_estimate = int(std::abs(s.window_end_um - s.window_start_um) / plan.z_step_um) + 1;
+  }
   auto on_frame = [&](const ScanFrameEvent& f) {
     context.emit([&](v1::JobEvent& e) {
-      FillFrameEvent(v1::JOB_PHASE_ACQUIRING, f.index, f.count, f.z_um, f.exposure_us, f.statistics, &e);
-      e.mutable_frame()->set_acquisition_index(f.acquisition);
+      const v1::JobPhase phase = f.z_range_search ? v1::JOB_PHASE_FOCUS_SEARCH : v1::JOB_PHASE_ACQUIRING;
+      if (!search) {
+        FillFrameEvent(phase, f.index, f.count, f.z_um, f.exposure_us, f.statistics, &e);
+        e.mutable_frame()->set_acquisition_index(f.acquisition);
+      } else {
+        if (f.z_range_search) frames.coarse = f.count;
+        const int done = f.z_range_search ? f.index : frames.coarse + f.index;
+        const int total = frames.coarse + (f.z_range_search ? frames.fine_estimate : f.count);
+        FillFrameEvent(phase, done, total, f.z_um, f.exposure_us, f.statistics, &e);
+        e.mutable_frame()->set_frame_index(f.index);  // within its phase
+        e.mutable_frame()->set_frame_count(f.count);
+        e.mutable_frame()->set_acquisition_index(f.acquisition + (f.z_range_search ? 0 : frames.coarse));
+      }
       e.mutable_frame()->set_stack_frame(f.stack_frame);
     });
   };
-  INSPECT_ASSIGN_OR_RETURN(ScanOutcome outcome, inspection::RunScan(rig_->rig(), plan, stack.path(), on_frame,
-                                                                    *context.cancel, bundle.get()));
+  StatusOr<ScanOutcome> scanned =
+      search ? RunScanWithZRangeSearch(rig_->rig(), plan, stack.path(), on_frame, *context.cancel, bundle.get())
+             : inspection::RunScan(rig_->rig(), plan, stack.path(), on_frame, *context.cancel, bundle.get());
+  INSPECT_ASSIGN_OR_RETURN(ScanOutcome outcome, std::move(scanned));
   EmitPhase(context, v1::JOB_PHASE_STORING, 0.92);
 
   INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher, ResultPublisher::Create(store_, job_id));
@@ -139,11 +170,25 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
   RecordMethod(plan.reconstruction, outcome.isff, result.mutable_depth());
   result.mutable_depth()->set_illumination(outcome.manifest.illumination);
   result.mutable_depth()->set_illumination_decision(outcome.illumination_decision);
+  if (const auto& r = outcome.manifest.z_range_search) {
+    v1::ZRangeSearchResult* z = result.mutable_depth()->mutable_z_range_search();
+    z->set_window_start_um(r->window_start_um);
+    z->set_window_end_um(r->window_end_um);
+    z->set_coarse_step_um(r->coarse_step_um);
+    z->set_coarse_frame_count(int(r->coarse_frames.size()));
+    z->set_focus_low_um(r->focus_low_um);
+    z->set_focus_high_um(r->focus_high_um);
+    z->set_resolved_percent(r->resolved_percent);
+    z->set_margin_um(r->margin_um);
+    z->set_z_start_um(r->z_start_um);
+    z->set_z_end_um(r->z_end_um);
+    z->set_search_seconds(r->search_seconds);
+  }
   if (work.recipe) {
     EmitPhase(context, v1::JOB_PHASE_STORING, 0.95, "measuring recipe " + work.recipe->recipe.recipe_id());
     DepthNoiseOptions noise;
     noise.window_px = plan.sff.window_px;
-    noise.z_positions_um = plan.z_um;
+    for (const StackFrame& f : outcome.manifest.frames) noise.z_positions_um.push_back(f.z_um);  // auto range too
     noise.stage_repeatability_um = rig_->rig().stage().repeatability_um();
     *result.mutable_inspection() =
         Inspect(*work.recipe, outcome.depth, outcome.manifest.pixel_size_um, noise, work.part_id, work.station);

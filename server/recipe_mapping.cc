@@ -191,6 +191,7 @@ v1::ScanRequest ScanRequestOfRecipe(const v1::RecipeScan& scan) {
   r.set_illumination(scan.illumination());
   *r.mutable_illumination_parameters() = scan.illumination_parameters();
   *r.mutable_reconstruction() = scan.reconstruction();
+  if (scan.has_z_range_search()) *r.mutable_z_range_search() = scan.z_range_search();
   return r;
 }
 

@@ -17,6 +17,7 @@ Status CheckNoScanFields(const v1::ScanRequest& r, const std::string& recipe_id)
     return Status::InvalidArgument("illumination_parameters" + why);
   }
   if (r.reconstruction().ByteSizeLong() > 0) return Status::InvalidArgument("reconstruction" + why);
+  if (r.z_range_search().ByteSizeLong() > 0) return Status::InvalidArgument("z_range_search" + why);
   return Status::Ok();
 }
 

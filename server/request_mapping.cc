@@ -3,10 +3,13 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
+#include <optional>
 #include <string>
 
 #include "core/texture_pattern.h"
 #include "server/procedures/illumination_auto.h"
+#include "server/procedures/z_range_search.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -199,6 +202,54 @@ IlluminationMode DefaultIlluminationMode(const CalibrationBundle* calibration, i
 // ---------------------------------------------------------------------------------------------
 // Job requests
 
+// ScanRequest.z_range_search: nullopt when not asked for. Fields are named "z_range_search.<f>".
+static StatusOr<std::optional<ZRangeSearchSettings>> MapZRangeSearch(const v1::ScanRequest& req, double fine_step_um,
+                                                                     const ScanDefaults& defaults, const Stage& stage) {
+  if (!req.has_z_range_search()) return std::optional<ZRangeSearchSettings>();
+  const v1::ZRangeSearch& z = req.z_range_search();
+  const bool any_field =
+      z.has_window_start_um() || z.has_window_end_um() || z.has_coarse_step_um() || z.has_margin_um();
+  if (!z.enabled()) {
+    if (any_field) return Status::InvalidArgument("z_range_search.enabled is false but its other fields are set");
+    return std::optional<ZRangeSearchSettings>();
+  }
+  // An explicit range and a search for one contradict each other: the window restricts a search.
+  if (req.z_start_um() != 0.0 || req.z_end_um() != 0.0) {
+    return Status::InvalidArgument(std::string(req.z_start_um() != 0.0 ? "z_start_um" : "z_end_um") +
+                                   " cannot be combined with z_range_search (give z_range_search.window_start_um "
+                                   "and window_end_um instead)");
+  }
+  if (z.has_window_start_um() != z.has_window_end_um()) {
+    return Status::InvalidArgument(std::string("z_range_search.") +
+                                   (z.has_window_start_um() ? "window_end_um" : "window_start_um") +
+                                   " is missing (give both ends of the search window or neither)");
+  }
+  if (z.has_coarse_step_um() && !(z.coarse_step_um() > 0.0)) {
+    return Status::InvalidArgument("z_range_search.coarse_step_um must be > 0 (got " +
+                                   std::to_string(z.coarse_step_um()) + ")");
+  }
+  if (z.has_margin_um() && (!(z.margin_um() >= 0.0) || !std::isfinite(z.margin_um()))) {
+    return Status::InvalidArgument("z_range_search.margin_um must be >= 0 (got " + std::to_string(z.margin_um()) + ")");
+  }
+  if (!(fine_step_um > 0.0) || !std::isfinite(fine_step_um)) {
+    return Status::InvalidArgument("z_step_um must be > 0 (got " + std::to_string(fine_step_um) + ")");
+  }
+  ZRangeSearchSettings s;
+  if (z.has_window_start_um()) {
+    s.window_start_um = z.window_start_um();
+    s.window_end_um = z.window_end_um();
+    // 0 .. 0 would read as "unset" below; as a window it is empty.
+    if (s.window_start_um == s.window_end_um) {
+      return Status::InvalidArgument("z_range_search.window_start_um and window_end_um must differ");
+    }
+  }
+  if (z.has_coarse_step_um()) s.coarse_step_um = z.coarse_step_um();
+  // A requested margin of 0 is kept as a tiny one: 0 means "default" in ZRangeSearchSettings.
+  if (z.has_margin_um()) s.margin_um = std::max(z.margin_um(), 1e-9);
+  INSPECT_ASSIGN_OR_RETURN(ZRangeSearchSettings resolved, ResolveZRangeSearch(s, fine_step_um, defaults, stage));
+  return std::optional<ZRangeSearchSettings>(resolved);
+}
+
 StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& req, const ScanContext& context) {
   INSPECT_ASSIGN_OR_RETURN(std::optional<IlluminationMode> requested, MapIlluminationMode(req.illumination()));
   INSPECT_ASSIGN_OR_RETURN(IlluminationParams params, MapIlluminationParameters(req.illumination_parameters()));
@@ -223,7 +274,18 @@ StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& req, const ScanContext&
   const double exposure = req.exposure_us() > 0 ? req.exposure_us() : defaults.exposure_us;
 
   ScanWork work;
-  INSPECT_ASSIGN_OR_RETURN(work.plan, MakeScanPlan(z0, z1, dz, exposure, *context.stage));
+  INSPECT_ASSIGN_OR_RETURN(std::optional<ZRangeSearchSettings> search,
+                           MapZRangeSearch(req, dz, defaults, *context.stage));
+  if (search) {
+    // The range comes from the search: a plan without z positions yet (z_range_search.h).
+    if (!(exposure > 0.0) || !std::isfinite(exposure)) return Status::InvalidArgument("exposure_us must be > 0");
+    if (!(dz > 0.0) || !std::isfinite(dz)) return Status::InvalidArgument("z_step_um must be > 0");
+    work.plan.exposure_us = exposure;
+    work.plan.z_step_um = dz;
+    work.plan.z_range_search = *search;
+  } else {
+    INSPECT_ASSIGN_OR_RETURN(work.plan, MakeScanPlan(z0, z1, dz, exposure, *context.stage));
+  }
   INSPECT_ASSIGN_OR_RETURN(ReconstructionSettings rec,
                            MapReconstructionOptions(req.reconstruction(), "reconstruction"));
   work.plan.sff = rec.sff;

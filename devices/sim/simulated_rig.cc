@@ -90,7 +90,8 @@ struct SimState {
   SimulatedRigOptions options;
   std::unique_ptr<ImageFormation> renderer;
   std::string specimen_name;
-  std::pair<double, double> z_range_um{0.0, 0.0};
+  std::pair<double, double> z_range_um{0.0, 0.0};  // including z_offset_um
+  double z_offset_um = 0.0;                        // SetSpecimenZOffsetUm
   double default_exposure_us = 10000.0;
   cv::Mat pattern;
   double stage_z_um = 0.0;  // actual position, including the repeatability error
@@ -103,8 +104,14 @@ struct SimState {
   Status LoadSpecimen(const std::string& name) {
     SpecimenGrid grid{options.camera_size, options.pixel_size_um, options.seed};
     INSPECT_ASSIGN_OR_RETURN(Specimen s, MakeSpecimen(name, grid));
+    s.height_um += z_offset_um;
     double lo = 0, hi = 0;
     cv::minMaxLoc(s.height_um, &lo, &hi);
+    if (lo < kStageMinUm || hi > kStageMaxUm) {
+      return Status::InvalidArgument("specimen_z_offset_um " + std::to_string(z_offset_um) + " puts specimen " + name +
+                                     " at z " + std::to_string(lo) + " .. " + std::to_string(hi) +
+                                     ", outside the stage travel");
+    }
     if (renderer) {
       INSPECT_RETURN_IF_ERROR(renderer->SetSpecimen(std::move(s)));
     } else {
@@ -266,7 +273,9 @@ class SimulatedRig : public Rig, public SimulationControl {
   double pixel_size_um() const override { return s_->options.pixel_size_um; }
   ScanDefaults scan_defaults() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
-    return ScanDefaultsFor(s_->z_range_um, s_->default_exposure_us);
+    // The unshifted range: the rig's default range does not know where a part was placed.
+    return ScanDefaultsFor({s_->z_range_um.first - s_->z_offset_um, s_->z_range_um.second - s_->z_offset_um},
+                           s_->default_exposure_us);
   }
   SimulationControl* simulation() override { return this; }
 
@@ -278,6 +287,15 @@ class SimulatedRig : public Rig, public SimulationControl {
   Status SetSpecimen(const std::string& name) override {
     std::lock_guard<std::mutex> lock(s_->mu);
     return s_->LoadSpecimen(name);
+  }
+  Status SetSpecimenZOffsetUm(double offset_um) override {
+    if (!std::isfinite(offset_um)) return Status::InvalidArgument("specimen_z_offset_um must be finite");
+    std::lock_guard<std::mutex> lock(s_->mu);
+    const double previous = s_->z_offset_um;
+    s_->z_offset_um = offset_um;
+    Status st = s_->LoadSpecimen(s_->specimen_name);
+    if (!st.ok()) s_->z_offset_um = previous;  // the loaded specimen is untouched on error
+    return st;
   }
   void SetFaults(const SimulatedFaults& faults) {
     std::lock_guard<std::mutex> lock(s_->mu);

@@ -11,11 +11,13 @@
 #include <atomic>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "core/calibration_bundle.h"
 #include "core/compensation.h"
+#include "core/focus_range_search.h"
 #include "core/frame_statistics.h"
 #include "core/sff_engine.h"
 #include "core/stack.h"
@@ -73,6 +75,10 @@ struct ScanPlan {
   SffOptions sff;
   ReconstructionMethodSettings reconstruction;  // SFF (sff above) or an integral method
   std::string calibration_id;                   // recorded in stack.json
+  // Automatic z range (z_range_search.h): z_um is empty until the coarse sweep chose the range;
+  // run the plan with RunScanWithZRangeSearch.
+  std::optional<ZRangeSearchSettings> z_range_search;
+  double z_step_um = 0.0;  // the fine step of an automatic z range (z_um is built from it)
 };
 
 // Builds the z positions from start to end (inclusive when end falls on the grid) with step
@@ -91,6 +97,9 @@ struct ScanFrameEvent {
   // false for HDR exposures, ADAPT initialisation frames and ADAPT-IT iterations that are not
   // kept. ADAPT-IT reports each iteration after its stop test, so the kept one says true.
   bool stack_frame = true;
+  // A frame of the automatic z range's coarse sweep (z_range_search.h): index / count and
+  // acquisition count within the sweep; the fine scan's events count from 0 again.
+  bool z_range_search = false;
 };
 
 struct ScanOutcome {

@@ -1,0 +1,304 @@
+// Automatic z range: focus curves of a coarse sweep on a reduced grid, their resolved peaks and
+// the percentile range (focus_range_search.h; thesis eq. 3.14 and 3.3.3).
+#include "core/focus_range_search.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+
+#include "core/depth_interpolation.h"
+
+namespace inspection {
+
+Status FocusRangeSearchOptions::Validate() const {
+  if (downsample < 1 || downsample > 16) return Status::InvalidArgument("downsample must be in [1, 16]");
+  if (window_px < 3 || window_px > 15 || window_px % 2 == 0) {
+    return Status::InvalidArgument("window_px must be odd, 3..15");
+  }
+  if (!(min_peak_ratio > 1.0)) return Status::InvalidArgument("min_peak_ratio must be > 1");
+  if (!(tail_percent >= 0.0 && tail_percent < 50.0)) return Status::InvalidArgument("tail_percent must be in [0, 50)");
+  if (!(min_resolved_percent > 0.0 && min_resolved_percent <= 100.0)) {
+    return Status::InvalidArgument("min_resolved_percent must be in (0, 100]");
+  }
+  if (!(max_saturated_share > 0.0 && max_saturated_share <= 1.0)) {
+    return Status::InvalidArgument("max_saturated_share must be in (0, 1]");
+  }
+  if (!(min_bin_percent >= 0.0 && min_bin_percent < 100.0))
+    return Status::InvalidArgument("min_bin_percent must be in [0, 100)");
+  if (!(min_cluster_percent >= 0.0 && min_cluster_percent <= 100.0)) {
+    return Status::InvalidArgument("min_cluster_percent must be in [0, 100]");
+  }
+  return Status::Ok();
+}
+
+StatusOr<FocusRangeAccumulator> FocusRangeAccumulator::Create(const FocusRangeSearchOptions& options,
+                                                              cv::Size frame_size, int bit_depth) {
+  INSPECT_RETURN_IF_ERROR(options.Validate());
+  if (bit_depth < 8 || bit_depth > 16) return Status::InvalidArgument("bit_depth must be in [8, 16]");
+  if (frame_size.width < 4 * options.downsample || frame_size.height < 4 * options.downsample) {
+    return Status::InvalidArgument("frame size " + std::to_string(frame_size.width) + "x" +
+                                   std::to_string(frame_size.height) + " is too small for downsample " +
+                                   std::to_string(options.downsample));
+  }
+  FocusRangeAccumulator a;
+  a.options_ = options;
+  a.frame_size_ = frame_size;
+  a.bit_depth_ = bit_depth;
+  return a;
+}
+
+Status FocusRangeAccumulator::PushFrame(const cv::Mat& frame, double z_um) {
+  const std::string name = "coarse frame " + std::to_string(z_um_.size());
+  if (frame.size() != frame_size_ || (frame.type() != CV_8UC1 && frame.type() != CV_16UC1)) {
+    return Status::InvalidArgument(name + ": expected a CV_8UC1/CV_16UC1 frame of the camera size");
+  }
+  if (!std::isfinite(z_um)) return Status::InvalidArgument(name + ": z_um must be finite");
+  if (z_um_.size() >= 2 && (z_um - z_um_.back()) * (z_um_[1] - z_um_[0]) <= 0.0) {
+    return Status::InvalidArgument(name + ": z_um breaks the monotonic order of the sweep");
+  }
+  if (z_um_.size() == 1 && z_um == z_um_[0]) return Status::InvalidArgument(name + ": z_um repeats frame 0");
+  // Grey levels on one scale whatever the bit depth, so min_peak_ratio means the same.
+  cv::Mat f;
+  frame.convertTo(f, CV_32F, frame.depth() == CV_16U ? 1.0 / 257.0 : 1.0);
+  const double max_value = frame.depth() == CV_16U ? double((1 << bit_depth_) - 1) : 255.0;
+  cv::Mat saturated;
+  cv::compare(frame, max_value, saturated, cv::CMP_GE);
+  saturated.convertTo(saturated, CV_32F, 1.0 / 255.0);
+  const int d = options_.downsample;
+  const cv::Size reduced(frame_size_.width / d, frame_size_.height / d);
+  cv::Mat small;
+  if (d > 1) {
+    cv::resize(f, small, reduced, 0, 0, cv::INTER_AREA);
+    cv::resize(saturated, saturated, reduced, 0, 0, cv::INTER_AREA);
+  } else {
+    small = f;
+  }
+  cv::boxFilter(saturated, saturated, CV_32F, cv::Size(options_.window_px, options_.window_px), cv::Point(-1, -1), true,
+                cv::BORDER_REFLECT);
+  saturated_.push_back(saturated);
+  cv::Mat gx, gy, energy;
+  cv::Sobel(small, gx, CV_32F, 1, 0, 3, 1.0, 0.0, cv::BORDER_REFLECT);
+  cv::Sobel(small, gy, CV_32F, 0, 1, 3, 1.0, 0.0, cv::BORDER_REFLECT);
+  energy = gx.mul(gx) + gy.mul(gy);
+  cv::boxFilter(energy, energy, CV_32F, cv::Size(options_.window_px, options_.window_px), cv::Point(-1, -1), true,
+                cv::BORDER_REFLECT);
+  focus_.push_back(energy);
+  z_um_.push_back(z_um);
+  return Status::Ok();
+}
+
+namespace {
+
+double Percentile(std::vector<float>& v, double percent) {
+  const size_t k = std::min(v.size() - 1, size_t(std::floor(percent / 100.0 * double(v.size() - 1) + 0.5)));
+  std::nth_element(v.begin(), v.begin() + long(k), v.end());
+  return v[k];
+}
+
+// A peak further than one coarse step from the median of the resolved peaks around it is not a
+// surface: the halo of a defocused highlight on its dark surround, or noise. A surface (tilted,
+// curved or stepped) has its neighbours at its height or on both sides of it.
+void RejectInconsistentPeaks(int radius, double step_um, cv::Mat* peak_z_um) {
+  const cv::Mat in = peak_z_um->clone();
+  std::vector<float> around;
+  for (int r = 0; r < in.rows; ++r) {
+    float* out = peak_z_um->ptr<float>(r);
+    for (int c = 0; c < in.cols; ++c) {
+      if (std::isnan(out[c])) continue;
+      around.clear();
+      for (int y = std::max(0, r - radius); y <= std::min(in.rows - 1, r + radius); ++y) {
+        const float* p = in.ptr<float>(y);
+        for (int x = std::max(0, c - radius); x <= std::min(in.cols - 1, c + radius); ++x) {
+          if (!std::isnan(p[x])) around.push_back(p[x]);
+        }
+      }
+      std::nth_element(around.begin(), around.begin() + long(around.size() / 2), around.end());
+      if (std::abs(out[c] - around[around.size() / 2]) > step_um) out[c] = std::numeric_limits<float>::quiet_NaN();
+    }
+  }
+}
+
+// The peaks inside the kept clusters (FocusRangeSearchOptions::min_bin_percent).
+std::vector<float> ClusteredPeaks(const std::vector<float>& peaks, double bin_um, const FocusRangeSearchOptions& o) {
+  const auto [min_it, max_it] = std::minmax_element(peaks.begin(), peaks.end());
+  const double z0 = *min_it;
+  const int bins = int(std::floor((*max_it - z0) / bin_um)) + 1;
+  auto bin_of = [&](float z) { return std::min(bins - 1, int(std::floor((z - z0) / bin_um))); };
+  std::vector<long> count(size_t(bins), 0);
+  for (float z : peaks) ++count[size_t(bin_of(z))];
+  const double bin_min = o.min_bin_percent / 100.0 * double(peaks.size());
+  // Runs of full bins; each run takes the sparse bin on either side too (the partial bin at the
+  // end of a surface's range), but never bridges an empty gap.
+  std::vector<int> cluster(size_t(bins), -1);
+  std::vector<long> cluster_count;
+  for (int b = 0; b < bins; ++b) {
+    if (double(count[size_t(b)]) < bin_min) continue;
+    if (b >= 1 && cluster[size_t(b - 1)] >= 0 && double(count[size_t(b - 1)]) >= bin_min) {
+      cluster[size_t(b)] = cluster[size_t(b - 1)];
+      continue;
+    }
+    cluster[size_t(b)] = int(cluster_count.size());
+    cluster_count.push_back(0);
+    if (b >= 1 && cluster[size_t(b - 1)] < 0) cluster[size_t(b - 1)] = cluster[size_t(b)];
+  }
+  for (int b = 1; b < bins; ++b) {  // the sparse bin above each run
+    if (cluster[size_t(b)] < 0 && double(count[size_t(b - 1)]) >= bin_min) cluster[size_t(b)] = cluster[size_t(b - 1)];
+  }
+  for (int b = 0; b < bins; ++b) {
+    if (cluster[size_t(b)] >= 0) cluster_count[size_t(cluster[size_t(b)])] += count[size_t(b)];
+  }
+  if (cluster_count.empty()) return peaks;  // all sparse: nothing to tell clutter from surface
+  const long largest = *std::max_element(cluster_count.begin(), cluster_count.end());
+  const double cluster_min = o.min_cluster_percent / 100.0 * double(peaks.size());
+  std::vector<float> kept;
+  kept.reserve(peaks.size());
+  for (float z : peaks) {
+    const int id = cluster[size_t(bin_of(z))];
+    if (id < 0) continue;
+    const long c = cluster_count[size_t(id)];
+    if (c == largest || double(c) >= cluster_min) kept.push_back(z);
+  }
+  return kept;
+}
+
+}  // namespace
+
+StatusOr<FocusRangeEstimate> FocusRangeAccumulator::Finish() const {
+  const int n = frames();
+  if (n < 3) return Status::FailedPrecondition("the coarse sweep needs at least 3 frames, has " + std::to_string(n));
+  const cv::Size size = focus_[0].size();
+  FocusRangeEstimate e;
+  e.peak_z_um.create(size, CV_32FC1);
+  std::vector<float> peaks;
+  peaks.reserve(size_t(size.area()));
+  std::vector<const float*> rows(static_cast<size_t>(n));
+  long at_first = 0, at_last = 0;
+  for (int r = 0; r < size.height; ++r) {
+    for (int k = 0; k < n; ++k) rows[size_t(k)] = focus_[size_t(k)].ptr<float>(r);
+    float* out = e.peak_z_um.ptr<float>(r);
+    for (int c = 0; c < size.width; ++c) {
+      int best = 0;
+      float f_max = rows[0][c], f_min = rows[0][c];
+      for (int k = 1; k < n; ++k) {
+        const float f = rows[size_t(k)][c];
+        if (f > f_max) {
+          f_max = f;
+          best = k;
+        }
+        f_min = std::min(f_min, f);
+      }
+      // The floor: noise and the texture's residue far from focus. A curve that never leaves
+      // it (textureless, or focus outside the window) resolves nothing.
+      const double floor = std::max(double(f_min), 1e-6);
+      if (!(f_max >= options_.min_peak_ratio * floor)) {
+        out[c] = std::numeric_limits<float>::quiet_NaN();
+        continue;
+      }
+      // Sharpness: two coarse steps away the curve must have fallen by min_sharpness (a
+      // focus peak; a defocused highlight's halo changes slowly and fails).
+      float f_far = 0.0f;
+      if (best >= 2) f_far = std::max(f_far, rows[size_t(best - 2)][c]);
+      if (best + 2 < n) f_far = std::max(f_far, rows[size_t(best + 2)][c]);
+      if (!(f_max >= options_.min_sharpness * f_far)) {
+        out[c] = std::numeric_limits<float>::quiet_NaN();
+        continue;
+      }
+      if (saturated_[size_t(best)].at<float>(r, c) > options_.max_saturated_share) {
+        out[c] = std::numeric_limits<float>::quiet_NaN();
+        continue;
+      }
+      // A maximum at the first or last frame says only that focus lies at or beyond the window's
+      // end (or a halo grows towards it): counted, not used for the range.
+      if (best == 0 || best == n - 1) {
+        (best == 0 ? at_first : at_last) += 1;
+        out[c] = std::numeric_limits<float>::quiet_NaN();
+        continue;
+      }
+      const double z = DefocusParabolaPeakZ(z_um_[size_t(best - 1)], z_um_[size_t(best)], z_um_[size_t(best + 1)],
+                                            rows[size_t(best - 1)][c], f_max, rows[size_t(best + 1)][c]);
+      out[c] = float(z);
+    }
+  }
+  RejectInconsistentPeaks(options_.consistency_radius, std::abs(z_um_[1] - z_um_[0]), &e.peak_z_um);
+  for (int r = 0; r < size.height; ++r) {
+    const float* p = e.peak_z_um.ptr<float>(r);
+    for (int c = 0; c < size.width; ++c) {
+      if (!std::isnan(p[c])) peaks.push_back(p[c]);
+    }
+  }
+  e.resolved_percent = 100.0 * double(peaks.size()) / double(size.area());
+  if (e.resolved_percent < options_.min_resolved_percent) {
+    char buf[320];
+    std::snprintf(buf, sizeof(buf),
+                  "automatic z range: no focus found in the search window z %.3f .. %.3f um (%.2f %% of the field "
+                  "shows a focus peak, %.2f %% needed): the specimen lacks texture under the search pattern or its "
+                  "focus lies outside the window",
+                  std::min(z_um_.front(), z_um_.back()), std::max(z_um_.front(), z_um_.back()), e.resolved_percent,
+                  options_.min_resolved_percent);
+    return Status::FailedPrecondition(buf);
+  }
+  e.at_first_frame_percent = 100.0 * double(at_first) / double(size.area());
+  e.at_last_frame_percent = 100.0 * double(at_last) / double(size.area());
+  std::vector<float> kept = ClusteredPeaks(peaks, std::abs(z_um_[1] - z_um_[0]), options_);
+  e.clustered_percent = 100.0 * double(kept.size()) / double(peaks.size());
+  e.z_low_um = Percentile(kept, options_.tail_percent);
+  e.z_high_um = Percentile(kept, 100.0 - options_.tail_percent);
+  return e;
+}
+
+StatusOr<std::vector<double>> CoarseSweepZ(const ZRangeSearchSettings& s, double travel_min_um, double travel_max_um,
+                                           int max_frames, const std::string& prefix) {
+  auto fmt = [](double v) {
+    char b[32];
+    std::snprintf(b, sizeof(b), "%.3f", v);
+    return std::string(b);
+  };
+  for (auto [name, z] :
+       {std::pair{"window_start_um", s.window_start_um}, std::pair{"window_end_um", s.window_end_um}}) {
+    if (!std::isfinite(z)) return Status::InvalidArgument(prefix + name + " must be finite");
+    if (z < travel_min_um || z > travel_max_um) {
+      return Status::InvalidArgument(prefix + name + " " + fmt(z) + " is outside the stage travel [" +
+                                     fmt(travel_min_um) + ", " + fmt(travel_max_um) + "]");
+    }
+  }
+  const double lo = std::min(s.window_start_um, s.window_end_um), hi = std::max(s.window_start_um, s.window_end_um);
+  if (!(hi > lo)) return Status::InvalidArgument(prefix + "window_start_um and window_end_um must differ");
+  if (!(s.coarse_step_um > 0.0) || !std::isfinite(s.coarse_step_um)) {
+    return Status::InvalidArgument(prefix + "coarse_step_um must be > 0 (got " + fmt(s.coarse_step_um) + ")");
+  }
+  // Three frames at least: the peak needs its two neighbours.
+  if (s.coarse_step_um > (hi - lo) / 2.0 + 1e-9) {
+    return Status::InvalidArgument(prefix + "coarse_step_um " + fmt(s.coarse_step_um) +
+                                   " is larger than half the search window (" + fmt(hi - lo) +
+                                   " um): the sweep needs at least 3 frames");
+  }
+  const long steps = long(std::ceil((hi - lo) / s.coarse_step_um - 1e-6));
+  if (steps + 1 > max_frames) {
+    return Status::InvalidArgument(prefix + "coarse_step_um " + fmt(s.coarse_step_um) + " over the window " + fmt(lo) +
+                                   " .. " + fmt(hi) + " um needs " + std::to_string(steps + 1) +
+                                   " coarse frames, more than " + std::to_string(max_frames) +
+                                   ": narrow the window or take a larger step");
+  }
+  std::vector<double> z;
+  for (long i = 0; i < steps; ++i) z.push_back(lo + double(i) * s.coarse_step_um);
+  z.push_back(hi);
+  return z;
+}
+
+FineRange ChooseFineRange(const FocusRangeEstimate& estimate, double fine_step_um, double margin_um, int min_frames,
+                          double travel_min_um, double travel_max_um) {
+  const double want_start = estimate.z_low_um - margin_um, want_end = estimate.z_high_um + margin_um;
+  const long steps =
+      std::max(long(std::max(min_frames, 3)) - 1, long(std::ceil((want_end - want_start) / fine_step_um - 1e-6)));
+  const double span = double(steps) * fine_step_um;
+  // The rounding to whole steps is shared by both ends; then the range is shifted, not cut, to
+  // stay within the travel.
+  double start = 0.5 * (want_start + want_end) - 0.5 * span;
+  start = std::min(start, travel_max_um - span);
+  start = std::max(start, travel_min_um);
+  return {start, std::min(travel_max_um, start + span)};
+}
+
+}  // namespace inspection

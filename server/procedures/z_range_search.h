@@ -1,0 +1,55 @@
+// Automatic z range (issue 18): a coarse sweep over the search window finds where the specimen's
+// focus lies (core/focus_range_search.h), then the normal scan (scan_procedure.h) runs over that
+// range plus the margin at the requested step. Coarse frames are stored under raw/ of the stack
+// ("frame_<i>_coarse0.png") and recorded in stack.json's "z_range_search".
+//
+// The coarse frames are captured under a projected checkerboard (cells of kSearchCellProjectorPx
+// projector pixels, 0/255, the STD exposure) instead of STD's uniform grey: through the shared
+// objective the pattern is sharp on the specimen only at focus, so textureless parts (lens,
+// mirror: no focus signal under uniform light) are found too, and on textured parts it adds
+// to their texture. No calibration is needed for it.
+#pragma once
+
+#include <atomic>
+#include <filesystem>
+#include <functional>
+
+#include "core/calibration_bundle.h"
+#include "core/focus_range_search.h"
+#include "core/status.h"
+#include "devices/rig.h"
+#include "server/procedures/scan_procedure.h"
+
+namespace inspection {
+
+// Checkerboard cell of the search pattern, projector pixels (3.4 camera pixels each on the
+// thesis rig: a period of ~14 camera pixels, resolved by the focus measure at 1/4 scale).
+inline constexpr int kSearchCellProjectorPx = 2;
+// Most coarse frames one search may take (a window / step needing more is INVALID_ARGUMENT).
+inline constexpr int kMaxCoarseFrames = 200;
+inline constexpr double kDefaultCoarseSteps = 4.0;
+// The fine scan takes at least this many frames, whatever the part's height: the SFF engine's
+// confidence (core/depth_interpolation.h FocusConfidence) estimates each curve's noise from its
+// second differences away from the peak, and on short stacks those are the peak's own flanks.
+// Measured on flat parts at 5 um steps (plane, step1um, seeds 5 and 7, 320x240): 6 frames
+// 3-5 % valid, 8 frames 20-98 %, 10 frames 93-100 %, 12 frames 100 %.
+inline constexpr int kMinFineFrames = 12;
+inline constexpr double kDefaultMarginSteps = 1.5;
+
+// Defaults for a request that leaves them unset (0): window = the rig's default scan range
+// (RigStatus.scan_defaults: where parts sit on this rig); coarse step = kDefaultCoarseSteps fine
+// steps; margin = kDefaultMarginSteps fine steps. Checks the window against the stage travel
+// and the step against the window; errors name the field under "z_range_search.".
+StatusOr<ZRangeSearchSettings> ResolveZRangeSearch(const ZRangeSearchSettings& requested, double fine_step_um,
+                                                   const ScanDefaults& defaults, const Stage& stage);
+
+// Runs the coarse sweep, chooses the range and runs RunScan over it. plan.z_range_search must be
+// set and plan.z_step_um > 0 (plan.z_um is replaced). on_frame sees the coarse frames with
+// z_range_search = true first, then the scan's frames. The outcome's manifest carries the record
+// (also written to stack.json); images_acquired and capture_statistics include the coarse frames.
+// FAILED_PRECONDITION when the sweep finds no focus (core/focus_range_search.h).
+StatusOr<ScanOutcome> RunScanWithZRangeSearch(Rig& rig, const ScanPlan& plan, const std::filesystem::path& stack_dir,
+                                              const std::function<void(const ScanFrameEvent&)>& on_frame,
+                                              const std::atomic<bool>& cancel, const CalibrationBundle* bundle);
+
+}  // namespace inspection

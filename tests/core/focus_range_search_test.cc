@@ -1,0 +1,151 @@
+// Automatic z range maths (core/focus_range_search.h) on synthetic coarse sweeps with known
+// heights: a textured two-level part blurred by the defocus model (blur sigma grows linearly with
+// |height - z|), a textureless field, and the sweep / fine range planning with its errors.
+#include "core/focus_range_search.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+namespace inspection {
+namespace {
+
+// A 256x192 frame of two halves at heights h_left / h_right seen with the stage at z: random
+// texture, Gaussian blur of sigma 0.6 + 0.4 |h - z| px, read noise 1 grey level.
+cv::Mat Frame(double h_left, double h_right, double z, uint64_t seed, bool textured = true) {
+  cv::Mat texture(192, 256, CV_32F);
+  cv::RNG tex(12345);
+  tex.fill(texture, cv::RNG::NORMAL, 128.0, textured ? 40.0 : 0.0);
+  cv::Mat out(texture.size(), CV_32F);
+  const int half = texture.cols / 2;
+  for (int side = 0; side < 2; ++side) {
+    const double sigma = 0.6 + 0.4 * std::abs((side == 0 ? h_left : h_right) - z);
+    cv::Mat blurred;
+    cv::GaussianBlur(texture, blurred, cv::Size(0, 0), sigma, sigma, cv::BORDER_REFLECT);
+    const cv::Rect roi(side * half, 0, half, texture.rows);
+    blurred(roi).copyTo(out(roi));
+  }
+  cv::Mat noise(out.size(), CV_32F);
+  cv::RNG rng(seed);
+  rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.0);
+  out += noise;
+  cv::Mat frame;
+  out.convertTo(frame, CV_8U);
+  return frame;
+}
+
+StatusOr<FocusRangeEstimate> Sweep(double h_left, double h_right, double z0, double z1, double step,
+                                   bool textured = true) {
+  INSPECT_ASSIGN_OR_RETURN(FocusRangeAccumulator acc,
+                           FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8));
+  uint64_t seed = 1;
+  for (double z = z0; z <= z1 + 1e-9; z += step) {
+    INSPECT_RETURN_IF_ERROR(acc.PushFrame(Frame(h_left, h_right, z, seed++, textured), z));
+  }
+  return acc.Finish();
+}
+
+TEST(FocusRangeSearchTest, FindsBothLevelsOfATwoLevelPartBetweenCoarseFrames) {
+  // Heights 233 and 271 um fall between the 20 um frames (at 220, 240, ... and 260, 280).
+  auto e = Sweep(233.0, 271.0, 100.0, 400.0, 20.0);
+  ASSERT_TRUE(e.ok()) << e.status().ToString();
+  EXPECT_NEAR(e->z_low_um, 233.0, 4.0);
+  EXPECT_NEAR(e->z_high_um, 271.0, 4.0);
+  EXPECT_GT(e->resolved_percent, 90.0);
+  EXPECT_DOUBLE_EQ(e->at_first_frame_percent, 0.0);
+  // Each half's peaks sit at its own height (the map is on the 4x reduced grid).
+  EXPECT_NEAR(e->peak_z_um.at<float>(24, 8), 233.0, 4.0);
+  EXPECT_NEAR(e->peak_z_um.at<float>(24, 40), 271.0, 4.0);
+}
+
+TEST(FocusRangeSearchTest, DescendingSweepGivesTheSameRange) {
+  auto up = Sweep(233.0, 271.0, 100.0, 400.0, 20.0);
+  ASSERT_TRUE(up.ok());
+  auto acc = FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8);
+  ASSERT_TRUE(acc.ok());
+  uint64_t seed = 1;
+  for (double z = 400.0; z >= 100.0 - 1e-9; z -= 20.0) ASSERT_TRUE(acc->PushFrame(Frame(233, 271, z, seed++), z).ok());
+  auto down = acc->Finish();
+  ASSERT_TRUE(down.ok()) << down.status().ToString();
+  EXPECT_NEAR(down->z_low_um, up->z_low_um, 2.0);
+  EXPECT_NEAR(down->z_high_um, up->z_high_um, 2.0);
+}
+
+TEST(FocusRangeSearchTest, TexturelessFieldIsFailedPreconditionNotAGuess) {
+  auto e = Sweep(233.0, 271.0, 100.0, 400.0, 20.0, /*textured=*/false);
+  ASSERT_FALSE(e.ok());
+  EXPECT_EQ(e.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(e.status().message().find("no focus found"), std::string::npos) << e.status().message();
+}
+
+TEST(FocusRangeSearchTest, FocusOutsideTheWindowIsNotFound) {
+  // The part at 600 um, the sweep over 100 .. 400 um: every curve rises towards the last frame.
+  auto e = Sweep(600.0, 600.0, 100.0, 400.0, 20.0);
+  ASSERT_FALSE(e.ok());
+  EXPECT_EQ(e.status().code(), StatusCode::kFailedPrecondition);
+}
+
+TEST(FocusRangeSearchTest, PushRejectsBadFramesAndBrokenOrder) {
+  auto acc = FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8);
+  ASSERT_TRUE(acc.ok());
+  EXPECT_EQ(acc->PushFrame(cv::Mat(10, 10, CV_8UC1), 0.0).code(), StatusCode::kInvalidArgument);
+  ASSERT_TRUE(acc->PushFrame(Frame(0, 0, 0, 1), 0.0).ok());
+  ASSERT_TRUE(acc->PushFrame(Frame(0, 0, 10, 2), 10.0).ok());
+  EXPECT_EQ(acc->PushFrame(Frame(0, 0, 5, 3), 5.0).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(acc->Finish().status().code(), StatusCode::kFailedPrecondition);  // 2 frames
+  FocusRangeSearchOptions bad;
+  bad.window_px = 4;
+  EXPECT_EQ(FocusRangeAccumulator::Create(bad, cv::Size(256, 192), 8).status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(CoarseSweepZTest, CoversTheWindowAndNamesTheFieldOnBadInput) {
+  auto z = CoarseSweepZ({100.0, 190.0, 20.0, 5.0}, 0.0, 1000.0, 200, "s.");
+  ASSERT_TRUE(z.ok());
+  EXPECT_EQ(*z, (std::vector<double>{100, 120, 140, 160, 180, 190}));
+  auto reversed = CoarseSweepZ({190.0, 100.0, 20.0, 5.0}, 0.0, 1000.0, 200, "s.");
+  ASSERT_TRUE(reversed.ok());
+  EXPECT_EQ(*reversed, *z);  // the window is normalised low .. high
+  struct Case {
+    ZRangeSearchSettings s;
+    const char* field;
+  };
+  const Case cases[] = {
+      {{-10.0, 100.0, 20.0, 0.0}, "s.window_start_um"}, {{100.0, 1100.0, 20.0, 0.0}, "s.window_end_um"},
+      {{100.0, 100.0, 20.0, 0.0}, "s.window_start_um"}, {{100.0, 130.0, 20.0, 0.0}, "s.coarse_step_um"},
+      {{100.0, 300.0, 0.0, 0.0}, "s.coarse_step_um"},   {{0.0, 1000.0, 1.0, 0.0}, "s.coarse_step_um"},
+  };
+  for (const Case& c : cases) {
+    auto r = CoarseSweepZ(c.s, 0.0, 1000.0, 200, "s.");
+    ASSERT_FALSE(r.ok()) << c.field;
+    EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(r.status().message().find(c.field), std::string::npos) << r.status().message();
+  }
+}
+
+TEST(ChooseFineRangeTest, WholeStepsCentredOnTheRangeWithinTheTravel) {
+  FocusRangeEstimate e;
+  e.z_low_um = 203.0;
+  e.z_high_um = 231.0;
+  // 203 - 7.5 .. 231 + 7.5 = 43 um -> 9 steps of 5 um = 45 um, the extra 2 um shared.
+  FineRange r = ChooseFineRange(e, 5.0, 7.5, 3, 0.0, 25000.0);
+  EXPECT_NEAR(r.z_start_um, 194.5, 1e-9);
+  EXPECT_NEAR(r.z_end_um, 239.5, 1e-9);
+  // A flat part still gets min_frames frames (3 at least), centred on it.
+  e.z_low_um = e.z_high_um = 300.0;
+  r = ChooseFineRange(e, 5.0, 0.0, 1, 0.0, 25000.0);
+  EXPECT_NEAR(r.z_end_um - r.z_start_um, 10.0, 1e-9);
+  EXPECT_NEAR(0.5 * (r.z_start_um + r.z_end_um), 300.0, 1e-9);
+  r = ChooseFineRange(e, 5.0, 7.5, 12, 0.0, 25000.0);
+  EXPECT_NEAR(r.z_end_um - r.z_start_um, 55.0, 1e-9);
+  EXPECT_NEAR(0.5 * (r.z_start_um + r.z_end_um), 300.0, 1e-9);
+  // At the travel's end the range is shifted inside, not cut.
+  e.z_low_um = 2.0;
+  e.z_high_um = 20.0;
+  r = ChooseFineRange(e, 5.0, 5.0, 3, 0.0, 25000.0);
+  EXPECT_DOUBLE_EQ(r.z_start_um, 0.0);
+  EXPECT_NEAR(r.z_end_um, 30.0, 1e-9);
+}
+
+}  // namespace
+}  // namespace inspection

@@ -1,0 +1,199 @@
+// Automatic z range on the simulated rig (server/procedures/z_range_search.h, issue 18): built-in
+// specimens placed at random heights (drawn from the seed) inside the search window; the chosen
+// range must hold the true heights of >= 99 % of the pixels with at most 3 fine steps to spare on
+// either side of the truth's P0.5 .. P99.5 range (parts flatter than the engine's shortest stack,
+// kMinFineFrames, get that stack centred on them). The coarse frames are stored, recorded and
+// reported before the scan's own. Figures for every specimen and several seeds:
+// autorange-evaluate (tests/bench/autorange_evaluate.cc).
+#include "server/procedures/z_range_search.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <random>
+
+#include "devices/sim/simulated_rig.h"
+
+namespace inspection {
+namespace {
+namespace fs = std::filesystem;
+
+constexpr double kFineStepUm = 5.0;
+constexpr double kWindowLowUm = 100.0, kWindowHighUm = 600.0;
+
+double Percentile(std::vector<float> v, double p) {
+  const size_t k = std::min(v.size() - 1, size_t(std::floor(p / 100.0 * double(v.size() - 1) + 0.5)));
+  std::nth_element(v.begin(), v.begin() + long(k), v.end());
+  return v[k];
+}
+
+struct Placed {
+  std::unique_ptr<Rig> rig;
+  std::vector<float> heights;
+};
+
+// The specimen at a random height with its whole range 10 um inside the window.
+Placed PlaceAtRandomHeight(const std::string& specimen, uint64_t seed) {
+  SimulatedRigOptions o;
+  o.specimen = specimen;
+  o.seed = seed;
+  o.camera_size = {512, 384};
+  auto rig = CreateSimulatedRig(o);
+  EXPECT_TRUE(rig.ok()) << rig.status().ToString();
+  Placed p{std::move(*rig), {}};
+  SimulationControl* sim = p.rig->simulation();
+  const auto [lo, hi] = sim->SpecimenZRangeUm();
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> offset(kWindowLowUm + 10.0 - lo, kWindowHighUm - 10.0 - hi);
+  EXPECT_TRUE(sim->SetSpecimenZOffsetUm(offset(rng)).ok());
+  const cv::Mat truth = sim->GroundTruthDepthUm();
+  p.heights.assign(truth.begin<float>(), truth.end<float>());
+  return p;
+}
+
+ScanPlan SearchPlan(Rig& rig) {
+  ScanPlan plan;
+  plan.exposure_us = rig.scan_defaults().exposure_us;
+  plan.z_step_um = kFineStepUm;
+  auto s = ResolveZRangeSearch({kWindowLowUm, kWindowHighUm, 0.0, 0.0}, kFineStepUm, rig.scan_defaults(), rig.stage());
+  EXPECT_TRUE(s.ok()) << s.status().ToString();
+  plan.z_range_search = *s;
+  return plan;
+}
+
+class ZRangeSearchTest : public ::testing::TestWithParam<std::pair<const char*, uint64_t>> {
+ protected:
+  void SetUp() override { dir_ = fs::temp_directory_path() / ("zrange-" + std::to_string(::getpid())); }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+TEST_P(ZRangeSearchTest, RangeHoldsTheTrueHeightsWithAtMostThreeStepsToSpare) {
+  const auto [specimen, seed] = GetParam();
+  Placed p = PlaceAtRandomHeight(specimen, seed);
+  const ScanPlan plan = SearchPlan(*p.rig);
+  std::vector<ScanFrameEvent> events;
+  std::atomic<bool> cancel{false};
+  auto out = RunScanWithZRangeSearch(
+      *p.rig, plan, dir_, [&](const ScanFrameEvent& e) { events.push_back(e); }, cancel, nullptr);
+  ASSERT_TRUE(out.ok()) << out.status().ToString();
+  ASSERT_TRUE(out->manifest.z_range_search.has_value());
+  const ZRangeSearchRecord& r = *out->manifest.z_range_search;
+
+  const double true_lo = Percentile(p.heights, 0.5), true_hi = Percentile(p.heights, 99.5);
+  long inside = 0;
+  for (float h : p.heights) inside += (h >= r.z_start_um && h <= r.z_end_um) ? 1 : 0;
+  const double coverage = 100.0 * double(inside) / double(p.heights.size());
+  EXPECT_GE(coverage, 99.0) << specimen << ": chosen " << r.z_start_um << " .. " << r.z_end_um << ", true " << true_lo
+                            << " .. " << true_hi;
+  const int fine = int(out->manifest.frames.size());
+  if (fine > kMinFineFrames) {
+    EXPECT_LE((true_lo - r.z_start_um) / kFineStepUm, 3.0) << specimen << ": start " << r.z_start_um;
+    EXPECT_LE((r.z_end_um - true_hi) / kFineStepUm, 3.0) << specimen << ": end " << r.z_end_um;
+  } else {
+    // Flat parts: the engine's shortest stack, centred on the part (one step of slack for the
+    // estimate).
+    EXPECT_EQ(fine, kMinFineFrames) << specimen;
+    EXPECT_NEAR(0.5 * (r.z_start_um + r.z_end_um), 0.5 * (true_lo + true_hi), kFineStepUm) << specimen;
+  }
+  // Textured under uniform light: the scan over the chosen range measures the whole part.
+  if (std::string(specimen) == "skew10" || std::string(specimen) == "step1um") {
+    EXPECT_GT(out->depth.valid_fraction, 0.98) << specimen;
+  }
+
+  // The stack's frames are the chosen range at the fine step.
+  ASSERT_GE(out->manifest.frames.size(), 3u);
+  EXPECT_DOUBLE_EQ(out->manifest.frames.front().z_um, r.z_start_um);
+  EXPECT_NEAR(out->manifest.frames.back().z_um, r.z_end_um, 1e-9);
+  EXPECT_NEAR(out->manifest.frames[1].z_um - out->manifest.frames[0].z_um, kFineStepUm, 1e-9);
+  // 100 .. 600 um at 4 fine steps: 26 coarse frames, reported first, stored under raw/.
+  const int coarse = 26;
+  ASSERT_EQ(int(r.coarse_frames.size()), coarse);
+  EXPECT_EQ(out->images_acquired, coarse + int(out->manifest.frames.size()));
+  ASSERT_EQ(int(events.size()), out->images_acquired);
+  for (int k = 0; k < int(events.size()); ++k) EXPECT_EQ(events[size_t(k)].z_range_search, k < coarse) << k;
+  EXPECT_EQ(events.front().count, coarse);
+  EXPECT_NEAR(r.coarse_frames.back().z_um, kWindowHighUm, 1e-9);
+  EXPECT_TRUE(fs::exists(dir_ / r.coarse_frames[5].file)) << r.coarse_frames[5].file;
+}
+
+// Textured, tilted, stepped, shiny (saturating under uniform light) and textureless (found by
+// the projected search pattern) specimens; one seed each, seeds 1..6 in turn.
+INSTANTIATE_TEST_SUITE_P(Specimens, ZRangeSearchTest,
+                         ::testing::Values(std::pair{"skew10", uint64_t(1)}, std::pair{"step1um", uint64_t(2)},
+                                           std::pair{"cutter", uint64_t(3)}, std::pair{"coin", uint64_t(4)},
+                                           std::pair{"mirror", uint64_t(5)}, std::pair{"lens", uint64_t(6)}),
+                         [](const auto& info) { return std::string(info.param.first); });
+
+// When the search window is a few times the part's height (a fixture that places parts within
+// +-50 um) and the fine step is fine, the sweep costs <= 25 % of the fine scan's frames: wedge
+// (109 um high at 512x384), 2 um steps, a window of 100 um around it, coarse step 20 um.
+TEST(ZRangeSearchBudgetTest, CoarseFramesAtMostAQuarterOfTheFineScanNearThePart) {
+  SimulatedRigOptions o;
+  o.specimen = "wedge";
+  o.seed = 9;
+  o.camera_size = {512, 384};
+  auto rig = CreateSimulatedRig(o);
+  ASSERT_TRUE(rig.ok());
+  SimulationControl* sim = (*rig)->simulation();
+  ASSERT_TRUE(sim->SetSpecimenZOffsetUm(83.0).ok());
+  const auto [lo, hi] = sim->SpecimenZRangeUm();
+  ScanPlan plan;
+  plan.exposure_us = (*rig)->scan_defaults().exposure_us;
+  plan.z_step_um = 2.0;
+  plan.z_range_search = ZRangeSearchSettings{std::floor(lo) - 50.0, std::ceil(hi) + 50.0, 20.0, 3.0};
+  const fs::path dir = fs::temp_directory_path() / ("zrange-budget-" + std::to_string(::getpid()));
+  std::atomic<bool> cancel{false};
+  auto out = RunScanWithZRangeSearch(**rig, plan, dir, nullptr, cancel, nullptr);
+  fs::remove_all(dir);
+  ASSERT_TRUE(out.ok()) << out.status().ToString();
+  const ZRangeSearchRecord& r = *out->manifest.z_range_search;
+  EXPECT_LE(double(r.coarse_frames.size()), 0.25 * double(out->manifest.frames.size()))
+      << r.coarse_frames.size() << " coarse, " << out->manifest.frames.size() << " fine";
+  const cv::Mat truth = sim->GroundTruthDepthUm();
+  EXPECT_GE(cv::countNonZero((truth >= r.z_start_um) & (truth <= r.z_end_um)), 0.99 * double(truth.total()));
+}
+
+TEST(ZRangeSearchDefaultsTest, DefaultsComeFromTheFineStepAndTheRigsRange) {
+  SimulatedRigOptions o;
+  o.camera_size = {64, 48};
+  auto rig = CreateSimulatedRig(o);
+  ASSERT_TRUE(rig.ok());
+  const ScanDefaults d = (*rig)->scan_defaults();
+  auto s = ResolveZRangeSearch({}, 2.0, d, (*rig)->stage());
+  ASSERT_TRUE(s.ok()) << s.status().ToString();
+  EXPECT_DOUBLE_EQ(s->window_start_um, d.z_start_um);
+  EXPECT_DOUBLE_EQ(s->window_end_um, d.z_end_um);
+  EXPECT_DOUBLE_EQ(s->coarse_step_um, 8.0);
+  EXPECT_DOUBLE_EQ(s->margin_um, 3.0);
+  auto bad = ResolveZRangeSearch({100.0, 26000.0, 0.0, 0.0}, 2.0, d, (*rig)->stage());
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("z_range_search.window_end_um"), std::string::npos);
+}
+
+// The simulated rig's specimen offset: truth and range move, the rig's default range does not.
+TEST(SimulatedSpecimenOffsetTest, MovesTheTruthButNotTheDefaultRange) {
+  SimulatedRigOptions o;
+  o.camera_size = {64, 48};
+  auto rig = CreateSimulatedRig(o);
+  ASSERT_TRUE(rig.ok());
+  SimulationControl* sim = (*rig)->simulation();
+  const cv::Mat before = sim->GroundTruthDepthUm();
+  const ScanDefaults d = (*rig)->scan_defaults();
+  ASSERT_TRUE(sim->SetSpecimenZOffsetUm(250.0).ok());
+  EXPECT_NEAR(cv::norm(sim->GroundTruthDepthUm() - before - 250.0, cv::NORM_INF), 0.0, 1e-3);
+  EXPECT_DOUBLE_EQ((*rig)->scan_defaults().z_start_um, d.z_start_um);
+  ASSERT_TRUE(sim->SetSpecimen("plane").ok());  // kept across specimens
+  EXPECT_NEAR(sim->SpecimenZRangeUm().first, 450.0, 1e-3);
+  const Status st = sim->SetSpecimenZOffsetUm(-500.0);
+  EXPECT_EQ(st.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(st.message().find("specimen_z_offset_um"), std::string::npos);
+  EXPECT_NEAR(sim->SpecimenZRangeUm().first, 450.0, 1e-3);  // unchanged after the refusal
+}
+
+}  // namespace
+}  // namespace inspection
