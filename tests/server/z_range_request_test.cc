@@ -142,15 +142,15 @@ TEST_F(ZRangeRequestTest, SearchFindsAMovedSpecimenAndReportsBothPhases) {
   EXPECT_NEAR(frames.back().progress(), 0.9, 1e-9);
 
   // stack.json records the search; its coarse frames are stored under raw/.
-  std::ifstream in(data_dir_ / "scans" / job.job_id() / "stack.json");
+  const std::filesystem::path stack = ExtractStoredStack(data_dir_, job.job_id(), UniqueTempDir("z_range_stack"));
+  std::ifstream in(stack / "stack.json");
   ASSERT_TRUE(in.good());
   const nlohmann::json m = nlohmann::json::parse(in);
   ASSERT_TRUE(m.contains("z_range_search"));
   const auto& js = m["z_range_search"];
   EXPECT_EQ(js["coarse_frames"].size(), 21u);
   EXPECT_DOUBLE_EQ(js["z_start_um"].get<double>(), res.z_start_um());
-  EXPECT_TRUE(
-      std::filesystem::exists(data_dir_ / "scans" / job.job_id() / js["coarse_frames"][0]["file"].get<std::string>()));
+  EXPECT_TRUE(std::filesystem::exists(stack / js["coarse_frames"][0]["file"].get<std::string>()));
   EXPECT_EQ(int(m["frames"].size()), fine);
   EXPECT_DOUBLE_EQ(m["frames"][0]["z_um"].get<double>(), res.z_start_um());
   // The fine scan measures the moved specimen (textured skew5 under STD).
