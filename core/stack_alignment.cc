@@ -192,6 +192,22 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
   return m;
 }
 
+double MaxCornerDisplacementPx(const FocusBreathingModel& model, const std::vector<double>& z_um) {
+  if (z_um.empty()) return 0.0;
+  const double z_ref = z_um[(z_um.size() - 1) / 2];
+  const cv::Size s = model.frame_size;
+  double worst = 0;
+  for (double z : z_um) {
+    const cv::Matx23d m = model.FrameFromReference(z, z_ref);
+    for (cv::Vec3d p : {cv::Vec3d(0, 0, 1), cv::Vec3d(s.width - 1, 0, 1), cv::Vec3d(0, s.height - 1, 1),
+                        cv::Vec3d(s.width - 1, s.height - 1, 1)}) {
+      const cv::Vec2d q = m * p;
+      worst = std::max(worst, std::hypot(q[0] - p[0], q[1] - p[1]));
+    }
+  }
+  return worst;
+}
+
 StatusOr<StackAligner> StackAligner::Create(const FocusBreathingModel& model, FrameAlignment alignment,
                                             const std::vector<double>& z_um, cv::Size frame_size) {
   INSPECT_RETURN_IF_ERROR(model.Validate());
@@ -242,6 +258,11 @@ StatusOr<StackAligner> StackAligner::Create(const FocusBreathingModel& model, Fr
     if (x1 >= x0) a.seen_.row(y).colRange(x0, x1 + 1).setTo(255);
   }
   a.figures_.seen_by_every_frame_percent = 100.0 * cv::countNonZero(a.seen_) / double(frame_size.area());
+  a.warps_ = MaxCornerDisplacementPx(model, z_um) >= kNegligibleAlignmentPx;
+  if (!a.warps_) {
+    a.seen_.setTo(255);
+    a.figures_.seen_by_every_frame_percent = 100.0;
+  }
   return a;
 }
 
@@ -251,6 +272,7 @@ StatusOr<cv::Mat> StackAligner::Warp(const cv::Mat& frame, int index) const {
                                    " frames the alignment was set up for");
   }
   if (frame.size() != size_) return Status::InvalidArgument("frame " + std::to_string(index) + " differs in size");
+  if (!warps_) return frame;
   cv::Mat out;
   cv::warpAffine(frame, out, maps_[size_t(index)], size_, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP,
                  cv::BORDER_REPLICATE);
@@ -258,7 +280,7 @@ StatusOr<cv::Mat> StackAligner::Warp(const cv::Mat& frame, int index) const {
 }
 
 void StackAligner::MaskUnseen(DepthResult* r) const {
-  if (r->depth_um.size() != size_) return;
+  if (!warps_ || r->depth_um.size() != size_) return;
   const cv::Mat unseen = seen_ == 0;
   r->depth_um.setTo(std::numeric_limits<float>::quiet_NaN(), unseen);
   if (r->confidence.size() == size_) r->confidence.setTo(0.0f, unseen);

@@ -75,6 +75,15 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
                                                      const std::vector<double>& z_um,
                                                      const StackAlignmentOptions& options);
 
+// Largest displacement (px) of a frame corner over the frames at z_um under the model, relative
+// to the middle frame.
+double MaxCornerDisplacementPx(const FocusBreathingModel& model, const std::vector<double>& z_um);
+// Below this largest corner displacement a stack is taken as registered and left as it is:
+// warping would only resample (smooth) the frames, and an estimate on frames that do not move is
+// itself off by about this much (neighbour registrations of one texture at different defocus err
+// by ~5e-5 in scale per pair, and those errors are correlated).
+inline constexpr double kNegligibleAlignmentPx = 0.5;
+
 // The alignment of one stack: every frame's transform to the reference frame, set up before the
 // first frame arrives; Warp resamples each frame as it comes.
 struct AlignmentFigures {
@@ -95,8 +104,12 @@ class StackAligner {
 
   // Frame `index` resampled onto the reference grid (bilinear; outside the frame the border is
   // replicated so no false edge enters the focus measure; those pixels are masked at Finish). A
-  // new Mat of the frame's type: the engine may keep it.
+  // new Mat of the frame's type (the engine may keep it); the frame itself when !warps().
   StatusOr<cv::Mat> Warp(const cv::Mat& frame, int index) const;
+  // False when the model moves no frame corner by kNegligibleAlignmentPx: frames stay as they
+  // are, every pixel counts as seen (seen_by_every_frame_percent 100) and results are exactly
+  // those without alignment.
+  bool warps() const { return warps_; }
   // NaN depth and zero confidence (and black all-in-focus) where a frame did not see the pixel.
   void MaskUnseen(DepthResult* result) const;
 
@@ -109,6 +122,7 @@ class StackAligner {
   std::vector<cv::Matx23d> maps_;
   cv::Mat seen_;
   AlignmentFigures figures_;
+  bool warps_ = true;
 };
 
 }  // namespace inspection

@@ -78,6 +78,8 @@ StatusOr<CalibrationStep> MapCalibrationStep(int step, const std::string& field)
       return CalibrationStep::kScatterMatrix;
     case v1::CALIBRATION_STEP_INTEGRAL_PSF:
       return CalibrationStep::kIntegralPsf;
+    case v1::CALIBRATION_STEP_FOCUS_BREATHING:
+      return CalibrationStep::kFocusBreathing;
     default:
       return Status::InvalidArgument(field + " is not a calibration step");
   }

@@ -75,9 +75,9 @@ TEST_F(CalibrationProcedureTest, AllStepsRunInOrderWithProgress) {
   }
   ASSERT_FALSE(events_->empty());
   EXPECT_EQ(events_->front().step, "camera_response");
-  EXPECT_EQ(events_->back().step, "integral_psf");
-  EXPECT_EQ(events_->back().step_index, 5);
-  EXPECT_EQ(events_->back().step_count, 6);
+  EXPECT_EQ(events_->back().step, "focus_breathing");
+  EXPECT_EQ(events_->back().step_index, 6);
+  EXPECT_EQ(events_->back().step_count, 7);
   EXPECT_TRUE(bundle_->Validate().ok());
 }
 
