@@ -40,8 +40,8 @@ struct FocusBreathingModel {
   double rotation_rad_per_100um = 0.0;
   double shift_x_px_per_100um = 0.0;
   double shift_y_px_per_100um = 0.0;
-  // How well the model explains the measured frames: RMS of (measured - model) displacement at
-  // the frame corners over the frames, px; and the frames it was estimated from.
+  // How well the model explains the measurements: RMS over the agreeing neighbour pairs of the
+  // (measured - model) pair transform at the frame corners, px; and the frames it came from.
   double fit_rms_px = 0.0;
   int frames = 0;
 
@@ -57,16 +57,18 @@ struct StackAlignmentOptions {
   // Pairs of neighbours that fail to register are left out of the fit; when more than this share
   // fails (or fewer than 2 pairs remain) the estimate fails.
   double max_failed_pair_share = 0.25;
-  // A model that leaves more than this RMS residual (px at the frame corners) does not describe
-  // the stack: aligning with it would smear the depth map, so the estimate fails instead.
-  double max_fit_rms_px = 2.0;
+  // A pair whose registration differs from the model's transform for that pair by more than this
+  // (RMS at the frame corners, px) disagrees with the model. Failed and disagreeing pairs together
+  // may be at most max_failed_pair_share of the pairs: else the stack does not follow one model,
+  // aligning with it would smear the depth map, and the estimate fails instead.
+  double max_pair_residual_px = 0.5;
   Status Validate() const;
 };
 
 // Estimates the model from a stack: each frame is registered to its neighbour (neighbours share
 // most of their defocus, so their structure is alike; a frame far from the reference may share
 // none with it) and the per-pair changes of scale, rotation and shift per um are combined by their
-// median (robust to a pair that registered wrongly); the chained transforms then check the fit.
+// median (robust to a pair that registered wrongly); each pair is then checked against the model.
 // load(i) returns frame i (CV_8UC1 or CV_16UC1); only two frames are held at a time.
 // reference_z_um of the result: z_um.front(). Errors: INVALID_ARGUMENT for fewer than 3 frames
 // or frames smaller than 32x32 px ("alignment needs ..."), FAILED_PRECONDITION naming the frame

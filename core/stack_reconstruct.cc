@@ -29,12 +29,14 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const std::filesystem::pa
       break;
     case FrameAlignment::kEstimate: {
       auto load = [&](int i) -> StatusOr<cv::Mat> {
-        if (cancel.load()) return Status::Cancelled("reconstruction cancelled while aligning frame " + std::to_string(i));
+        if (cancel.load())
+          return Status::Cancelled("reconstruction cancelled while aligning frame " + std::to_string(i));
         return LoadStackFrame(dir, manifest, size_t(i));  // errors name the frame
       };
       StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
       if (!estimate.ok()) {
-        if (a.fall_back_to_none && estimate.status().code() == StatusCode::kFailedPrecondition) {
+        const StatusCode code = estimate.status().code();
+        if (a.fall_back_to_none && (code == StatusCode::kFailedPrecondition || code == StatusCode::kInvalidArgument)) {
           return std::optional<StackAligner>();
         }
         return estimate.status();

@@ -164,7 +164,7 @@ const cv::Mat& ImageFormation::CameraIrradianceScratch(const cv::Mat& pattern, d
   if (!options_.lateral.active()) return scratch_ec_;
   // The image on the sensor is the specimen's through the breathing optics. Beyond the specimen
   // maps the scene continues mirrored (the camera at low magnification sees past their edge).
-  cv::warpAffine(scratch_ec_, scratch_lateral_, CameraFromSpecimen(z_um), scratch_ec_.size(), cv::INTER_CUBIC,
+  cv::warpAffine(scratch_ec_, scratch_lateral_, CameraFromSpecimen(z_um), scratch_ec_.size(), cv::INTER_LANCZOS4,
                  cv::BORDER_REFLECT_101);
   return scratch_lateral_;
 }

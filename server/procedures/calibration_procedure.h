@@ -1,7 +1,7 @@
 // Calibration procedure: drives a Rig through the calibration steps of thesis 4.3 and 5.4.1
 // (camera response, projector response, geometric LUTs, PSF + sigma_p, scatter matrix,
-// integral PSF) and the focus-breathing model of issue 18, calls the core estimators and returns a CalibrationBundle with the figures
-// that verify each step. No gRPC here: the server's Calibrate job wraps RunCalibration.
+// integral PSF) and the focus-breathing model of issue 18, calls the core estimators and returns a CalibrationBundle
+// with the figures that verify each step. No gRPC here: the server's Calibrate job wraps RunCalibration.
 //
 // What it needs from the rig: a planar, diffuse target normal to the optical axis under the
 // objective (thesis 4.3.1). On the simulated rig the procedure switches the specimen to
