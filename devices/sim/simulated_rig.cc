@@ -351,9 +351,11 @@ Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults) {
 }
 
 cv::Mat GroundTruthInCameraGrid(Rig& rig, double z_um) {
-  auto* sim = dynamic_cast<SimulatedRig*>(&rig);
-  if (sim == nullptr) return {};
-  return sim->GroundTruthInCameraGrid(z_um);
+  // Through simulation(): a rig wrapping the simulated one (the server's) forwards it.
+  SimulationControl* control = rig.simulation();
+  if (control == nullptr) return {};
+  auto* sim = dynamic_cast<SimulatedRig*>(control);
+  return sim != nullptr ? sim->GroundTruthInCameraGrid(z_um) : control->GroundTruthDepthUm();
 }
 
 StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& options) {
