@@ -40,6 +40,12 @@ std::vector<CalibrationStep> AllCalibrationSteps() {
           CalibrationStep::kFocusBreathing};
 }
 
+std::vector<CalibrationStep> DefaultCalibrationSteps() {
+  std::vector<CalibrationStep> steps = AllCalibrationSteps();
+  steps.pop_back();  // kFocusBreathing, the last
+  return steps;
+}
+
 StatusOr<CalibrationStep> ParseCalibrationStep(const std::string& name) {
   for (CalibrationStep s : AllCalibrationSteps())
     if (name == CalibrationStepName(s)) return s;

@@ -52,6 +52,9 @@ inline constexpr int kCalibrationStepCount = 7;
 const char* CalibrationStepName(CalibrationStep step);
 StatusOr<CalibrationStep> ParseCalibrationStep(const std::string& name);
 std::vector<CalibrationStep> AllCalibrationSteps();
+// What a calibration request without steps runs: every step but focus_breathing, which a rig
+// with telecentric optics and a straight stage does not need (request it by name).
+std::vector<CalibrationStep> DefaultCalibrationSteps();
 
 // What one step measured, for `inspectctl calibration show`. Figure names carry units, e.g.
 // "lut_vs_homography_mean_px", "prediction_mae_percent", "fit_rms_residual_ln".

@@ -56,12 +56,12 @@ struct StackAlignmentOptions {
   FrameRegistrationOptions registration;
   // Pairs of neighbours that fail to register are left out of the fit; when more than this share
   // fails (or fewer than 2 pairs remain) the estimate fails.
-  double max_failed_pair_share = 0.25;
+  double max_failed_pair_share = 0.4;
   // A pair whose registration differs from the model's transform for that pair by more than this
   // (RMS at the frame corners, px) disagrees with the model. Failed and disagreeing pairs together
   // may be at most max_failed_pair_share of the pairs: else the stack does not follow one model,
   // aligning with it would smear the depth map, and the estimate fails instead.
-  double max_pair_residual_px = 0.5;
+  double max_pair_residual_px = 1.0;
   Status Validate() const;
 };
 

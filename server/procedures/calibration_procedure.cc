@@ -584,7 +584,10 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
   INSPECT_RETURN_IF_ERROR(options.Validate());
   std::set<CalibrationStep> wanted(options.steps.begin(), options.steps.end());
   const std::vector<CalibrationStep> all = AllCalibrationSteps();
-  if (wanted.empty()) wanted = std::set<CalibrationStep>(all.begin(), all.end());
+  if (wanted.empty()) {
+    const std::vector<CalibrationStep> d = DefaultCalibrationSteps();
+    wanted = std::set<CalibrationStep>(d.begin(), d.end());
+  }
   std::vector<CalibrationStep> steps;
   for (CalibrationStep s : all)
     if (wanted.count(s)) steps.push_back(s);

@@ -33,7 +33,8 @@ struct CalibrationProgress {
 };
 
 struct CalibrationOptions {
-  // Steps to run, in any order (they are run in CalibrationStep order); empty = all seven.
+  // Steps to run, in any order (they are run in CalibrationStep order); empty = the six of
+  // DefaultCalibrationSteps() (focus_breathing only when named).
   std::vector<CalibrationStep> steps;
 
   // Simulated rig only (ignored on real rigs; empty = keep the current specimen): the target
