@@ -57,6 +57,15 @@ const std::map<std::string, v1::ArtifactKind>& Exports() {
   return m;
 }
 
+const std::map<std::string, v1::FrameAlignment>& Alignments() {
+  static const std::map<std::string, v1::FrameAlignment> m = {
+      {"none", v1::FRAME_ALIGNMENT_NONE},
+      {"estimate", v1::FRAME_ALIGNMENT_ESTIMATE},
+      {"calibrated", v1::FRAME_ALIGNMENT_CALIBRATED},
+  };
+  return m;
+}
+
 }  // namespace
 
 void ReconstructionFlags::Add(CLI::App* cmd) {
@@ -74,6 +83,10 @@ void ReconstructionFlags::Add(CLI::App* cmd) {
   cmd->add_option("--min-confidence", min_confidence, "Pixels below this confidence get no depth (0..1)");
   cmd->add_option("--export", exports, "Extra export, repeatable: png16, ply, x3p")
       ->check(CLI::IsMember(Keys(Exports()), CLI::ignore_case));
+  cmd->add_option("--alignment", alignment,
+                  "Lateral alignment of the frames: none | estimate (from the stack; reconstruct's default) | "
+                  "calibrated (the focus-breathing calibration; scan's default when calibrated)")
+      ->check(CLI::IsMember(Keys(Alignments()), CLI::ignore_case));
 }
 
 v1::ReconstructionOptions ReconstructionFlags::ToProto() const {
@@ -85,6 +98,7 @@ v1::ReconstructionOptions ReconstructionFlags::ToProto() const {
   for (const auto& e : exports) o.add_extra_exports(Exports().at(Lower(e)));
   if (!method.empty()) o.set_method(Methods().at(Lower(method)));
   if (isff_fast_threshold) o.set_isff_fast_threshold(*isff_fast_threshold);
+  if (!alignment.empty()) o.set_alignment(Alignments().at(Lower(alignment)));
   return o;
 }
 

@@ -1,6 +1,6 @@
 // The reconstruction options shared by `scan` and `reconstruct` (--method, --isff-fast-threshold,
-// --focus-measure, --window, --interpolation, --min-confidence, --export) and their mapping to
-// ReconstructionOptions.
+// --focus-measure, --window, --interpolation, --min-confidence, --export, --alignment) and their
+// mapping to ReconstructionOptions.
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -22,6 +22,7 @@ struct ReconstructionFlags {
   std::vector<std::string> exports;
   std::string method;                         // sff | isff | isff-gt | isff-fast (thesis 5.4, 6.4)
   std::optional<double> isff_fast_threshold;  // ISFF-FAST, (0, 1]; the server checks the range
+  std::string alignment;                      // none | estimate | calibrated; empty = server default
 
   // Adds the options to `cmd`, writing into this object (which must outlive the parse).
   void Add(CLI::App* cmd);

@@ -27,6 +27,8 @@ const char* CalibrationStepName(CalibrationStep step) {
       return "scatter_matrix";
     case CalibrationStep::kIntegralPsf:
       return "integral_psf";
+    case CalibrationStep::kFocusBreathing:
+      return "focus_breathing";
   }
   return "unknown";
 }
@@ -34,7 +36,14 @@ const char* CalibrationStepName(CalibrationStep step) {
 std::vector<CalibrationStep> AllCalibrationSteps() {
   return {CalibrationStep::kCameraResponse, CalibrationStep::kProjectorResponse,
           CalibrationStep::kGeometry,       CalibrationStep::kPsf,
-          CalibrationStep::kScatterMatrix,  CalibrationStep::kIntegralPsf};
+          CalibrationStep::kScatterMatrix,  CalibrationStep::kIntegralPsf,
+          CalibrationStep::kFocusBreathing};
+}
+
+std::vector<CalibrationStep> DefaultCalibrationSteps() {
+  std::vector<CalibrationStep> steps = AllCalibrationSteps();
+  steps.pop_back();  // kFocusBreathing, the last
+  return steps;
 }
 
 StatusOr<CalibrationStep> ParseCalibrationStep(const std::string& name) {
@@ -42,7 +51,7 @@ StatusOr<CalibrationStep> ParseCalibrationStep(const std::string& name) {
     if (name == CalibrationStepName(s)) return s;
   return Status::InvalidArgument(
       "unknown calibration step '" + name +
-      "' (camera_response, projector_response, geometry, psf, scatter_matrix, integral_psf)");
+      "' (camera_response, projector_response, geometry, psf, scatter_matrix, integral_psf, focus_breathing)");
 }
 
 const CalibrationStepReport* CalibrationBundle::Report(CalibrationStep step) const {
@@ -75,6 +84,8 @@ bool CalibrationBundle::HasModel(CalibrationStep step) const {
       return scatter.has_value();
     case CalibrationStep::kIntegralPsf:
       return integral_psf.has_value();
+    case CalibrationStep::kFocusBreathing:
+      return focus_breathing.has_value();
   }
   return false;
 }
@@ -101,6 +112,12 @@ Status CalibrationBundle::Validate() const {
     }
   }
   if (integral_psf) INSPECT_RETURN_IF_ERROR(integral_psf->Validate());
+  if (focus_breathing) {
+    INSPECT_RETURN_IF_ERROR(focus_breathing->Validate().WithContext("focus_breathing"));
+    if (focus_breathing->frame_size != camera_size) {
+      return Status::InvalidArgument("focus_breathing: frame_size differs from camera_size");
+    }
+  }
   return Status::Ok();
 }
 
@@ -242,6 +259,18 @@ Status CalibrationBundle::Save(const fs::path& dir) const {
                          {"stack_frames", p.stack_frames},
                          {"integral_noise_sigma", Num(p.integral_noise_sigma)}};
   }
+  if (focus_breathing) {
+    const auto& m = *focus_breathing;
+    j["focus_breathing"] = {{"reference_z_um", m.reference_z_um},
+                            {"frame_width", m.frame_size.width},
+                            {"frame_height", m.frame_size.height},
+                            {"scale_change_per_100um", m.scale_change_per_100um},
+                            {"rotation_rad_per_100um", m.rotation_rad_per_100um},
+                            {"shift_x_px_per_100um", m.shift_x_px_per_100um},
+                            {"shift_y_px_per_100um", m.shift_y_px_per_100um},
+                            {"fit_rms_px", Num(m.fit_rms_px)},
+                            {"frames", m.frames}};
+  }
   json reps = json::array();
   for (const auto& r : reports) {
     json f = json::object();
@@ -371,6 +400,19 @@ StatusOr<CalibrationBundle> CalibrationBundle::Load(const fs::path& dir) {
       r.integral_noise_sigma = p.contains("integral_noise_sigma") ? NumFrom(p.at("integral_noise_sigma")) : 0.0;
       INSPECT_ASSIGN_OR_RETURN(r.kernel, ReadFloatTiff(dir / "integral_psf.tiff", {}));
       b.integral_psf = std::move(r);
+    }
+    if (j.contains("focus_breathing")) {
+      const json& p = j.at("focus_breathing");
+      FocusBreathingModel m;
+      m.reference_z_um = p.at("reference_z_um").get<double>();
+      m.frame_size = cv::Size(p.at("frame_width").get<int>(), p.at("frame_height").get<int>());
+      m.scale_change_per_100um = p.at("scale_change_per_100um").get<double>();
+      m.rotation_rad_per_100um = p.at("rotation_rad_per_100um").get<double>();
+      m.shift_x_px_per_100um = p.at("shift_x_px_per_100um").get<double>();
+      m.shift_y_px_per_100um = p.at("shift_y_px_per_100um").get<double>();
+      m.fit_rms_px = NumFrom(p.at("fit_rms_px"));
+      m.frames = p.value("frames", 0);
+      b.focus_breathing = m;
     }
     const json reports_json = j.value("reports", json::array());
     for (const json& r : reports_json) {

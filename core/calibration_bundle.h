@@ -10,6 +10,7 @@
 //   scatter_matrix.bin                CSC float32 (see core/scatter_matrix.h)
 //   scatter_black_radiance.tiff       float32, camera size
 //   integral_psf.tiff                 float32 kernel
+// The focus-breathing model (issue 18, core/stack_alignment.h) is scalar: bundle.json only.
 // Models that were not calibrated are absent from bundle.json and have no files.
 #pragma once
 
@@ -26,6 +27,7 @@
 #include "core/projector_response.h"
 #include "core/psf_calibration.h"
 #include "core/scatter_matrix.h"
+#include "core/stack_alignment.h"
 #include "core/status.h"
 
 namespace inspection {
@@ -41,13 +43,18 @@ enum class CalibrationStep {
   kPsf,                // thesis 4.3.3 and sigma_p of 5.2.1
   kScatterMatrix,      // thesis 4.3.4, eq. 4.11-4.12
   kIntegralPsf,        // thesis 5.4.1, eq. 5.22
+  kFocusBreathing,     // issue 18: magnification change and lateral drift through z
 };
-inline constexpr int kCalibrationStepCount = 6;
+inline constexpr int kCalibrationStepCount = 7;
 
-// "camera_response", "projector_response", "geometry", "psf", "scatter_matrix", "integral_psf".
+// "camera_response", "projector_response", "geometry", "psf", "scatter_matrix", "integral_psf",
+// "focus_breathing".
 const char* CalibrationStepName(CalibrationStep step);
 StatusOr<CalibrationStep> ParseCalibrationStep(const std::string& name);
 std::vector<CalibrationStep> AllCalibrationSteps();
+// What a calibration request without steps runs: every step but focus_breathing, which a rig
+// with telecentric optics and a straight stage does not need (request it by name).
+std::vector<CalibrationStep> DefaultCalibrationSteps();
 
 // What one step measured, for `inspectctl calibration show`. Figure names carry units, e.g.
 // "lut_vs_homography_mean_px", "prediction_mae_percent", "fit_rms_residual_ln".
@@ -75,6 +82,7 @@ struct CalibrationBundle {
   std::optional<PsfCalibration> psf;
   std::optional<ScatterMatrix> scatter;
   std::optional<IntegralPsf> integral_psf;
+  std::optional<FocusBreathingModel> focus_breathing;
 
   // The latest report of every step in the bundle (one per step; a step carried over from a
   // previous bundle keeps its report).

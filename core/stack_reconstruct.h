@@ -10,6 +10,7 @@
 #include "core/frame_statistics.h"
 #include "core/sff_engine.h"
 #include "core/stack.h"
+#include "core/stack_alignment.h"
 #include "core/status.h"
 
 namespace inspection {
@@ -17,11 +18,32 @@ namespace inspection {
 // Called after each frame is pushed: (frame index, frame count, z_um, grey-value statistics).
 using StackFrameCallback = std::function<void(int, int, double, const FrameStatistics&)>;
 
+// How the frames of a stack folder are aligned before the focus measure (core/stack_alignment.h).
+struct StackFolderAlignment {
+  FrameAlignment alignment = FrameAlignment::kNone;
+  const FocusBreathingModel* calibrated = nullptr;  // kCalibrated: the model (must outlive the call)
+  // kEstimate only: when the estimate fails to converge, reconstruct unaligned instead of failing
+  // (the server's default for imported stacks, which may be featureless; an explicit request
+  // fails). figures->alignment then says kNone.
+  bool fall_back_to_none = false;
+  StackAlignmentOptions options;
+};
+
 // manifest: as read by ReadStackManifest(dir). on_frame may be empty. cancel is polled before
 // each frame: CANCELLED naming the frame. Errors name the frame and its file, e.g.
 // "frame 3 (frame_0003.png): ...".
+// Alignment: kEstimate first registers the frames (one pass over the folder, two frames in
+// memory), then every frame is warped onto the middle frame's grid as it is pushed (StackAligner:
+// a negligible model leaves the frames as they are); the depth map is in that grid, NaN where a
+// frame did not see the pixel. figures (may be null) receives what ran.
 StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, const StackManifest& manifest,
                                              const SffOptions& options, const StackFrameCallback& on_frame,
-                                             const std::atomic<bool>& cancel);
+                                             const std::atomic<bool>& cancel,
+                                             const StackFolderAlignment& alignment = {},
+                                             AlignmentFigures* figures = nullptr);
+
+// Largest displacement (px) of a frame corner over the frames at z_um under the model,
+// relative to the middle frame: below ~0.5 px alignment changes nothing measurable.
+double MaxCornerDisplacementPx(const FocusBreathingModel& model, const std::vector<double>& z_um);
 
 }  // namespace inspection

@@ -1,6 +1,7 @@
 // Rig configuration: JSON parsing with key-naming errors, and CreateRig (see rig_config.h).
 #include "devices/rig_config.h"
 
+#include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -102,6 +103,10 @@ Status ParseSimulation(Section s, SimulatedRigOptions* o) {
   INSPECT_RETURN_IF_ERROR(s.Number("stage_repeatability_um", &o->stage_repeatability_um));
   INSPECT_RETURN_IF_ERROR(s.Number("read_noise_dn", &o->read_noise_dn));
   INSPECT_RETURN_IF_ERROR(s.Bool("shot_noise", &o->shot_noise));
+  INSPECT_RETURN_IF_ERROR(s.Number("focus_breathing_percent_per_100um", &o->focus_breathing_percent_per_100um));
+  INSPECT_RETURN_IF_ERROR(s.Number("lateral_drift_x_px_per_100um", &o->lateral_drift_x_px_per_100um));
+  INSPECT_RETURN_IF_ERROR(s.Number("lateral_drift_y_px_per_100um", &o->lateral_drift_y_px_per_100um));
+  INSPECT_RETURN_IF_ERROR(s.Number("breathing_reference_z_um", &o->breathing_reference_z_um));
   INSPECT_RETURN_IF_ERROR(s.NoUnknownKeys());
   if (o->camera_size.width <= 0 || o->camera_size.height <= 0) {
     return ConfigError(s.key("camera_width/camera_height"), "must be > 0");
@@ -114,6 +119,13 @@ Status ParseSimulation(Section s, SimulatedRigOptions* o) {
   INSPECT_RETURN_IF_ERROR(Positive(s.key("pixel_size_um"), o->pixel_size_um));
   if (!(o->stage_repeatability_um >= 0.0)) return ConfigError(s.key("stage_repeatability_um"), "must be >= 0");
   if (!(o->read_noise_dn >= 0.0)) return ConfigError(s.key("read_noise_dn"), "must be >= 0");
+  if (!(std::abs(o->focus_breathing_percent_per_100um) <= 20.0)) {
+    return ConfigError(s.key("focus_breathing_percent_per_100um"), "must be within +-20");
+  }
+  for (auto [key, v] : {std::pair{"lateral_drift_x_px_per_100um", o->lateral_drift_x_px_per_100um},
+                        std::pair{"lateral_drift_y_px_per_100um", o->lateral_drift_y_px_per_100um}}) {
+    if (!(std::abs(v) <= 100.0)) return ConfigError(s.key(key), "must be within +-100");
+  }
   return Status::Ok();
 }
 

@@ -5,11 +5,13 @@
 
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <variant>
 #include <vector>
 
 #include "core/sff_engine.h"
+#include "core/stack_alignment.h"
 #include "inspection/v1/inspection.pb.h"
 #include "server/inspection_result.h"
 #include "server/owned_folder.h"
@@ -46,6 +48,9 @@ struct ReconstructWork {
   SffOptions sff;
   ReconstructionMethodSettings method;  // SFF with sff, or an integral method (thesis 5.4, 6.4)
   std::vector<DepthExportKind> extra_exports;
+  // Lateral alignment (core/stack_alignment.h); nullopt = ESTIMATE, unaligned when the frames do
+  // not register.
+  std::optional<FrameAlignment> alignment;
 };
 
 using JobWork = std::variant<ScanWork, CalibrateWork, ReconstructWork>;

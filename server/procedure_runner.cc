@@ -94,6 +94,24 @@ void RecordMethod(const ReconstructionMethodSettings& m, const IntegralSffFigure
   d->set_frames_searched_fraction(figures.frames_searched_fraction);
 }
 
+// The lateral alignment that ran and its figures (DepthSummary 22..25).
+void RecordAlignment(const AlignmentFigures& a, v1::DepthSummary* d) {
+  switch (a.alignment) {
+    case FrameAlignment::kNone:
+      d->set_alignment(v1::FRAME_ALIGNMENT_NONE);
+      break;
+    case FrameAlignment::kEstimate:
+      d->set_alignment(v1::FRAME_ALIGNMENT_ESTIMATE);
+      break;
+    case FrameAlignment::kCalibrated:
+      d->set_alignment(v1::FRAME_ALIGNMENT_CALIBRATED);
+      break;
+  }
+  d->set_alignment_max_scale_change_percent(a.max_scale_change_percent);
+  d->set_alignment_max_shift_px(a.max_shift_px);
+  d->set_alignment_seen_percent(a.seen_by_every_frame_percent);
+}
+
 }  // namespace
 
 StatusOr<v1::JobResult> ProcedureRunner::Run(const JobWork& work, const JobContext& context) {
@@ -193,6 +211,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
     *result.mutable_inspection() =
         Inspect(*work.recipe, outcome.depth, outcome.manifest.pixel_size_um, noise, work.part_id, work.station);
   }
+  RecordAlignment(outcome.alignment, result.mutable_depth());
   // The stack is stored once, as stack.zip (server/stored_stack.h): the folder in tmp/ goes
   // with `stack` whether or not publication succeeds.
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
@@ -238,6 +257,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   const auto t0 = std::chrono::steady_clock::now();
   DepthResult depth;
   IntegralSffFigures isff;
+  AlignmentFigures alignment;
   if (work.method.integral()) {
     // The calibration active now; two passes over the folder without per-frame events (and
     // without a cancellation point inside them: ~1 s for 23 frames of 1024 x 768).
@@ -251,7 +271,21 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     depth = std::move(r.depth);
     isff = FiguresOf(r);
   } else {
-    INSPECT_ASSIGN_OR_RETURN(depth, ReconstructStackFolder(work.stack_dir, m, work.sff, on_frame, *context.cancel));
+    // Imported stacks align by default: estimated from the frames, unaligned when they do not
+    // register (a featureless stack); an explicit request fails instead.
+    StackFolderAlignment a;
+    a.alignment = work.alignment.value_or(FrameAlignment::kEstimate);
+    a.fall_back_to_none = !work.alignment.has_value();
+    const std::shared_ptr<const CalibrationBundle> bundle = calibrations_->active();
+    if (a.alignment == FrameAlignment::kCalibrated && bundle && bundle->focus_breathing) {
+      a.calibrated = &*bundle->focus_breathing;
+    }
+    auto r = ReconstructStackFolder(work.stack_dir, m, work.sff, on_frame, *context.cancel, a, &alignment);
+    if (!r.ok()) {
+      const bool alignment_error = r.status().message().rfind("alignment", 0) == 0;
+      return alignment_error ? r.status().WithContext("options.alignment") : r.status();
+    }
+    depth = std::move(r).value();
   }
   const double engine_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EmitPhase(context, v1::JOB_PHASE_STORING, 0.92);
@@ -279,6 +313,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   *result.mutable_depth() = SummariseDepth(depth, m.pixel_size_um, truth, work.sff.window_px);
   result.mutable_depth()->set_engine_seconds(engine_seconds);
   RecordMethod(work.method, isff, result.mutable_depth());
+  RecordAlignment(alignment, result.mutable_depth());
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
   return result;
 }

@@ -81,6 +81,8 @@ StatusOr<CalibrationStep> MapCalibrationStep(int step, const std::string& field)
       return CalibrationStep::kScatterMatrix;
     case v1::CALIBRATION_STEP_INTEGRAL_PSF:
       return CalibrationStep::kIntegralPsf;
+    case v1::CALIBRATION_STEP_FOCUS_BREATHING:
+      return CalibrationStep::kFocusBreathing;
     default:
       return Status::InvalidArgument(field + " is not a calibration step");
   }
@@ -112,6 +114,36 @@ bool IsCheckerboardMode(IlluminationMode mode) {
 StatusOr<TexturePeriod> CheckerboardPeriod(const CalibrationBundle& calibration, int window_px) {
   return ChooseTexturePeriod(calibration.psf->influence_radius_px, calibration.geometry->camera_px_per_projector_px,
                              window_px);
+}
+
+StatusOr<std::optional<FrameAlignment>> MapFrameAlignment(v1::FrameAlignment a, const std::string& field) {
+  switch (a) {
+    case v1::FRAME_ALIGNMENT_UNSPECIFIED:
+      return std::optional<FrameAlignment>();
+    case v1::FRAME_ALIGNMENT_NONE:
+      return std::optional(FrameAlignment::kNone);
+    case v1::FRAME_ALIGNMENT_ESTIMATE:
+      return std::optional(FrameAlignment::kEstimate);
+    case v1::FRAME_ALIGNMENT_CALIBRATED:
+      return std::optional(FrameAlignment::kCalibrated);
+    default:
+      return Status::InvalidArgument(field + ".alignment " + std::to_string(int(a)) + " is unknown");
+  }
+}
+
+// Scans warp each frame as it arrives: only a model known before the first frame will do.
+Status CheckScanAlignment(const std::optional<FrameAlignment>& a, const CalibrationBundle* calibration) {
+  if (a == FrameAlignment::kEstimate) {
+    return Status::InvalidArgument(
+        "reconstruction.alignment FRAME_ALIGNMENT_ESTIMATE needs the whole stack; a scan aligns each frame as it "
+        "arrives with the calibrated model (FRAME_ALIGNMENT_CALIBRATED). Reconstruct the stored scan to estimate");
+  }
+  if (a == FrameAlignment::kCalibrated && (calibration == nullptr || !calibration->focus_breathing)) {
+    return Status::FailedPrecondition(
+        std::string("reconstruction.alignment FRAME_ALIGNMENT_CALIBRATED needs the calibration step focus_breathing") +
+        (calibration == nullptr ? " (no active calibration)" : " (missing in the active calibration)"));
+  }
+  return Status::Ok();
 }
 
 }  // namespace
@@ -146,6 +178,11 @@ StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::Reconstructi
   }
   // Validate's message starts with the field name ("isff_fast_threshold must be in (0, 1] ...").
   if (Status v = m.Validate(); !v.ok()) return Status::InvalidArgument(field + "." + v.message());
+  INSPECT_ASSIGN_OR_RETURN(out.alignment, MapFrameAlignment(o.alignment(), field));
+  if (m.integral() && out.alignment && *out.alignment != FrameAlignment::kNone) {
+    return Status::InvalidArgument(field + ".alignment " + v1::FrameAlignment_Name(o.alignment()) +
+                                   " applies to SFF only (method " + method_name + " reads the stack as acquired)");
+  }
   for (int i = 0; i < o.extra_exports_size(); ++i) {
     INSPECT_ASSIGN_OR_RETURN(DepthExportKind k,
                              MapExtraExport(o.extra_exports(i), field + ".extra_exports[" + std::to_string(i) + "]"));
@@ -291,6 +328,8 @@ StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& req, const ScanContext&
   work.plan.sff = rec.sff;
   work.plan.reconstruction = rec.method;
   work.extra_exports = std::move(rec.extra_exports);
+  INSPECT_RETURN_IF_ERROR(CheckScanAlignment(rec.alignment, context.calibration));
+  work.plan.alignment = rec.alignment;
 
   const int window_px = work.plan.sff.window_px;
   IlluminationMode mode = requested ? *requested : DefaultIlluminationMode(context.calibration, window_px);
@@ -371,6 +410,7 @@ StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start,
   work.sff = rec.sff;
   work.method = rec.method;
   work.extra_exports = std::move(rec.extra_exports);
+  work.alignment = rec.alignment;
   return work;
 }
 

@@ -36,6 +36,10 @@ struct ReconstructionSettings {
   SffOptions sff;
   ReconstructionMethodSettings method;
   std::vector<DepthExportKind> extra_exports;
+  // nullopt = FRAME_ALIGNMENT_UNSPECIFIED: the job's default (scan: CALIBRATED when the active
+  // calibration holds the model, else NONE; reconstruct: ESTIMATE, NONE when it cannot register).
+  // With an integral method only NONE is accepted (INVALID_ARGUMENT "<field>.alignment ...").
+  std::optional<FrameAlignment> alignment;
 };
 StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::ReconstructionOptions& options,
                                                           const std::string& field);
@@ -66,7 +70,10 @@ struct ScanContext {
 // INVALID_ARGUMENT), the mode's calibration models, exposure_us, the z range (z_start_um,
 // z_end_um, z_step_um), reconstruction, for the checkerboard modes the focus window against the
 // texture period, and for ISFF and ISFF_FAST the integral_psf calibration step
-// (FAILED_PRECONDITION). ISFF_GT's simulated rig is checked when the scan starts (RunScan).
+// (FAILED_PRECONDITION). reconstruction.alignment: ESTIMATE is INVALID_ARGUMENT (a scan warps each
+// frame as it arrives, before the stack exists: it uses the calibrated model; reconstruct the
+// stored scan to estimate), CALIBRATED without the focus_breathing step FAILED_PRECONDITION. ISFF_GT's simulated rig is
+// checked when the scan starts (RunScan).
 StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& request, const ScanContext& context);
 
 StatusOr<CalibrateWork> MapCalibrateRequest(const v1::CalibrateRequest& request);

@@ -7,6 +7,27 @@
 
 namespace inspection {
 
+FocusBreathingModel LateralOptics::Model(cv::Size frame_size) const {
+  FocusBreathingModel m;
+  m.frame_size = frame_size;
+  m.reference_z_um = reference_z_um;
+  m.scale_change_per_100um = breathing_percent_per_100um / 100.0;
+  m.shift_x_px_per_100um = drift_x_px_per_100um;
+  m.shift_y_px_per_100um = drift_y_px_per_100um;
+  return m;
+}
+
+Status LateralOptics::Validate() const {
+  if (!(std::abs(breathing_percent_per_100um) <= 20.0)) {
+    return Status::InvalidArgument("focus_breathing_percent_per_100um must be within +-20");
+  }
+  if (!(std::abs(drift_x_px_per_100um) <= 100.0) || !(std::abs(drift_y_px_per_100um) <= 100.0)) {
+    return Status::InvalidArgument("lateral_drift_x/y_px_per_100um must be within +-100");
+  }
+  if (!std::isfinite(reference_z_um)) return Status::InvalidArgument("breathing_reference_z_um must be finite");
+  return Status::Ok();
+}
+
 Status ImageFormationOptions::Validate() const {
   if (camera_size.width < 16 || camera_size.height < 16 || camera_size.width > 8192 || camera_size.height > 8192) {
     return Status::InvalidArgument("camera_size must be 16x16 .. 8192x8192");
@@ -19,6 +40,7 @@ Status ImageFormationOptions::Validate() const {
   INSPECT_RETURN_IF_ERROR(geometry.Validate());
   INSPECT_RETURN_IF_ERROR(defocus.Validate());
   INSPECT_RETURN_IF_ERROR(camera.Validate());
+  INSPECT_RETURN_IF_ERROR(lateral.Validate());
   return Status::Ok();
 }
 
@@ -139,7 +161,16 @@ const cv::Mat& ImageFormation::CameraIrradianceScratch(const cv::Mat& pattern, d
   }
   cv::multiply(*ep, surface_, scratch_es_);      // eq. 5.2
   blur_.Apply(scratch_es_, plan, &scratch_ec_);  // defocus on the way back
-  return scratch_ec_;
+  if (!options_.lateral.active()) return scratch_ec_;
+  // The image on the sensor is the specimen's through the breathing optics. Beyond the specimen
+  // maps the scene continues mirrored (the camera at low magnification sees past their edge).
+  cv::warpAffine(scratch_ec_, scratch_lateral_, CameraFromSpecimen(z_um), scratch_ec_.size(), cv::INTER_LANCZOS4,
+                 cv::BORDER_REFLECT_101);
+  return scratch_lateral_;
+}
+
+cv::Matx23d ImageFormation::CameraFromSpecimen(double z_um) const {
+  return options_.lateral.Model(options_.camera_size).FrameFromReference(z_um, options_.lateral.reference_z_um);
 }
 
 StatusOr<cv::Mat> ImageFormation::Render(const cv::Mat& pattern, double z_um, double exposure_us, double gain_db,

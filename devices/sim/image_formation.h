@@ -12,6 +12,7 @@
 #include <memory>
 #include <opencv2/core.hpp>
 
+#include "core/stack_alignment.h"
 #include "core/status.h"
 #include "devices/sim/defocus.h"
 #include "devices/sim/projector_camera_geometry.h"
@@ -20,6 +21,24 @@
 
 namespace inspection {
 
+// Lateral optics through focus (issue 18): a non-telecentric objective's magnification changes
+// with the stage z ("focus breathing") and the stage drifts laterally. The camera grid at z is
+// the specimen grid (the grid of the specimen maps and of the ground truth) transformed by
+// FocusBreathingModel::At(z) (core/stack_alignment.h: scale about the image centre, then shift);
+// at reference_z_um it is the specimen grid. All zero = frames registered pixel for pixel.
+struct LateralOptics {
+  double breathing_percent_per_100um = 0.0;  // magnification change, % per 100 um of z
+  double drift_x_px_per_100um = 0.0;         // lateral drift, camera px per 100 um of z
+  double drift_y_px_per_100um = 0.0;
+  double reference_z_um = 0.0;
+  bool active() const {
+    return breathing_percent_per_100um != 0.0 || drift_x_px_per_100um != 0.0 || drift_y_px_per_100um != 0.0;
+  }
+  // The exact model the frames follow, for a camera of frame_size.
+  FocusBreathingModel Model(cv::Size frame_size) const;
+  Status Validate() const;  // INVALID_ARGUMENT naming the field
+};
+
 struct ImageFormationOptions {
   cv::Size camera_size{1024, 768};
   cv::Size projector_size{1280, 720};
@@ -27,6 +46,7 @@ struct ImageFormationOptions {
   ProjectorCameraGeometryOptions geometry;
   DefocusModel defocus;
   CameraResponse camera;
+  LateralOptics lateral;
 
   Status Validate() const;
 };
@@ -53,7 +73,10 @@ class ImageFormation {
   StatusOr<cv::Mat> ProjectorIrradianceOnCamera(const cv::Mat& pattern) const;
   // PSF sigma (camera px) of every pixel with the stage at z_um.
   cv::Mat DefocusSigmaPx(double z_um) const;
-  // E_c: irradiance reaching the sensor (both defocus passes), relative units.
+  // Specimen-grid pixels -> camera pixels with the stage at z_um (identity without lateral optics).
+  cv::Matx23d CameraFromSpecimen(double z_um) const;
+  // E_c: irradiance reaching the sensor (both defocus passes, then the lateral optics), relative
+  // units.
   StatusOr<cv::Mat> CameraIrradiance(const cv::Mat& pattern, double z_um);
 
   // Exposure (us) for which the noise-free, in-focus image under a uniform projector grey has
@@ -76,7 +99,7 @@ class ImageFormation {
   Specimen specimen_;
   cv::Mat surface_;  // reflectance * texture
   SpatiallyVaryingBlur blur_;
-  cv::Mat scratch_sigma_, scratch_ep_, scratch_ep_blurred_, scratch_es_, scratch_ec_;
+  cv::Mat scratch_sigma_, scratch_ep_, scratch_ep_blurred_, scratch_es_, scratch_ec_, scratch_lateral_;
 };
 
 }  // namespace inspection

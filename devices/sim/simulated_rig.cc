@@ -5,12 +5,24 @@
 #include <algorithm>
 #include <cmath>
 #include <mutex>
+#include <opencv2/imgproc.hpp>
 #include <random>
 
 #include "devices/sim/image_formation.h"
 #include "devices/sim/specimen.h"
 
 namespace inspection {
+
+namespace {
+LateralOptics LateralOpticsOf(const SimulatedRigOptions& o) {
+  LateralOptics l;
+  l.breathing_percent_per_100um = o.focus_breathing_percent_per_100um;
+  l.drift_x_px_per_100um = o.lateral_drift_x_px_per_100um;
+  l.drift_y_px_per_100um = o.lateral_drift_y_px_per_100um;
+  l.reference_z_um = o.breathing_reference_z_um;
+  return l;
+}
+}  // namespace
 
 Status SimulatedRigOptions::Validate() const {
   if (camera_size.width < 16 || camera_size.height < 16 || camera_size.width > 8192 || camera_size.height > 8192) {
@@ -36,7 +48,7 @@ Status SimulatedRigOptions::Validate() const {
     return Status::InvalidArgument("read_noise_dn must be in [0, 50]");
   }
   if (specimen.empty()) return Status::InvalidArgument("specimen must not be empty");
-  return Status::Ok();
+  return LateralOpticsOf(*this).Validate();
 }
 
 StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptions& options) {
@@ -52,6 +64,7 @@ StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptio
   const double na = options.numerical_aperture;
   f.defocus.blur_radius_px_per_um = std::tan(std::asin(na)) / options.pixel_size_um;
   f.defocus.in_focus_sigma_px = std::clamp(0.21 * 0.55 / na / options.pixel_size_um, 0.55, 5.0);
+  f.lateral = LateralOpticsOf(options);
   INSPECT_RETURN_IF_ERROR(f.Validate());
   return f;
 }
@@ -327,6 +340,14 @@ class SimulatedRig : public Rig, public SimulationControl {
                              ImageFormation::Create(options, std::move(flat)));
     return renderer->Render(pattern, 0.0, exposure_us, gain_db, 1);
   }
+  cv::Mat GroundTruthInCameraGrid(double z_um) const {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    const cv::Mat& h = s_->renderer->specimen().height_um;
+    if (!s_->renderer->options().lateral.active()) return h.clone();
+    cv::Mat out;
+    cv::warpAffine(h, out, s_->renderer->CameraFromSpecimen(z_um), h.size(), cv::INTER_NEAREST, cv::BORDER_REFLECT_101);
+    return out;
+  }
   std::pair<double, double> SpecimenZRangeUm() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
     return s_->z_range_um;
@@ -349,6 +370,14 @@ Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults) {
   }
   sim->SetFaults(faults);
   return Status::Ok();
+}
+
+cv::Mat GroundTruthInCameraGrid(Rig& rig, double z_um) {
+  // Through simulation(): a rig wrapping the simulated one (the server's) forwards it.
+  SimulationControl* control = rig.simulation();
+  if (control == nullptr) return {};
+  auto* sim = dynamic_cast<SimulatedRig*>(control);
+  return sim != nullptr ? sim->GroundTruthInCameraGrid(z_um) : control->GroundTruthDepthUm();
 }
 
 StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& options) {

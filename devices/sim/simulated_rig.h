@@ -31,6 +31,13 @@ struct SimulatedRigOptions {
   double stage_repeatability_um = 0.1;  // ±, uniform (thesis 6: ±0.1 µm)
   double read_noise_dn = 0.8;           // camera read noise, in output grey levels (8-bit scale)
   bool shot_noise = true;
+  // Lateral optics (devices/sim/image_formation.h, LateralOptics): magnification change in % per
+  // 100 um of stage z relative to breathing_reference_z_um, and lateral drift in camera px per
+  // 100 um. 0 = none (the default): frames registered pixel for pixel.
+  double focus_breathing_percent_per_100um = 0.0;
+  double lateral_drift_x_px_per_100um = 0.0;
+  double lateral_drift_y_px_per_100um = 0.0;
+  double breathing_reference_z_um = 0.0;
 
   Status Validate() const;
 };
@@ -55,6 +62,13 @@ struct SimulatedFaults {
 };
 // INVALID_ARGUMENT when rig is not a simulated rig.
 Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults);
+
+// The ground truth height map (um) in the camera grid with the stage at z_um: what
+// SimulationControl::GroundTruthDepthUm() gives (the specimen grid) moved by the lateral optics
+// (nearest neighbour, so a step edge keeps its two heights). A depth map aligned onto a
+// reference frame at z compares against GroundTruthInCameraGrid(rig, z). Without lateral optics,
+// or on a rig that is not simulated, the specimen-grid map unchanged (empty when not simulated).
+cv::Mat GroundTruthInCameraGrid(Rig& rig, double z_um);
 
 // The renderer settings the simulated rig uses for these options (for serving the same frames
 // elsewhere, e.g. over GigE Vision: build an ImageFormation from them and MakeSpecimen).

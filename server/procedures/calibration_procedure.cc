@@ -19,6 +19,7 @@
 #include "core/projector_response.h"
 #include "core/psf_calibration.h"
 #include "core/scatter_matrix.h"
+#include "core/stack_alignment.h"
 
 namespace inspection {
 namespace {
@@ -508,6 +509,42 @@ Status RunIntegralPsf(Session& s, Targeting& t, const CalibrationOptions& o, Cal
   return Status::Ok();
 }
 
+// Focus breathing (issue 18): the textured target scanned through z around its focus; the
+// frames' neighbour registrations give the model scans align with (core/stack_alignment.h).
+Status RunFocusBreathing(Session& s, Targeting& t, const CalibrationOptions& o, CalibrationBundle& b,
+                         CalibrationStepReport& rep) {
+  INSPECT_ASSIGN_OR_RETURN(const double z_focus, t.Use(o.simulated_target));
+  const cv::Mat uniform(s.projector_size(), CV_8UC1, cv::Scalar(128));
+  INSPECT_ASSIGN_OR_RETURN(double dt, s.AutoExposure(uniform, 0.5, 0.5, s.rig().camera().exposure_us()));
+  const int n = static_cast<int>(std::floor(o.breathing_half_range_um / o.breathing_step_um + 1e-9));
+  const Stage& stage = s.rig().stage();
+  std::vector<cv::Mat> frames;
+  std::vector<double> z_um;
+  for (int k = -n; k <= n; ++k) {
+    const double z = z_focus + k * o.breathing_step_um;
+    if (z < stage.min_z_um() || z > stage.max_z_um()) continue;  // a target near the end of travel
+    INSPECT_RETURN_IF_ERROR(s.MoveTo(z));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, s.Capture(uniform, dt));
+    frames.push_back(f);
+    z_um.push_back(z);
+    s.Item("stack frame " + std::to_string(k + n + 1) + "/" + std::to_string(2 * n + 1));
+  }
+  INSPECT_RETURN_IF_ERROR(s.MoveTo(z_focus));
+  INSPECT_ASSIGN_OR_RETURN(
+      FocusBreathingModel m,
+      EstimateFocusBreathing([&](int i) -> StatusOr<cv::Mat> { return frames[static_cast<size_t>(i)]; }, z_um, {}));
+  m.reference_z_um = z_focus;  // any z will do (scans use transforms between frames); focus reads best
+  rep.figures["scale_change_percent_per_100um"] = 100.0 * m.scale_change_per_100um;
+  rep.figures["rotation_mrad_per_100um"] = 1000.0 * m.rotation_rad_per_100um;
+  rep.figures["shift_x_px_per_100um"] = m.shift_x_px_per_100um;
+  rep.figures["shift_y_px_per_100um"] = m.shift_y_px_per_100um;
+  rep.figures["fit_rms_px"] = m.fit_rms_px;
+  rep.figures["stack_frames"] = m.frames;
+  rep.figures["z_range_um"] = z_um.back() - z_um.front();
+  b.focus_breathing = m;
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status CalibrationOptions::Validate() const {
@@ -534,6 +571,9 @@ Status CalibrationOptions::Validate() const {
   if (ipsf_region_px < 4 * ipsf_radius_px + 2) {
     return Status::InvalidArgument("ipsf_region_px must be at least 4 * ipsf_radius_px + 2");
   }
+  if (!(breathing_step_um > 0) || !(breathing_half_range_um >= breathing_step_um)) {
+    return Status::InvalidArgument("breathing_step_um must be > 0 and breathing_half_range_um >= breathing_step_um");
+  }
   return Status::Ok();
 }
 
@@ -544,7 +584,10 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
   INSPECT_RETURN_IF_ERROR(options.Validate());
   std::set<CalibrationStep> wanted(options.steps.begin(), options.steps.end());
   const std::vector<CalibrationStep> all = AllCalibrationSteps();
-  if (wanted.empty()) wanted = std::set<CalibrationStep>(all.begin(), all.end());
+  if (wanted.empty()) {
+    const std::vector<CalibrationStep> d = DefaultCalibrationSteps();
+    wanted = std::set<CalibrationStep>(d.begin(), d.end());
+  }
   std::vector<CalibrationStep> steps;
   for (CalibrationStep s : all)
     if (wanted.count(s)) steps.push_back(s);
@@ -604,7 +647,8 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
         1 + static_cast<int>(MakeGrayCodePatterns(proj, options.gray_code_finest_stripe_px).size()) + sp_geo * sp_geo,
         static_cast<int>(options.psf_defocus_um.size()),
         sp_sc * sp_sc + 1,
-        2 * static_cast<int>(std::floor(options.ipsf_half_range_um / options.ipsf_step_um + 1e-9)) + 1};
+        2 * static_cast<int>(std::floor(options.ipsf_half_range_um / options.ipsf_step_um + 1e-9)) + 1,
+        2 * static_cast<int>(std::floor(options.breathing_half_range_um / options.breathing_step_um + 1e-9)) + 1};
     session.BeginStep(CalibrationStepName(step), i, count, items[static_cast<int>(step)]);
     const int frames_before = session.frames();
     const auto t0 = Clock::now();
@@ -629,6 +673,9 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
         break;
       case CalibrationStep::kIntegralPsf:
         st = RunIntegralPsf(session, targeting, options, b, rep);
+        break;
+      case CalibrationStep::kFocusBreathing:
+        st = RunFocusBreathing(session, targeting, options, b, rep);
         break;
     }
     if (!st.ok()) return st.WithContext(CalibrationStepName(step));

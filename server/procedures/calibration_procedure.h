@@ -1,7 +1,7 @@
 // Calibration procedure: drives a Rig through the calibration steps of thesis 4.3 and 5.4.1
 // (camera response, projector response, geometric LUTs, PSF + sigma_p, scatter matrix,
-// integral PSF), calls the core estimators and returns a CalibrationBundle with the figures
-// that verify each step. No gRPC here: the server's Calibrate job wraps RunCalibration.
+// integral PSF) and the focus-breathing model of issue 18, calls the core estimators and returns a CalibrationBundle
+// with the figures that verify each step. No gRPC here: the server's Calibrate job wraps RunCalibration.
 //
 // What it needs from the rig: a planar, diffuse target normal to the optical axis under the
 // objective (thesis 4.3.1). On the simulated rig the procedure switches the specimen to
@@ -33,7 +33,8 @@ struct CalibrationProgress {
 };
 
 struct CalibrationOptions {
-  // Steps to run, in any order (they are run in CalibrationStep order); empty = all six.
+  // Steps to run, in any order (they are run in CalibrationStep order); empty = the six of
+  // DefaultCalibrationSteps() (focus_breathing only when named).
   std::vector<CalibrationStep> steps;
 
   // Simulated rig only (ignored on real rigs; empty = keep the current specimen): the target
@@ -85,6 +86,11 @@ struct CalibrationOptions {
   // The IPSF is one kernel for the whole field (thesis 5.4.1): it is estimated on the central
   // region of at most this many pixels per side, which bounds the solve time on big cameras.
   int ipsf_region_px = 512;
+
+  // Focus breathing (issue 18): the target from focus - half range to focus + half range (frames
+  // beyond the stage travel are skipped), registered neighbour to neighbour.
+  double breathing_half_range_um = 40.0;
+  double breathing_step_um = 5.0;
 
   Status Validate() const;
 };

@@ -8,8 +8,10 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/depth_export.h"
+#include "devices/sim/simulated_rig.h"
 #include "server/procedures/illumination_auto.h"
 #include "server/procedures/illumination_strategy.h"
+#include "server/procedures/scan_alignment.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -299,6 +301,7 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
   const int frame_type = stack_bit_depth > 8 ? CV_16UC1 : CV_8UC1;
   INSPECT_ASSIGN_OR_RETURN(StreamingReconstruction engine,
                            CreateStreamingReconstruction(rig, chosen, bundle, frame_type));
+  INSPECT_ASSIGN_OR_RETURN(std::optional<StackAligner> aligner, CreateScanAligner(chosen, bundle, camera.frame_size()));
 
   StackManifest& m = out.manifest;
   m.pixel_size_um = rig.pixel_size_um();
@@ -321,7 +324,8 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
     }
     // The commanded z is the stack coordinate: repeatability error is what the stage adds, and
     // the thesis evaluates against the nominal step positions.
-    INSPECT_RETURN_IF_ERROR(engine.PushFrame(frame.image, plan.z_um[size_t(i)]));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat aligned, AlignScanFrame(aligner, frame.image, i));
+    INSPECT_RETURN_IF_ERROR(engine.PushFrame(aligned, plan.z_um[size_t(i)]));
     m.frames.push_back({name, plan.z_um[size_t(i)], frame.exposure_us, frame.pattern});
   }
   out.images_acquired = recorder.acquisitions();
@@ -341,10 +345,16 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
     out.depth = std::move(isff.depth);
     out.isff = FiguresOf(isff);
   }
+  if (aligner) {
+    aligner->MaskUnseen(&out.depth);
+    out.alignment = aligner->figures();
+  }
   out.engine_finish_seconds = std::chrono::duration<double>(Clock::now() - t1).count();
   out.acquisition_seconds = std::chrono::duration<double>(t1 - t0).count();
   if (SimulationControl* sim = rig.simulation()) {
-    out.ground_truth_um = sim->GroundTruthDepthUm();
+    // In the grid of the middle frame, the alignment's reference (the specimen grid without
+    // focus breathing).
+    out.ground_truth_um = GroundTruthInCameraGrid(rig, plan.z_um[(plan.z_um.size() - 1) / 2]);
     DepthExportMeta meta;
     meta.pixel_size_um = m.pixel_size_um;
     meta.description = "ground truth depth (um) of simulated specimen " + m.specimen;

@@ -21,6 +21,7 @@
 #include "core/frame_statistics.h"
 #include "core/sff_engine.h"
 #include "core/stack.h"
+#include "core/stack_alignment.h"
 #include "core/status.h"
 #include "devices/rig.h"
 #include "server/procedures/reconstruction_method.h"
@@ -79,6 +80,9 @@ struct ScanPlan {
   // run the plan with RunScanWithZRangeSearch.
   std::optional<ZRangeSearchSettings> z_range_search;
   double z_step_um = 0.0;  // the fine step of an automatic z range (z_um is built from it)
+  // Lateral alignment (scan_alignment.h): kNone or kCalibrated; nullopt = kCalibrated when the
+  // bundle holds the focus_breathing model, else kNone.
+  std::optional<FrameAlignment> alignment;
 };
 
 // Builds the z positions from start to end (inclusive when end falls on the grid) with step
@@ -115,6 +119,9 @@ struct ScanOutcome {
   // The mode that ran (AUTO: the one it chose) and, for AUTO, the decision and its reasons.
   IlluminationMode illumination = IlluminationMode::kStd;
   std::string illumination_decision;
+  // The lateral alignment that ran. With alignment the depth map is in the middle frame's grid
+  // (and so is ground_truth_um); the stack folder keeps the frames as captured.
+  AlignmentFigures alignment;
 };
 
 // Acquires into stack_dir (created; the caller owns clean-up on failure) and reconstructs.
