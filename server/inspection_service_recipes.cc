@@ -33,6 +33,15 @@ Status CheckRecipeDocument(const v1::Recipe& recipe, RigController& rig, Calibra
   return Status::Ok();
 }
 
+// Create and update alike: check the document, stamp author and time, store the next version.
+StatusOr<v1::Recipe> StoreRecipeVersion(v1::Recipe recipe, const Identity& who, bool create, int expected_version,
+                                        RigController& rig, CalibrationStore& calibrations, DataStore& store) {
+  INSPECT_RETURN_IF_ERROR(CheckRecipeDocument(recipe, rig, calibrations));
+  recipe.set_author(who.name);
+  *recipe.mutable_create_time() = google::protobuf::util::TimeUtil::GetCurrentTime();
+  return store.StoreRecipe(std::move(recipe), create, expected_version);
+}
+
 }  // namespace
 
 grpc::Status InspectionServiceImpl::CreateRecipe(grpc::ServerContext* ctx, const v1::CreateRecipeRequest* req,
@@ -41,14 +50,10 @@ grpc::Status InspectionServiceImpl::CreateRecipe(grpc::ServerContext* ctx, const
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return ToGrpcStatus(s);
   if (!req->has_recipe()) return ToGrpcStatus(Status::InvalidArgument("recipe is required"));
-  v1::Recipe recipe = req->recipe();
-  if (recipe.version() != 0) {
+  if (req->recipe().version() != 0) {
     return ToGrpcStatus(Status::InvalidArgument("recipe.version is set by the server; leave it 0"));
   }
-  if (Status s = CheckRecipeDocument(recipe, *rig_, *calibrations_); !s.ok()) return ToGrpcStatus(s);
-  recipe.set_author(who->name);
-  *recipe.mutable_create_time() = google::protobuf::util::TimeUtil::GetCurrentTime();
-  auto stored = store_->StoreRecipe(std::move(recipe), /*create=*/true, 0);
+  auto stored = StoreRecipeVersion(req->recipe(), *who, /*create=*/true, 0, *rig_, *calibrations_, *store_);
   if (!stored.ok()) return ToGrpcStatus(stored.status());
   SetAuditTarget(ctx, stored->recipe_id() + "@" + std::to_string(stored->version()));
   *out = *stored;
@@ -62,11 +67,8 @@ grpc::Status InspectionServiceImpl::UpdateRecipe(grpc::ServerContext* ctx, const
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return ToGrpcStatus(s);
   if (!req->has_recipe()) return ToGrpcStatus(Status::InvalidArgument("recipe is required"));
   if (req->expected_version() < 0) return ToGrpcStatus(Status::InvalidArgument("expected_version must be >= 0"));
-  v1::Recipe recipe = req->recipe();
-  if (Status s = CheckRecipeDocument(recipe, *rig_, *calibrations_); !s.ok()) return ToGrpcStatus(s);
-  recipe.set_author(who->name);
-  *recipe.mutable_create_time() = google::protobuf::util::TimeUtil::GetCurrentTime();
-  auto stored = store_->StoreRecipe(std::move(recipe), /*create=*/false, req->expected_version());
+  auto stored = StoreRecipeVersion(req->recipe(), *who, /*create=*/false, req->expected_version(), *rig_,
+                                   *calibrations_, *store_);
   if (!stored.ok()) return ToGrpcStatus(stored.status());
   SetAuditTarget(ctx, stored->recipe_id() + "@" + std::to_string(stored->version()));
   *out = *stored;

@@ -17,14 +17,8 @@ trap cleanup EXIT
 
 fail() { echo "FAIL: $*"; echo "--- inspectd log"; tail -n 30 "$srv_log" || true; exit 1; }
 
-wait_for() {  # wait_for DESCRIPTION SECONDS COMMAND...: polls COMMAND every 50 ms
-  local what="$1" secs="$2"; shift 2
-  local end=$((SECONDS + secs))
-  until "$@" 2>/dev/null; do
-    ((SECONDS < end)) || fail "timed out waiting for $what"
-    sleep 0.05
-  done
-}
+# shellcheck source=../lib/poll.sh
+source "$(dirname "${BASH_SOURCE[0]}")/../lib/poll.sh"  # wait_for
 
 alice="alice-token-0123456789abcdef"
 bob="bob-token-fedcba9876543210xyz"
