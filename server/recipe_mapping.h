@@ -15,8 +15,6 @@
 
 namespace inspection {
 
-namespace v1 = ::inspection::v1;
-
 inline constexpr size_t kMaxRecipeBytes = 256 * 1024;  // serialised; a recipe is a small document
 inline constexpr int kMaxRecipeMeasurements = 64;
 
