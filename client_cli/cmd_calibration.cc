@@ -21,6 +21,7 @@ const std::map<std::string, v1::CalibrationStep>& Steps() {
       {"psf", v1::CALIBRATION_STEP_PSF},
       {"scatter-matrix", v1::CALIBRATION_STEP_SCATTER_MATRIX},
       {"integral-psf", v1::CALIBRATION_STEP_INTEGRAL_PSF},
+      {"z-linearity", v1::CALIBRATION_STEP_Z_LINEARITY},
       {"focus-breathing", v1::CALIBRATION_STEP_FOCUS_BREATHING},
   };
   return m;

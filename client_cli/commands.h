@@ -16,5 +16,6 @@ void RegisterJobCommands(CLI::App& app, CliContext& context);          // jobs, 
 void RegisterCalibrationCommands(CLI::App& app, CliContext& context);  // calibrate, calibration show|list
 void RegisterSpecimenCommands(CLI::App& app, CliContext& context);     // specimen list|set
 void RegisterRecipeCommands(CLI::App& app, CliContext& context);       // recipe create|update|get|list|delete
+void RegisterResultCommands(CLI::App& app, CliContext& context);       // results list|watch
 
 }  // namespace inspection::client::cli

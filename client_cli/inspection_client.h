@@ -97,6 +97,11 @@ class InspectionClient {
   grpc::Status GetRecipe(const std::string& recipe_id, int version, v1::Recipe* recipe);
   grpc::Status ListRecipes(v1::ListRecipesResponse* response);
   grpc::Status DeleteRecipe(const std::string& recipe_id, v1::DeleteResponse* response);
+  // Inspection results (ListResults with the request's filters and page).
+  grpc::Status ListResults(const v1::ListResultsRequest& request, v1::ListResultsResponse* response);
+  // Follows the result feed from after_sequence; on_result returns false to stop (the call then
+  // ends OK). Without a stop it runs until the server ends the stream.
+  grpc::Status WatchResults(int64_t after_sequence, const std::function<bool(const v1::InspectionResult&)>& on_result);
 
   std::shared_ptr<grpc::Channel> channel() const { return channel_; }
 

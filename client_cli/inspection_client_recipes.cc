@@ -1,4 +1,5 @@
-// InspectionClient: the recipe RPCs (unary, with the client's deadline and credentials).
+// InspectionClient: the recipe and result RPCs (unary ones with the client's deadline; the result
+// feed without one) and credentials.
 #include "client_cli/inspection_client.h"
 
 namespace inspection::client {
@@ -46,6 +47,34 @@ grpc::Status InspectionClient::DeleteRecipe(const std::string& recipe_id, v1::De
   v1::DeleteRecipeRequest request;
   request.set_recipe_id(recipe_id);
   return stub_->DeleteRecipe(&ctx, request, response);
+}
+
+grpc::Status InspectionClient::ListResults(const v1::ListResultsRequest& request, v1::ListResultsResponse* response) {
+  if (!init_status_.ok()) return init_status_;
+  grpc::ClientContext ctx;
+  PrepareUnary(&ctx);
+  return stub_->ListResults(&ctx, request, response);
+}
+
+grpc::Status InspectionClient::WatchResults(int64_t after_sequence,
+                                            const std::function<bool(const v1::InspectionResult&)>& on_result) {
+  if (!init_status_.ok()) return init_status_;
+  grpc::ClientContext ctx;
+  Prepare(&ctx);  // no deadline: a feed stays open
+  v1::WatchResultsRequest request;
+  request.set_after_sequence(after_sequence);
+  auto reader = stub_->WatchResults(&ctx, request);
+  v1::InspectionResult result;
+  bool stopped = false;
+  while (reader->Read(&result)) {
+    if (!on_result(result)) {
+      stopped = true;
+      ctx.TryCancel();
+      break;
+    }
+  }
+  grpc::Status status = reader->Finish();
+  return stopped ? grpc::Status::OK : status;
 }
 
 }  // namespace inspection::client

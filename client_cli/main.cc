@@ -25,6 +25,7 @@ int Main(int argc, char** argv) {
   RegisterCalibrationCommands(app, context);
   RegisterSpecimenCommands(app, context);
   RegisterRecipeCommands(app, context);
+  RegisterResultCommands(app, context);
 
   try {
     app.parse(argc, argv);

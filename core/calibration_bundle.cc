@@ -27,6 +27,8 @@ const char* CalibrationStepName(CalibrationStep step) {
       return "scatter_matrix";
     case CalibrationStep::kIntegralPsf:
       return "integral_psf";
+    case CalibrationStep::kZLinearity:
+      return "z_linearity";
     case CalibrationStep::kFocusBreathing:
       return "focus_breathing";
   }
@@ -37,7 +39,7 @@ std::vector<CalibrationStep> AllCalibrationSteps() {
   return {CalibrationStep::kCameraResponse, CalibrationStep::kProjectorResponse,
           CalibrationStep::kGeometry,       CalibrationStep::kPsf,
           CalibrationStep::kScatterMatrix,  CalibrationStep::kIntegralPsf,
-          CalibrationStep::kFocusBreathing};
+          CalibrationStep::kZLinearity,     CalibrationStep::kFocusBreathing};
 }
 
 std::vector<CalibrationStep> DefaultCalibrationSteps() {
@@ -51,7 +53,8 @@ StatusOr<CalibrationStep> ParseCalibrationStep(const std::string& name) {
     if (name == CalibrationStepName(s)) return s;
   return Status::InvalidArgument(
       "unknown calibration step '" + name +
-      "' (camera_response, projector_response, geometry, psf, scatter_matrix, integral_psf, focus_breathing)");
+      "' (camera_response, projector_response, geometry, psf, scatter_matrix, integral_psf, z_linearity, "
+      "focus_breathing)");
 }
 
 const CalibrationStepReport* CalibrationBundle::Report(CalibrationStep step) const {
@@ -84,6 +87,8 @@ bool CalibrationBundle::HasModel(CalibrationStep step) const {
       return scatter.has_value();
     case CalibrationStep::kIntegralPsf:
       return integral_psf.has_value();
+    case CalibrationStep::kZLinearity:
+      return z_linearity.has_value();
     case CalibrationStep::kFocusBreathing:
       return focus_breathing.has_value();
   }
@@ -112,6 +117,9 @@ Status CalibrationBundle::Validate() const {
     }
   }
   if (integral_psf) INSPECT_RETURN_IF_ERROR(integral_psf->Validate());
+  if (z_linearity && (z_linearity->bias_of_step.size() < 2 || !(z_linearity->characterised_step_um > 0.0))) {
+    return Status::InvalidArgument("z_linearity: needs >= 2 table entries and a characterised step > 0");
+  }
   if (focus_breathing) {
     INSPECT_RETURN_IF_ERROR(focus_breathing->Validate().WithContext("focus_breathing"));
     if (focus_breathing->frame_size != camera_size) {
@@ -271,6 +279,7 @@ Status CalibrationBundle::Save(const fs::path& dir) const {
                             {"fit_rms_px", Num(m.fit_rms_px)},
                             {"frames", m.frames}};
   }
+  if (z_linearity) j["z_linearity"] = json::parse(ZLinearityToJson(*z_linearity));
   json reps = json::array();
   for (const auto& r : reports) {
     json f = json::object();
@@ -413,6 +422,10 @@ StatusOr<CalibrationBundle> CalibrationBundle::Load(const fs::path& dir) {
       m.fit_rms_px = NumFrom(p.at("fit_rms_px"));
       m.frames = p.value("frames", 0);
       b.focus_breathing = m;
+    }
+    if (j.contains("z_linearity")) {
+      INSPECT_ASSIGN_OR_RETURN(ZLinearity z, ZLinearityFromJson(j.at("z_linearity").dump()));
+      b.z_linearity = std::move(z);
     }
     const json reports_json = j.value("reports", json::array());
     for (const json& r : reports_json) {

@@ -10,7 +10,8 @@
 //   scatter_matrix.bin                CSC float32 (see core/scatter_matrix.h)
 //   scatter_black_radiance.tiff       float32, camera size
 //   integral_psf.tiff                 float32 kernel
-// The focus-breathing model (issue 18, core/stack_alignment.h) is scalar: bundle.json only.
+// The focus-breathing model (issue 18, core/stack_alignment.h) and the z-linearity table (issue
+// 13, core/z_linearity.h) are scalar: bundle.json only.
 // Models that were not calibrated are absent from bundle.json and have no files.
 #pragma once
 
@@ -29,6 +30,7 @@
 #include "core/scatter_matrix.h"
 #include "core/stack_alignment.h"
 #include "core/status.h"
+#include "core/z_linearity.h"
 
 namespace inspection {
 
@@ -43,12 +45,13 @@ enum class CalibrationStep {
   kPsf,                // thesis 4.3.3 and sigma_p of 5.2.1
   kScatterMatrix,      // thesis 4.3.4, eq. 4.11-4.12
   kIntegralPsf,        // thesis 5.4.1, eq. 5.22
+  kZLinearity,         // issue 13: the depth's periodic error between frames, for uncertainties
   kFocusBreathing,     // issue 18: magnification change and lateral drift through z
 };
-inline constexpr int kCalibrationStepCount = 7;
+inline constexpr int kCalibrationStepCount = 8;
 
 // "camera_response", "projector_response", "geometry", "psf", "scatter_matrix", "integral_psf",
-// "focus_breathing".
+// "z_linearity", "focus_breathing".
 const char* CalibrationStepName(CalibrationStep step);
 StatusOr<CalibrationStep> ParseCalibrationStep(const std::string& name);
 std::vector<CalibrationStep> AllCalibrationSteps();
@@ -83,6 +86,7 @@ struct CalibrationBundle {
   std::optional<ScatterMatrix> scatter;
   std::optional<IntegralPsf> integral_psf;
   std::optional<FocusBreathingModel> focus_breathing;
+  std::optional<ZLinearity> z_linearity;  // characterised at z_linearity->characterised_step_um
 
   // The latest report of every step in the bundle (one per step; a step carried over from a
   // previous bundle keeps its report).

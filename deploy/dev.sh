@@ -26,6 +26,7 @@ packages=(
   libcli11-dev nlohmann-json3-dev libtiff-dev libzip-dev libsqlite3-dev libssl-dev
   gwyddion  # a real x3p reader: tests open our x3p with gwyddion-thumbnailer
   python3 python3-yaml  # deploy/validate_manifests.sh, tests/fault/kill9_test.sh (Debian's /usr/bin/python3)
+  python3-grpcio python3-protobuf  # examples/python: the MES client (tests/mes)
   libcpp-httplib-dev  # inspectd's HTTP port: /metrics and the dashboard
   prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)

@@ -98,6 +98,11 @@ StatusOr<std::unique_ptr<DataStore>> DataStore::Open(const fs::path& data_dir) {
       recipe_id TEXT NOT NULL, version INTEGER NOT NULL, deleted INTEGER NOT NULL DEFAULT 0,
       recipe BLOB NOT NULL, PRIMARY KEY(recipe_id, version));
     CREATE INDEX IF NOT EXISTS artifacts_by_job ON artifacts(job_id);
+    CREATE TABLE IF NOT EXISTS results (
+      sequence INTEGER PRIMARY KEY AUTOINCREMENT, job_id TEXT NOT NULL UNIQUE, part_id TEXT NOT NULL,
+      recipe_id TEXT NOT NULL, verdict INTEGER NOT NULL, finish_ns INTEGER NOT NULL, result BLOB NOT NULL);
+    CREATE INDEX IF NOT EXISTS results_by_part ON results(part_id, sequence);
+    CREATE INDEX IF NOT EXISTS results_by_recipe ON results(recipe_id, sequence);
   )sql"));
   return store;
 }
@@ -408,6 +413,82 @@ StatusOr<int> DataStore::DeleteRecipe(const std::string& recipe_id) {
   const int n = sqlite3_changes(db_);
   if (n == 0) return Status::NotFound("recipe_id '" + recipe_id + "' not found");
   return n;
+}
+
+StatusOr<v1::InspectionResult> DataStore::AppendResult(v1::InspectionResult result) {
+  std::lock_guard<std::mutex> lock(mu_);
+  const auto& t = result.finish_time();
+  // AUTOINCREMENT: a deleted row's number is never handed out again, so a feed client's "last
+  // sequence seen" stays meaningful. The blob carries its own number, set in the same transaction.
+  INSPECT_RETURN_IF_ERROR(Exec("BEGIN IMMEDIATE"));
+  Stmt st(db_, "INSERT INTO results(job_id, part_id, recipe_id, verdict, finish_ns, result) VALUES(?,?,?,?,?,x'')");
+  st.Text(1, result.job_id())
+      .Text(2, result.part_id())
+      .Text(3, result.recipe_id())
+      .Int(4, result.verdict())
+      .Int(5, t.seconds() * 1000000000LL + t.nanos());
+  if (st.Step() != SQLITE_DONE) {
+    const bool duplicate = sqlite3_extended_errcode(db_) == SQLITE_CONSTRAINT_UNIQUE;
+    Status error = duplicate ? Status::AlreadyExists("job " + result.job_id() + " already has a result")
+                             : DbError(db_, "AppendResult");
+    (void)Exec("ROLLBACK");
+    return error;
+  }
+  result.set_sequence(sqlite3_last_insert_rowid(db_));
+  Stmt update(db_, "UPDATE results SET result = ? WHERE sequence = ?");
+  update.Blob(1, result.SerializeAsString()).Int(2, result.sequence());
+  if (update.Step() != SQLITE_DONE) {
+    Status error = DbError(db_, "AppendResult");
+    (void)Exec("ROLLBACK");
+    return error;
+  }
+  INSPECT_RETURN_IF_ERROR(Exec("COMMIT"));
+  return result;
+}
+
+namespace {
+StatusOr<std::vector<v1::InspectionResult>> ReadResults(Stmt& st) {
+  std::vector<v1::InspectionResult> out;
+  int rc = st.Step();
+  for (; rc == SQLITE_ROW; rc = st.Step()) {
+    v1::InspectionResult r;
+    if (!r.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("an inspection result record is corrupt");
+    out.push_back(std::move(r));
+  }
+  if (rc != SQLITE_DONE)
+    return Status::Internal("reading inspection results failed (sqlite " + std::to_string(rc) + ")");
+  return out;
+}
+}  // namespace
+
+StatusOr<std::vector<v1::InspectionResult>> DataStore::ListResults(const ResultQuery& q) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_,
+          "SELECT result FROM results WHERE (?1 = '' OR part_id = ?1) AND (?2 = '' OR recipe_id = ?2) "
+          "AND (?3 = 0 OR verdict = ?3) AND (?4 = 0 OR finish_ns >= ?4) AND (?5 = 0 OR finish_ns < ?5) "
+          "AND (?6 = 0 OR sequence < ?6) ORDER BY sequence DESC LIMIT ?7");
+  st.Text(1, q.part_id)
+      .Text(2, q.recipe_id)
+      .Int(3, q.verdict)
+      .Int(4, q.finished_from_ns)
+      .Int(5, q.finished_before_ns)
+      .Int(6, q.before_sequence)
+      .Int(7, q.limit);
+  return ReadResults(st);
+}
+
+StatusOr<std::vector<v1::InspectionResult>> DataStore::ResultsAfter(int64_t after_sequence, int limit) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT result FROM results WHERE sequence > ? ORDER BY sequence LIMIT ?");
+  st.Int(1, after_sequence).Int(2, limit);
+  return ReadResults(st);
+}
+
+StatusOr<int64_t> DataStore::LastResultSequence() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT COALESCE(MAX(sequence), 0) FROM results");
+  if (st.Step() != SQLITE_ROW) return DbError(db_, "LastResultSequence");
+  return int64_t(sqlite3_column_int64(st.stmt(), 0));
 }
 
 Status DataStore::SetSetting(const std::string& key, const std::string& value) {

@@ -29,6 +29,17 @@ struct StoredArtifact {
   std::filesystem::path path;
 };
 
+// A ListResults filter; empty / 0 fields match everything.
+struct ResultQuery {
+  std::string part_id;
+  std::string recipe_id;
+  v1::Verdict verdict = v1::VERDICT_UNSPECIFIED;
+  int64_t finished_from_ns = 0;    // inclusive
+  int64_t finished_before_ns = 0;  // exclusive
+  int64_t before_sequence = 0;     // paging: only older results
+  int limit = 50;
+};
+
 class DataStore {
  public:
   static StatusOr<std::unique_ptr<DataStore>> Open(const std::filesystem::path& data_dir);
@@ -88,6 +99,17 @@ class DataStore {
   StatusOr<std::vector<v1::Recipe>> ListRecipes();
   // Hides every version; NOT_FOUND when the id is not in use. Returns the versions hidden.
   StatusOr<int> DeleteRecipe(const std::string& recipe_id);
+
+  // Inspection results (the result feed). Stores `result` under the next sequence number
+  // (increasing, never reused, also after deletions) and returns it with the number set.
+  // ALREADY_EXISTS when the job already has a result.
+  StatusOr<v1::InspectionResult> AppendResult(v1::InspectionResult result);
+  // Newest first, matching `query`; at most query.limit.
+  StatusOr<std::vector<v1::InspectionResult>> ListResults(const ResultQuery& query);
+  // Oldest first: the results with a sequence number > after_sequence, at most `limit`.
+  StatusOr<std::vector<v1::InspectionResult>> ResultsAfter(int64_t after_sequence, int limit);
+  // The highest sequence number stored (0 = none).
+  StatusOr<int64_t> LastResultSequence();
 
   Status SetSetting(const std::string& key, const std::string& value);
   std::string GetSetting(const std::string& key);

@@ -19,12 +19,14 @@ namespace inspection {
 struct RecipeRun {
   v1::Recipe recipe;
   std::vector<RecipeMeasurementPlan> plans;
+  std::vector<RecipeProfilePlan> profiles;
 };
 
 // Measures every measurement of `run` on `depth` (pixels of pixel_size_um) with the error model
 // `noise` (the stack's z positions, the focus window, the stage's repeatability) and judges it:
 // a measurement that cannot be made is NOT_DECIDABLE with the reason. The overall verdict is
-// NOT_OK if any is NOT_OK, else NOT_DECIDABLE if any is, else OK.
+// NOT_OK if any is NOT_OK, else NOT_DECIDABLE if any is, else OK. The recipe's line profiles
+// come back as data (a profile the map cannot give has no samples and coverage 0).
 v1::InspectionResult Inspect(const RecipeRun& run, const DepthResult& depth, double pixel_size_um,
                              const DepthNoiseOptions& noise, const std::string& part_id, const std::string& station);
 

@@ -93,7 +93,9 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   }
   s->calibrations_ = std::make_unique<CalibrationStore>(s->store_.get());
   s->calibrations_->LoadActive().IgnoreError();  // logged; the server still serves without it
-  s->runner_ = std::make_unique<ProcedureRunner>(s->store_.get(), s->rig_.get(), s->calibrations_.get());
+  s->results_ = std::make_unique<ResultFeed>(s->store_.get());
+  s->runner_ =
+      std::make_unique<ProcedureRunner>(s->store_.get(), s->rig_.get(), s->calibrations_.get(), s->results_.get());
   JobManagerOptions jo;
   jo.rig_queue_capacity = options.rig_queue_capacity;
   jo.on_event = [ops = s->ops_.get()](const v1::JobEvent& e) { ops->OnJobEvent(e); };
@@ -116,6 +118,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   so.scene_dir = options.scene_dir;
   so.janitor = s->janitor_.get();
   so.min_free_bytes = min_free_bytes;
+  so.results = s->results_.get();
   s->service_ = std::make_unique<InspectionServiceImpl>(so, s->store_.get(), s->jobs_.get(), s->rig_.get(),
                                                         s->calibrations_.get());
   if (options.no_rig) {
@@ -194,6 +197,7 @@ void InspectionServer::Shutdown() {
   if (sweeper_) sweeper_->Stop();
   // Jobs first, so streaming handlers see terminal events and return; then the transport.
   jobs_->Shutdown();
+  results_->Shutdown();  // open WatchResults streams end (UNAVAILABLE: resume elsewhere or later)
   server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
 }
 

@@ -22,6 +22,7 @@
 #include "server/job_manager.h"
 #include "server/no_rig_service.h"
 #include "server/procedure_runner.h"
+#include "server/result_feed.h"
 #include "server/retention_sweeper.h"
 #include "server/rig_controller.h"
 
@@ -100,6 +101,7 @@ class InspectionServer {
   std::unique_ptr<DataStore> store_;
   std::unique_ptr<RigController> rig_;
   std::unique_ptr<CalibrationStore> calibrations_;
+  std::unique_ptr<ResultFeed> results_;  // written by scan jobs, read by WatchResults handlers
   std::unique_ptr<ProcedureRunner> runner_;
   std::unique_ptr<JobManager> jobs_;  // declared after what its jobs use: destroyed (joined) first
   std::unique_ptr<DataJanitor> janitor_;

@@ -13,6 +13,7 @@
 #include "server/calibration_store.h"
 #include "server/data_store.h"
 #include "server/job_manager.h"
+#include "server/result_feed.h"
 #include "server/retention_sweeper.h"
 #include "server/rig_controller.h"
 
@@ -32,6 +33,8 @@ struct ServiceOptions {
   // New scans and uploads are refused with RESOURCE_EXHAUSTED while the data disk has less free
   // space than this (0 = no reserve).
   int64_t min_free_bytes = 0;
+  // The inspection result feed (ListResults reads the store directly); must outlive the service.
+  ResultFeed* results = nullptr;
 };
 
 // Authenticates the caller and checks the role `method` needs: UNAUTHENTICATED without or with
@@ -68,6 +71,10 @@ class InspectionServiceImpl final : public v1::InspectionService::Service {
   grpc::Status GetRecipe(grpc::ServerContext*, const v1::GetRecipeRequest*, v1::Recipe*) override;
   grpc::Status ListRecipes(grpc::ServerContext*, const v1::ListRecipesRequest*, v1::ListRecipesResponse*) override;
   grpc::Status DeleteRecipe(grpc::ServerContext*, const v1::DeleteRecipeRequest*, v1::DeleteResponse*) override;
+  // Inspection results (inspection_service_results.cc).
+  grpc::Status ListResults(grpc::ServerContext*, const v1::ListResultsRequest*, v1::ListResultsResponse*) override;
+  grpc::Status WatchResults(grpc::ServerContext*, const v1::WatchResultsRequest*,
+                            grpc::ServerWriter<v1::InspectionResult>*) override;
 
  private:
   StatusOr<Identity> CheckAuth(grpc::ServerContext* ctx, std::string_view method) const {

@@ -20,10 +20,11 @@ std::string NoRigMessage(std::string_view method);
 // InspectionService methods by what --no-rig does with them. Together they are every method of
 // the service (a test checks this against the proto, so a new RPC cannot fall through as
 // UNIMPLEMENTED unnoticed).
-// Recipes live on the rig's server: they are checked against its camera and run by its scans.
-inline constexpr std::array<std::string_view, 9> kRigOnlyMethods = {"GetRigStatus", "Calibrate",    "Scan",
-                                                                    "ResetRig",     "CreateRecipe", "UpdateRecipe",
-                                                                    "GetRecipe",    "ListRecipes",  "DeleteRecipe"};
+// Recipes live on the rig's server: they are checked against its camera and run by its scans,
+// which are also the only source of inspection results.
+inline constexpr std::array<std::string_view, 11> kRigOnlyMethods = {
+    "GetRigStatus", "Calibrate",   "Scan",         "ResetRig",    "CreateRecipe", "UpdateRecipe",
+    "GetRecipe",    "ListRecipes", "DeleteRecipe", "ListResults", "WatchResults"};
 inline constexpr std::array<std::string_view, 11> kNoRigServedMethods = {
     "Reconstruct",    "WatchJob",         "GetJob",    "ListJobs",   "CancelJob", "DownloadArtifact",
     "GetCalibration", "ListCalibrations", "DeleteJob", "DeleteScan", "PinJob"};
@@ -90,6 +91,13 @@ class NoRigInspectionService final : public v1::InspectionService::Service {
   }
   grpc::Status DeleteRecipe(grpc::ServerContext* c, const v1::DeleteRecipeRequest*, v1::DeleteResponse*) override {
     return Refuse(c, "DeleteRecipe");
+  }
+  grpc::Status ListResults(grpc::ServerContext* c, const v1::ListResultsRequest*, v1::ListResultsResponse*) override {
+    return Refuse(c, "ListResults");
+  }
+  grpc::Status WatchResults(grpc::ServerContext* c, const v1::WatchResultsRequest*,
+                            grpc::ServerWriter<v1::InspectionResult>*) override {
+    return Refuse(c, "WatchResults");
   }
 
  private:

@@ -2,6 +2,7 @@
 // progress events and their results published into the data store.
 #include "server/procedure_runner.h"
 
+#include <google/protobuf/util/time_util.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -13,6 +14,7 @@
 
 #include "core/depth_export.h"
 #include "core/stack.h"
+#include "server/inspection_report.h"
 #include "server/owned_folder.h"
 #include "server/procedures/z_range_search.h"
 #include "server/result_publisher.h"
@@ -112,6 +114,42 @@ void RecordAlignment(const AlignmentFigures& a, v1::DepthSummary* d) {
   d->set_alignment_seen_percent(a.seen_by_every_frame_percent);
 }
 
+double SecondsSince(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
+// Queue wait from the stored job's submission time (wall clock), the scan from the job's start.
+void FillTimings(DataStore* store, const std::string& job_id, std::chrono::steady_clock::time_point started_at,
+                 std::chrono::steady_clock::time_point scanned_at, double engine_seconds,
+                 v1::InspectionResult* inspection) {
+  using google::protobuf::util::TimeUtil;
+  v1::InspectionTimings* t = inspection->mutable_timings();
+  StatusOr<v1::Job> job = store->GetJob(job_id);
+  if (job.ok() && job->has_create_time()) {
+    const double since_submit_s =
+        double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+                   .count() -
+               TimeUtil::TimestampToNanoseconds(job->create_time())) *
+        1e-9;
+    t->set_queue_seconds(std::max(0.0, since_submit_s - SecondsSince(started_at)));
+  }
+  t->set_scan_seconds(std::chrono::duration<double>(scanned_at - started_at).count());
+  t->set_engine_seconds(engine_seconds);
+}
+
+// The HTML report of an inspection (server/inspection_report.h), as an artifact of the job.
+Status WriteReport(const RecipeRun& run, const v1::JobResult& result, const DepthResult& depth,
+                   ResultPublisher* publisher) {
+  InspectionReportInput input;
+  input.inspection = result.inspection();
+  input.depth = result.depth();
+  input.recipe_description = run.recipe.description();
+  input.depth_um = depth.depth_um;
+  input.all_in_focus = depth.all_in_focus;
+  INSPECT_ASSIGN_OR_RETURN(std::string html, RenderInspectionReport(input));
+  return publisher->WriteBytes(v1::ARTIFACT_KIND_REPORT_HTML, "report.html", html);
+}
+
 }  // namespace
 
 StatusOr<v1::JobResult> ProcedureRunner::Run(const JobWork& work, const JobContext& context) {
@@ -125,6 +163,7 @@ StatusOr<v1::JobResult> ProcedureRunner::Run(const JobWork& work, const JobConte
 
 StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const JobContext& context) {
   const std::string& job_id = context.job_id;
+  const auto started_at = std::chrono::steady_clock::now();
   // The calibration is the one active now (a calibration may have finished since submission);
   // RunScan re-checks that it holds the mode's models.
   ScanPlan plan = work.plan;
@@ -202,19 +241,42 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
     z->set_z_end_um(r->z_end_um);
     z->set_search_seconds(r->search_seconds);
   }
+  RecordAlignment(outcome.alignment, result.mutable_depth());
+  const auto scanned_at = std::chrono::steady_clock::now();
   if (work.recipe) {
     EmitPhase(context, v1::JOB_PHASE_STORING, 0.95, "measuring recipe " + work.recipe->recipe.recipe_id());
     DepthNoiseOptions noise;
     noise.window_px = plan.sff.window_px;
     for (const StackFrame& f : outcome.manifest.frames) noise.z_positions_um.push_back(f.z_um);  // auto range too
     noise.stage_repeatability_um = rig_->rig().stage().repeatability_um();
-    *result.mutable_inspection() =
+    // The rig's characterised z linearity (calibration step z_linearity) when the scan ran at
+    // its step; otherwise the peak-locking bound (core/depth_noise_model.h decides).
+    if (bundle && bundle->z_linearity) noise.linearity = *bundle->z_linearity;
+    v1::InspectionResult* inspection = result.mutable_inspection();
+    *inspection =
         Inspect(*work.recipe, outcome.depth, outcome.manifest.pixel_size_um, noise, work.part_id, work.station);
+    inspection->set_job_id(job_id);
+    inspection->set_calibration_id(plan.calibration_id);
+    FillTimings(store_, job_id, started_at, scanned_at, outcome.engine_finish_seconds, inspection);
+    // Nanoseconds: TimeUtil::GetCurrentTime keeps whole seconds here, and results a second
+    // apart must stay apart for time-range queries.
+    *inspection->mutable_finish_time() = google::protobuf::util::TimeUtil::NanosecondsToTimestamp(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+            .count());
+    INSPECT_RETURN_IF_ERROR(WriteReport(*work.recipe, result, outcome.depth, &publisher));
   }
-  RecordAlignment(outcome.alignment, result.mutable_depth());
   // The stack is stored once, as stack.zip (server/stored_stack.h): the folder in tmp/ goes
   // with `stack` whether or not publication succeeds.
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
+  if (work.recipe) {
+    // Stored, then announced: a WatchResults client that sees it can download the report.
+    v1::InspectionResult* inspection = result.mutable_inspection();
+    for (const v1::Artifact& a : result.artifacts()) {
+      if (a.kind() == v1::ARTIFACT_KIND_REPORT_HTML) inspection->set_report_artifact_id(a.artifact_id());
+    }
+    inspection->mutable_timings()->set_measure_seconds(SecondsSince(scanned_at));
+    INSPECT_ASSIGN_OR_RETURN(*inspection, results_->Append(*inspection));
+  }
   return result;
 }
 

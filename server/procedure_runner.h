@@ -1,7 +1,8 @@
 // ProcedureRunner: the server's JobRunner. Runs a job's work through server/procedures and
 // publishes what it produced:
 //  - scan: holds the rig, RunScan with the active calibration (thesis 3.1.2, 5, 6.2), stores
-//    the stack under scans/<job_id>/ and publishes the depth artifacts, ground truth and stack;
+//    the stack as stack.zip and publishes the depth artifacts and ground truth; a scan that ran
+//    a recipe also measures, judges, writes the HTML report and appends to the result feed;
 //  - calibrate: holds the rig, RunCalibration carrying over the active bundle's other models
 //    (thesis 4.3, 5.4.1), saves the new bundle and activates it;
 //  - reconstruct: no rig; replays a stack folder through the SFF engine and publishes.
@@ -13,14 +14,16 @@
 #include "server/calibration_store.h"
 #include "server/data_store.h"
 #include "server/job_runner.h"
+#include "server/result_feed.h"
 #include "server/rig_controller.h"
 
 namespace inspection {
 
 class ProcedureRunner final : public JobRunner {
  public:
-  ProcedureRunner(DataStore* store, RigController* rig, CalibrationStore* calibrations)
-      : store_(store), rig_(rig), calibrations_(calibrations) {}
+  // `results` receives the inspection result of every scan that ran a recipe.
+  ProcedureRunner(DataStore* store, RigController* rig, CalibrationStore* calibrations, ResultFeed* results)
+      : store_(store), rig_(rig), calibrations_(calibrations), results_(results) {}
 
   StatusOr<v1::JobResult> Run(const JobWork& work, const JobContext& context) override;
 
@@ -32,6 +35,7 @@ class ProcedureRunner final : public JobRunner {
   DataStore* store_;
   RigController* rig_;
   CalibrationStore* calibrations_;
+  ResultFeed* results_;
 };
 
 }  // namespace inspection

@@ -160,7 +160,44 @@ Status ValidateRecipe(const v1::Recipe& recipe, cv::Size image_size, double pixe
     return Invalid("recipe.measurements", "has " + std::to_string(recipe.measurements_size()) + " entries; at most " +
                                               std::to_string(kMaxRecipeMeasurements));
   }
-  return MapRecipeMeasurements(recipe, image_size, pixel_size_um).status();
+  INSPECT_RETURN_IF_ERROR(MapRecipeMeasurements(recipe, image_size, pixel_size_um).status());
+  return MapRecipeProfiles(recipe, image_size, pixel_size_um).status();
+}
+
+StatusOr<std::vector<RecipeProfilePlan>> MapRecipeProfiles(const v1::Recipe& recipe, cv::Size image_size,
+                                                           double pixel_size_um) {
+  if (recipe.profiles_size() > kMaxRecipeProfiles) {
+    return Invalid("recipe.profiles", "has " + std::to_string(recipe.profiles_size()) + " entries; at most " +
+                                          std::to_string(kMaxRecipeProfiles));
+  }
+  std::vector<RecipeProfilePlan> plans;
+  std::set<std::string> names;
+  for (int i = 0; i < recipe.profiles_size(); ++i) {
+    const v1::RecipeProfile& p = recipe.profiles(i);
+    const std::string field = "recipe.profiles[" + std::to_string(i) + "]";
+    INSPECT_RETURN_IF_ERROR(CheckRecipeName(p.name(), field + ".name"));
+    if (!names.insert(p.name()).second) return Invalid(field + ".name", "'" + p.name() + "' is used twice");
+    RecipeProfilePlan plan;
+    plan.name = p.name();
+    double to_px = 1.0;
+    if (p.unit().empty() || p.unit() == "px") {
+      plan.options.unit = RoiUnit::kPixel;
+    } else if (p.unit() == "um") {
+      plan.options.unit = RoiUnit::kMicrometre;
+      to_px = 1.0 / pixel_size_um;
+    } else {
+      return Invalid(field + ".unit", "'" + p.unit() + "' is not a unit (px or um)");
+    }
+    if (!std::isfinite(p.width()) || p.width() < 0.0) {
+      return Invalid(field + ".width", "must be >= 0 (0 = one pixel)");
+    }
+    plan.options.start = {p.start().x(), p.start().y()};
+    plan.options.end = {p.end().x(), p.end().y()};
+    plan.options.width_px = std::max(1.0, p.width() * to_px);
+    INSPECT_RETURN_IF_ERROR(plan.options.Validate(image_size, pixel_size_um, field));
+    plans.push_back(std::move(plan));
+  }
+  return plans;
 }
 
 StatusOr<std::vector<RecipeMeasurementPlan>> MapRecipeMeasurements(const v1::Recipe& recipe, cv::Size image_size,

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "core/line_profile.h"
 #include "core/measurement.h"
 #include "core/status.h"
 #include "core/verdict.h"
@@ -17,6 +18,7 @@ namespace inspection {
 
 inline constexpr size_t kMaxRecipeBytes = 256 * 1024;  // serialised; a recipe is a small document
 inline constexpr int kMaxRecipeMeasurements = 64;
+inline constexpr int kMaxRecipeProfiles = 16;
 
 // [A-Za-z0-9_.-], 1..64 characters: ids and measurement names appear in file names, URLs and
 // MES tags. INVALID_ARGUMENT naming `field`.
@@ -39,6 +41,16 @@ Status ValidateRecipe(const v1::Recipe& recipe, cv::Size image_size, double pixe
 // The measurements of a valid recipe, in order.
 StatusOr<std::vector<RecipeMeasurementPlan>> MapRecipeMeasurements(const v1::Recipe& recipe, cv::Size image_size,
                                                                    double pixel_size_um);
+
+// A recipe's line profile, mapped for the rig's image.
+struct RecipeProfilePlan {
+  std::string name;
+  LineProfileOptions options;
+};
+
+// The profiles of a recipe (0..16), in order; INVALID_ARGUMENT naming "recipe.profiles[i]...".
+StatusOr<std::vector<RecipeProfilePlan>> MapRecipeProfiles(const v1::Recipe& recipe, cv::Size image_size,
+                                                           double pixel_size_um);
 
 // The ScanRequest a recipe's scan section stands for (the MES adds part and station).
 v1::ScanRequest ScanRequestOfRecipe(const v1::RecipeScan& scan);

@@ -49,6 +49,7 @@ StatusOr<ScanWork> MapScanRequestWithRecipe(const v1::ScanRequest& request, cons
   auto run = std::make_shared<RecipeRun>();
   // Checked when stored; checked again here because the camera may have changed since.
   INSPECT_ASSIGN_OR_RETURN(run->plans, MapRecipeMeasurements(recipe, image_size, pixel_size_um));
+  INSPECT_ASSIGN_OR_RETURN(run->profiles, MapRecipeProfiles(recipe, image_size, pixel_size_um));
   run->recipe = std::move(recipe);
   work.recipe = std::move(run);
   return work;

@@ -83,6 +83,8 @@ StatusOr<CalibrationStep> MapCalibrationStep(int step, const std::string& field)
       return CalibrationStep::kIntegralPsf;
     case v1::CALIBRATION_STEP_FOCUS_BREATHING:
       return CalibrationStep::kFocusBreathing;
+    case v1::CALIBRATION_STEP_Z_LINEARITY:
+      return CalibrationStep::kZLinearity;
     default:
       return Status::InvalidArgument(field + " is not a calibration step");
   }

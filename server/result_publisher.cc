@@ -1,6 +1,7 @@
 // ResultPublisher: write, hash (sha256), publish a job's result files into the data store.
 #include "server/result_publisher.h"
 
+#include <fstream>
 #include <system_error>
 
 #include "core/depth_metrics.h"
@@ -30,6 +31,16 @@ Status ResultPublisher::CopyFile(v1::ArtifactKind kind, const fs::path& source) 
   std::error_code ec;
   fs::copy_file(source, target, ec);
   if (ec) return Status::Internal("cannot copy " + source.filename().string() + ": " + ec.message());
+  files_.push_back({kind, target});
+  return Status::Ok();
+}
+
+Status ResultPublisher::WriteBytes(v1::ArtifactKind kind, const std::string& file_name, const std::string& bytes) {
+  const fs::path target = dir_.path() / file_name;
+  std::ofstream out(target, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), std::streamsize(bytes.size()));
+  out.close();
+  if (!out) return Status::Internal("cannot write " + file_name);
   files_.push_back({kind, target});
   return Status::Ok();
 }
@@ -87,6 +98,8 @@ const char* MediaType(v1::ArtifactKind k) {
       return "application/x-ply";
     case v1::ARTIFACT_KIND_DEPTH_X3P:
       return "application/x-iso25178-x3p";
+    case v1::ARTIFACT_KIND_REPORT_HTML:
+      return "text/html; charset=utf-8";
     default:
       return "application/octet-stream";
   }

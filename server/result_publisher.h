@@ -32,6 +32,8 @@ class ResultPublisher {
                     const std::vector<DepthExportKind>& extra_exports);
   // A copy of `source` under its own file name.
   Status CopyFile(v1::ArtifactKind kind, const std::filesystem::path& source);
+  // `bytes` as a file named `file_name` (e.g. the inspection report).
+  Status WriteBytes(v1::ArtifactKind kind, const std::string& file_name, const std::string& bytes);
   // `folder` as an archive named `file_name` (stored, see ZipFolder).
   Status Zip(v1::ArtifactKind kind, const std::filesystem::path& folder, const std::string& file_name);
 

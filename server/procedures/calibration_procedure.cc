@@ -20,6 +20,7 @@
 #include "core/psf_calibration.h"
 #include "core/scatter_matrix.h"
 #include "core/stack_alignment.h"
+#include "server/procedures/z_linearity_calibration.h"
 
 namespace inspection {
 namespace {
@@ -545,6 +546,40 @@ Status RunFocusBreathing(Session& s, Targeting& t, const CalibrationOptions& o, 
   return Status::Ok();
 }
 
+// z linearity (issue 13): a tilted flat scanned through the rig's default range at its default
+// step under uniform grey, as scans would; the SFF depth's periodic error is tabulated.
+Status RunZLinearity(Session& s, Targeting& t, const CalibrationOptions& o, CalibrationBundle& b,
+                     CalibrationStepReport& rep) {
+  INSPECT_RETURN_IF_ERROR(t.Use(o.simulated_linearity_target).status());
+  const cv::Mat uniform(s.projector_size(), CV_8UC1, cv::Scalar(128));
+  INSPECT_ASSIGN_OR_RETURN(double dt, s.AutoExposure(uniform, 0.5, 0.5, s.rig().camera().exposure_us()));
+  const ScanDefaults d = s.rig().scan_defaults();  // the target's range on the simulated rig
+  const Stage& stage = s.rig().stage();
+  const double step = o.z_linearity_step_um > 0 ? o.z_linearity_step_um : d.z_step_um;
+  const double lo = std::max(std::min(d.z_start_um, d.z_end_um), stage.min_z_um());
+  const double hi = std::min(std::max(d.z_start_um, d.z_end_um), stage.max_z_um());
+  std::vector<double> z_um;
+  for (double z = lo; z <= hi + 1e-9; z += step) z_um.push_back(z);
+  const int count = int(z_um.size());
+  int done = 0;
+  auto capture_at = [&](double z) -> StatusOr<cv::Mat> {
+    INSPECT_RETURN_IF_ERROR(s.MoveTo(z));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, s.Capture(uniform, dt));
+    s.Item("stack frame " + std::to_string(++done) + "/" + std::to_string(count));
+    return f;
+  };
+  const std::string target = s.rig().simulation() ? s.rig().simulation()->specimen() : "tilted flat";
+  INSPECT_ASSIGN_OR_RETURN(ZLinearityScan scan, ScanZLinearity(capture_at, z_um, s.rig().pixel_size_um(), SffOptions(),
+                                                               "calibration step z_linearity on " + target));
+  rep.figures["step_um"] = scan.linearity.characterised_step_um;
+  rep.figures["rms_percent_of_step"] = 100.0 * scan.linearity.Rms();
+  rep.figures["max_abs_percent_of_step"] = 100.0 * scan.linearity.MaxAbs();
+  rep.figures["stack_frames"] = scan.frames;
+  rep.figures["fitted_percent_of_field"] = scan.valid_percent;
+  b.z_linearity = std::move(scan.linearity);
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status CalibrationOptions::Validate() const {
@@ -573,6 +608,9 @@ Status CalibrationOptions::Validate() const {
   }
   if (!(breathing_step_um > 0) || !(breathing_half_range_um >= breathing_step_um)) {
     return Status::InvalidArgument("breathing_step_um must be > 0 and breathing_half_range_um >= breathing_step_um");
+  }
+  if (!(z_linearity_step_um >= 0.0) || !std::isfinite(z_linearity_step_um)) {
+    return Status::InvalidArgument("z_linearity_step_um must be >= 0 (0 = the rig's default step)");
   }
   return Status::Ok();
 }
@@ -648,6 +686,7 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
         static_cast<int>(options.psf_defocus_um.size()),
         sp_sc * sp_sc + 1,
         2 * static_cast<int>(std::floor(options.ipsf_half_range_um / options.ipsf_step_um + 1e-9)) + 1,
+        0,  // z linearity: the range is known once the target is in place (items counted as they come)
         2 * static_cast<int>(std::floor(options.breathing_half_range_um / options.breathing_step_um + 1e-9)) + 1};
     session.BeginStep(CalibrationStepName(step), i, count, items[static_cast<int>(step)]);
     const int frames_before = session.frames();
@@ -673,6 +712,9 @@ StatusOr<CalibrationBundle> RunCalibration(Rig& rig, const CalibrationOptions& o
         break;
       case CalibrationStep::kIntegralPsf:
         st = RunIntegralPsf(session, targeting, options, b, rep);
+        break;
+      case CalibrationStep::kZLinearity:
+        st = RunZLinearity(session, targeting, options, b, rep);
         break;
       case CalibrationStep::kFocusBreathing:
         st = RunFocusBreathing(session, targeting, options, b, rep);

@@ -33,7 +33,7 @@ struct CalibrationProgress {
 };
 
 struct CalibrationOptions {
-  // Steps to run, in any order (they are run in CalibrationStep order); empty = the six of
+  // Steps to run, in any order (they are run in CalibrationStep order); empty = the seven of
   // DefaultCalibrationSteps() (focus_breathing only when named).
   std::vector<CalibrationStep> steps;
 
@@ -91,6 +91,13 @@ struct CalibrationOptions {
   // beyond the stage travel are skipped), registered neighbour to neighbour.
   double breathing_half_range_um = 40.0;
   double breathing_step_um = 5.0;
+
+  // z linearity (issue 13): a smooth, textured flat tilted so its heights span several z steps
+  // (an optical flat on a wedge on a real rig; SKEW10, tilted 10 deg, on the simulated rig),
+  // scanned over the rig's default range at this step (0 = the rig's default step: the table
+  // applies only to scans at that step).
+  std::string simulated_linearity_target = "skew10";
+  double z_linearity_step_um = 0.0;
 
   Status Validate() const;
 };

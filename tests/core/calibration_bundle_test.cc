@@ -166,6 +166,26 @@ TEST_F(CalibrationBundleTest, RefusesNewerVersionMissingFilesAndBadCurves) {
   EXPECT_NE(l.status().message().find("geometry_camera_to_projector_y.tiff"), std::string::npos);
 }
 
+TEST_F(CalibrationBundleTest, ZLinearityRoundTripsThroughBundleJson) {
+  CalibrationBundle b = MakeBundle();
+  ZLinearity z;
+  z.bias_of_step = {0.0, 0.031, -0.0125, -0.018};
+  z.characterised_step_um = 5.0;
+  z.source = "calibration step z_linearity on skew10";
+  b.z_linearity = z;
+  ASSERT_TRUE(b.Save(dir_).ok());
+  auto l = CalibrationBundle::Load(dir_);
+  ASSERT_TRUE(l.ok()) << l.status().ToString();
+  ASSERT_TRUE(l->z_linearity.has_value());
+  EXPECT_EQ(l->z_linearity->bias_of_step, z.bias_of_step);
+  EXPECT_DOUBLE_EQ(l->z_linearity->characterised_step_um, 5.0);
+  EXPECT_EQ(l->z_linearity->source, z.source);
+  EXPECT_TRUE(l->HasModel(CalibrationStep::kZLinearity));
+  EXPECT_FALSE(MakeBundle().HasModel(CalibrationStep::kZLinearity));
+  b.z_linearity->characterised_step_um = 0.0;  // a table must say at which step it holds
+  EXPECT_EQ(b.Validate().code(), StatusCode::kInvalidArgument);
+}
+
 TEST(CalibrationStepTest, NamesRoundTrip) {
   for (CalibrationStep s : AllCalibrationSteps()) {
     auto p = ParseCalibrationStep(CalibrationStepName(s));

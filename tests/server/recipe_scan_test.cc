@@ -155,5 +155,31 @@ TEST_F(RecipeScanTest, ARecipeInUseByARunningScanCannotBeDeleted) {
   EXPECT_TRUE(client_->DeleteRecipe("tilt-check", &deleted).ok());
 }
 
+// The z-linearity calibration step replaces the +-1/2 step bound in the uncertainty by the rig's
+// measured periodic error: the tilt's U shrinks several times and still covers the truth.
+TEST_F(RecipeScanTest, ZLinearityCalibrationNarrowsTheUncertaintyAndStillCoversTheTruth) {
+  v1::Job before;
+  ASSERT_TRUE(client_->Scan(PartScan("4730"), {}, &before).ok());
+  v1::CalibrateRequest cal_req;
+  cal_req.add_steps(v1::CALIBRATION_STEP_Z_LINEARITY);
+  v1::Job cal;
+  grpc::Status s = client_->Calibrate(cal_req, nullptr, &cal);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  ASSERT_EQ(cal.state(), v1::JOB_STATE_SUCCEEDED) << cal.error_message();
+  v1::Job after;
+  ASSERT_TRUE(client_->Scan(PartScan("4731"), {}, &after).ok());
+  ASSERT_EQ(after.result().calibration_id(), cal.result().calibration_id());
+  const v1::MeasurementResult& t0 = before.result().inspection().measurements(0);
+  const v1::MeasurementResult& t1 = after.result().inspection().measurements(0);
+  const v1::MeasurementResult& sa0 = before.result().inspection().measurements(3);
+  const v1::MeasurementResult& sa1 = after.result().inspection().measurements(3);
+  std::printf("tilt %.4f deg U %.4f -> %.4f deg U %.4f; Sa %.4f um U %.3f -> %.4f um U %.3f\n", t0.value(),
+              t0.expanded_uncertainty(), t1.value(), t1.expanded_uncertainty(), sa0.value(), sa0.expanded_uncertainty(),
+              sa1.value(), sa1.expanded_uncertainty());
+  EXPECT_LT(t1.expanded_uncertainty(), 0.5 * t0.expanded_uncertainty());
+  EXPECT_GT(t1.expanded_uncertainty(), std::abs(t1.value() - 5.0));  // the true tilt is 5.000 deg
+  EXPECT_LT(sa1.expanded_uncertainty(), 0.25 * sa0.expanded_uncertainty());
+}
+
 }  // namespace
 }  // namespace inspection::testing

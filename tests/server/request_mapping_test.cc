@@ -54,6 +54,9 @@ CalibrationBundle BundleWith(std::initializer_list<CalibrationStep> steps) {
       case CalibrationStep::kIntegralPsf:
         b.integral_psf.emplace();
         break;
+      case CalibrationStep::kZLinearity:
+        b.z_linearity = ZLinearity::Uncharacterised();
+        break;
       case CalibrationStep::kFocusBreathing:
         b.focus_breathing.emplace();
         break;
