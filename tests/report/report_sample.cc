@@ -4,10 +4,12 @@
 // verdicts, a line profile across the step and the hole), so the page shows real figures.
 //
 // Usage: report_sample OUT.html [WIDTHxHEIGHT]   (default 1024x768)
-// Prints one line: "<path> <bytes> bytes, verdict <text>". Exit 1 with a message on failure.
+// Prints "<path> <bytes> bytes, verdict <text>, rendered in <s> s" and one line per measurement.
+// Exit 1 with a message on failure.
 #include <google/protobuf/util/time_util.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -222,7 +224,10 @@ int Run(int argc, char** argv) {
 
   in.depth_um = s.depth_um;
   in.all_in_focus = s.all_in_focus;
+  const auto render_start = std::chrono::steady_clock::now();
   StatusOr<std::string> html = RenderInspectionReport(in);
+  const double render_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - render_start).count();
   if (!html.ok()) {
     std::fprintf(stderr, "report_sample: %s\n", html.status().ToString().c_str());
     return 1;
@@ -235,7 +240,7 @@ int Run(int argc, char** argv) {
     return 1;
   }
   const char* verdict = r.verdict() == v1::VERDICT_OK ? "OK" : r.verdict() == v1::VERDICT_NOT_OK ? "NOT OK" : "NOT DECIDABLE";
-  std::printf("%s %zu bytes, verdict %s\n", argv[1], html->size(), verdict);
+  std::printf("%s %zu bytes, verdict %s, rendered in %.3f s\n", argv[1], html->size(), verdict, render_seconds);
   for (const auto& m : r.measurements()) {
     std::printf("  %s %s = %.4f +- %.4f %s, coverage %.1f %%: %s (%s)\n", m.name().c_str(), m.parameter().c_str(),
                 m.value(), m.expanded_uncertainty(), m.unit().c_str(), m.coverage_percent(),
