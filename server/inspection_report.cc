@@ -85,10 +85,14 @@ struct VerdictStyle {
 
 VerdictStyle StyleOf(v1::Verdict verdict) {
   switch (verdict) {
-    case v1::VERDICT_OK: return {"OK", "v-ok"};
-    case v1::VERDICT_NOT_OK: return {"NOT OK", "v-nok"};
-    case v1::VERDICT_NOT_DECIDABLE: return {"NOT DECIDABLE", "v-nd"};
-    default: return {"—", "v-none"};
+    case v1::VERDICT_OK:
+      return {"OK", "v-ok"};
+    case v1::VERDICT_NOT_OK:
+      return {"NOT OK", "v-nok"};
+    case v1::VERDICT_NOT_DECIDABLE:
+      return {"NOT DECIDABLE", "v-nd"};
+    default:
+      return {"—", "v-none"};
   }
 }
 
@@ -162,10 +166,12 @@ cv::Mat DownscaleDepth(const cv::Mat& depth_um, cv::Size out) {
   cv::Mat result(out, CV_32FC1);
   const int rows = depth_um.rows, cols = depth_um.cols;
   for (int oy = 0; oy < out.height; ++oy) {
-    const int y0 = int(int64_t(oy) * rows / out.height), y1 = std::max(y0 + 1, int(int64_t(oy + 1) * rows / out.height));
+    const int y0 = int(int64_t(oy) * rows / out.height),
+              y1 = std::max(y0 + 1, int(int64_t(oy + 1) * rows / out.height));
     float* dst = result.ptr<float>(oy);
     for (int ox = 0; ox < out.width; ++ox) {
-      const int x0 = int(int64_t(ox) * cols / out.width), x1 = std::max(x0 + 1, int(int64_t(ox + 1) * cols / out.width));
+      const int x0 = int(int64_t(ox) * cols / out.width),
+                x1 = std::max(x0 + 1, int(int64_t(ox + 1) * cols / out.width));
       double sum = 0.0;
       int n = 0;
       for (int y = y0; y < y1; ++y) {
@@ -259,35 +265,35 @@ std::string ScanMetadataTable(const v1::DepthSummary& d, const cv::Mat& depth_um
   } else {
     html += Row("Pixel size", "not calibrated");
   }
-  html += Row("Height range (valid pixels)",
-              FormatFixed(d.z_min_um(), 3) + " … " + FormatFixed(d.z_max_um(), 3) + " µm");
+  html +=
+      Row("Height range (valid pixels)", FormatFixed(d.z_min_um(), 3) + " … " + FormatFixed(d.z_max_um(), 3) + " µm");
   html += Row("Frames", std::to_string(d.frame_count()));
   html += Row("Valid pixels", FormatFixed(d.valid_percent(), 2) + " %");
   std::string illumination = OrDash(d.illumination());
   if (!d.illumination_decision().empty()) illumination += " (" + HtmlEscape(d.illumination_decision()) + ")";
   html += Row("Illumination", illumination);
-  const std::string method =
-      EnumShortName(v1::ReconstructionMethod_Name(d.method()), "RECONSTRUCTION_METHOD_");
+  const std::string method = EnumShortName(v1::ReconstructionMethod_Name(d.method()), "RECONSTRUCTION_METHOD_");
   html += Row("Reconstruction", HtmlEscape(method == "UNSPECIFIED" ? "SFF" : method) + ", engine " +
                                     Seconds(d.engine_seconds()) + " after the last frame");
   if (d.method() == v1::RECONSTRUCTION_METHOD_ISFF_FAST && d.isff_fast_threshold() > 0)
     html += Row("ISFF fast threshold", FormatSignificant(d.isff_fast_threshold(), 4));
-  if (d.frame_noise_sigma() > 0) html += Row("Frame noise σ", FormatSignificant(d.frame_noise_sigma(), 4) + " grey levels");
+  if (d.frame_noise_sigma() > 0)
+    html += Row("Frame noise σ", FormatSignificant(d.frame_noise_sigma(), 4) + " grey levels");
   if (d.frames_searched_fraction() > 0)
     html += Row("Frames searched per pixel", FormatFixed(100.0 * d.frames_searched_fraction(), 1) + " %");
   if (d.alignment() != v1::FRAME_ALIGNMENT_UNSPECIFIED) {
-    html += Row("Frame alignment", HtmlEscape(EnumShortName(v1::FrameAlignment_Name(d.alignment()), "FRAME_ALIGNMENT_")) +
-                                       ": max scale change " + FormatFixed(d.alignment_max_scale_change_percent(), 3) +
-                                       " %, max shift " + FormatFixed(d.alignment_max_shift_px(), 2) + " px, seen by all " +
-                                       FormatFixed(d.alignment_seen_percent(), 1) + " %");
+    html +=
+        Row("Frame alignment", HtmlEscape(EnumShortName(v1::FrameAlignment_Name(d.alignment()), "FRAME_ALIGNMENT_")) +
+                                   ": max scale change " + FormatFixed(d.alignment_max_scale_change_percent(), 3) +
+                                   " %, max shift " + FormatFixed(d.alignment_max_shift_px(), 2) + " px, seen by all " +
+                                   FormatFixed(d.alignment_seen_percent(), 1) + " %");
   }
   if (d.has_z_range_search()) {
     const v1::ZRangeSearchResult& z = d.z_range_search();
-    html += Row("Automatic z range", "searched " + FormatFixed(z.window_start_um(), 1) + " … " +
-                                         FormatFixed(z.window_end_um(), 1) + " µm, focus " +
-                                         FormatFixed(z.focus_low_um(), 1) + " … " + FormatFixed(z.focus_high_um(), 1) +
-                                         " µm, scanned " + FormatFixed(z.z_start_um(), 1) + " … " +
-                                         FormatFixed(z.z_end_um(), 1) + " µm");
+    html += Row("Automatic z range",
+                "searched " + FormatFixed(z.window_start_um(), 1) + " … " + FormatFixed(z.window_end_um(), 1) +
+                    " µm, focus " + FormatFixed(z.focus_low_um(), 1) + " … " + FormatFixed(z.focus_high_um(), 1) +
+                    " µm, scanned " + FormatFixed(z.z_start_um(), 1) + " … " + FormatFixed(z.z_end_um(), 1) + " µm");
   }
   if (d.has_ground_truth()) {
     html += Row("Against ground truth (simulated rig)", "RMSE " + FormatFixed(d.rmse_um(), 3) + " µm, mean |error| " +
@@ -348,17 +354,20 @@ StatusOr<std::string> RenderInspectionReport(const InspectionReportInput& input)
   const std::string part = OrDash(r.part_id());
   std::string html;
   html.reserve(preview_uri->size() + aif_uri.size() + 64 * 1024);
-  html += "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-          "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src data:; "
-          "style-src 'unsafe-inline'\">"
-          "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
-          "<meta name=\"generator\" content=\"inspectd " INSPECT_REPORT_VERSION "\">";
-  html += "<title>Inspection " + part + " – " + verdict.text + "</title><style>" + kStyle + "</style></head><body><main>";
+  html +=
+      "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+      "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src data:; "
+      "style-src 'unsafe-inline'\">"
+      "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+      "<meta name=\"generator\" content=\"inspectd " INSPECT_REPORT_VERSION "\">";
+  html +=
+      "<title>Inspection " + part + " – " + verdict.text + "</title><style>" + kStyle + "</style></head><body><main>";
 
   // Head: the verdict and what was inspected.
   html += std::string("<header class=\"report-head\"><div id=\"verdict\" class=\"") + verdict.css + "\">" +
           verdict.text + "</div><div class=\"ident\"><h1>Part <span id=\"part-id\">" + part + "</span></h1>";
-  html += "<p>Recipe <b id=\"recipe-id\">" + OrDash(r.recipe_id()) + "</b> version " + std::to_string(r.recipe_version());
+  html +=
+      "<p>Recipe <b id=\"recipe-id\">" + OrDash(r.recipe_id()) + "</b> version " + std::to_string(r.recipe_version());
   if (!input.recipe_description.empty())
     html += " — <span id=\"recipe-description\">" + HtmlEscape(input.recipe_description) + "</span>";
   html += "</p><p>Station " + OrDash(r.station()) + " · finished " + FinishTime(r) + "</p></div></header>";
@@ -380,20 +389,22 @@ StatusOr<std::string> RenderInspectionReport(const InspectionReportInput& input)
           "LSL = nominal + lower, USL = nominal + upper.</p></section>";
 
   html += "<section id=\"images\"><h2>Depth map and all-in-focus image</h2><div class=\"images\">";
-  html += "<figure id=\"depth-preview\"><img alt=\"depth map preview\" src=\"" + *preview_uri + "\" width=\"" +
-          std::to_string(preview->cols) + "\" height=\"" + std::to_string(preview->rows) +
-          "\"><figcaption>Depth map (" + std::to_string(input.depth_um.cols) + " × " +
-          std::to_string(input.depth_um.rows) + " px" +
-          (map_out != input.depth_um.size() ? ", shown at " + std::to_string(map_out.width) + " × " +
-                                                  std::to_string(map_out.height) + " px as box means" : std::string()) +
-          "); colour scale z [µm] on the right; black: no depth.</figcaption></figure>";
+  html +=
+      "<figure id=\"depth-preview\"><img alt=\"depth map preview\" src=\"" + *preview_uri + "\" width=\"" +
+      std::to_string(preview->cols) + "\" height=\"" + std::to_string(preview->rows) + "\"><figcaption>Depth map (" +
+      std::to_string(input.depth_um.cols) + " × " + std::to_string(input.depth_um.rows) + " px" +
+      (map_out != input.depth_um.size()
+           ? ", shown at " + std::to_string(map_out.width) + " × " + std::to_string(map_out.height) + " px as box means"
+           : std::string()) +
+      "); colour scale z [µm] on the right; black: no depth.</figcaption></figure>";
   if (!aif_uri.empty()) {
     html += "<figure id=\"all-in-focus\"><img alt=\"all-in-focus image\" src=\"" + aif_uri + "\" width=\"" +
             std::to_string(aif_shown.width) + "\" height=\"" + std::to_string(aif_shown.height) +
             "\"><figcaption>All-in-focus image (" + std::to_string(input.all_in_focus.cols) + " × " +
             std::to_string(input.all_in_focus.rows) + " px" +
-            (aif_shown != input.all_in_focus.size() ? ", shown at " + std::to_string(aif_shown.width) + " × " +
-                                                          std::to_string(aif_shown.height) + " px" : std::string()) +
+            (aif_shown != input.all_in_focus.size()
+                 ? ", shown at " + std::to_string(aif_shown.width) + " × " + std::to_string(aif_shown.height) + " px"
+                 : std::string()) +
             (aif_note.empty() ? std::string() : "; " + aif_note) + ").</figcaption></figure>";
   }
   html += "</div></section>";

@@ -125,12 +125,23 @@ std::string HtmlEscape(std::string_view text) {
   out.reserve(text.size());
   for (char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      case '\'': out += "&#39;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      case '\'':
+        out += "&#39;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -198,11 +209,12 @@ std::string RenderHistogramSvg(const HeightHistogram& histogram) {
     const double b_lo = lo + i * histogram.bin_width_um, b_hi = b_lo + histogram.bin_width_um;
     const int64_t c = histogram.counts[size_t(i)];
     const double x0 = x(b_lo), x1 = x(b_hi), y0 = y(double(c));
-    svg += "<rect class=\"hist-bar\" data-bin=\"" + std::to_string(i) + "\" data-lo-um=\"" + FormatSignificant(b_lo, 9) +
-           "\" data-hi-um=\"" + FormatSignificant(b_hi, 9) + "\" data-count=\"" + std::to_string(c) + "\" x=\"" +
-           FormatFixed(x0, 2) + "\" y=\"" + FormatFixed(y0, 2) + "\" width=\"" + FormatFixed(x1 - x0, 2) +
-           "\" height=\"" + FormatFixed(kPlotY1 - y0, 2) + "\"><title>" + FormatFixed(b_lo, lo_decimals) + " to " +
-           FormatFixed(b_hi, lo_decimals) + " µm: " + std::to_string(c) + " px</title></rect>";
+    svg += "<rect class=\"hist-bar\" data-bin=\"" + std::to_string(i) + "\" data-lo-um=\"" +
+           FormatSignificant(b_lo, 9) + "\" data-hi-um=\"" + FormatSignificant(b_hi, 9) + "\" data-count=\"" +
+           std::to_string(c) + "\" x=\"" + FormatFixed(x0, 2) + "\" y=\"" + FormatFixed(y0, 2) + "\" width=\"" +
+           FormatFixed(x1 - x0, 2) + "\" height=\"" + FormatFixed(kPlotY1 - y0, 2) + "\"><title>" +
+           FormatFixed(b_lo, lo_decimals) + " to " + FormatFixed(b_hi, lo_decimals) + " µm: " + std::to_string(c) +
+           " px</title></rect>";
   }
   svg += "</g></svg>";
   return svg;
@@ -260,8 +272,10 @@ std::string RenderProfileSvg(const v1::ProfileResult& profile) {
     svg += "<g class=\"bands\">";
     for (const auto& [b, e] : runs) {
       std::string points;
-      for (int i = b; i < e; ++i) points += Px(x(profile.position_um(i))) + "," + Px(y(profile.height_um(i) + 2 * u_of(i))) + " ";
-      for (int i = e - 1; i >= b; --i) points += Px(x(profile.position_um(i))) + "," + Px(y(profile.height_um(i) - 2 * u_of(i))) + " ";
+      for (int i = b; i < e; ++i)
+        points += Px(x(profile.position_um(i))) + "," + Px(y(profile.height_um(i) + 2 * u_of(i))) + " ";
+      for (int i = e - 1; i >= b; --i)
+        points += Px(x(profile.position_um(i))) + "," + Px(y(profile.height_um(i) - 2 * u_of(i))) + " ";
       points.pop_back();
       svg += "<polygon class=\"profile-band\" points=\"" + points + "\"/>";
     }
@@ -283,10 +297,12 @@ std::string RenderProfileSvg(const v1::ProfileResult& profile) {
   // Legend above the plot's top right corner, where no data can lie under it.
   const double lx = kPlotX1 - 190, ly = kPlotY0 - 10;
   svg += "<g class=\"legend\"><line class=\"legend-line\" x1=\"" + Px(lx) + "\" x2=\"" + Px(lx + 22) + "\" y1=\"" +
-         Px(ly - 4) + "\" y2=\"" + Px(ly - 4) + "\"/><text x=\"" + Px(lx + 28) + "\" y=\"" + Px(ly) + "\">height</text>";
+         Px(ly - 4) + "\" y2=\"" + Px(ly - 4) + "\"/><text x=\"" + Px(lx + 28) + "\" y=\"" + Px(ly) +
+         "\">height</text>";
   if (has_band) {
-    svg += "<rect class=\"legend-band\" x=\"" + Px(lx + 80) + "\" y=\"" + Px(ly - 10) + "\" width=\"22\" height=\"12\"/>" +
-           "<text x=\"" + Px(lx + 108) + "\" y=\"" + Px(ly) + "\">±2u (k = 2)</text>";
+    svg += "<rect class=\"legend-band\" x=\"" + Px(lx + 80) + "\" y=\"" + Px(ly - 10) +
+           "\" width=\"22\" height=\"12\"/>" + "<text x=\"" + Px(lx + 108) + "\" y=\"" + Px(ly) +
+           "\">±2u (k = 2)</text>";
   }
   svg += "</g></svg>";
   return svg;

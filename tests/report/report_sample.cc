@@ -53,8 +53,7 @@ Specimen MakeSpecimen(cv::Size size) {
       if (rough) z += 1.0 * std::sin(2 * M_PI * x_um / 60.0);
       s.truth_um.at<float>(y, x) = float(z);
       const bool hole = std::hypot(x - hole_x, y - hole_y) < hole_r || rng.uniform(0.0, 1.0) < 0.003;
-      s.depth_um.at<float>(y, x) =
-          hole ? std::numeric_limits<float>::quiet_NaN() : float(z + rng.gaussian(0.12));
+      s.depth_um.at<float>(y, x) = hole ? std::numeric_limits<float>::quiet_NaN() : float(z + rng.gaussian(0.12));
       // The camera's view: a speckled texture (what SFF needs), darker on the lower level,
       // featureless and bright in the disc.
       double grey = (upper ? 150 : 110) + 45 * std::sin(x / 5.3) * std::cos(y / 7.1) + rng.gaussian(12);
@@ -67,9 +66,12 @@ Specimen MakeSpecimen(cv::Size size) {
 
 v1::Verdict ToProto(Verdict v) {
   switch (v) {
-    case Verdict::kOk: return v1::VERDICT_OK;
-    case Verdict::kNotOk: return v1::VERDICT_NOT_OK;
-    case Verdict::kNotDecidable: return v1::VERDICT_NOT_DECIDABLE;
+    case Verdict::kOk:
+      return v1::VERDICT_OK;
+    case Verdict::kNotOk:
+      return v1::VERDICT_NOT_OK;
+    case Verdict::kNotDecidable:
+      return v1::VERDICT_NOT_DECIDABLE;
   }
   return v1::VERDICT_UNSPECIFIED;
 }
@@ -81,9 +83,8 @@ v1::MeasurementResult MeasureOne(const std::string& name, const MeasurementSpec&
   m.set_parameter(MeasurementKindName(spec.kind));
   m.set_unit(spec.unit());
   StatusOr<MeasuredValue> v = Measure(spec, ctx, name);
-  const VerdictResult verdict =
-      v.ok() ? Judge(v->value, v->uncertainty.standard_uncertainty, v->coverage_percent, tol)
-             : NotMeasured(v.status().message());
+  const VerdictResult verdict = v.ok() ? Judge(v->value, v->uncertainty.standard_uncertainty, v->coverage_percent, tol)
+                                       : NotMeasured(v.status().message());
   if (v.ok()) {
     m.set_measured(true);
     m.set_value(v->value);
@@ -226,8 +227,7 @@ int Run(int argc, char** argv) {
   in.all_in_focus = s.all_in_focus;
   const auto render_start = std::chrono::steady_clock::now();
   StatusOr<std::string> html = RenderInspectionReport(in);
-  const double render_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - render_start).count();
+  const double render_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - render_start).count();
   if (!html.ok()) {
     std::fprintf(stderr, "report_sample: %s\n", html.status().ToString().c_str());
     return 1;
@@ -239,7 +239,9 @@ int Run(int argc, char** argv) {
     std::fprintf(stderr, "report_sample: cannot write %s\n", argv[1]);
     return 1;
   }
-  const char* verdict = r.verdict() == v1::VERDICT_OK ? "OK" : r.verdict() == v1::VERDICT_NOT_OK ? "NOT OK" : "NOT DECIDABLE";
+  const char* verdict = r.verdict() == v1::VERDICT_OK       ? "OK"
+                        : r.verdict() == v1::VERDICT_NOT_OK ? "NOT OK"
+                                                            : "NOT DECIDABLE";
   std::printf("%s %zu bytes, verdict %s, rendered in %.3f s\n", argv[1], html->size(), verdict, render_seconds);
   for (const auto& m : r.measurements()) {
     std::printf("  %s %s = %.4f +- %.4f %s, coverage %.1f %%: %s (%s)\n", m.name().c_str(), m.parameter().c_str(),

@@ -196,7 +196,9 @@ TEST(InspectionReport, HistogramCountsMatchAKnownMap) {
   float* d = in.depth_um.ptr<float>(0);
   for (int i = 0; i < 200; ++i) d[i] = i < 100 ? 0.0f : i < 125 ? 5.0f : i < 175 ? 10.0f : kNaN;
   const std::string html = Render(in);
-  const auto counts = AllMatches(html, std::regex(R"re(class="hist-bar" data-bin="\d+" data-lo-um="[^"]*" data-hi-um="[^"]*" data-count="(\d+)")re"));
+  const auto counts = AllMatches(
+      html,
+      std::regex(R"re(class="hist-bar" data-bin="\d+" data-lo-um="[^"]*" data-hi-um="[^"]*" data-count="(\d+)")re"));
   ASSERT_EQ(counts.size(), 64u);
   std::vector<int> expected(64, 0);
   expected[0] = 100;
@@ -270,8 +272,9 @@ TEST(InspectionReport, MeasurementTableShowsLimitsAndRoundedValues) {
                       "<td class=\"num\">97.5 (min 80)</td><td class=\"num\">0</td><td class=\"num\">—</td>"
                       "<td class=\"num\">0.5</td><td><span class=\"v v-nok\">NOT OK</span></td>"),
             std::string::npos);
-  EXPECT_NE(html.find("<td class=\"num\">—</td><td>µm</td><td class=\"num\">—</td><td class=\"num\">12.0 (min 80)</td>"),
-            std::string::npos);
+  EXPECT_NE(
+      html.find("<td class=\"num\">—</td><td>µm</td><td class=\"num\">—</td><td class=\"num\">12.0 (min 80)</td>"),
+      std::string::npos);
 }
 
 TEST(InspectionReport, EmbeddedPngsDecodeToTheDownscaledSizes) {
