@@ -288,7 +288,7 @@ FiniteRange FindFiniteRange(const cv::Mat& m) {
 
 }  // namespace
 
-Status WriteDepthPreviewPng(const fs::path& path, const cv::Mat& depth_um) {
+StatusOr<cv::Mat> RenderDepthPreview(const cv::Mat& depth_um) {
   INSPECT_RETURN_IF_ERROR(CheckFloatMap(depth_um, "depth_um"));
   try {
     const FiniteRange fr = FindFiniteRange(depth_um);
@@ -311,7 +311,7 @@ Status WriteDepthPreviewPng(const fs::path& path, const cv::Mat& depth_um) {
     coloured.setTo(cv::Scalar::all(0), nan_mask);
 
     // Canvas: the map on the left, a panel with the colour bar and µm labels on the right.
-    const int panel_w = 110, min_h = 200;
+    const int panel_w = kDepthPreviewPanelWidthPx, min_h = kDepthPreviewMinHeightPx;
     const int canvas_h = std::max(depth_um.rows, min_h);
     cv::Mat canvas(canvas_h, depth_um.cols + panel_w, CV_8UC3, cv::Scalar::all(0));
     coloured.copyTo(canvas(cv::Rect(0, 0, depth_um.cols, depth_um.rows)));
@@ -342,12 +342,22 @@ Status WriteDepthPreviewPng(const fs::path& path, const cv::Mat& depth_um) {
                     font_scale, white, 1, cv::LINE_AA);
       }
     }
-    std::vector<uchar> png;
-    if (!cv::imencode(".png", canvas, png)) return Status::Internal("PNG encoding failed");
-    return WriteBytesAtomic(path, png.data(), png.size());
+    return canvas;
   } catch (const cv::Exception& e) {
     return Status::Internal(std::string("preview rendering failed: ") + e.what());
   }
+}
+
+Status WriteDepthPreviewPng(const fs::path& path, const cv::Mat& depth_um) {
+  StatusOr<cv::Mat> canvas = RenderDepthPreview(depth_um);
+  if (!canvas.ok()) return canvas.status();
+  std::vector<uchar> png;
+  try {
+    if (!cv::imencode(".png", *canvas, png)) return Status::Internal("PNG encoding failed");
+  } catch (const cv::Exception& e) {
+    return Status::Internal(std::string("PNG encoding failed: ") + e.what());
+  }
+  return WriteBytesAtomic(path, png.data(), png.size());
 }
 
 // ---------------------------------------------------------------------------------------------

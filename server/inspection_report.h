@@ -28,7 +28,12 @@ struct InspectionReportInput {
 // image, a histogram of heights, one plot per profile (height with its +-2u band against
 // position), the measurement table (value, unit, U, coverage, tolerance limits, verdict and
 // reason) and the scan metadata. Text from the recipe or the request is HTML-escaped.
-// INVALID_ARGUMENT when depth_um is empty or not CV_32FC1.
+// Embedded images are downscaled to at most 1024 px on the long side (the depth map by box means
+// of its valid heights, so holes do not grow); the histogram is of the full-size map. An unset
+// overall verdict is derived from the measurements as InspectionResult.verdict defines it (none:
+// NOT DECIDABLE). About 1.6 MB for a 1024x768 scan with a textured all-in-focus image.
+// INVALID_ARGUMENT when depth_um is empty or not CV_32FC1, or all_in_focus is neither empty nor
+// CV_8U/CV_16U with 1 or 3 channels.
 StatusOr<std::string> RenderInspectionReport(const InspectionReportInput& input);
 
 }  // namespace inspection
