@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds the inspectd image (deploy/Containerfile) with podman from a local debootstrap base, runs
-# it on the simulated rig, scans through the published port with the host's inspectctl, checks
-# the gRPC health service, the non-root user and the data volume, and stops it (SIGTERM, exit 0).
+# it on the simulated rig, scans through the published gRPC port with the host's inspectctl,
+# reads the Prometheus /metrics of the published HTTP port (9464) for that scan, checks the gRPC
+# health service, the non-root user and the data volume, and stops it (SIGTERM, exit 0).
 #
 #   deploy/container_test.sh [INSPECTCTL]      (default build/bin/inspectctl; run as root)
 # Environment:
@@ -11,6 +12,9 @@
 #                (default /var/cache/inspection-containers)
 #   SKIP_BUILD=1 test an existing IMAGE;  KEEP_IMAGE=1 keep IMAGE afterwards (default: kept)
 #   JOBS         compile jobs inside the build (default 2)
+#   CCACHE_HOST_DIR  the host's ccache directory, mounted into the build stage so the image reuses
+#                the host's objects (default: `ccache -k cache_dir`; empty = the build's own cache
+#                mount only). deploy/README.md "Building the image fast".
 # Podman on these machines needs --runtime runc, explicit ulimits and chroot isolation for builds
 # (../shared/PLATFORM.md "Containers").
 set -euo pipefail
@@ -37,6 +41,7 @@ cleanup() {
 trap cleanup EXIT
 
 [[ $(id -u) -eq 0 ]] || fail "run as root (podman with runc, as in ../shared/PLATFORM.md)"
+command -v curl >/dev/null || fail "curl is needed to read /metrics (apt-get install curl)"
 [[ -x "$inspectctl" ]] || fail "no inspectctl at $inspectctl (build it: cmake --build build --target inspectctl)"
 
 # --- base image: podman's store, else the cached tarball, else debootstrap (~2 min) -------------
@@ -62,11 +67,18 @@ fi
 if [[ "${SKIP_BUILD:-0}" != 1 ]]; then
   step "build $image"
   start=$SECONDS
-  "${podman[@]}" build --format docker --isolation chroot "${ulimits[@]}" \
+  cache_args=()
+  ccache_dir="${CCACHE_HOST_DIR-$(ccache -k cache_dir 2>/dev/null || true)}"
+  if [[ -n "$ccache_dir" ]]; then
+    mkdir -p "$ccache_dir"
+    cache_args=(--volume "$ccache_dir:/ccache" --build-arg CCACHE_DIR=/ccache)
+    echo "   ccache: the host's $ccache_dir"
+  fi
+  "${podman[@]}" build --format docker --isolation chroot "${ulimits[@]}" "${cache_args[@]}" \
     --build-arg BASE_IMAGE="$base_image" --build-arg JOBS="${JOBS:-2}" \
     --ignorefile deploy/containerignore -f deploy/Containerfile -t "$image" . >"$work/build.log" 2>&1 ||
     { tail -40 "$work/build.log"; fail "image build failed"; }
-  grep -E '^ *(Hits|Misses):' "$work/build.log" | sed 's/^ */   ccache /' || true
+  grep -E '^ccache this build: ' "$work/build.log" | sed 's/^/   /' || true
   echo "   build time: $((SECONDS - start)) s"
 fi
 size_bytes="$("${podman[@]}" image inspect --format '{{.Size}}' "$image")"
@@ -76,13 +88,17 @@ echo "   image size: $((size_bytes / 1000000)) MB ($size_bytes bytes)"
 # --- run on the simulated rig --------------------------------------------------------------------
 step "run $image (simulated rig, 512x384 camera)"
 "${podman[@]}" volume create "$volume" >/dev/null
-"${podman[@]}" run -d --read-only --name "$name" "${ulimits[@]}" -p 127.0.0.1::50051 -v "$volume:/var/lib/inspection" \
+"${podman[@]}" run -d --read-only --name "$name" "${ulimits[@]}" -p 127.0.0.1::50051 -p 127.0.0.1::9464 \
+  -v "$volume:/var/lib/inspection" \
   -e INSPECTD_SPECIMEN=lens "$image" --camera-size 512x384 >/dev/null 2>"$work/run.err" ||
   { cat "$work/run.err"; fail "podman run failed"; }
 port="$("${podman[@]}" port "$name" 50051/tcp | head -n1 | sed 's/.*://')"
 [[ -n "$port" ]] || fail "no published port"
 addr="127.0.0.1:$port"
-echo "   published at $addr"
+http_port="$("${podman[@]}" port "$name" 9464/tcp | head -n1 | sed 's/.*://')"
+[[ -n "$http_port" ]] || fail "no published HTTP port"
+http_addr="127.0.0.1:$http_port"
+echo "   gRPC published at $addr, HTTP (metrics, dashboard) at $http_addr"
 
 # Health through the image's own HEALTHCHECK (inspect-health-probe -> grpc.health.v1.Health):
 # podman here has no systemd to run it periodically, so run it on demand until it passes.
@@ -120,9 +136,18 @@ step "status and scan through $addr with the host's inspectctl"
 for f in depth.tiff confidence.tiff all_in_focus.png depth_preview.png; do
   [[ -s "$work/scan/$f" ]] || fail "scan result $f missing"
 done
+
 owner="$("${podman[@]}" exec "$name" sh -c 'find /var/lib/inspection -type f | head -n1 | xargs stat -c %u')"
 [[ "$owner" == 10001 ]] || fail "data files owned by uid $owner"
 echo "   data volume files owned by uid $owner"
+
+step "Prometheus /metrics through the published HTTP port $http_addr"
+curl -fsS --max-time 10 "http://$http_addr/metrics" >"$work/metrics.txt" || fail "GET /metrics failed"
+grep -E '^inspectd_(jobs_total\{|frames_acquired_total |rig_state\{state="ready"\})' "$work/metrics.txt" | sed 's/^/   /'
+grep -qx 'inspectd_jobs_total{kind="scan",state="succeeded"} 1' "$work/metrics.txt" ||
+  fail "no inspectd_jobs_total{kind=\"scan\",state=\"succeeded\"} 1 after the scan"
+curl -fsS --max-time 10 "http://$http_addr/" | grep -q '<title>inspectd</title>' || fail "dashboard page not served"
+echo "   dashboard page served at http://$http_addr/"
 
 step "stop (SIGTERM)"
 "${podman[@]}" stop -t 30 "$name" >/dev/null

@@ -8,6 +8,7 @@
 
 #include "server/access_control.h"
 #include "server/audit_interceptor.h"
+#include "server/log_identity_interceptor.h"
 #include "server/transport_security.h"
 
 namespace inspection {
@@ -142,6 +143,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
   interceptors.push_back(s->ops_->NewInterceptorFactory());  // inspectd_grpc_calls_total
   interceptors.push_back(std::make_unique<AuditInterceptorFactory>(s->audit_.get(), s->access_.get()));
+  interceptors.push_back(std::make_unique<LogIdentityInterceptorFactory>(s->access_.get()));  // "identity" in logs
   builder.experimental().SetInterceptorCreators(std::move(interceptors));
   // Uploads arrive in 1 MiB chunks; keep headroom for the envelope.
   builder.SetMaxReceiveMessageSize(4 << 20);
@@ -162,10 +164,11 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
     http.listen_address = options.http_listen_address;
     http.tls_cert_file = options.tls_cert_file;  // HTTPS with the gRPC certificate when TLS is on
     http.tls_key_file = options.tls_key_file;
-    if (!options.auth_token.empty()) {
-      // The same bearer token as gRPC; a bare token line is one identity with every role.
-      INSPECT_ASSIGN_OR_RETURN(AccessPolicy policy, AccessPolicy::Parse("", options.auth_token, false));
-      http.access = std::make_shared<const AccessControl>(std::move(policy));
+    http.tls_client_ca_file = options.tls_client_ca_file;  // mTLS on gRPC: client certificates here too
+    // The gRPC side's access control itself (tokens, certificates, policy, SIGHUP reloads); not
+    // owned: access_ outlives ops_.
+    if (s->access_->enabled()) {
+      http.access = std::shared_ptr<const AccessControl>(std::shared_ptr<void>(), s->access_.get());
     }
     DashboardSources sources{s->store_.get(), s->jobs_.get(), s->rig_.get(), s->calibrations_.get(), INSPECT_VERSION};
     if (Status hs = s->ops_->Start(std::move(http), sources, options.data_dir); !hs.ok()) {

@@ -370,7 +370,7 @@ void JobManager::Emit(const RecordPtr& r, const EventFill& fill) {
 }
 
 void JobManager::Finish(const RecordPtr& r, const StatusOr<v1::JobResult>& outcome) {
-  const ScopedLogJob log_job(r->job_id());
+  const ScopedLogJob log_job(r->job_id(), r->Snapshot().owner());
   const Status status = outcome.ok() ? Status::Ok() : outcome.status();
   v1::Job job;
   auto fill = [&](v1::JobEvent& e) {
@@ -440,7 +440,7 @@ void JobManager::Worker(Queue* queue, bool rig) {
           Emit(r, fill);
           if (options_.disk_full && !disk_full_seen) disk_full_seen = options_.disk_full();
         };
-        const ScopedLogJob log_job(r->job_id());  // log lines of the work name the job
+        const ScopedLogJob log_job(r->job_id(), r->Snapshot().owner());  // lines of the work name job and owner
         outcome = runner_->Run(job->work, context);
         if (!outcome->ok() && options_.disk_full) {
           disk_full_seen = disk_full_seen || options_.disk_full();

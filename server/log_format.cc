@@ -14,6 +14,7 @@ namespace inspection {
 namespace {
 
 thread_local std::string current_log_job;
+thread_local std::string current_log_identity;
 
 const char* kTextPattern = "%Y-%m-%dT%H:%M:%S.%e%z %l inspectd: %v";
 
@@ -37,13 +38,25 @@ std::string JsonLine(std::chrono::system_clock::time_point time, std::string_vie
   j["message"] = std::string(message);
   const std::string& job = ScopedLogJob::Current();
   if (!job.empty()) j["job_id"] = job;
+  // Identities come from certificates and token files: replaced like the message if not UTF-8.
+  const std::string& identity = ScopedLogIdentity::Current();
+  if (!identity.empty()) j["identity"] = identity;
   if (!logger.empty()) j["logger"] = logger;
   return j.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
 }
 
 }  // namespace
 
-ScopedLogJob::ScopedLogJob(std::string job_id) : previous_(std::move(current_log_job)) {
+ScopedLogIdentity::ScopedLogIdentity(std::string identity) : previous_(current_log_identity) {
+  if (!identity.empty()) current_log_identity = std::move(identity);
+}
+
+ScopedLogIdentity::~ScopedLogIdentity() { current_log_identity = std::move(previous_); }
+
+const std::string& ScopedLogIdentity::Current() { return current_log_identity; }
+
+ScopedLogJob::ScopedLogJob(std::string job_id, std::string owner)
+    : previous_(std::move(current_log_job)), identity_(std::move(owner)) {
   current_log_job = std::move(job_id);
 }
 

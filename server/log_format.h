@@ -1,7 +1,10 @@
 // inspectd's log lines: "text" (the default, for people) or "json" (one JSON object per line,
-// for log collectors: time, level, message, and job_id while a job's work runs on the thread).
-// The job id comes from a thread-local scope that the JobManager's workers open around a job,
-// so procedures log through plain spdlog calls and still get their job attributed.
+// for log collectors: time, level, message, job_id while a job's work runs on the thread, and
+// identity while an RPC or a job runs for a caller).
+// Both come from thread-local scopes: the JobManager's workers open one around a job (its id and
+// its owner), the gRPC interceptor of log_identity_interceptor.h one around each call (the
+// authenticated caller), so handlers and procedures log through plain spdlog calls and still get
+// their job and caller attributed.
 #pragma once
 
 #include <spdlog/formatter.h>
@@ -14,10 +17,29 @@
 
 namespace inspection {
 
+// Marks the current thread as working for `identity` (the authenticated caller: certificate CN
+// or SAN, token name, "anonymous" without authentication) until destroyed; nests (restores the
+// outer). An empty identity leaves the outer one in force.
+class ScopedLogIdentity {
+ public:
+  explicit ScopedLogIdentity(std::string identity);
+  ~ScopedLogIdentity();
+  ScopedLogIdentity(const ScopedLogIdentity&) = delete;
+  ScopedLogIdentity& operator=(const ScopedLogIdentity&) = delete;
+
+  // The identity of the current thread; empty outside any scope.
+  static const std::string& Current();
+
+ private:
+  std::string previous_;
+};
+
 // Marks the current thread as working for `job_id` until destroyed; nests (restores the outer).
+// `owner`, the identity that started the job, is the thread's identity for as long (empty: the
+// outer identity stays).
 class ScopedLogJob {
  public:
-  explicit ScopedLogJob(std::string job_id);
+  explicit ScopedLogJob(std::string job_id, std::string owner = {});
   ~ScopedLogJob();
   ScopedLogJob(const ScopedLogJob&) = delete;
   ScopedLogJob& operator=(const ScopedLogJob&) = delete;
@@ -27,11 +49,13 @@ class ScopedLogJob {
 
  private:
   std::string previous_;
+  ScopedLogIdentity identity_;
 };
 
-// {"time":"2026-11-25T19:40:01.123Z","level":"info","message":"...","job_id":"scan-..."} + '\n'.
-// Time in UTC with milliseconds; job_id only when known; the logger's name as "logger" when it
-// is not the default one.
+// {"time":"2026-11-25T19:40:01.123Z","level":"info","message":"...","job_id":"scan-...",
+//  "identity":"station-7"} + '\n'.
+// Time in UTC with milliseconds; job_id and identity only when known; the logger's name as
+// "logger" when it is not the default one.
 class JsonLogFormatter final : public spdlog::formatter {
  public:
   void format(const spdlog::details::log_msg& msg, spdlog::memory_buf_t& dest) override;

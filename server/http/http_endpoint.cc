@@ -1,10 +1,12 @@
-// inspectd's HTTP port: routing, bearer-token checks and the serving thread (http_endpoint.h).
+// inspectd's HTTP port: routing, credential checks and the serving thread (http_endpoint.h).
 #include "server/http/http_endpoint.h"
 
 #include <httplib.h>
 #include <spdlog/spdlog.h>
 
 #include <charconv>
+
+#include "server/http/http_tls.h"
 
 namespace inspection {
 
@@ -28,7 +30,9 @@ Status SplitHostPort(const std::string& address, const std::string& setting, std
 
 HttpEndpoint::HttpEndpoint(HttpEndpointOptions options) : options_(std::move(options)) {
   if (!options_.tls_cert_file.empty()) {
-    server_ = std::make_unique<httplib::SSLServer>(options_.tls_cert_file.c_str(), options_.tls_key_file.c_str());
+    const HttpTlsFiles files{options_.tls_cert_file, options_.tls_key_file, options_.tls_client_ca_file};
+    server_ = std::make_unique<httplib::SSLServer>(
+        [this, files](SSL_CTX& ctx) { return ConfigureHttpTls(ctx, files, &tls_error_); });
   } else {
     server_ = std::make_unique<httplib::Server>();
   }
@@ -47,6 +51,18 @@ bool HttpEndpoint::Authorized(const httplib::Request& request, httplib::Response
   static const std::string kBearer = "Bearer ";
   if (header.compare(0, kBearer.size(), kBearer) == 0) credentials.bearer_token = header.substr(kBearer.size());
   credentials.peer = "http:" + request.remote_addr + ":" + std::to_string(request.remote_port);
+  if (!options_.tls_client_ca_file.empty()) {
+    // mTLS: the certificate is mandatory, as in gRPC's handshake; a token may add to it.
+    credentials.cert_names = VerifiedClientCertificateNames(request.ssl);
+    if (credentials.cert_names.empty()) {
+      response.status = 401;
+      response.set_content(
+          "client certificate required: this server accepts only clients with a certificate "
+          "from its client CA (as on its gRPC port)\n",
+          "text/plain; charset=utf-8");
+      return false;
+    }
+  }
   auto identity = options_.access->Authorize(credentials, options_.role_method);
   if (identity.ok()) return true;
   const bool denied = identity.status().code() == StatusCode::kPermissionDenied;
@@ -70,8 +86,7 @@ Status HttpEndpoint::Start() {
   int requested = 0;
   INSPECT_RETURN_IF_ERROR(SplitHostPort(options_.listen_address, "http_listen", &host_, &requested));
   if (!server_->is_valid()) {
-    return Status::InvalidArgument("HTTPS cannot use tls_cert '" + options_.tls_cert_file + "' / tls_key '" +
-                                   options_.tls_key_file + "'");
+    return Status::InvalidArgument("HTTPS: " + (tls_error_.empty() ? "cannot set up TLS" : tls_error_));
   }
   if (requested == 0) {
     port_ = server_->bind_to_any_port(host_);

@@ -1,11 +1,15 @@
 // HttpEndpoint: inspectd's second port, HTTP/1.1 (cpp-httplib; HTTPS when gRPC has TLS) beside gRPC, for the
 // Prometheus /metrics endpoint and the read-only web dashboard. Read-only by design: only GET
 // routes exist, nothing here changes the rig or the jobs.
-// Authentication follows the gRPC side: when the server's AccessControl is enabled, every data
-// route needs "Authorization: Bearer <token>" of an identity whose role may call `role_method`
-// (GetRigStatus: viewer), else 401 (no or unknown token) or 403 (role too low). Static assets
-// (the dashboard's page, script and style, which hold no data) are served to anyone so a
-// browser can load the page and then ask for the token.
+// Authentication follows the gRPC side, with the server's own AccessControl (the same identities,
+// roles and SIGHUP reloads): when it is enabled, every data route needs an identity whose role may
+// call `role_method` (GetRigStatus: viewer), else 401 (no or unknown credentials) or 403 (an
+// identity the policy does not list, or a role too low). The identity is the bearer token's
+// ("Authorization: Bearer <token>"), or, when gRPC requires client certificates (mTLS), the
+// verified client certificate's (http_tls.h); with mTLS a request without a verified
+// certificate is 401 whatever token it carries, as gRPC would refuse its handshake.
+// Static assets (the dashboard's page, script and style, which hold no data) are served to
+// anyone so a browser can load the page and then ask for the token.
 #pragma once
 
 #include <atomic>
@@ -33,6 +37,9 @@ struct HttpEndpointOptions {
   // never crosses the network in clear when gRPC is protected by TLS.
   std::string tls_cert_file;
   std::string tls_key_file;
+  // PEM CA bundle (gRPC's tls_client_ca): client certificates are verified against it and
+  // required on data routes.
+  std::string tls_client_ca_file;
 };
 
 class HttpEndpoint {
@@ -57,11 +64,12 @@ class HttpEndpoint {
   std::string address() const;  // host:port actually bound
 
  private:
-  // True when the call may proceed; otherwise `response` holds 401 (no or unknown token) or
-  // 403 (role too low) with the reason.
+  // True when the call may proceed; otherwise `response` holds 401 (no or unknown credentials)
+  // or 403 (identity not in the policy, role too low) with the reason.
   bool Authorized(const httplib::Request& request, httplib::Response& response) const;
 
   HttpEndpointOptions options_;
+  std::string tls_error_;  // why the TLS set-up failed (Start reports it)
   std::unique_ptr<httplib::Server> server_;
   std::thread thread_;
   std::atomic<bool> thread_done_{false};

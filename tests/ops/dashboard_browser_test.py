@@ -114,6 +114,33 @@ def main():
             row_selector))
         row_text = driver.execute_script("return document.querySelector(arguments[0]).innerText;", row_selector)
         print("finished job row: " + row_text.replace("\n", " | ").replace("\t", " | "))
+        verdict = driver.execute_script(
+            "return document.querySelector(arguments[0] + ' td.verdict').innerText;", row_selector)
+        assert verdict == "", f"a scan without a recipe has no verdict, the row shows {verdict!r}"
+
+        # A recipe scan: the default specimen skew5 is a plane tilted by 5.000 deg, the recipe
+        # accepts 5 +-0.5 deg, so its row shows the overall verdict OK (JobResult.inspection).
+        recipe_file = os.path.join(work, "tilt-check.json")
+        with open(recipe_file, "w") as f:
+            json.dump({"recipe_id": "tilt-check", "scan": {"z_step_um": 10},
+                       "measurements": [{"name": "tilt", "parameter": "tilt",
+                                         "tolerance": {"nominal": 5.0, "lower": -0.5, "upper": 0.5}}]}, f)
+        ctl = [inspectctl, "--server", grpc_addr, "--token-file", token_file]
+        for args in (["recipe", "create", recipe_file],
+                     ["scan", "--recipe", "tilt-check", "--part-id", "P-4711", "--out", os.path.join(work, "part")]):
+            r = subprocess.run(ctl + args, capture_output=True, text=True, timeout=DEADLINE_S * 3)
+            assert r.returncode == 0, f"inspectctl {' '.join(args)} exited {r.returncode}:\n{r.stdout}\n{r.stderr}"
+        m = re.search(r"^job (\S+) ", r.stdout, re.M) or re.search(r"(scan-[0-9a-f]+)", r.stdout)
+        assert m, f"no job id in inspectctl's output:\n{r.stdout}"
+        recipe_job = m.group(1)
+        print(f"recipe scan {recipe_job}: " + next(l for l in r.stdout.splitlines() if l.startswith("inspection:")))
+        recipe_row = f'#jobs tbody tr[data-job-id="{recipe_job}"]'
+        shown = wait.until(lambda d: d.execute_script(
+            "const r = document.querySelector(arguments[0]);"
+            "return r && r.dataset.verdict && [r.dataset.verdict, r.querySelector('td.verdict').innerText];",
+            recipe_row))
+        assert shown == ["OK", "OK"], f"recipe scan row: data-verdict / verdict text {shown}"
+        print(f"recipe scan row shows verdict {shown[1]}")
         wait.until(lambda d: not d.find_element(By.ID, "live-view").is_displayed())
         path = os.path.join(out_dir, "dashboard_done.png")
         driver.save_screenshot(path)

@@ -1,6 +1,7 @@
 // inspectd's HTTP port through a real HTTP client (cpp-httplib) against the real server: the
 // Prometheus exposition after a scan, the dashboard's JSON and images, bearer-token checks, and
 // `--no-rig` (reconstruct only) through gRPC.
+#include <google/protobuf/util/json_util.h>
 #include <grpcpp/generic/generic_stub.h>
 
 #include <nlohmann/json.hpp>
@@ -153,6 +154,42 @@ TEST_F(OperationsHttpTest, DashboardServesPageStatusJobsAndPreview) {
   EXPECT_EQ(http_->Get("/api/jobs/scan-0000/preview.png")->status, 404);
   EXPECT_EQ(http_->Get("/api/jobs/" + job.job_id() + "/frame.png")->status, 404) << "not running";
   EXPECT_EQ(http_->Get("/api/jobs/..%2F..%2Fetc/preview.png")->status, 404);
+}
+
+TEST_F(OperationsHttpTest, RecentJobsCarryTheVerdictOfARecipeScan) {
+  Start();
+  // skew5 is a plane tilted by 5.000 deg: a recipe expecting 3 +-0.5 deg judges it NOT_OK.
+  const std::string recipe_json = R"({
+      "recipe_id": "tilt-three", "scan": {"z_step_um": 10},
+      "measurements": [{"name": "tilt", "parameter": "tilt", "tolerance": {"nominal": 3.0, "lower": -0.5, "upper": 0.5}}]
+    })";
+  v1::Recipe recipe;
+  ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(recipe_json, &recipe).ok());
+  v1::Recipe stored;
+  ASSERT_TRUE(client_->CreateRecipe(recipe, &stored).ok());
+  v1::ScanRequest req;
+  req.set_recipe_id("tilt-three");
+  req.set_part_id("P-17");
+  v1::Job job;
+  grpc::Status s = client_->Scan(req, nullptr, &job);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  ASSERT_EQ(job.result().inspection().verdict(), v1::VERDICT_NOT_OK);
+  const v1::Job plain = SmallScan();  // no recipe: no verdict
+
+  Json jobs = Json::parse(Get("/api/jobs?limit=5"));
+  ASSERT_EQ(jobs["jobs"].size(), 2u);
+  EXPECT_EQ(jobs["jobs"][0]["jobId"], plain.job_id());
+  EXPECT_FALSE(jobs["jobs"][0]["result"].contains("inspection"));
+  const Json& inspected = jobs["jobs"][1];
+  EXPECT_EQ(inspected["jobId"], job.job_id());
+  EXPECT_EQ(inspected["result"]["inspection"]["verdict"], "VERDICT_NOT_OK");
+  EXPECT_EQ(inspected["result"]["inspection"]["recipeId"], "tilt-three");
+  EXPECT_EQ(inspected["result"]["inspection"]["partId"], "P-17");
+  EXPECT_EQ(inspected["result"]["inspection"]["measurements"][0]["verdict"], "VERDICT_NOT_OK");
+  // The page draws it from there (the browser test, ops_dashboard_browser, sees the text).
+  const std::string script = Get("/dashboard.js");
+  EXPECT_NE(script.find("result?.inspection"), std::string::npos);
+  EXPECT_NE(script.find("\"verdict-\" + verdict"), std::string::npos);
 }
 
 TEST_F(OperationsHttpTest, LiveViewShowsTheRunningScanAndItsNewestStoredFrame) {

@@ -177,6 +177,17 @@ function depthText(job) {
   return text;
 }
 
+// The overall verdict of a scan that ran a recipe (JobResult.inspection): OK, NOT OK or NOT
+// DECIDABLE; nothing for other jobs.
+function verdictBadge(job) {
+  const inspection = job.result?.inspection;
+  if (!inspection) return "";
+  const verdict = enumName(inspection.verdict, "VERDICT_");
+  const b = document.createElement("span");
+  badge(b, verdict.replace(/_/g, " "), "verdict-" + verdict);
+  return b;
+}
+
 async function refreshJobs() {
   const { jobs } = await getJson("/api/jobs?limit=15");
   const rows = [];
@@ -188,10 +199,17 @@ async function refreshJobs() {
     cell(row, job.jobId);
     cell(row, enumName(job.kind, "JOB_KIND_").toLowerCase());
     cell(row, job.label);
-    const verdict = document.createElement("span");
-    badge(verdict, state, "state-" + state);
-    const v = cell(row, verdict);
-    if (job.errorMessage) v.title = job.errorMessage;
+    const stateBadge = document.createElement("span");
+    badge(stateBadge, state, "state-" + state);
+    const stateCell = cell(row, stateBadge);
+    if (job.errorMessage) stateCell.title = job.errorMessage;
+    const verdictCell = cell(row, verdictBadge(job));
+    verdictCell.className = "verdict";
+    if (job.result?.inspection) {
+      const i = job.result.inspection;
+      row.dataset.verdict = enumName(i.verdict, "VERDICT_");
+      verdictCell.title = "recipe " + i.recipeId + " v" + i.recipeVersion + (i.partId ? ", part " + i.partId : "");
+    }
     cell(row, job.endTime ? new Date(job.endTime).toLocaleTimeString() : "");
     cell(row, depthText(job));
     cell(row, (await previewImage(job).catch(() => null)) || "");
