@@ -39,6 +39,9 @@ grep -q "^verdicts: " <<<"$out" || fail "no verdict summary"
 for expect in "P-OK=OK" "P-NOK=NOT_OK" "P-ND=NOT_DECIDABLE"; do
   grep -q "^verdicts: .*\b$expect\b" <<<"$out" || fail "expected $expect"
 done
+# The undecidable part says why: its field is mostly without depth (coverage below the recipe's 90 %).
+nd_coverage="$(grep -A1 "part=P-ND " <<<"$out" | sed -n 's/.*coverage \([0-9.]*\) %.*/\1/p')"
+[[ -n "$nd_coverage" ]] && awk -v c="$nd_coverage" 'BEGIN { exit !(c < 90) }' || fail "P-ND coverage '$nd_coverage' not below 90 %"
 declare -A shown=([P-OK]="OK" [P-NOK]="NOT OK" [P-ND]="NOT DECIDABLE")
 for part in P-OK P-NOK P-ND; do
   report="$(ls "$work/reports/${part}_"*.html)" || fail "no report for $part"
