@@ -376,11 +376,16 @@ StatusOr<std::string> RenderInspectionReport(const InspectionReportInput& input)
           Row("Recipe", OrDash(r.recipe_id()) + " v" + std::to_string(r.recipe_version())) +
           Row("Station", OrDash(r.station())) + Row("Job id", OrDash(r.job_id())) +
           Row("Calibration", r.calibration_id().empty() ? "uncalibrated" : HtmlEscape(r.calibration_id())) +
-          Row("Finished", FinishTime(r)) + Row("Result sequence", std::to_string(r.sequence())) +
+          Row("Finished", FinishTime(r)) +
+          // The server renders the report before the result is stored and numbered, and before
+          // its own time is known: rows without a value yet are left out rather than shown as 0.
+          (r.sequence() > 0 ? Row("Result sequence", std::to_string(r.sequence())) : std::string()) +
           "</table><table class=\"kv\" id=\"timings\">" + Row("Queued", Seconds(r.timings().queue_seconds())) +
           Row("Scan (acquisition and reconstruction)", Seconds(r.timings().scan_seconds())) +
           Row("of which engine after the last frame", Seconds(r.timings().engine_seconds())) +
-          Row("Measurements and report", Seconds(r.timings().measure_seconds())) + "</table></div></section>";
+          (r.timings().measure_seconds() > 0 ? Row("Measurements and report", Seconds(r.timings().measure_seconds()))
+                                             : std::string()) +
+          "</table></div></section>";
 
   html += "<section id=\"measurements\"><h2>Measurements</h2>" + MeasurementTable(r) +
           "<p class=\"note\">Verdicts follow ISO 14253-1 with U = 2u: OK when value ± U lies within [LSL, USL], "
