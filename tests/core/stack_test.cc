@@ -248,7 +248,9 @@ TEST_F(StackTest, ColourStackReconstructsLikeItsLuminance) {
   EXPECT_GT(rc->valid_fraction, 0.9);
   ASSERT_EQ(rc->depth_um.size(), rg->depth_um.size());
   EXPECT_EQ(std::memcmp(rc->depth_um.data, rg->depth_um.data, rc->depth_um.total() * sizeof(float)), 0);
-  EXPECT_EQ(cv::norm(rc->all_in_focus, rg->all_in_focus, cv::NORM_INF), 0.0);
+  // The all-in-focus image keeps the colour; its luminance is the grey stack's all-in-focus.
+  ASSERT_EQ(rc->all_in_focus.type(), CV_8UC3);
+  EXPECT_EQ(cv::norm(LuminanceOf(rc->all_in_focus).value(), rg->all_in_focus, cv::NORM_INF), 0.0);
 }
 
 }  // namespace
