@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/colour.h"
@@ -85,10 +86,26 @@ TEST_F(StackTest, RejectsPathEscapingTheFolder) {
   EXPECT_NE(m.status().message().find("frames[0].file"), std::string::npos);
 }
 
-TEST_F(StackTest, MissingPixelSizeNamesTheField) {
-  auto m = ParseStackManifest(R"({"frames":[]})");
-  ASSERT_FALSE(m.ok());
-  EXPECT_NE(m.status().message().find("pixel_size_um"), std::string::npos);
+TEST_F(StackTest, MissingPixelSizeIsUnknownScaleAndBadOneNamesTheField) {
+  const std::string frames =
+      R"("frames":[{"file":"a.png","z_um":0},{"file":"b.png","z_um":1},{"file":"c.png","z_um":2}])";
+  auto m = ParseStackManifest("{" + frames + "}");
+  ASSERT_TRUE(m.ok()) << m.status().ToString();
+  EXPECT_EQ(m->pixel_size_um, 0.0);  // unknown
+  for (const std::string bad : {R"("pixel_size_um":0,)", R"("pixel_size_um":-1,)", R"("pixel_size_um":"x",)"}) {
+    auto b = ParseStackManifest("{" + bad + frames + "}");
+    ASSERT_FALSE(b.ok()) << bad;
+    EXPECT_NE(b.status().message().find("pixel_size_um"), std::string::npos) << b.status().ToString();
+  }
+  // Written back without the field, read back as unknown again.
+  StackManifest w = *m;
+  ASSERT_TRUE(WriteStackManifest(dir_, w).ok());
+  std::ifstream in(dir_ / "stack.json");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(text.find("pixel_size_um"), std::string::npos) << text;
+  auto back = ParseStackManifest(text);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  EXPECT_EQ(back->pixel_size_um, 0.0);
 }
 
 TEST_F(StackTest, FewerThanThreeFramesIsRejected) {
