@@ -47,8 +47,8 @@ int RunReconstruct(const ReconstructFlags& f, Session& session) {
       return kExitUsage;
     }
     stack_dir = built.path();
-    // The server requires pixel_size_um until it accepts a missing one (issue 16 item 2); then
-    // StackManifestJson should omit it instead of writing 1.0.
+    // Without --pixel-size stack.json has no pixel_size_um: the server reports pixel_size_um 0
+    // and its lateral outputs say "unknown scale".
     if (!f.images.pixel_size_um && !session.out.quiet) {
       std::cerr << "inspectctl: note: no --pixel-size; lateral outputs are in pixels (unknown scale)\n";
     }

@@ -201,8 +201,8 @@ std::string StackManifestJson(const std::vector<ImageFrame>& frames, std::option
   nlohmann::ordered_json j;
   j["format"] = "inspection-stack";
   j["version"] = 1;
-  // The server requires pixel_size_um today; 1.0 makes lateral outputs count pixels.
-  j["pixel_size_um"] = pixel_size_um.value_or(1.0);
+  // Without --pixel-size the scale is unknown: left out, the server's lateral outputs count pixels.
+  if (pixel_size_um) j["pixel_size_um"] = *pixel_size_um;
   j["frames"] = nlohmann::ordered_json::array();
   for (const auto& f : frames) j["frames"].push_back({{"file", f.file}, {"z_um", f.z_um}});
   return j.dump(2) + "\n";

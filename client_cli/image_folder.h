@@ -42,8 +42,8 @@ bool NaturalLess(const std::string& a, const std::string& b);
 // monotonic, --z-step <= 0, --pixel-size <= 0.
 grpc::Status BuildImageStack(const ImageFolderOptions& options, std::vector<ImageFrame>* frames);
 
-// The stack.json text for the frames. pixel_size_um is required by the server today, so a
-// missing one is written as 1.0 (lateral outputs then count pixels).
+// The stack.json text for the frames. Without pixel_size_um the field is left out (unknown
+// scale: the server's lateral outputs then count pixels).
 std::string StackManifestJson(const std::vector<ImageFrame>& frames, std::optional<double> pixel_size_um);
 
 // A stack folder built from frames: stack.json plus one hard link (else symlink, else copy) per

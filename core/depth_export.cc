@@ -482,12 +482,17 @@ std::string UtcNowIso8601() {
   return buf;
 }
 
+// 0 = unknown scale: the lateral exports then use a pixel of 1 unit and say so.
 Status CheckPixelSize(const DepthExportMeta& meta) {
-  if (!(meta.pixel_size_um > 0.0) || !std::isfinite(meta.pixel_size_um)) {
-    return Status::InvalidArgument("pixel_size_um must be finite and > 0");
+  if (!(meta.pixel_size_um >= 0.0) || !std::isfinite(meta.pixel_size_um)) {
+    return Status::InvalidArgument("pixel_size_um must be finite and >= 0 (0 = unknown scale)");
   }
   return Status::Ok();
 }
+
+double LateralStepOrOne(const DepthExportMeta& meta) { return meta.pixel_size_um > 0.0 ? meta.pixel_size_um : 1.0; }
+
+constexpr const char* kUnknownScaleNote = "unknown scale: pixel_size_um missing, x and y count pixels";
 
 }  // namespace
 
@@ -527,6 +532,7 @@ Status WriteDepthPng16(const fs::path& path, const cv::Mat& depth_um, const Dept
   j["nan_value"] = 0;
   j["depth_um"] = "value * scale_um + offset_um";
   j["pixel_size_um"] = meta.pixel_size_um;
+  if (!(meta.pixel_size_um > 0.0)) j["lateral_scale"] = kUnknownScaleNote;
   if (!meta.description.empty()) j["description"] = meta.description;
   const std::string text = j.dump();
   try {
@@ -558,18 +564,25 @@ Status WriteDepthPng16(const fs::path& path, const cv::Mat& depth_um, const Dept
 Status WriteDepthPly(const fs::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta) {
   INSPECT_RETURN_IF_ERROR(CheckFloatMap(depth_um, "depth_um"));
   INSPECT_RETURN_IF_ERROR(CheckPixelSize(meta));
+  const double step = LateralStepOrOne(meta);
   std::vector<float> xyz;
   for (int y = 0; y < depth_um.rows; ++y) {
     const float* d = depth_um.ptr<float>(y);
     for (int x = 0; x < depth_um.cols; ++x) {
       if (!std::isfinite(d[x])) continue;
-      xyz.push_back(float(x * meta.pixel_size_um));
-      xyz.push_back(float(y * meta.pixel_size_um));
+      xyz.push_back(float(x * step));
+      xyz.push_back(float(y * step));
       xyz.push_back(d[x]);
     }
   }
-  std::string header = "ply\nformat binary_little_endian 1.0\ncomment inspection depth map; x, y, z in um\n";
-  header += "comment pixel_size_um " + FormatDouble(meta.pixel_size_um) + "\n";
+  std::string header = "ply\nformat binary_little_endian 1.0\n";
+  if (meta.pixel_size_um > 0.0) {
+    header += "comment inspection depth map; x, y, z in um\n";
+    header += "comment pixel_size_um " + FormatDouble(meta.pixel_size_um) + "\n";
+  } else {
+    header += "comment inspection depth map; x, y in pixels, z in um\n";
+    header += "comment " + std::string(kUnknownScaleNote) + "\n";
+  }
   if (!meta.description.empty()) {
     std::string desc = meta.description;
     std::replace(desc.begin(), desc.end(), '\n', ' ');
@@ -597,7 +610,12 @@ Status WriteDepthX3p(const fs::path& path, const cv::Mat& depth_um, const DepthE
     }
   }
   const std::string data_md5 = Md5Hex(data.data(), data.size() * sizeof(double));
-  const std::string px_m = FormatDouble(meta.pixel_size_um * 1e-6);
+  // Unknown scale: a 1 um increment (one unit per pixel), stated in Record2's comment.
+  const std::string px_m = FormatDouble(LateralStepOrOne(meta) * 1e-6);
+  const std::string comment = meta.pixel_size_um > 0.0
+                                  ? meta.description
+                                  : std::string(kUnknownScaleNote) + " (CX/CY increments of 1e-6 are 1 pixel)" +
+                                        (meta.description.empty() ? "" : "; " + meta.description);
   const std::string now = UtcNowIso8601();
   std::string xml;
   xml += "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n";
@@ -623,7 +641,7 @@ Status WriteDepthX3p(const fs::path& path, const cv::Mat& depth_um, const DepthE
   xml +=
       "    <ProbingSystem>\n      <Type>NonContacting</Type>\n      <Identification>shape from focus</Identification>\n"
       "    </ProbingSystem>\n";
-  xml += "    <Comment>" + XmlEscape(meta.description) + "</Comment>\n  </Record2>\n";
+  xml += "    <Comment>" + XmlEscape(comment) + "</Comment>\n  </Record2>\n";
   xml += "  <Record3>\n    <MatrixDimension>\n      <SizeX>" + std::to_string(depth_um.cols) +
          "</SizeX>\n      <SizeY>" + std::to_string(depth_um.rows) +
          "</SizeY>\n      <SizeZ>1</SizeZ>\n    </MatrixDimension>\n";

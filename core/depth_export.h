@@ -12,7 +12,7 @@
 namespace inspection {
 
 struct DepthExportMeta {
-  double pixel_size_um = 0.0;  // lateral sampling in x and y
+  double pixel_size_um = 0.0;  // lateral sampling in x and y; 0 = unknown scale
   std::string description;     // free text stored where the format allows (TIFF ImageDescription, x3p comment)
 };
 
@@ -38,13 +38,16 @@ StatusOr<cv::Mat> RenderDepthPreview(const cv::Mat& depth_um);
 // 16-bit PNG: value = round((depth_um - offset_um) / scale_um), 0 reserved for NaN; scale and
 // offset go into a tEXt chunk and a sidecar "<path>.json".
 Status WriteDepthPng16(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
-// Binary little-endian PLY (float x, y, z): x, y = pixel column/row * pixel_size_um (must be
-// > 0), z = depth_um; NaN points are skipped.
+// Binary little-endian PLY (float x, y, z): x, y = pixel column/row * pixel_size_um, z =
+// depth_um; NaN points are skipped. pixel_size_um 0 = unknown scale: x, y are the column/row
+// and a header comment says "unknown scale".
 Status WriteDepthPly(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
 // ISO 25178-72 x3p: zip holding main.xml (Record1 axes: CX/CY incremental with the pixel size
 // in metres, CZ absolute float64; Record2 creator/instrument; Record3 matrix size and the md5 of
 // bindata), bindata/data.bin (float64 metres, x fastest, NaN = not measured) and md5checksum.hex
 // ("<md5 of main.xml> *main.xml", as md5sum writes it). Checked against Gwyddion's reader.
+// pixel_size_um 0 = unknown scale: 1e-6 m increments (one unit per pixel) and Record2's
+// Comment starts with "unknown scale".
 Status WriteDepthX3p(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);
 
 // Scale and offset chosen by WriteDepthPng16 for a map (value 1 = the smallest finite depth,

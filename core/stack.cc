@@ -58,10 +58,15 @@ StatusOr<StackManifest> ParseStackManifest(const std::string& json_text) {
     m.version = j["version"].get<int>();
     if (m.version != 1) return Invalid("version " + std::to_string(m.version) + " is not supported (expected 1)");
   }
-  if (!j.contains("pixel_size_um") || !j["pixel_size_um"].is_number())
-    return Invalid("pixel_size_um is missing or not a number");
-  m.pixel_size_um = j["pixel_size_um"].get<double>();
-  if (!(m.pixel_size_um > 0.0) || !std::isfinite(m.pixel_size_um)) return Invalid("pixel_size_um must be > 0");
+  // Optional: stacks from other cameras often have no known scale. Missing = 0 = unknown (depth
+  // stays in the z unit; lateral outputs count pixels); when given it must be a real size.
+  if (j.contains("pixel_size_um")) {
+    if (!j["pixel_size_um"].is_number()) return Invalid("pixel_size_um must be a number (or left out: unknown scale)");
+    m.pixel_size_um = j["pixel_size_um"].get<double>();
+    if (!(m.pixel_size_um > 0.0) || !std::isfinite(m.pixel_size_um)) {
+      return Invalid("pixel_size_um must be > 0 (or left out: unknown scale)");
+    }
+  }
   if (j.contains("bit_depth")) {
     if (!j["bit_depth"].is_number_integer()) return Invalid("bit_depth must be an integer");
     m.bit_depth = j["bit_depth"].get<int>();
@@ -132,7 +137,7 @@ Status WriteStackManifest(const fs::path& dir, const StackManifest& m) {
   json j;
   j["format"] = "inspection-stack";
   j["version"] = m.version;
-  j["pixel_size_um"] = m.pixel_size_um;
+  if (m.pixel_size_um > 0.0) j["pixel_size_um"] = m.pixel_size_um;  // 0 = unknown: left out
   j["bit_depth"] = m.bit_depth;
   if (!m.specimen.empty()) j["specimen"] = m.specimen;
   if (!m.calibration_id.empty()) j["calibration_id"] = m.calibration_id;

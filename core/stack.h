@@ -13,6 +13,7 @@
 //     "bit_depth": 8, "specimen": "skew5", "calibration_id": "", "illumination": "STD" }
 // Frames are listed in acquisition order; z_um must be strictly monotonic (either direction,
 // steps need not be uniform). "pattern" names what the projector showed for that frame.
+// "pixel_size_um" is optional: without it the scale is unknown (StackManifest::pixel_size_um 0).
 #pragma once
 
 #include <filesystem>
@@ -50,7 +51,8 @@ struct ZRangeSearchRecord {
 
 struct StackManifest {
   int version = 1;
-  double pixel_size_um = 0.0;  // lateral size of one camera pixel on the specimen
+  double pixel_size_um = 0.0;  // lateral size of one camera pixel on the specimen; 0 = unknown
+                               // (optional in stack.json: lateral outputs then count pixels)
   int bit_depth = 8;           // significant bits per pixel: 8, 10, 12 or 16
   std::string specimen;        // free text; the simulated rig writes its specimen name
   std::string calibration_id;  // calibration bundle active when acquired, empty if none

@@ -5,6 +5,9 @@
 #include <optional>
 #include <string>
 
+#include "core/all_in_focus.h"
+#include "core/colour.h"
+
 namespace inspection {
 
 namespace {
@@ -60,15 +63,39 @@ StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, c
   INSPECT_ASSIGN_OR_RETURN(std::optional<StackAligner> aligner,
                            PrepareAlignment(dir, manifest, alignment, cancel, figures));
   std::unique_ptr<SffEngine> engine;
+  // Colour stacks: the engine measures focus on the luminance, and the composer keeps, per pixel,
+  // the colour of the frame the engine picks (same scores, same tie rule), O(pixels) state.
+  std::optional<AllInFocusComposer> colour;
   const int count = int(manifest.frames.size());
   for (int i = 0; i < count; ++i) {
     if (cancel.load()) return Status::Cancelled("reconstruction cancelled at frame " + std::to_string(i));
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, LoadStackFrame(dir, manifest, size_t(i)));
-    if (!engine) {
-      INSPECT_ASSIGN_OR_RETURN(engine, SffEngine::Create(options, frame.size(), frame.type()));
-    }
+    INSPECT_ASSIGN_OR_RETURN(StackFrameImage image, LoadStackFrameImage(dir, manifest, size_t(i)));
     const std::string name = "frame " + std::to_string(i) + " (" + manifest.frames[i].file + ")";
-    if (aligner) {
+    if (i > 0 && image.is_colour() != colour.has_value()) {
+      return Status::InvalidArgument(name + ": " + (image.is_colour() ? "colour (3 channels)" : "grey") +
+                                     " differs from frame 0 (" + (colour ? "colour (3 channels)" : "grey") + ")");
+    }
+    if (!engine) {
+      INSPECT_ASSIGN_OR_RETURN(engine, SffEngine::Create(options, image.grey.size(), image.grey.type()));
+      if (image.is_colour()) {
+        INSPECT_ASSIGN_OR_RETURN(AllInFocusComposer c,
+                                 AllInFocusComposer::Create(image.colour.size(), image.colour.type()));
+        colour.emplace(std::move(c));
+      }
+    }
+    cv::Mat frame = image.grey;
+    if (colour) {
+      // Warp the colour frame and measure on its luminance, so that the kept colour's luminance
+      // is exactly the engine's grey all-in-focus value, aligned or not.
+      cv::Mat c = image.colour;
+      if (aligner) {
+        INSPECT_ASSIGN_OR_RETURN(c, aligner->Warp(c, i));
+      }
+      INSPECT_ASSIGN_OR_RETURN(frame, LuminanceOf(c));
+      cv::Mat score;
+      INSPECT_RETURN_IF_ERROR(FocusScore(frame, options.focus_measure, options.window_px, &score).WithContext(name));
+      INSPECT_RETURN_IF_ERROR(colour->PushFrame(c, score).WithContext(name));
+    } else if (aligner) {
       INSPECT_ASSIGN_OR_RETURN(frame, aligner->Warp(frame, i));
     }
     INSPECT_RETURN_IF_ERROR(engine->PushFrame(frame, manifest.frames[i].z_um).WithContext(name));
@@ -76,6 +103,7 @@ StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, c
   }
   if (!engine) return Status::InvalidArgument("stack has no frames");
   INSPECT_ASSIGN_OR_RETURN(DepthResult result, engine->Finish());
+  if (colour) result.all_in_focus = colour->all_in_focus();
   if (aligner) aligner->MaskUnseen(&result);
   return result;
 }

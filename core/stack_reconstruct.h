@@ -36,6 +36,11 @@ struct StackFolderAlignment {
 // memory), then every frame is warped onto the middle frame's grid as it is pushed (StackAligner:
 // a negligible model leaves the frames as they are); the depth map is in that grid, NaN where a
 // frame did not see the pixel. figures (may be null) receives what ran.
+// Colour stacks (core/stack.h): focus is measured on each frame's luminance (core/colour.h) and
+// result.all_in_focus is the colour image (CV_8UC3 / CV_16UC3, BGR) composed beside the engine
+// (AllInFocusComposer + FocusScore, O(pixels)): its luminance is the engine's grey all-in-focus.
+// Grey stacks give exactly the engine's result. A frame whose channel count differs from frame
+// 0's is INVALID_ARGUMENT naming it.
 StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, const StackManifest& manifest,
                                              const SffOptions& options, const StackFrameCallback& on_frame,
                                              const std::atomic<bool>& cancel,

@@ -311,8 +311,24 @@ TEST_F(DepthExportTest, PlySkipsNanAndScalesXY) {
   std::memcpy(v.data(), bytes.data() + body + end.size(), 12 * sizeof(float));
   const std::vector<float> expected{0, 0, 1.5f, 4, 0, 2.5f, 0, 2, -3, 2, 2, 4};
   EXPECT_EQ(v, expected);
-  EXPECT_EQ(WriteDepthPly(dir_ / "no.ply", d, {}).code(), StatusCode::kInvalidArgument);  // no pixel size
+  EXPECT_EQ(WriteDepthPly(dir_ / "no.ply", d, {-1.0, ""}).code(), StatusCode::kInvalidArgument);
   EXPECT_FALSE(fs::exists(dir_ / "no.ply"));
+  EXPECT_NE(header.find("comment pixel_size_um 2\n"), std::string::npos) << header;
+  EXPECT_EQ(header.find("unknown scale"), std::string::npos);
+
+  // Unknown scale (pixel_size_um 0): x, y are the column and row, and the header says so.
+  const fs::path u = dir_ / "unknown.ply";
+  ASSERT_TRUE(WriteDepthPly(u, d, {}).ok());
+  const std::string ubytes = ReadAll(u);
+  const size_t ubody = ubytes.find(end);
+  ASSERT_NE(ubody, std::string::npos);
+  const std::string uheader = ubytes.substr(0, ubody);
+  EXPECT_NE(uheader.find("comment unknown scale"), std::string::npos) << uheader;
+  EXPECT_NE(uheader.find("x, y in pixels, z in um"), std::string::npos) << uheader;
+  ASSERT_EQ(ubytes.size() - ubody - end.size(), 4 * 3 * sizeof(float));
+  std::memcpy(v.data(), ubytes.data() + ubody + end.size(), 12 * sizeof(float));
+  const std::vector<float> in_pixels{0, 0, 1.5f, 2, 0, 2.5f, 0, 1, -3, 1, 1, 4};
+  EXPECT_EQ(v, in_pixels);
 }
 
 struct ZipEntries {
@@ -416,9 +432,29 @@ TEST_F(DepthExportTest, X3pOpensInGwyddion) {
   for (int x = 1; x < thumb.cols; ++x) EXPECT_GE(thumb.at<uint8_t>(r, x) + 2, thumb.at<uint8_t>(r, x - 1));
 }
 
+TEST_F(DepthExportTest, X3pOfUnknownScaleHasUnitIncrementsAndSaysSo) {
+  const fs::path p = dir_ / "unknown.x3p";
+  ASSERT_TRUE(WriteDepthX3p(p, SampleDepth(), {0.0, "from a folder"}).ok());
+  const ZipEntries z = ReadZip(p);
+  const std::string xml = z.data.count("main.xml") ? z.data.at("main.xml") : "";
+  auto increment = [](const std::string& x, const char* open, const char* close) {
+    return std::stod(Between(Between(x, open, close), "<Increment>", "</Increment>"));
+  };
+  EXPECT_DOUBLE_EQ(increment(xml, "<CX>", "</CX>"), 1e-6) << xml;
+  EXPECT_DOUBLE_EQ(increment(xml, "<CY>", "</CY>"), 1e-6);
+  const std::string comment = Between(xml, "<Comment>", "</Comment>");
+  EXPECT_EQ(comment.rfind("unknown scale", 0), 0u) << comment;
+  EXPECT_NE(comment.find("from a folder"), std::string::npos) << comment;
+  // With a known scale, the comment is the description alone.
+  ASSERT_TRUE(WriteDepthX3p(p, SampleDepth(), {0.5, "known"}).ok());
+  const ZipEntries k = ReadZip(p);
+  EXPECT_EQ(Between(k.data.at("main.xml"), "<Comment>", "</Comment>"), "known");
+  EXPECT_DOUBLE_EQ(increment(k.data.at("main.xml"), "<CX>", "</CX>"), 0.5e-6);
+}
+
 TEST_F(DepthExportTest, X3pRejectsBadInputAndLeavesNothing) {
   const fs::path p = dir_ / "bad.x3p";
-  EXPECT_EQ(WriteDepthX3p(p, SampleDepth(), {}).code(), StatusCode::kInvalidArgument);  // pixel size 0
+  EXPECT_EQ(WriteDepthX3p(p, SampleDepth(), {-1.0, ""}).code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(WriteDepthX3p(p, cv::Mat(3, 3, CV_64F), {1.0, ""}).code(), StatusCode::kInvalidArgument);
   EXPECT_FALSE(WriteDepthX3p(dir_ / "nodir" / "a.x3p", SampleDepth(), {1.0, ""}).ok());
   EXPECT_FALSE(fs::exists(p));

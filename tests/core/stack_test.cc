@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/colour.h"
@@ -85,10 +86,26 @@ TEST_F(StackTest, RejectsPathEscapingTheFolder) {
   EXPECT_NE(m.status().message().find("frames[0].file"), std::string::npos);
 }
 
-TEST_F(StackTest, MissingPixelSizeNamesTheField) {
-  auto m = ParseStackManifest(R"({"frames":[]})");
-  ASSERT_FALSE(m.ok());
-  EXPECT_NE(m.status().message().find("pixel_size_um"), std::string::npos);
+TEST_F(StackTest, MissingPixelSizeIsUnknownScaleAndBadOneNamesTheField) {
+  const std::string frames =
+      R"("frames":[{"file":"a.png","z_um":0},{"file":"b.png","z_um":1},{"file":"c.png","z_um":2}])";
+  auto m = ParseStackManifest("{" + frames + "}");
+  ASSERT_TRUE(m.ok()) << m.status().ToString();
+  EXPECT_EQ(m->pixel_size_um, 0.0);  // unknown
+  for (const std::string bad : {R"("pixel_size_um":0,)", R"("pixel_size_um":-1,)", R"("pixel_size_um":"x",)"}) {
+    auto b = ParseStackManifest("{" + bad + frames + "}");
+    ASSERT_FALSE(b.ok()) << bad;
+    EXPECT_NE(b.status().message().find("pixel_size_um"), std::string::npos) << b.status().ToString();
+  }
+  // Written back without the field, read back as unknown again.
+  StackManifest w = *m;
+  ASSERT_TRUE(WriteStackManifest(dir_, w).ok());
+  std::ifstream in(dir_ / "stack.json");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(text.find("pixel_size_um"), std::string::npos) << text;
+  auto back = ParseStackManifest(text);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  EXPECT_EQ(back->pixel_size_um, 0.0);
 }
 
 TEST_F(StackTest, FewerThanThreeFramesIsRejected) {
@@ -248,7 +265,9 @@ TEST_F(StackTest, ColourStackReconstructsLikeItsLuminance) {
   EXPECT_GT(rc->valid_fraction, 0.9);
   ASSERT_EQ(rc->depth_um.size(), rg->depth_um.size());
   EXPECT_EQ(std::memcmp(rc->depth_um.data, rg->depth_um.data, rc->depth_um.total() * sizeof(float)), 0);
-  EXPECT_EQ(cv::norm(rc->all_in_focus, rg->all_in_focus, cv::NORM_INF), 0.0);
+  // The all-in-focus image keeps the colour; its luminance is the grey stack's all-in-focus.
+  ASSERT_EQ(rc->all_in_focus.type(), CV_8UC3);
+  EXPECT_EQ(cv::norm(LuminanceOf(rc->all_in_focus).value(), rg->all_in_focus, cv::NORM_INF), 0.0);
 }
 
 }  // namespace

@@ -85,14 +85,14 @@ TEST_F(CliTest, ImageFolderIsOrderedNaturallyWithRegularZAndReconstructsLikeTheS
   // Same frames, same z in the same order: the scan's depth map.
   EXPECT_LT(MaxDepthDiffUm(work_ / "scan" / "depth.tiff", work_ / "rec" / "depth.tiff"), 1e-3);
 
-  // The manifest the tool builds: natural order, z = start + i * step, no pixel size -> 1.0.
+  // The manifest the tool builds: natural order, z = start + i * step, no pixel size (unknown scale).
   const fs::path kept = work_ / "kept";
   r = Run({"reconstruct", "--images", images.string(), "--z-step", "2.5", "--z-start", "-10", "--keep-stack",
            kept.string(), "--out", (work_ / "rec2").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.err, "inspectctl: note: no --pixel-size; lateral outputs are in pixels (unknown scale)\n");
   const json manifest = json::parse(ReadAll(kept / "stack.json"));
-  EXPECT_EQ(manifest["pixel_size_um"].get<double>(), 1.0);
+  EXPECT_FALSE(manifest.contains("pixel_size_um"));
   ASSERT_EQ(manifest["frames"].size(), n);
   for (size_t i = 0; i < n; ++i) {
     EXPECT_EQ(manifest["frames"][i]["file"], "f" + std::to_string(i + 1) + ".png") << i;
@@ -103,8 +103,10 @@ TEST_F(CliTest, ImageFolderIsOrderedNaturallyWithRegularZAndReconstructsLikeTheS
   EXPECT_FALSE(fs::exists(kept / "notes.txt"));
   // Depth follows the z the tool assigned: the scan's depth mapped through z -> -10 + 2.5 (z - z0) / step.
   auto scan_depth = ReadDepthTiff(work_ / "scan" / "depth.tiff");
-  auto rec_depth = ReadDepthTiff(work_ / "rec2" / "depth.tiff");
+  DepthExportMeta rec_meta;
+  auto rec_depth = ReadDepthTiff(work_ / "rec2" / "depth.tiff", &rec_meta);
   ASSERT_TRUE(scan_depth.ok() && rec_depth.ok());
+  EXPECT_EQ(rec_meta.pixel_size_um, 0.0);  // unknown scale: no resolution tags
   double max_diff_um = 0.0;
   for (int y = 0; y < scan_depth->rows; ++y) {
     for (int x = 0; x < scan_depth->cols; ++x) {
