@@ -21,6 +21,7 @@
 #include "core/measurement.h"
 #include "core/verdict.h"
 #include "server/inspection_report.h"
+#include "server/inspection_result.h"
 
 namespace inspection {
 namespace {
@@ -64,18 +65,6 @@ Specimen MakeSpecimen(cv::Size size) {
   return s;
 }
 
-v1::Verdict ToProto(Verdict v) {
-  switch (v) {
-    case Verdict::kOk:
-      return v1::VERDICT_OK;
-    case Verdict::kNotOk:
-      return v1::VERDICT_NOT_OK;
-    case Verdict::kNotDecidable:
-      return v1::VERDICT_NOT_DECIDABLE;
-  }
-  return v1::VERDICT_UNSPECIFIED;
-}
-
 v1::MeasurementResult MeasureOne(const std::string& name, const MeasurementSpec& spec, const Tolerance& tol,
                                  const MeasurementContext& ctx) {
   v1::MeasurementResult m;
@@ -92,7 +81,7 @@ v1::MeasurementResult MeasureOne(const std::string& name, const MeasurementSpec&
     m.set_expanded_uncertainty(verdict.expanded_uncertainty);
     m.set_coverage_percent(v->coverage_percent);
   }
-  m.set_verdict(ToProto(verdict.verdict));
+  m.set_verdict(ToProtoVerdict(verdict.verdict));
   m.set_reason(verdict.reason);
   v1::RecipeTolerance* t = m.mutable_tolerance();
   t->set_nominal(tol.nominal);
@@ -163,7 +152,7 @@ int Run(int argc, char** argv) {
     verdicts.push_back(m.verdict() == v1::VERDICT_OK       ? Verdict::kOk
                        : m.verdict() == v1::VERDICT_NOT_OK ? Verdict::kNotOk
                                                            : Verdict::kNotDecidable);
-  r.set_verdict(ToProto(OverallVerdict(verdicts)));
+  r.set_verdict(ToProtoVerdict(OverallVerdict(verdicts)));
 
   // Across the step and through the disc without depth: the plot shows the gap.
   LineProfileOptions line;
