@@ -269,4 +269,98 @@ StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& d
   return out;
 }
 
+cv::Mat WindowAveragingError(const cv::Mat& depth_um, int window_px) {
+  CV_Assert(depth_um.type() == CV_32FC1 && window_px >= 1);
+  cv::Mat valid = (depth_um == depth_um);  // NaN != NaN
+  cv::Mat z = depth_um.clone(), weight;
+  z.setTo(0.0f, ~valid);
+  valid.convertTo(weight, CV_32F, 1.0 / 255.0);
+  // Normalised convolution: holes neither pull the smoothed surface to 0 nor leave gaps.
+  const double sigma = std::max(1.0, 0.5 * window_px);
+  cv::Mat zs, ws;
+  cv::GaussianBlur(z, zs, cv::Size(0, 0), sigma, sigma, cv::BORDER_REFLECT);
+  cv::GaussianBlur(weight, ws, cv::Size(0, 0), sigma, sigma, cv::BORDER_REFLECT);
+  cv::Mat smooth;
+  cv::divide(zs, cv::max(ws, 1e-6), smooth);
+  cv::Mat lap;
+  cv::Laplacian(smooth, lap, CV_32F, 1, 1.0, 0.0, cv::BORDER_REFLECT);  // 4-neighbour, um / px^2
+  const double s2 = (double(window_px) * window_px - 1.0) / 12.0 + 0.5;
+  cv::Mat e = lap * (0.5 * s2);
+  // Where the smoothing had too little support (isolated pixels) the estimate is meaningless.
+  e.setTo(0.0f, ~valid | (ws < 0.25f));
+  return e;
+}
+
+double HeightDependentErrorBoundUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model) {
+  const cv::Mat e = WindowAveragingError(depth_um, model.correlation_px);
+  std::vector<float> flattening;
+  for (int row = 0; row < depth_um.rows; ++row) {
+    const float* z = depth_um.ptr<float>(row);
+    const float* er = e.ptr<float>(row);
+    const uint8_t* m = mask.ptr<uint8_t>(row);
+    for (int col = 0; col < depth_um.cols; ++col) {
+      if (m[col] && std::isfinite(z[col])) flattening.push_back(std::abs(er[col]));
+    }
+  }
+  double p99 = 0.0;
+  if (!flattening.empty()) {
+    const size_t k = std::min(flattening.size() - 1, size_t(0.99 * double(flattening.size())));
+    std::nth_element(flattening.begin(), flattening.begin() + long(k), flattening.end());
+    p99 = flattening[k];
+  }
+  return 0.5 * LinearityRangeUm(depth_um, mask, model) + p99;
+}
+
+StatusOr<cv::Mat> ShapeParameterSensitivitySign(const cv::Mat& surface_um, HeightParameter parameter) {
+  if (parameter != HeightParameter::kSsk && parameter != HeightParameter::kSku) {
+    return Status::InvalidArgument("ShapeParameterSensitivitySign: parameter must be Ssk or Sku");
+  }
+  double n = 0, s1 = 0;
+  for (int row = 0; row < surface_um.rows; ++row) {
+    const float* z = surface_um.ptr<float>(row);
+    for (int col = 0; col < surface_um.cols; ++col) {
+      if (std::isfinite(z[col])) {
+        n += 1;
+        s1 += z[col];
+      }
+    }
+  }
+  cv::Mat sign(surface_um.size(), CV_32FC1, cv::Scalar(0));
+  if (n < 2) return sign;
+  const double mean = s1 / n;
+  double m2 = 0, m3 = 0, m4 = 0;
+  for (int row = 0; row < surface_um.rows; ++row) {
+    const float* z = surface_um.ptr<float>(row);
+    for (int col = 0; col < surface_um.cols; ++col) {
+      if (!std::isfinite(z[col])) continue;
+      const double d = z[col] - mean;
+      m2 += d * d / n;
+      m3 += d * d * d / n;
+      m4 += d * d * d * d / n;
+    }
+  }
+  if (!(m2 > 0)) return sign;
+  // n d(m3 / m2^1.5) / dz_p = (3 (d^2 - m2) m2 - 3 m3 d) / m2^2.5
+  // n d(m4 / m2^2) / dz_p   = (4 (d^3 - m3) m2 - 4 m4 d) / m2^3
+  for (int row = 0; row < surface_um.rows; ++row) {
+    const float* z = surface_um.ptr<float>(row);
+    float* s = sign.ptr<float>(row);
+    for (int col = 0; col < surface_um.cols; ++col) {
+      if (!std::isfinite(z[col])) continue;
+      const double d = z[col] - mean;
+      const double g = parameter == HeightParameter::kSsk ? 3.0 * (d * d - m2) * m2 - 3.0 * m3 * d
+                                                          : 4.0 * (d * d * d - m3) * m2 - 4.0 * m4 * d;
+      s[col] = g >= 0.0 ? 1.0f : -1.0f;
+    }
+  }
+  return sign;
+}
+
+void AddHeightDependentBound(UncertaintyBudget& budget, double bound) {
+  const double u = std::abs(bound) / std::sqrt(3.0);
+  budget.height_dependent = u;
+  const double before = std::isfinite(budget.standard_uncertainty) ? budget.standard_uncertainty : 0.0;
+  budget.standard_uncertainty = std::hypot(before, u);
+}
+
 }  // namespace inspection

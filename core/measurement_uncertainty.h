@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "core/areal_parameters.h"
 #include "core/depth_noise_model.h"
 #include "core/form_removal.h"
 #include "core/status.h"
@@ -43,6 +44,8 @@ struct UncertaintyBudget {
   double monte_carlo_spread = std::nan("");
   double noise_bias = std::nan("");
   int monte_carlo_samples = 0;
+  // Height-dependent systematic error (HeightDependentErrorBoundUm), worst case over its shape.
+  double height_dependent = std::nan("");
   std::string method;  // "analytic" or "monte-carlo"; empty without a noise model
 };
 
@@ -108,5 +111,38 @@ StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& d
                                                                 const DepthMeasureFunction& measure,
                                                                 const DepthNoiseModel& model,
                                                                 const MonteCarloOptions& options);
+
+// Height-dependent systematic error of shape parameters (Ssk, Sku). The SFF error of a pixel
+// depends on its height: where it falls between frames (z linearity) and, on a curved surface,
+// the focus window's averaging (WindowAveragingError). The Monte Carlo draws the z-linearity
+// table characterised on a tilted flat, at random phase; on a curved surface the error's shape
+// over the heights differs from that table (on a 2 um cosine between two frames: valleys
+// raised by ~0.03 um against the peaks, Ssk +0.057 against a truth of 0, which the Monte Carlo
+// gave +-0.02 for). Its size is known, its shape is not, so shape parameters take the worst
+// case of an error g(height) with |g| <= delta: g = +-delta sign(df/dz) (df/dz from the moments
+// of the levelled surface, a function of height alone), delta = half the range the table takes
+// over the region's heights (LinearityRangeUm / 2: ~0 for a region at one height) plus the
+// 99th percentile of |WindowAveragingError| over the region. B = the larger change of the value,
+// taken as a uniform bound: standard uncertainty B / sqrt 3 (component height_dependent).
+// Sa and Sq are left to the Monte Carlo: their deviations stayed within its U (coverage 100 %
+// in tests/bench/uncertainty_coverage.cc), and a worst case would only inflate them.
+
+// The focus window's flattening of a curved surface: the focus measure sums over the window U
+// (eq. 3.12/3.14, plus the Sobel operator's support), so to second order the depth is the
+// window's mean height z + (s2 / 2) lap z, s2 = (w^2 - 1) / 12 + 1/2 px^2 per axis. Estimated
+// from the measured map (NaN-aware Gaussian of sigma w / 2 against noise). CV_32FC1, um, 0 where
+// depth_um is NaN. window_px >= 1.
+cv::Mat WindowAveragingError(const cv::Mat& depth_um, int window_px);
+
+// delta of the comment above, for the pixels where mask is non-zero and depth finite.
+double HeightDependentErrorBoundUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model);
+
+// sign(d Ssk / d z_p) or sign(d Sku / d z_p) (+1 / -1 as CV_32FC1, 0 where surface_um is NaN)
+// for the levelled surface of core/areal_parameters.h. parameter: kSsk or kSku, else
+// INVALID_ARGUMENT.
+StatusOr<cv::Mat> ShapeParameterSensitivitySign(const cv::Mat& surface_um, HeightParameter parameter);
+
+// Adds a uniform bound B: component height_dependent = B / sqrt 3, combined in quadrature.
+void AddHeightDependentBound(UncertaintyBudget& budget, double bound);
 
 }  // namespace inspection

@@ -9,6 +9,7 @@
 // uncharacterised linearity bound for comparison.
 //
 //   uncertainty-coverage [--seeds N] [--camera WxH] [--samples N]
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -26,6 +27,7 @@
 #include "core/z_linearity.h"
 #include "devices/sim/simulated_rig.h"
 #include "server/procedures/scan_procedure.h"
+#include "tests/lib/user_scene.h"
 
 namespace fs = std::filesystem;
 using namespace inspection;
@@ -38,6 +40,8 @@ struct Args {
   int seeds = 20;
   cv::Size camera{256, 192};
   int samples = 32;
+  std::string only;          // run only specimens whose short name contains this
+  bool residual_profile = false;  // print the mean depth error against the true height per specimen
 };
 
 struct Case {
@@ -63,41 +67,6 @@ StatusOr<Scan> ScanOnce(Rig& rig, const std::string& specimen, const fs::path& w
   INSPECT_ASSIGN_OR_RETURN(ScanOutcome out, RunScan(rig, plan, dir, nullptr, cancel));
   fs::remove_all(dir, ec);
   return Scan{out.depth.depth_um, out.ground_truth_um, plan.z_um, plan.sff.window_px};
-}
-
-// Mean-1 log-normal texture like the built-in specimens' (fine grain plus mottling), 16-bit PNG.
-void WriteTexture(const fs::path& path, cv::Size size, unsigned seed) {
-  cv::Mat fine(size, CV_32F), coarse(size, CV_32F);
-  cv::RNG rng(seed);
-  rng.fill(fine, cv::RNG::NORMAL, 0.0, 1.0);
-  rng.fill(coarse, cv::RNG::NORMAL, 0.0, 1.0);
-  cv::GaussianBlur(fine, fine, cv::Size(0, 0), 1.0);
-  cv::GaussianBlur(coarse, coarse, cv::Size(0, 0), 8.0);
-  cv::Scalar m, s;
-  cv::meanStdDev(fine, m, s);
-  fine = (fine - m[0]) / s[0];
-  cv::meanStdDev(coarse, m, s);
-  coarse = (coarse - m[0]) / s[0];
-  cv::Mat t = 0.35 * fine + 0.15 * coarse;
-  cv::exp(t, t);
-  t *= 20000.0 / cv::mean(t)[0];
-  cv::Mat t16;
-  t.convertTo(t16, CV_16U);
-  cv::imwrite(path.string(), t16);
-}
-
-// A user scene (devices/sim/specimen.h) with height z(x_um, y_um) at the camera size.
-std::string WriteScene(const fs::path& dir, const std::string& name, cv::Size size, double px,
-                       const std::function<double(double, double)>& z, unsigned texture_seed) {
-  fs::create_directories(dir);
-  cv::Mat h(size, CV_32F);
-  for (int r = 0; r < size.height; ++r)
-    for (int c = 0; c < size.width; ++c) h.at<float>(r, c) = float(z((c + 0.5) * px, (r + 0.5) * px));
-  cv::imwrite((dir / (name + "_height.tiff")).string(), h);
-  WriteTexture(dir / (name + "_texture.png"), size, texture_seed);
-  std::ofstream((dir / (name + ".json")).string())
-      << "{\"height\": \"" << name << "_height.tiff\", \"texture\": \"" << name << "_texture.png\"}\n";
-  return "file:" + (dir / (name + ".json")).string();
 }
 
 MeasurementSpec Spec(MeasurementKind kind, RegionOfInterest roi) {
@@ -144,7 +113,7 @@ std::vector<Case> Cases(const Args& a, const fs::path& work, double px, int bord
   {
     // 2 um cosine, 4 periods across the field, along x; the region holds 3 whole periods.
     const double lambda_px = w / 4.0;
-    const std::string scene = WriteScene(
+    const std::string scene = test_scenes::WriteUserScene(
         work / "scenes", "cosine", a.camera, px,
         [&](double x, double) { return 210.0 + 2.0 * std::cos(2 * kPi * x / (lambda_px * px)); }, 101);
     Case c{scene, {}};
@@ -158,7 +127,7 @@ std::vector<Case> Cases(const Args& a, const fs::path& work, double px, int bord
   {
     // Convex sphere cap (lens), R = 8 fields, and a cylinder (axis along y), R = 4 fields.
     const double field = w * px, rs = 8 * field, cx = 0.5 * w * px, cy = 0.5 * h * px;
-    const std::string sphere = WriteScene(
+    const std::string sphere = test_scenes::WriteUserScene(
         work / "scenes", "sphere", a.camera, px,
         [&](double x, double y) {
           return 200.0 + std::sqrt(rs * rs - (x - cx) * (x - cx) - (y - cy) * (y - cy)) - (rs - 12.0);
@@ -172,7 +141,7 @@ std::vector<Case> Cases(const Args& a, const fs::path& work, double px, int bord
     c.specs.push_back({"volume_above", vol});
     cases.push_back(c);
     const double rc = 4 * field;
-    const std::string cyl = WriteScene(
+    const std::string cyl = test_scenes::WriteUserScene(
         work / "scenes", "cylinder", a.camera, px,
         [&](double x, double) { return 200.0 + std::sqrt(rc * rc - (x - cx) * (x - cx)) - (rc - 12.0); }, 103);
     Case k{cyl, {}};
@@ -214,6 +183,10 @@ int main(int argc, char** argv) {
       a.seeds = std::atoi(argv[++i]);
     else if (arg == "--samples" && i + 1 < argc)
       a.samples = std::atoi(argv[++i]);
+    else if (arg == "--only" && i + 1 < argc)
+      a.only = argv[++i];
+    else if (arg == "--residual-profile")
+      a.residual_profile = true;
     else if (arg == "--camera" && i + 1 < argc &&
              std::sscanf(argv[++i], "%dx%d", &a.camera.width, &a.camera.height) == 2) {
     } else {
@@ -257,7 +230,15 @@ int main(int argc, char** argv) {
   std::printf("\n\n");
 
   // 2. Repeated scans of each specimen.
-  const std::vector<Case> cases = Cases(a, work, px, border);
+  std::vector<Case> cases = Cases(a, work, px, border);
+  if (!a.only.empty()) {
+    std::erase_if(cases, [&](const Case& c) { return Short(c.specimen).find(a.only) == std::string::npos; });
+  }
+  // Mean depth error per bin of the true height (relative to the specimen's inner range): the
+  // signature of the SFF's systematic errors (e.g. peaks against valleys of a cosine).
+  constexpr int kProfileBins = 16;
+  std::map<std::string, std::vector<std::pair<double, int>>> profile;  // specimen -> (sum, n) per bin
+  std::map<std::string, std::pair<double, double>> profile_range;
   std::map<std::string, Tally> by_case, by_case_unchar;  // "specimen|label"
   std::map<std::string, std::string> truth_of;
   double scan_s = 0, measure_s = 0;
@@ -277,6 +258,22 @@ int main(int argc, char** argv) {
       }
       ++scans;
       scan_s += std::chrono::duration<double>(t1 - t0).count();
+      if (a.residual_profile) {
+        const cv::Rect in(border, border, a.camera.width - 2 * border, a.camera.height - 2 * border);
+        double lo, hi;
+        cv::minMaxLoc(scan->truth_um(in), &lo, &hi);
+        auto& bins = profile[Short(c.specimen)];
+        bins.resize(kProfileBins);
+        profile_range[Short(c.specimen)] = {lo, hi};
+        for (int r = in.y; r < in.y + in.height; ++r)
+          for (int col = in.x; col < in.x + in.width; ++col) {
+            const double d = scan->depth_um.at<float>(r, col), t = scan->truth_um.at<float>(r, col);
+            if (!std::isfinite(d) || !std::isfinite(t) || !(hi > lo)) continue;
+            const int b = std::clamp(int((t - lo) / (hi - lo) * kProfileBins), 0, kProfileBins - 1);
+            bins[b].first += d - t;
+            bins[b].second += 1;
+          }
+      }
       std::vector<MeasurementSpec> specs;
       for (const auto& s : c.specs) specs.push_back(s.second);
       MeasurementContext ctx;
@@ -365,6 +362,15 @@ int main(int argc, char** argv) {
   std::printf("  %-14s %5.1f %%  (%d/%d)   uncharacterised linearity: %5.1f %%\n", "all", 100.0 * all_cov / all_n,
               all_cov, all_n, 100.0 * all_cov_u / all_n);
   if (failures) std::printf("measurement failures: %d\n", failures);
+  for (const auto& [specimen, bins] : profile) {
+    const auto [lo, hi] = profile_range[specimen];
+    std::printf("\nmean depth error by true height, %s (%.3f..%.3f um, %d bins, all seeds):\n", specimen.c_str(), lo,
+                hi, kProfileBins);
+    for (int b = 0; b < kProfileBins; ++b) {
+      std::printf("  %9.3f um  %+8.4f um  (%d px)\n", lo + (b + 0.5) * (hi - lo) / kProfileBins,
+                  bins[b].second ? bins[b].first / bins[b].second : std::nan(""), bins[b].second);
+    }
+  }
   std::error_code ec;
   fs::remove_all(work, ec);
   return 0;
