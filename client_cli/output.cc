@@ -141,6 +141,10 @@ void PrintDepthSummary(const v1::DepthSummary& d) {
               << Format(", scale change up to %.2f %%, shift up to %.2f px, seen by every frame %.1f %%\n",
                         d.alignment_max_scale_change_percent(), d.alignment_max_shift_px(), d.alignment_seen_percent());
   }
+  if (d.consistency_rejected_percent() > 0.0 || d.filled_percent() > 0.0) {
+    std::cout << Format("post-processing: %.1f %% rejected by the depth consistency check, %.1f %% filled\n",
+                        d.consistency_rejected_percent(), d.filled_percent());
+  }
   if (d.has_ground_truth()) {
     std::cout << Format("vs ground truth: RMSE %.3f um, mean |error| %.3f um\n", d.rmse_um(), d.mean_abs_error_um());
   }

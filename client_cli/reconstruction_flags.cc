@@ -66,6 +66,15 @@ const std::map<std::string, v1::FrameAlignment>& Alignments() {
   return m;
 }
 
+const std::map<std::string, v1::DepthRefinementMethod>& Refinements() {
+  static const std::map<std::string, v1::DepthRefinementMethod> m = {
+      {"none", v1::DEPTH_REFINEMENT_METHOD_NONE},
+      {"weighted-median", v1::DEPTH_REFINEMENT_METHOD_WEIGHTED_MEDIAN},
+      {"guided-filter", v1::DEPTH_REFINEMENT_METHOD_GUIDED_FILTER},
+  };
+  return m;
+}
+
 }  // namespace
 
 void ReconstructionFlags::Add(CLI::App* cmd) {
@@ -87,6 +96,15 @@ void ReconstructionFlags::Add(CLI::App* cmd) {
                   "Lateral alignment of the frames: none | estimate (from the stack; reconstruct's default) | "
                   "calibrated (the focus-breathing calibration; scan's default when calibrated)")
       ->check(CLI::IsMember(Keys(Alignments()), CLI::ignore_case));
+  cmd->add_flag("--no-consistency", no_consistency,
+                "Keep pixels whose depth disagrees with their neighbourhood by more than a z step (the default "
+                "rejects them: focus windows across depth steps or without texture)");
+  cmd->add_option("--refine", refinement,
+                  "Edge-aware smoothing of the depth guided by the all-in-focus image: none (default) | "
+                  "weighted-median | guided-filter")
+      ->check(CLI::IsMember(Keys(Refinements()), CLI::ignore_case));
+  cmd->add_flag("--fill", fill,
+                "Fill pixels without depth from measured neighbours (interpolated, not measured; off by default)");
 }
 
 v1::ReconstructionOptions ReconstructionFlags::ToProto() const {
@@ -99,6 +117,9 @@ v1::ReconstructionOptions ReconstructionFlags::ToProto() const {
   if (!method.empty()) o.set_method(Methods().at(Lower(method)));
   if (isff_fast_threshold) o.set_isff_fast_threshold(*isff_fast_threshold);
   if (!alignment.empty()) o.set_alignment(Alignments().at(Lower(alignment)));
+  if (no_consistency) o.set_depth_consistency(false);
+  if (!refinement.empty()) o.set_refinement(Refinements().at(Lower(refinement)));
+  if (fill) o.set_fill_low_confidence(true);
   return o;
 }
 

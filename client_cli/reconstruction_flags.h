@@ -1,5 +1,6 @@
 // The reconstruction options shared by `scan` and `reconstruct` (--method, --isff-fast-threshold,
-// --focus-measure, --window, --interpolation, --min-confidence, --export, --alignment) and their
+// --focus-measure, --window, --interpolation, --min-confidence, --export, --alignment,
+// --no-consistency, --refine, --fill) and their
 // mapping to ReconstructionOptions.
 #pragma once
 
@@ -23,6 +24,9 @@ struct ReconstructionFlags {
   std::string method;                         // sff | isff | isff-gt | isff-fast (thesis 5.4, 6.4)
   std::optional<double> isff_fast_threshold;  // ISFF-FAST, (0, 1]; the server checks the range
   std::string alignment;                      // none | estimate | calibrated; empty = server default
+  bool no_consistency = false;                // depth_consistency = false (the server's default is true)
+  std::string refinement;                     // none | weighted-median | guided-filter; empty = none
+  bool fill = false;                          // fill_low_confidence
 
   // Adds the options to `cmd`, writing into this object (which must outlive the parse).
   void Add(CLI::App* cmd);

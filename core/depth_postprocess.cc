@@ -17,7 +17,7 @@ Status DepthPostProcessOptions::Validate() const {
 }
 
 StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector<double>& z_um, int focus_window_px,
-                                       const DepthPostProcessOptions& o) {
+                                       const DepthPostProcessOptions& o, DepthPostProcessFigures* figures) {
   INSPECT_RETURN_IF_ERROR(o.Validate());
   if (raw.depth_um.empty() || raw.depth_um.type() != CV_32FC1 || raw.confidence.type() != CV_32FC1 ||
       raw.confidence.size() != raw.depth_um.size()) {
@@ -37,13 +37,19 @@ StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector
     // (cv::compare's CMP_NE is false for NaN, so NaN is found as "not equal to itself" via ~EQ.)
     const cv::Mat rejected = (out.depth_um == out.depth_um) & ~(kept == kept);
     out.confidence.setTo(0.f, rejected);
+    if (figures) figures->consistency_rejected_fraction = double(cv::countNonZero(rejected)) / double(rejected.total());
     out.depth_um = kept;
   }
   if (o.refinement.method != DepthRefinement::kNone) {
     INSPECT_ASSIGN_OR_RETURN(out.depth_um, RefineDepth(out.depth_um, out.confidence, raw.all_in_focus, o.refinement));
   }
   if (o.fill_low_confidence) {
+    const int before = cv::countNonZero(out.depth_um == out.depth_um);
     INSPECT_ASSIGN_OR_RETURN(out.depth_um, FillDepth(out.depth_um, out.confidence, raw.all_in_focus, o.fill_options));
+    if (figures) {
+      figures->filled_fraction =
+          double(cv::countNonZero(out.depth_um == out.depth_um) - before) / double(out.depth_um.total());
+    }
   }
   out.valid_fraction = double(cv::countNonZero(out.depth_um == out.depth_um)) / double(out.depth_um.total());
   return out;

@@ -39,7 +39,12 @@ struct DepthPostProcessOptions {
 // window. Returns raw with depth_um post-processed, valid_fraction recounted (filled pixels
 // count as valid), and confidence set to 0 where the consistency step rejected a pixel, so that
 // "confidence >= min_confidence" still means "measured". all_in_focus is kept (the guide).
+struct DepthPostProcessFigures {
+  double consistency_rejected_fraction = 0.0;  // of all pixels: above the threshold, rejected by consistency
+  double filled_fraction = 0.0;                // of all pixels: depth filled, not measured
+};
 StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector<double>& z_um, int focus_window_px,
-                                       const DepthPostProcessOptions& options);
+                                       const DepthPostProcessOptions& options,
+                                       DepthPostProcessFigures* figures = nullptr);
 
 }  // namespace inspection

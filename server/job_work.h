@@ -10,6 +10,7 @@
 #include <variant>
 #include <vector>
 
+#include "core/depth_postprocess.h"
 #include "core/sff_engine.h"
 #include "core/stack_alignment.h"
 #include "inspection/v1/inspection.pb.h"
@@ -51,6 +52,7 @@ struct ReconstructWork {
   // Lateral alignment (core/stack_alignment.h); nullopt = ESTIMATE, unaligned when the frames do
   // not register.
   std::optional<FrameAlignment> alignment;
+  DepthPostProcessOptions postprocess;  // SFF only
 };
 
 using JobWork = std::variant<ScanWork, CalibrateWork, ReconstructWork>;

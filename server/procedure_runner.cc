@@ -96,7 +96,14 @@ void RecordMethod(const ReconstructionMethodSettings& m, const IntegralSffFigure
   d->set_frames_searched_fraction(figures.frames_searched_fraction);
 }
 
+// What the SFF post-processing took away and filled (DepthSummary 26..27).
+void RecordPostProcess(const DepthPostProcessFigures& f, v1::DepthSummary* d) {
+  d->set_consistency_rejected_percent(100.0 * f.consistency_rejected_fraction);
+  d->set_filled_percent(100.0 * f.filled_fraction);
+}
+
 // The lateral alignment that ran and its figures (DepthSummary 22..25).
+
 void RecordAlignment(const AlignmentFigures& a, v1::DepthSummary* d) {
   switch (a.alignment) {
     case FrameAlignment::kNone:
@@ -242,6 +249,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
     z->set_search_seconds(r->search_seconds);
   }
   RecordAlignment(outcome.alignment, result.mutable_depth());
+  RecordPostProcess(outcome.postprocess, result.mutable_depth());
   const auto scanned_at = std::chrono::steady_clock::now();
   if (work.recipe) {
     EmitPhase(context, v1::JOB_PHASE_STORING, 0.95, "measuring recipe " + work.recipe->recipe.recipe_id());
@@ -320,6 +328,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   DepthResult depth;
   IntegralSffFigures isff;
   AlignmentFigures alignment;
+  DepthPostProcessFigures postprocess;
   if (work.method.integral()) {
     // The calibration active now; two passes over the folder without per-frame events (and
     // without a cancellation point inside them: ~1 s for 23 frames of 1024 x 768).
@@ -342,12 +351,19 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     if (a.alignment == FrameAlignment::kCalibrated && bundle && bundle->focus_breathing) {
       a.calibrated = &*bundle->focus_breathing;
     }
-    auto r = ReconstructStackFolder(work.stack_dir, m, work.sff, on_frame, *context.cancel, a, &alignment);
+    // Unthresholded engine, then the post-processing (core/depth_postprocess.h) thresholds.
+    SffOptions unthresholded = work.sff;
+    unthresholded.min_confidence = 0.0;
+    auto r = ReconstructStackFolder(work.stack_dir, m, unthresholded, on_frame, *context.cancel, a, &alignment);
     if (!r.ok()) {
       const bool alignment_error = r.status().message().rfind("alignment", 0) == 0;
       return alignment_error ? r.status().WithContext("options.alignment") : r.status();
     }
-    depth = std::move(r).value();
+    DepthPostProcessOptions post = work.postprocess;
+    post.min_confidence = work.sff.min_confidence;
+    std::vector<double> z_um;
+    for (const StackFrame& f : m.frames) z_um.push_back(f.z_um);
+    INSPECT_ASSIGN_OR_RETURN(depth, PostProcessDepth(*r, z_um, work.sff.window_px, post, &postprocess));
   }
   const double engine_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EmitPhase(context, v1::JOB_PHASE_STORING, 0.92);
@@ -376,6 +392,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   result.mutable_depth()->set_engine_seconds(engine_seconds);
   RecordMethod(work.method, isff, result.mutable_depth());
   RecordAlignment(alignment, result.mutable_depth());
+  RecordPostProcess(postprocess, result.mutable_depth());
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
   return result;
 }

@@ -185,6 +185,38 @@ StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::Reconstructi
     return Status::InvalidArgument(field + ".alignment " + v1::FrameAlignment_Name(o.alignment()) +
                                    " applies to SFF only (method " + method_name + " reads the stack as acquired)");
   }
+  DepthPostProcessOptions& post = out.postprocess;
+  post.min_confidence = s.min_confidence;  // the jobs take it from sff; kept equal for Validate
+  post.consistency = o.has_depth_consistency() ? o.depth_consistency() : true;
+  switch (o.refinement()) {
+    case v1::DEPTH_REFINEMENT_METHOD_UNSPECIFIED:
+    case v1::DEPTH_REFINEMENT_METHOD_NONE:
+      post.refinement.method = DepthRefinement::kNone;
+      break;
+    case v1::DEPTH_REFINEMENT_METHOD_WEIGHTED_MEDIAN:
+      post.refinement.method = DepthRefinement::kWeightedMedian;
+      break;
+    case v1::DEPTH_REFINEMENT_METHOD_GUIDED_FILTER:
+      post.refinement.method = DepthRefinement::kGuidedFilter;
+      break;
+    default:
+      return Status::InvalidArgument(field + ".refinement: unknown value " + std::to_string(int(o.refinement())));
+  }
+  post.fill_low_confidence = o.fill_low_confidence();
+  if (m.integral()) {
+    // The integral methods threshold their own correlation peak; nothing here applies to them.
+    post.consistency = false;
+    if (o.has_depth_consistency()) {
+      return Status::InvalidArgument(field + ".depth_consistency applies to SFF only (method " + method_name + ")");
+    }
+    if (post.refinement.method != DepthRefinement::kNone) {
+      return Status::InvalidArgument(field + ".refinement applies to SFF only (method " + method_name + ")");
+    }
+    if (post.fill_low_confidence) {
+      return Status::InvalidArgument(field + ".fill_low_confidence applies to SFF only (method " + method_name + ")");
+    }
+  }
+  INSPECT_RETURN_IF_ERROR(post.Validate().WithContext(field));
   for (int i = 0; i < o.extra_exports_size(); ++i) {
     INSPECT_ASSIGN_OR_RETURN(DepthExportKind k,
                              MapExtraExport(o.extra_exports(i), field + ".extra_exports[" + std::to_string(i) + "]"));
@@ -332,6 +364,7 @@ StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& req, const ScanContext&
   work.extra_exports = std::move(rec.extra_exports);
   INSPECT_RETURN_IF_ERROR(CheckScanAlignment(rec.alignment, context.calibration));
   work.plan.alignment = rec.alignment;
+  work.plan.postprocess = rec.postprocess;
 
   const int window_px = work.plan.sff.window_px;
   IlluminationMode mode = requested ? *requested : DefaultIlluminationMode(context.calibration, window_px);
@@ -413,6 +446,7 @@ StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start,
   work.method = rec.method;
   work.extra_exports = std::move(rec.extra_exports);
   work.alignment = rec.alignment;
+  work.postprocess = rec.postprocess;
   return work;
 }
 

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "core/calibration_bundle.h"
+#include "core/depth_postprocess.h"
 #include "core/sff_engine.h"
 #include "core/status.h"
 #include "devices/rig.h"
@@ -40,6 +41,9 @@ struct ReconstructionSettings {
   // calibration holds the model, else NONE; reconstruct: ESTIMATE, NONE when it cannot register).
   // With an integral method only NONE is accepted (INVALID_ARGUMENT "<field>.alignment ...").
   std::optional<FrameAlignment> alignment;
+  // SFF only (the integral methods refuse the fields): consistency, refinement, fill; the jobs
+  // threshold at sff.min_confidence and run the engine with min_confidence 0.
+  DepthPostProcessOptions postprocess;
 };
 StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::ReconstructionOptions& options,
                                                           const std::string& field);

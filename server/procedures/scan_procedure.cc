@@ -232,7 +232,11 @@ StatusOr<StreamingReconstruction> CreateStreamingReconstruction(Rig& rig, const 
   const ReconstructionMethodSettings& method = plan.reconstruction;
   StreamingReconstruction r;
   if (!method.integral()) {
-    INSPECT_ASSIGN_OR_RETURN(r.sff, SffEngine::Create(plan.sff, rig.camera().frame_size(), frame_type));
+    // Unthresholded: the post-processing's consistency check needs every pixel's depth, and it
+    // applies plan.sff.min_confidence itself.
+    SffOptions unthresholded = plan.sff;
+    unthresholded.min_confidence = 0.0;
+    INSPECT_ASSIGN_OR_RETURN(r.sff, SffEngine::Create(unthresholded, rig.camera().frame_size(), frame_type));
     return r;
   }
   INSPECT_RETURN_IF_ERROR(method.Validate());
@@ -332,7 +336,10 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
   const auto t1 = Clock::now();
   INSPECT_RETURN_IF_ERROR(WriteStackManifest(stack_dir, m));
   if (engine.sff) {
-    INSPECT_ASSIGN_OR_RETURN(out.depth, engine.sff->Finish());
+    INSPECT_ASSIGN_OR_RETURN(DepthResult raw, engine.sff->Finish());
+    DepthPostProcessOptions post = plan.postprocess;
+    post.min_confidence = plan.sff.min_confidence;
+    INSPECT_ASSIGN_OR_RETURN(out.depth, PostProcessDepth(raw, plan.z_um, plan.sff.window_px, post, &out.postprocess));
   } else if (engine.ncc) {
     INSPECT_ASSIGN_OR_RETURN(out.depth, engine.ncc->Finish());
     out.isff.frame_noise_sigma = 0.0;  // ISFF-GT's template is noise-free; nothing is estimated

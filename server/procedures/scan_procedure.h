@@ -17,6 +17,7 @@
 
 #include "core/calibration_bundle.h"
 #include "core/compensation.h"
+#include "core/depth_postprocess.h"
 #include "core/focus_range_search.h"
 #include "core/frame_statistics.h"
 #include "core/sff_engine.h"
@@ -83,6 +84,9 @@ struct ScanPlan {
   // Lateral alignment (scan_alignment.h): kNone or kCalibrated; nullopt = kCalibrated when the
   // bundle holds the focus_breathing model, else kNone.
   std::optional<FrameAlignment> alignment;
+  // SFF: the engine runs with min_confidence 0 and this makes the map (core/depth_postprocess.h),
+  // thresholding at sff.min_confidence (postprocess.min_confidence is not used).
+  DepthPostProcessOptions postprocess;
 };
 
 // Builds the z positions from start to end (inclusive when end falls on the grid) with step
@@ -122,6 +126,7 @@ struct ScanOutcome {
   // The lateral alignment that ran. With alignment the depth map is in the middle frame's grid
   // (and so is ground_truth_um); the stack folder keeps the frames as captured.
   AlignmentFigures alignment;
+  DepthPostProcessFigures postprocess;  // SFF only
 };
 
 // Acquires into stack_dir (created; the caller owns clean-up on failure) and reconstructs.

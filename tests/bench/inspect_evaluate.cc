@@ -7,11 +7,13 @@
 // Then integral SFF (thesis 6.4, tests/bench/isff_tables.h): Table 6.8, Table 6.9, Fig. 6.17 and
 // the calibration and reconstruction times, on their own rig (default camera 512x384).
 // Usage: inspect-evaluate [--camera WxH] [--projector WxH] [--seed N] [--bias-only] [--specimens a,b]
-//        [--modes STD,ADAPT,...] [--isff-only | --no-isff]
+//        [--modes STD,ADAPT,...] [--isff-only | --no-isff] [--no-consistency]
 //        (default 256x192, 96x72, seed 5, all tables, every specimen and mode)
 // --bias-only prints only the bias table; --specimens / --modes restrict it (for quick checks).
 // --isff-only prints only the integral SFF part (--camera and --seed apply to it when given),
-// --no-isff leaves it out. Exit status 3 when a mode exceeds the bias bound, 1 on a failure.
+// --no-isff leaves it out. --no-consistency turns the depth consistency check of the post-processing
+// off (core/depth_postprocess.h), for comparing the default with and without it. Exit status 3
+// when a mode exceeds the bias bound, 1 on a failure.
 #include <unistd.h>
 
 #include <algorithm>
@@ -61,6 +63,7 @@ struct Evaluator {
   Rig* rig;
   const CalibrationBundle* bundle;
   fs::path dir;
+  bool consistency = true;  // the depth consistency check of the post-processing (--no-consistency: off)
 
   Run Scan(const std::string& specimen, IlluminationMode mode, IlluminationParams params, double z_step_um = 0) {
     Run r;
@@ -73,6 +76,7 @@ struct Evaluator {
     plan->mode = mode;
     plan->params = params;
     plan->sff.window_px = kWindowPx;
+    plan->postprocess.consistency = consistency;
     std::atomic<bool> cancel{false};
     const fs::path stack =
         dir / (specimen + "_" + std::to_string(int(mode)) + "_" + std::to_string(params.hdr_exposures));
@@ -127,6 +131,7 @@ int Main(int argc, char** argv) {
   ro.projector_size = {96, 72};
   ro.seed = 5;
   bool bias_only = false;
+  bool no_consistency = false;
   bool isff_only = false, no_isff = false, camera_given = false;
   std::vector<std::string> specimens = BuiltinSpecimenNames();
   const IlluminationMode all_modes[] = {
@@ -136,9 +141,13 @@ int Main(int argc, char** argv) {
   std::vector<IlluminationMode> modes(std::begin(all_modes), std::end(all_modes));
   const char* usage =
       "usage: inspect-evaluate [--camera WxH] [--projector WxH] [--seed N] [--bias-only] [--specimens a,b] "
-      "[--modes STD,ADAPT,...] [--isff-only | --no-isff]\n";
+      "[--modes STD,ADAPT,...] [--isff-only | --no-isff] [--no-consistency]\n";
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
+    if (a == "--no-consistency") {
+      no_consistency = true;
+      continue;
+    }
     if (a == "--bias-only" || a == "--isff-only" || a == "--no-isff") {
       bias_only |= a == "--bias-only";
       isff_only |= a == "--isff-only";
@@ -203,7 +212,8 @@ int Main(int argc, char** argv) {
     std::fprintf(stderr, "calibration: %s\n", bundle.status().ToString().c_str());
     return 1;
   }
-  Evaluator ev{rig->get(), &*bundle, fs::temp_directory_path() / ("inspect_evaluate_" + std::to_string(::getpid()))};
+  Evaluator ev{rig->get(), &*bundle, fs::temp_directory_path() / ("inspect_evaluate_" + std::to_string(::getpid())),
+               !no_consistency};
   std::printf(
       "Simulated rig: camera %dx%d, projector %dx%d, seed %llu; sigma_p %.2f px; Tenengrad 9x9; "
       "outlier = |error| > 2 z steps or no depth counted apart (valid %%)\n\n",
