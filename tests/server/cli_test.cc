@@ -49,6 +49,34 @@ TEST_F(CliTest, ScanWritesResultFilesAndPrintsFolderAndDepthSummary) {
   EXPECT_NE(r.out.find("\nillumination: STD\n"), std::string::npos) << r.out;
 }
 
+TEST_F(CliTest, PostProcessingFlagsReachTheServerAndItsFiguresArePrinted) {
+  StartServer();
+  // The saturating cutter under STD leaves pixels without depth (clipped glints).
+  ASSERT_EQ(Run({"specimen", "set", "cutter"}).exit_code, 0);
+  // --fill: every pixel gets a depth, and the summary says how many were interpolated.
+  CliResult r = Run({"scan", "--out", (work_ / "filled").string(), "--fill", "--refine", "guided-filter"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  v1::Job job;
+  ASSERT_TRUE(client_->GetJob(NewestJobId(), &job).ok());
+  const v1::DepthSummary& d = job.result().depth();
+  EXPECT_DOUBLE_EQ(d.valid_percent(), 100.0);
+  ASSERT_GT(d.filled_percent(), 1.0);
+  char line[128];
+  std::snprintf(line, sizeof line, "rejected by the depth consistency check, %.1f %% filled", d.filled_percent());
+  EXPECT_NE(r.out.find(line), std::string::npos) << r.out;
+  // --no-consistency: nothing is rejected, and nothing is printed about it.
+  r = Run({"scan", "--out", (work_ / "plain").string(), "--no-consistency"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_TRUE(client_->GetJob(NewestJobId(), &job).ok());
+  EXPECT_EQ(job.result().depth().consistency_rejected_percent(), 0.0);
+  EXPECT_EQ(r.out.find("post-processing:"), std::string::npos) << r.out;
+  // Bad values: usage (2) in the CLI, INVALID_ARGUMENT (4) naming the field from the server.
+  EXPECT_EQ(Run({"scan", "--out", "d", "--refine", "blur"}).exit_code, 2);
+  r = Run({"scan", "--out", (work_ / "isff").string(), "--method", "isff-gt", "--fill"});
+  EXPECT_EQ(r.exit_code, 4);
+  EXPECT_NE(r.err.find("reconstruction.fill_low_confidence"), std::string::npos) << r.err;
+}
+
 TEST_F(CliTest, JsonScanIsOneEventPerLineThenOneResultObject) {
   StartServer();
   const fs::path out = work_ / "scan";
