@@ -9,6 +9,8 @@
 // Usage: inspect-evaluate [--camera WxH] [--projector WxH] [--seed N] [--bias-only] [--specimens a,b]
 //        [--modes STD,ADAPT,...] [--isff-only | --no-isff] [--no-consistency]
 //        (default 256x192, 96x72, seed 5, all tables, every specimen and mode)
+//        inspect-evaluate --natural [natural-evaluate's options]: the natural-scene evaluation
+//        (tests/bench/natural_tables.h) instead
 // --bias-only prints only the bias table; --specimens / --modes restrict it (for quick checks).
 // --isff-only prints only the integral SFF part (--camera and --seed apply to it when given),
 // --no-isff leaves it out. --no-consistency turns the depth consistency check of the post-processing
@@ -30,6 +32,7 @@
 #include "server/procedures/calibration_procedure.h"
 #include "server/procedures/scan_procedure.h"
 #include "tests/bench/isff_tables.h"
+#include "tests/bench/natural_tables.h"
 
 namespace inspection {
 namespace {
@@ -420,4 +423,8 @@ int PrintBiasTable(Evaluator& ev, const std::vector<std::string>& specimens,
 }  // namespace
 }  // namespace inspection
 
-int main(int argc, char** argv) { return inspection::Main(argc, argv); }
+int main(int argc, char** argv) {
+  // The natural-scene evaluation has its own options; argv[1] stands in for the program name.
+  if (argc >= 2 && std::string(argv[1]) == "--natural") return inspection::RunNaturalEvaluation(argc - 1, argv + 1);
+  return inspection::Main(argc, argv);
+}

@@ -1,0 +1,648 @@
+// Shape from focus on natural-looking focal stacks with ground truth (devices/sim/natural_scene.h):
+// focus measures x windows, interpolations, confidence thresholds, multi-window / measure fusion
+// (core/depth_fusion.h), guided refinement (core/depth_refinement.h) and fill (core/depth_fill.h),
+// each scored against the truth (RMSE, bias, Pearson correlation, coverage, outliers), and
+// focus-stack's depth map on the same stacks (written as PNG files) when the tool is found.
+// Depth is in frame units (z = frame index). Frames are written as a stack folder and read back
+// through core/stack.h (colour PNG -> BT.709 luminance for focus, colour kept for the guide).
+//
+// Usage: natural-evaluate (or inspect-evaluate --natural) [--scenes N] [--size WxH] [--seed S] [--focus-stack PATH|none]
+//                         [--keep DIR] [--timing]
+//   focus-stack: --focus-stack PATH, else $FOCUS_STACK, else `focus-stack` on PATH; skipped if absent.
+#include "tests/bench/natural_tables.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "core/depth_consistency.h"
+#include "core/depth_export.h"
+#include "core/depth_fill.h"
+#include "core/depth_fusion.h"
+#include "core/depth_postprocess.h"
+#include "core/depth_refinement.h"
+#include "core/sff_engine.h"
+#include "core/stack.h"
+#include "devices/sim/natural_scene.h"
+
+namespace inspection {
+namespace {
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+const DepthInterpolation kDefaultInterpolation = SffOptions().interpolation;
+
+constexpr int kBorderPx = 8;  // left out of every comparison (focus windows see the image edge)
+constexpr double kOutlierFrames = 2.0;
+
+double Seconds(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+struct Scene {
+  NaturalScene truth;
+  std::vector<cv::Mat> grey;  // what the engine sees (luminance of the colour PNGs)
+  std::vector<double> z;      // frame index
+  cv::Mat fs_depth;           // focus-stack, frame units (empty if not run)
+  double fs_seconds = 0;
+  fs::path dir;
+};
+
+struct EngineKey {
+  FocusMeasure measure;
+  int window;
+  DepthInterpolation interp;
+  bool operator<(const EngineKey& o) const {
+    return std::tie(measure, window, interp) < std::tie(o.measure, o.window, o.interp);
+  }
+};
+
+std::string KeyName(const EngineKey& k) {
+  std::string s = std::string(FocusMeasureName(k.measure)) + " " + std::to_string(k.window);
+  if (k.interp != kDefaultInterpolation) s += " " + std::string(DepthInterpolationName(k.interp));
+  return s;
+}
+
+struct Candidate {
+  std::string name;
+  std::vector<EngineKey> engines;  // > 1: fused
+  DepthFusionRule fusion = DepthFusionRule::kMostConfident;
+  double min_confidence = 0.4;
+  bool consistency = false;  // core/depth_consistency.h on the first engine's unthresholded depth
+  DepthConsistencyOptions consistency_options;
+  DepthRefinementOptions refine{DepthRefinement::kNone};
+  bool fill = false;
+  DepthFillOptions fill_options;
+};
+
+struct Metrics {
+  double rmse = 0, bias = 0, corr = 0, coverage = 0, outliers = 0;
+  double rmse_textured = 0, coverage_textured = 0, rmse_edges = 0;
+  double fs_rmse_same = NAN;  // focus-stack on the same pixels
+  double seconds = 0;
+};
+
+// Error statistics of depth against the truth over finite pixels of `depth` inside the border
+// (and inside `mask` when given).
+Metrics Score(const cv::Mat& depth, const NaturalScene& truth, const cv::Mat& fs_depth,
+              const cv::Mat& mask = cv::Mat()) {
+  Metrics m;
+  const cv::Mat& t = truth.depth_frames;
+  double n = 0, total = 0, se = 0, sd = 0, st = 0, sdd = 0, stt = 0, sdt = 0, out = 0;
+  double nt = 0, tt = 0, set = 0, ne = 0, see = 0;
+  for (int y = kBorderPx; y < t.rows - kBorderPx; ++y)
+    for (int x = kBorderPx; x < t.cols - kBorderPx; ++x) {
+      if (!mask.empty() && !mask.at<uint8_t>(y, x)) continue;
+      ++total;
+      const bool textured = truth.textured.at<uint8_t>(y, x) != 0;
+      tt += textured;
+      const double d = depth.at<float>(y, x), tv = t.at<float>(y, x);
+      if (!std::isfinite(d)) continue;
+      const double e = d - tv;
+      ++n;
+      se += e * e;
+      sd += d;
+      st += tv;
+      sdd += d * d;
+      stt += tv * tv;
+      sdt += d * tv;
+      out += std::abs(e) > kOutlierFrames;
+      if (textured) {
+        ++nt;
+        set += e * e;
+      }
+      if (truth.occlusion_edge.at<uint8_t>(y, x)) {
+        ++ne;
+        see += e * e;
+      }
+    }
+  if (n == 0) return m;
+  m.rmse = std::sqrt(se / n);
+  m.bias = (sd - st) / n;
+  const double cov = sdt / n - (sd / n) * (st / n);
+  const double vd = sdd / n - (sd / n) * (sd / n), vt = stt / n - (st / n) * (st / n);
+  m.corr = cov / std::sqrt(std::max(vd * vt, 1e-30));
+  m.coverage = n / total;
+  m.outliers = 100.0 * out / n;
+  m.rmse_textured = nt ? std::sqrt(set / nt) : NAN;
+  m.coverage_textured = tt ? nt / tt : NAN;
+  m.rmse_edges = ne ? std::sqrt(see / ne) : NAN;
+  if (!fs_depth.empty()) {
+    const cv::Mat footprint = depth == depth;  // finite
+    m.fs_rmse_same = Score(fs_depth, truth, cv::Mat(), footprint).rmse;
+  }
+  return m;
+}
+
+struct Cache {
+  std::map<EngineKey, DepthResult> results;
+  std::map<EngineKey, double> seconds;
+};
+
+const DepthResult& Run(const Scene& s, const EngineKey& k, Cache* cache) {
+  auto it = cache->results.find(k);
+  if (it != cache->results.end()) return it->second;
+  SffOptions o;
+  o.focus_measure = k.measure;
+  o.window_px = k.window;
+  o.interpolation = k.interp;
+  o.min_confidence = 0.0;  // every pixel gets a depth; thresholds are applied per candidate
+  const auto t0 = Clock::now();
+  auto r = SffEngine::ReconstructInMemory(o, s.grey, s.z);
+  cache->seconds[k] = Seconds(t0);
+  if (!r.ok()) {
+    std::fprintf(stderr, "%s: %s\n", KeyName(k).c_str(), r.status().ToString().c_str());
+    std::exit(1);
+  }
+  return cache->results.emplace(k, std::move(r).value()).first->second;
+}
+
+cv::Mat Threshold(const cv::Mat& depth, const cv::Mat& conf, double min_conf) {
+  cv::Mat d = depth.clone();
+  d.setTo(std::numeric_limits<float>::quiet_NaN(), conf < min_conf);
+  return d;
+}
+
+Metrics Evaluate(const Scene& s, const Candidate& c, Cache* cache) {
+  double seconds = 0;
+  cv::Mat depth, conf, guide;
+  if (c.engines.size() == 1) {
+    const DepthResult& r = Run(s, c.engines[0], cache);
+    seconds += cache->seconds[c.engines[0]];
+    depth = Threshold(r.depth_um, r.confidence, c.min_confidence);
+    conf = r.confidence;
+    guide = r.all_in_focus;
+  } else {
+    std::vector<cv::Mat> ds, cs;
+    for (const EngineKey& k : c.engines) {
+      const DepthResult& r = Run(s, k, cache);
+      seconds += cache->seconds[k];
+      ds.push_back(r.depth_um);
+      cs.push_back(r.confidence);
+      guide = r.all_in_focus;
+    }
+    const auto t0 = Clock::now();
+    auto f = FuseDepthMaps(ds, cs, c.fusion, c.min_confidence);
+    seconds += Seconds(t0);
+    depth = f->depth_um;
+    conf = f->confidence;
+  }
+  // The engine's grey all-in-focus image guides refinement and fill (every stack has it; the
+  // colour one of core/all_in_focus.h separated nothing more here).
+  const auto t0 = Clock::now();
+  if (c.consistency) {
+    const DepthResult& raw = Run(s, c.engines[0], cache);
+    depth = RejectInconsistentDepth(depth, raw.depth_um, MedianZStep(s.z), c.engines[0].window, c.consistency_options)
+                .value();
+  }
+  if (c.refine.method != DepthRefinement::kNone) depth = RefineDepth(depth, conf, guide, c.refine).value();
+  if (c.fill) depth = FillDepth(depth, conf, guide, c.fill_options).value();
+  seconds += Seconds(t0);
+  Metrics m = Score(depth, s.truth, s.fs_depth);
+  m.seconds = seconds;
+  return m;
+}
+
+Metrics Mean(const std::vector<Metrics>& v) {
+  Metrics m;
+  m.fs_rmse_same = 0;
+  for (const Metrics& x : v) {
+    m.rmse += x.rmse / v.size();
+    m.bias += x.bias / v.size();
+    m.corr += x.corr / v.size();
+    m.coverage += x.coverage / v.size();
+    m.outliers += x.outliers / v.size();
+    m.rmse_textured += x.rmse_textured / v.size();
+    m.coverage_textured += x.coverage_textured / v.size();
+    m.rmse_edges += x.rmse_edges / v.size();
+    m.fs_rmse_same += x.fs_rmse_same / v.size();
+    m.seconds += x.seconds / v.size();
+  }
+  return m;
+}
+
+void PrintHeader(const char* title) {
+  std::printf("\n%s\n", title);
+  std::printf("%-34s %7s %6s %7s %6s %6s | %7s %6s %7s | %8s %6s\n", "candidate", "RMSE", "corr", "bias", "cover",
+              "out>2", "RMSE-tx", "cov-tx", "RMSE-ed", "FS same", "ratio");
+}
+
+void PrintRow(const std::string& name, const Metrics& m) {
+  std::printf("%-34s %7.3f %6.3f %+7.3f %5.1f%% %5.1f%% | %7.3f %5.1f%% %7.3f | ", name.c_str(), m.rmse, m.corr, m.bias,
+              100 * m.coverage, m.outliers, m.rmse_textured, 100 * m.coverage_textured, m.rmse_edges);
+  if (std::isfinite(m.fs_rmse_same))
+    std::printf("%8.3f %6.2f\n", m.fs_rmse_same, m.rmse / m.fs_rmse_same);
+  else
+    std::printf("%8s %6s\n", "n/a", "");
+}
+
+std::vector<Metrics> EvaluateAll(std::vector<Scene>& scenes, const Candidate& c, std::vector<Cache>& caches) {
+  std::vector<Metrics> per_scene;
+  for (size_t i = 0; i < scenes.size(); ++i) per_scene.push_back(Evaluate(scenes[i], c, &caches[i]));
+  return per_scene;
+}
+
+std::string FindFocusStack(const std::string& flag) {
+  if (flag == "none") return "";
+  if (!flag.empty()) return fs::exists(flag) ? flag : "";
+  if (const char* env = std::getenv("FOCUS_STACK"); env && fs::exists(env)) return env;
+  if (const char* path = std::getenv("PATH")) {
+    std::string p = path;
+    size_t start = 0;
+    while (start <= p.size()) {
+      const size_t end = p.find(':', start);
+      const fs::path cand = fs::path(p.substr(start, end - start)) / "focus-stack";
+      if (fs::exists(cand)) return cand.string();
+      if (end == std::string::npos) break;
+      start = end + 1;
+    }
+  }
+  return "";
+}
+
+// focus-stack's --depthmap: 8 bits, 0 = unknown, else (index + 1) * 255 / N for N < 255 frames
+// (task_depthmap.cc: scaler = 255 / (maxdepth + 1), offset = scaler), index = input order.
+cv::Mat RunFocusStack(const std::string& exe, const Scene& s, double* seconds) {
+  std::string cmd = "'" + exe + "' --no-align --nocrop --threads=2 --depthmap='" + (s.dir / "fs_depth.png").string() +
+                    "' --output='" + (s.dir / "fs_aif.png").string() + "'";
+  for (size_t k = 0; k < s.z.size(); ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%04zu.png", k);
+    cmd += " '" + (s.dir / name).string() + "'";
+  }
+  cmd += " > '" + (s.dir / "fs.log").string() + "' 2>&1";
+  const auto t0 = Clock::now();
+  const int rc = std::system(cmd.c_str());
+  *seconds = Seconds(t0);
+  cv::Mat dm = cv::imread((s.dir / "fs_depth.png").string(), cv::IMREAD_GRAYSCALE);
+  if (rc != 0 || dm.empty() || dm.size() != s.truth.depth_frames.size()) {
+    std::fprintf(stderr, "focus-stack failed (rc %d), see %s\n", rc, (s.dir / "fs.log").c_str());
+    return cv::Mat();
+  }
+  const double n = double(s.z.size());
+  cv::Mat out(dm.size(), CV_32F);
+  for (int y = 0; y < dm.rows; ++y)
+    for (int x = 0; x < dm.cols; ++x) {
+      const int v = dm.at<uint8_t>(y, x);
+      out.at<float>(y, x) = v == 0 ? NAN : float(v * n / 255.0 - 1.0);
+    }
+  return out;
+}
+
+Scene MakeScene(const NaturalSceneOptions& o, const fs::path& dir) {
+  Scene s;
+  auto t = RenderNaturalScene(o);
+  if (!t.ok()) {
+    std::fprintf(stderr, "render: %s\n", t.status().ToString().c_str());
+    std::exit(1);
+  }
+  s.truth = std::move(t).value();
+  s.dir = dir;
+  fs::create_directories(dir);
+  StackManifest m;
+  m.pixel_size_um = 1.0;
+  m.specimen = "natural seed " + std::to_string(o.seed);
+  for (int k = 0; k < o.frames; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%04d.png", k);
+    cv::imwrite((dir / name).string(), s.truth.frames[size_t(k)]);
+    m.frames.push_back({name, double(k), 0.0, ""});
+  }
+  DepthExportMeta meta;
+  meta.pixel_size_um = 1.0;
+  meta.description =
+      "ground truth depth in frame units (z_um = frame index) of natural scene seed " + std::to_string(o.seed);
+  // A stack folder like a scan's: inspectctl reconstruct --stack DIR works on it.
+  if (!WriteStackManifest(dir, m).ok() || !ValidateStackFrames(dir, m).ok() ||
+      !WriteDepthTiff(dir / kGroundTruthDepthName, s.truth.depth_frames, meta).ok()) {
+    std::fprintf(stderr, "cannot write the stack folder %s\n", dir.c_str());
+    std::exit(1);
+  }
+  for (size_t k = 0; k < m.frames.size(); ++k) {
+    auto f = LoadStackFrameImage(dir, m, k);
+    if (!f.ok()) {
+      std::fprintf(stderr, "%s\n", f.status().ToString().c_str());
+      std::exit(1);
+    }
+    s.grey.push_back(f->grey);
+    s.z.push_back(double(k));
+  }
+  s.truth.frames.clear();  // on disk; the engine works on the luminance
+  return s;
+}
+
+}  // namespace
+
+int RunNaturalEvaluation(int argc, char** argv) {
+  int n_scenes = 8;
+  cv::Size size(256, 256);
+  uint32_t seed = 1;
+  std::string fs_flag, keep;
+  bool timing = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const char* v = i + 1 < argc ? argv[i + 1] : nullptr;
+    if (a == "--scenes" && v)
+      n_scenes = std::atoi(argv[++i]);
+    else if (a == "--size" && v && std::sscanf(argv[++i], "%dx%d", &size.width, &size.height) == 2) {
+    } else if (a == "--seed" && v)
+      seed = uint32_t(std::strtoul(argv[++i], nullptr, 10));
+    else if (a == "--focus-stack" && v)
+      fs_flag = argv[++i];
+    else if (a == "--keep" && v)
+      keep = argv[++i];
+    else if (a == "--timing")
+      timing = true;
+    else {
+      std::fprintf(stderr,
+                   "usage: natural-evaluate [--scenes N] [--size WxH] [--seed S] "
+                   "[--focus-stack PATH|none] [--keep DIR] [--timing]\n");
+      return 2;
+    }
+  }
+  const fs::path root =
+      keep.empty() ? fs::temp_directory_path() / ("natural_evaluate_" + std::to_string(::getpid())) : fs::path(keep);
+  const std::string fs_exe = FindFocusStack(fs_flag);
+
+  std::printf(
+      "Natural focal stacks: %d scenes of %dx%d, 24..36 frames, seeds %u.., depth in frames; border %d px "
+      "left out; out>2 = |error| > 2 frames; -tx = textured pixels only; -ed = within 3 px of a depth jump\n",
+      n_scenes, size.width, size.height, seed, kBorderPx);
+  std::printf("focus-stack: %s\n", fs_exe.empty() ? "not found (column skipped)" : fs_exe.c_str());
+  std::vector<Scene> scenes;
+  for (int i = 0; i < n_scenes; ++i) {
+    NaturalSceneOptions o;
+    o.size = size;
+    o.seed = seed + uint32_t(i);
+    o.frames = 24 + int((o.seed * 2654435761u) >> 16) % 13;
+    const auto t0 = Clock::now();
+    scenes.push_back(MakeScene(o, root / ("scene_" + std::to_string(o.seed))));
+    Scene& s = scenes.back();
+    std::printf("scene %u: %d frames, %s (render %.1f s", o.seed, o.frames, s.truth.description.c_str(), Seconds(t0));
+    if (!fs_exe.empty()) {
+      s.fs_depth = RunFocusStack(fs_exe, s, &s.fs_seconds);
+      std::printf(", focus-stack %.1f s", s.fs_seconds);
+    }
+    const double textured = cv::countNonZero(s.truth.textured) * 100.0 / s.truth.textured.total();
+    std::printf("; textured %.0f %%)\n", textured);
+  }
+  std::vector<Cache> caches(scenes.size());
+  const bool have_fs =
+      !fs_exe.empty() && std::all_of(scenes.begin(), scenes.end(), [](const Scene& s) { return !s.fs_depth.empty(); });
+
+  // focus-stack alone (all its pixels).
+  if (have_fs) {
+    std::vector<Metrics> v;
+    for (const Scene& s : scenes) v.push_back(Score(s.fs_depth, s.truth, cv::Mat()));
+    PrintHeader("Reference: focus-stack --no-align (its depth map fills every pixel)");
+    PrintRow("focus-stack", Mean(v));
+  }
+
+  const EngineKey current{FocusMeasure::kTenengrad, 7, kDefaultInterpolation};
+  // The product's default: the default engine options plus the post-processing's defaults
+  // (core/depth_postprocess.h: the consistency step; README "Depth post-processing").
+  const EngineKey recommended_key = current;
+  auto Single = [](const EngineKey& k, std::string name = "") {
+    Candidate c;
+    c.engines = {k};
+    c.name = name.empty() ? KeyName(k) : name;
+    return c;
+  };
+  auto Consistent = [&](const EngineKey& k, int radius, double steps) {
+    Candidate c = Single(k);
+    c.consistency = true;
+    c.consistency_options.radius_px = radius;
+    c.consistency_options.max_residual_z_steps = steps;
+    char buf[64];
+    std::snprintf(buf, sizeof buf, " + consistency r%d %.2g", radius > 0 ? radius : DefaultConsistencyRadius(k.window),
+                  steps);
+    c.name += buf;
+    return c;
+  };
+  const DepthPostProcessOptions product_defaults;
+  const Candidate recommended = Consistent(recommended_key, product_defaults.consistency_options.radius_px,
+                                           product_defaults.consistency_options.max_residual_z_steps);
+
+  // Table 1: measure x window, the default interpolation, confidence 0.4.
+  PrintHeader((std::string("Table 1: focus measure x window (") + DepthInterpolationName(kDefaultInterpolation) +
+               " interpolation, min confidence 0.4, no post-processing)")
+                  .c_str());
+  const FocusMeasure measures[] = {
+      FocusMeasure::kTenengrad,         FocusMeasure::kSumModifiedLaplacian,   FocusMeasure::kModifiedLaplacian,
+      FocusMeasure::kGreyLevelVariance, FocusMeasure::kGreyLevelLocalVariance, FocusMeasure::kHelmliMean,
+      FocusMeasure::kChebyshevMoments};
+  std::vector<std::pair<double, EngineKey>> ranked;
+  for (FocusMeasure fm : measures) {
+    for (int w : {3, 5, 7, 9, 11, 15}) {
+      const Candidate c = Single({fm, w, kDefaultInterpolation});
+      const Metrics m = Mean(EvaluateAll(scenes, c, caches));
+      PrintRow(c.name + (fm == current.measure && w == current.window ?  " (default engine, no consistency)" : ""), m);
+      // Rank by RMSE at comparable coverage: leaving half the scene empty is not better for it.
+      ranked.push_back({m.rmse * (m.coverage < 0.6 ? 2.0 : 1.0), c.engines[0]});
+    }
+  }
+  std::sort(ranked.begin(), ranked.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  const EngineKey best = ranked[0].second;
+  std::printf("best without post-processing (coverage >= 60 %%): %s\n", KeyName(best).c_str());
+
+  PrintHeader("Table 2: depth interpolation (min confidence 0.4)");
+  for (const EngineKey& k : {best, current}) {
+    for (DepthInterpolation in : {DepthInterpolation::kMaximum, DepthInterpolation::kLineFit,
+                                  DepthInterpolation::kGaussian, DepthInterpolation::kDefocusParabola}) {
+      PrintRow(KeyName({k.measure, k.window, in}) + (in == kDefaultInterpolation ? " (default interpolation)" : ""),
+               Mean(EvaluateAll(scenes, Single({k.measure, k.window, in}), caches)));
+    }
+  }
+  PrintHeader("Table 3: confidence threshold");
+  for (const EngineKey& k : {best, current}) {
+    for (double mc : {0.0, 0.2, 0.4, 0.6}) {
+      Candidate c = Single(k);
+      c.min_confidence = mc;
+      char buf[32];
+      std::snprintf(buf, sizeof buf, " conf %.1f", mc);
+      c.name += buf;
+      PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
+    }
+  }
+
+  // Table 4: local depth consistency (core/depth_consistency.h) per measure and window.
+  PrintHeader(
+      "Table 4: local depth consistency (residual about a local plane of the unthresholded depth, "
+      "in z steps; radius focus window / 2 + 1 unless given), min confidence 0.4");
+  for (int w : {7, 9, 11, 13, 15}) {
+    for (double steps : {0.75, 1.0, 1.5}) {
+      PrintRow(Consistent({FocusMeasure::kTenengrad, w, kDefaultInterpolation}, 0, steps).name,
+               Mean(EvaluateAll(scenes, Consistent({FocusMeasure::kTenengrad, w, kDefaultInterpolation}, 0, steps),
+                                caches)));
+    }
+  }
+  for (int w : {7, 9, 11}) {
+    const Candidate c = Consistent({FocusMeasure::kTenengrad, w, kDefaultInterpolation}, w / 2 + 2, 1.0);
+    PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
+  }
+  for (FocusMeasure fm :
+       {FocusMeasure::kSumModifiedLaplacian, FocusMeasure::kChebyshevMoments, FocusMeasure::kGreyLevelLocalVariance}) {
+    for (int w : {9, 11}) {
+      const Candidate c = Consistent({fm, w, kDefaultInterpolation}, 0, 1.0);
+      PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
+    }
+  }
+  {
+    Candidate c = recommended;
+    c.min_confidence = 0.0;
+    c.name += " conf 0";
+    PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
+  }
+
+  // Table 5: fusion of windows and of measures.
+  PrintHeader("Table 5: multi-window and measure fusion (min confidence 0.4)");
+  const std::vector<std::pair<std::string, std::vector<EngineKey>>> fusions = {
+      {"tenengrad 5+11",
+       {{FocusMeasure::kTenengrad, 5, kDefaultInterpolation}, {FocusMeasure::kTenengrad, 11, kDefaultInterpolation}}},
+      {"tenengrad 3+7+15",
+       {{FocusMeasure::kTenengrad, 3, kDefaultInterpolation},
+        current,
+        {FocusMeasure::kTenengrad, 15, kDefaultInterpolation}}},
+      {KeyName(best) + " + tenengrad 7", {best, current}},
+      {"tenengrad 7 + sml 7", {current, {FocusMeasure::kSumModifiedLaplacian, 7, kDefaultInterpolation}}},
+      {"sml 9 + glvm 9",
+       {{FocusMeasure::kSumModifiedLaplacian, 9, kDefaultInterpolation},
+        {FocusMeasure::kGreyLevelLocalVariance, 9, kDefaultInterpolation}}},
+  };
+  for (const auto& [name, keys] : fusions) {
+    for (DepthFusionRule rule :
+         {DepthFusionRule::kMostConfident, DepthFusionRule::kConfidenceWeighted, DepthFusionRule::kFirstConfident}) {
+      Candidate c;
+      c.engines = keys;
+      c.fusion = rule;
+      c.name = name + (rule == DepthFusionRule::kMostConfident    ? " (max)"
+                       : rule == DepthFusionRule::kFirstConfident ? " (first)"
+                                                                  : " (wtd)");
+      PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
+    }
+  }
+
+  // Table 6: refinement and fill, on the current default and on the recommended one.
+  PrintHeader("Table 6: guided refinement and fill (guide: the engine's all-in-focus image); fill = full coverage");
+  for (const Candidate& base : {Single(current, "tenengrad 7"), Single(best), recommended}) {
+    struct R {
+      std::string name;
+      DepthRefinement method;
+      int radius;
+      double sigma, eps;
+      bool fill;
+      double fill_sigma;
+    };
+    const R refinements[] = {
+        {"", DepthRefinement::kNone, 0, 0, 0, false, 0},
+        {" WM r4", DepthRefinement::kWeightedMedian, 4, 0.06, 0, false, 0},
+        {" WM r10", DepthRefinement::kWeightedMedian, 10, 0.06, 0, false, 0},
+        {" WM r10 s0.12", DepthRefinement::kWeightedMedian, 10, 0.12, 0, false, 0},
+        {" GF r4", DepthRefinement::kGuidedFilter, 4, 0.06, 1e-3, false, 0},
+        {" GF r8 eps1e-2", DepthRefinement::kGuidedFilter, 8, 0.06, 1e-2, false, 0},
+        {" fill plain", DepthRefinement::kNone, 0, 0, 0, true, 0.0},
+        {" fill guided", DepthRefinement::kNone, 0, 0, 0, true, 0.05},
+        {" fill guided s0.02", DepthRefinement::kNone, 0, 0, 0, true, 0.02},
+        {" WM r10 + fill guided", DepthRefinement::kWeightedMedian, 10, 0.06, 0, true, 0.05},
+    };
+    for (const R& r : refinements) {
+      Candidate c = base;
+      c.refine.method = r.method;
+      c.refine.radius_px = std::max(1, r.radius);
+      if (r.sigma > 0) c.refine.guide_sigma = r.sigma;
+      if (r.eps > 0) c.refine.guided_filter_eps = r.eps;
+      c.fill = r.fill;
+      c.fill_options.guide_sigma = r.fill_sigma;
+      c.name += r.name;
+      PrintRow(c.name, Mean(EvaluateAll(scenes, c, caches)));
+    }
+  }
+
+  // Per scene: the engine alone, the product's default, focus-stack on the same pixels.
+  std::printf(
+      "\nPer scene: RMSE [frames] (coverage) of the engine alone (tenengrad 7, threshold only) and of the "
+      "default (%s), focus-stack on the default's pixels and on all pixels\n",
+      recommended.name.c_str());
+  const auto mc = EvaluateAll(scenes, Single(current), caches), mr = EvaluateAll(scenes, recommended, caches);
+  for (size_t i = 0; i < scenes.size(); ++i) {
+    std::printf(
+        "  scene %zu: engine %6.3f (%5.1f%%)   default %6.3f (%5.1f%%)   focus-stack same pixels %6.3f, "
+        "all %6.3f\n",
+        i, mc[i].rmse, 100 * mc[i].coverage, mr[i].rmse, 100 * mr[i].coverage, mr[i].fs_rmse_same,
+        have_fs ? Score(scenes[i].fs_depth, scenes[i].truth, cv::Mat()).rmse : NAN);
+  }
+  const Metrics rec = Mean(mr);
+  std::printf(
+      "Default (with consistency): mean RMSE %.3f frames at %.1f %% coverage; focus-stack on the same pixels %.3f: "
+      "%.0f %% %s\n",
+      rec.rmse, 100 * rec.coverage, rec.fs_rmse_same, 100 * std::abs(1 - rec.rmse / rec.fs_rmse_same),
+      rec.rmse < rec.fs_rmse_same ? "lower" : "higher");
+
+  if (timing) {
+    // Post-processing cost at camera size, against the engine on the same stack size.
+    const cv::Size big(1600, 1200);
+    const Scene& s = scenes[0];
+    std::vector<cv::Mat> frames;
+    for (const cv::Mat& f : s.grey) {
+      cv::Mat b;
+      cv::resize(f, b, big, 0, 0, cv::INTER_LINEAR);
+      frames.push_back(b);
+    }
+    SffOptions o;
+    o.focus_measure = recommended_key.measure;
+    o.window_px = recommended_key.window;
+    o.min_confidence = 0.0;
+    // Rounds alternate all steps, so load on the shared machine hits them alike; best of 3.
+    std::map<std::string, double> best_s;
+    auto Time = [&](const std::string& name, auto&& fn) {
+      const auto t0 = Clock::now();
+      fn();
+      const double sec = Seconds(t0);
+      best_s[name] = best_s.count(name) ? std::min(best_s[name], sec) : sec;
+    };
+    double valid_before_fill = 0;
+    for (int round = 0; round < 3; ++round) {
+      StatusOr<DepthResult> r = Status::Internal("not run");
+      Time("engine", [&] { r = SffEngine::ReconstructInMemory(o, frames, s.z); });
+      cv::Mat kept;
+      Time("consistency", [&] {
+        cv::Mat d = r->depth_um.clone();
+        d.setTo(std::numeric_limits<float>::quiet_NaN(), r->confidence < 0.4);
+        kept = RejectInconsistentDepth(d, r->depth_um, 1.0, o.window_px, DepthConsistencyOptions{}).value();
+      });
+      valid_before_fill = double(cv::countNonZero(kept == kept)) / kept.total();
+      for (auto [name, method, radius] : {std::tuple{"WM r4", DepthRefinement::kWeightedMedian, 4},
+                                          std::tuple{"WM r10", DepthRefinement::kWeightedMedian, 10},
+                                          std::tuple{"GF r4", DepthRefinement::kGuidedFilter, 4}}) {
+        DepthRefinementOptions ro;
+        ro.method = method;
+        ro.radius_px = radius;
+        Time(name, [&] { (void)RefineDepth(kept, r->confidence, r->all_in_focus, ro).value(); });
+      }
+      Time("fill guided", [&] { (void)FillDepth(kept, r->confidence, r->all_in_focus, DepthFillOptions{}).value(); });
+    }
+    std::printf("\nTiming at %dx%d x %zu frames, best of 3 alternating rounds (x engine): engine %s %.3f s", big.width,
+                big.height, frames.size(), KeyName(recommended_key).c_str(), best_s["engine"]);
+    for (const char* name : {"consistency", "WM r4", "WM r10", "GF r4", "fill guided"}) {
+      std::printf("; %s %.3f s (%.2fx)", name, best_s[name], best_s[name] / best_s["engine"]);
+    }
+    std::printf("; fill ran on %.1f %% valid pixels\n", 100 * valid_before_fill);
+  }
+
+  if (keep.empty()) {
+    std::error_code ec;
+    fs::remove_all(root, ec);
+  }
+  return 0;
+}
+
+}  // namespace inspection
