@@ -17,7 +17,7 @@
 // compared bit for bit with the first run's.
 //
 //   e2e-bench [--frames 60] [--width 1600] [--height 1200] [--runs 2] [--colour]
-//             [--alignment none|estimate] [--work DIR] [--decode-threads 0]
+//             [--alignment none|estimate] [--work DIR] [--decode-threads 0] [--verbose]
 #include <grpcpp/grpcpp.h>
 #include <spdlog/spdlog.h>
 
@@ -66,7 +66,7 @@ void ResetPeakRss() {
 
 struct Args {
   int frames = 60, width = 1600, height = 1200, runs = 2, decode_threads = 0;
-  bool colour = false;
+  bool colour = false, verbose = false;
   std::string alignment;  // empty = the request's default (estimate, unaligned when it fails)
   fs::path work = fs::temp_directory_path() / "e2e-bench";
 };
@@ -78,6 +78,8 @@ bool ParseArgs(int argc, char** argv, Args* a) {
     const char* v = nullptr;
     if (k == "--colour") {
       a->colour = true;
+    } else if (k == "--verbose") {
+      a->verbose = true;
     } else if ((k == "--frames" || k == "--width" || k == "--height" || k == "--runs" || k == "--decode-threads") &&
                (v = next())) {
       const int n = std::atoi(v);
@@ -253,10 +255,11 @@ int main(int argc, char** argv) {
   Args a;
   if (!ParseArgs(argc, argv, &a)) {
     std::cerr << "usage: e2e-bench [--frames 60] [--width 1600] [--height 1200] [--runs 2] [--colour]\n"
-                 "                 [--alignment none|estimate] [--work DIR] [--decode-threads 0]\n";
+                 "                 [--alignment none|estimate] [--work DIR] [--decode-threads 0] [--verbose]\n";
     return 2;
   }
-  spdlog::set_level(spdlog::level::warn);  // the servers' per-job lines would bury the table
+  // The servers' per-job lines would bury the table; --verbose shows them with the jobs' timings.
+  spdlog::set_level(a.verbose ? spdlog::level::debug : spdlog::level::warn);
   fs::create_directories(a.work);
   const auto tg = Clock::now();
   const fs::path stack = GenerateStack(a);
