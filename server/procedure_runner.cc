@@ -347,6 +347,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     // the engine has it; without them (the sequential path) the folder is read here.
     StatusOr<DepthResult> r = Status::Internal("not run");
     if (work.decoded) {
+      a.options.threads = 0;  // frames in memory, Frame thread-safe: neighbour pairs register concurrently
       StackFrameSource source{[&](int i) { return work.decoded->Frame(i); },
                               [&](int i) { work.decoded->Release(i); }};
       r = ReconstructStackFrames(m, source, work.sff, on_frame, *context.cancel, a, &alignment);

@@ -95,7 +95,9 @@ TEST(StackFrameDecoderTest, ParallelDecodeIsBitIdenticalToSequentialFolderLoop) 
     for (int i = int(m.frames.size()) - 1; i >= 0; i -= 2) decoder.Submit(i);
     for (int i = 0; i < int(m.frames.size()); i += 2) decoder.Submit(i);
     ASSERT_TRUE(decoder.Finish().ok());
-    auto parallel = ReconstructStackFrames(m, SourceOf(decoder), SffOptions{}, {}, cancel, a);
+    StackFolderAlignment concurrent = a;  // as the server runs it on decoded frames
+    concurrent.options.threads = 0;
+    auto parallel = ReconstructStackFrames(m, SourceOf(decoder), SffOptions{}, {}, cancel, concurrent);
     ASSERT_TRUE(parallel.ok()) << parallel.status().ToString();
     ExpectBitIdentical(*parallel, *sequential);
     EXPECT_EQ(c.colour ? 3 : 1, parallel->all_in_focus.channels());
