@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <set>
 
 #include "core/stack.h"
@@ -263,7 +264,13 @@ grpc::Status InspectionServiceImpl::Reconstruct(
   } else {
     // The stack is stored once, as the scan's stack.zip: the job reads its own extraction.
     if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
-    auto stored = OpenStoredStack(*store_, source->scan_id);
+    // Its frames decode as they are extracted (stack.json comes first).
+    std::optional<UploadDecoding> decoding;
+    auto stored = OpenStoredStack(*store_, source->scan_id, [&](const fs::path& folder, const std::string& file) {
+      if (!decoding) decoding.emplace(folder, options_.reconstruct);
+      decoding->FileComplete(file);
+    });
+    if (decoding) decoded = decoding->Take();
     if (!stored.ok()) return Grpc(stored.status());
     dir = stored->dir;
     upload = std::move(stored->extraction);
