@@ -229,35 +229,43 @@ StatusOr<cv::Mat> LoadStackFrame(const fs::path& dir, const StackManifest& m, si
   return LuminanceOf(img);
 }
 
+StatusOr<cv::Mat> DecodeStackFrame(const fs::path& dir, const StackManifest& m, size_t index) {
+  return DecodeFrame(dir, m, index);
+}
+
+Status CheckStackFrameShape(const StackManifest& m, size_t index, const StackFrameShape& first,
+                            const StackFrameShape& shape) {
+  if (index == 0) {
+    if (m.bit_depth > 8 && shape.depth == CV_8U) {
+      return Status::InvalidArgument(FrameName(m, 0) + ": 8-bit image but stack.json bit_depth is " +
+                                     std::to_string(m.bit_depth));
+    }
+    return Status::Ok();
+  }
+  const std::string name = FrameName(m, index);
+  if (shape.size != first.size) {
+    return Status::InvalidArgument(name + ": size " + std::to_string(shape.size.width) + "x" +
+                                   std::to_string(shape.size.height) + " differs from frame 0 (" +
+                                   std::to_string(first.size.width) + "x" + std::to_string(first.size.height) + ")");
+  }
+  if (shape.channels != first.channels) {
+    return Status::InvalidArgument(name + ": " + ChannelsName(shape.channels) + " differs from frame 0 (" +
+                                   ChannelsName(first.channels) + ")");
+  }
+  if (shape.depth != first.depth) {
+    return Status::InvalidArgument(name + ": bit depth " + (shape.depth == CV_8U ? "8" : "16") +
+                                   " differs from frame 0 (" + (first.depth == CV_8U ? "8" : "16") + ")");
+  }
+  return Status::Ok();
+}
+
 Status ValidateStackFrames(const fs::path& dir, const StackManifest& m) {
-  cv::Size size0;
-  int depth0 = -1, channels0 = 0;
+  StackFrameShape first;
   for (size_t i = 0; i < m.frames.size(); ++i) {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat img, DecodeFrame(dir, m, i));
-    if (i == 0) {
-      size0 = img.size();
-      depth0 = img.depth();
-      channels0 = img.channels();
-      if (m.bit_depth > 8 && depth0 == CV_8U) {
-        return Status::InvalidArgument(FrameName(m, 0) + ": 8-bit image but stack.json bit_depth is " +
-                                       std::to_string(m.bit_depth));
-      }
-      continue;
-    }
-    const std::string name = FrameName(m, i);
-    if (img.size() != size0) {
-      return Status::InvalidArgument(name + ": size " + std::to_string(img.cols) + "x" + std::to_string(img.rows) +
-                                     " differs from frame 0 (" + std::to_string(size0.width) + "x" +
-                                     std::to_string(size0.height) + ")");
-    }
-    if (img.channels() != channels0) {
-      return Status::InvalidArgument(name + ": " + ChannelsName(img.channels()) + " differs from frame 0 (" +
-                                     ChannelsName(channels0) + ")");
-    }
-    if (img.depth() != depth0) {
-      return Status::InvalidArgument(name + ": bit depth " + (img.depth() == CV_8U ? "8" : "16") +
-                                     " differs from frame 0 (" + (depth0 == CV_8U ? "8" : "16") + ")");
-    }
+    const StackFrameShape shape = StackFrameShape::Of(img);
+    if (i == 0) first = shape;
+    INSPECT_RETURN_IF_ERROR(CheckStackFrameShape(m, i, first, shape));
   }
   return Status::Ok();
 }

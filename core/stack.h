@@ -93,6 +93,23 @@ StatusOr<StackFrameImage> LoadStackFrameImage(const std::filesystem::path& dir, 
 // luminance of a colour frame. Grey stacks give exactly what they did before colour support.
 StatusOr<cv::Mat> LoadStackFrame(const std::filesystem::path& dir, const StackManifest& manifest, size_t index);
 
+// Decodes one frame as stored: CV_8U or CV_16U, 1 (grey) or 3 (colour, BGR) channels. Errors
+// name the frame. The decode step the parallel decoder (core/stack_frame_decoder.h) runs.
+StatusOr<cv::Mat> DecodeStackFrame(const std::filesystem::path& dir, const StackManifest& manifest, size_t index);
+
+// What a decoded frame looks like, enough to check it against frame 0 after its pixels are gone.
+struct StackFrameShape {
+  cv::Size size;
+  int depth = -1;  // CV_8U or CV_16U
+  int channels = 0;
+  static StackFrameShape Of(const cv::Mat& image) { return {image.size(), image.depth(), image.channels()}; }
+};
+
+// Checks frame `index` (shape) against frame 0 (first) as ValidateStackFrames does; for index 0,
+// its bit depth against manifest.bit_depth. Same messages as ValidateStackFrames.
+Status CheckStackFrameShape(const StackManifest& manifest, size_t index, const StackFrameShape& first,
+                            const StackFrameShape& shape);
+
 // Decodes every frame and checks that all frames share size, channel count (grey or colour) and
 // bit depth. Errors name the frame: "frame 3 (frame_0003.png): size 640x480 differs from frame 0
 // (1024x768)", "frame 2 (b.png): colour (3 channels) differs from frame 0 (grey)".

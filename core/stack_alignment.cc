@@ -6,6 +6,9 @@
 #include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
+#include <optional>
+
+#include "core/parallel_for.h"
 
 namespace inspection {
 
@@ -66,6 +69,7 @@ Status StackAlignmentOptions::Validate() const {
     return Status::InvalidArgument("max_failed_pair_share must be in [0, 1)");
   }
   if (!(max_pair_residual_px > 0)) return Status::InvalidArgument("max_pair_residual_px must be > 0");
+  if (threads < 0) return Status::InvalidArgument("threads must be >= 0 (0 = all hardware threads)");
   return Status::Ok();
 }
 
@@ -111,7 +115,38 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
   int failed = 0;
   cv::Mat previous;
   cv::Size size;
+  // Concurrent pairs: each registered on its own thread, then taken in order below exactly as
+  // the sequential loop takes them (same errors, same failures, same model).
+  std::vector<std::optional<StatusOr<FrameRegistration>>> registered;
+  if (options.threads != 1) {
+    registered.resize(size_t(n));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat first, load(0));
+    if (first.cols >= 32 && first.rows >= 32) ParallelFor(n - 1, ResolveThreads(options.threads), [&](int task, int) {
+      const int i = task + 1;
+      StatusOr<cv::Mat> a = i == 1 ? StatusOr<cv::Mat>(first) : load(i - 1);
+      StatusOr<cv::Mat> b = load(i);
+      if (!a.ok() || !b.ok() || a->size() != first.size() || b->size() != first.size()) return;  // the loop reports it
+      registered[size_t(i)] = RegisterFrame(*a, *b, options.registration);
+    });
+  }
   for (int i = 0; i < n; ++i) {
+    if (!registered.empty() && i > 0 && registered[size_t(i)]) {
+      // Registered concurrently; frames i-1 and i loaded and of the first frame's size.
+      const StatusOr<FrameRegistration>& r = *registered[size_t(i)];
+      if (r.ok()) {
+        pair_t[size_t(i)] = r->transform;
+        ok[size_t(i)] = true;
+      } else {
+        if (r.status().code() == StatusCode::kInvalidArgument) return r.status();
+        ++failed;
+        if (failures.size() < 200)
+          failures += (failures.empty() ? "" : "; ") + PairName(i) + ": " + r.status().message();
+      }
+      continue;
+    }
+    if (i > 0 && previous.empty()) {
+      INSPECT_ASSIGN_OR_RETURN(previous, load(i - 1));  // after concurrent pairs
+    }
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(i));
     if (i == 0) {
       size = frame.size();

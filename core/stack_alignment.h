@@ -62,6 +62,11 @@ struct StackAlignmentOptions {
   // may be at most max_failed_pair_share of the pairs: else the stack does not follow one model,
   // aligning with it would smear the depth map, and the estimate fails instead.
   double max_pair_residual_px = 1.0;
+  // Neighbour pairs registered at once. 1: one pair after another, two frames in memory (load is
+  // called once per frame, in order). Otherwise (0 = all hardware threads) pairs register
+  // concurrently: load must be thread-safe and is called for both frames of each pair (so use it
+  // on frames held in memory, e.g. a StackFrameDecoder's); the model is the same bit for bit.
+  int threads = 1;
   Status Validate() const;
 };
 

@@ -13,7 +13,14 @@ namespace inspection {
 namespace {
 
 // The aligner for the folder's frames, or nullopt when the frames are used as they are.
-StatusOr<std::optional<StackAligner>> PrepareAlignment(const std::filesystem::path& dir, const StackManifest& manifest,
+// The grey image focus is measured on: the frame as stored, or a colour frame's luminance.
+StatusOr<cv::Mat> GreyFrame(const StackFrameSource& source, int index) {
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat image, source.frame(index));
+  if (image.channels() == 1) return image;
+  return LuminanceOf(image);
+}
+
+StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& source, const StackManifest& manifest,
                                                        const StackFolderAlignment& a, const std::atomic<bool>& cancel,
                                                        AlignmentFigures* figures) {
   if (figures) *figures = AlignmentFigures{};
@@ -34,7 +41,7 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const std::filesystem::pa
       auto load = [&](int i) -> StatusOr<cv::Mat> {
         if (cancel.load())
           return Status::Cancelled("reconstruction cancelled while aligning frame " + std::to_string(i));
-        return LoadStackFrame(dir, manifest, size_t(i));  // errors name the frame
+        return GreyFrame(source, i);  // errors name the frame
       };
       StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
       if (!estimate.ok()) {
@@ -48,7 +55,7 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const std::filesystem::pa
       break;
     }
   }
-  INSPECT_ASSIGN_OR_RETURN(cv::Mat first, LoadStackFrame(dir, manifest, 0));
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat first, GreyFrame(source, 0));
   INSPECT_ASSIGN_OR_RETURN(StackAligner aligner, StackAligner::Create(model, a.alignment, z_um, first.size()));
   if (figures) *figures = aligner.figures();
   return std::optional<StackAligner>(std::move(aligner));
@@ -60,8 +67,17 @@ StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, c
                                              const SffOptions& options, const StackFrameCallback& on_frame,
                                              const std::atomic<bool>& cancel, const StackFolderAlignment& alignment,
                                              AlignmentFigures* figures) {
+  StackFrameSource source;
+  source.frame = [&](int i) { return DecodeStackFrame(dir, manifest, size_t(i)); };
+  return ReconstructStackFrames(manifest, source, options, on_frame, cancel, alignment, figures);
+}
+
+StatusOr<DepthResult> ReconstructStackFrames(const StackManifest& manifest, const StackFrameSource& source,
+                                             const SffOptions& options, const StackFrameCallback& on_frame,
+                                             const std::atomic<bool>& cancel, const StackFolderAlignment& alignment,
+                                             AlignmentFigures* figures) {
   INSPECT_ASSIGN_OR_RETURN(std::optional<StackAligner> aligner,
-                           PrepareAlignment(dir, manifest, alignment, cancel, figures));
+                           PrepareAlignment(source, manifest, alignment, cancel, figures));
   std::unique_ptr<SffEngine> engine;
   // Colour stacks: the engine measures focus on the luminance, and the composer keeps, per pixel,
   // the colour of the frame the engine picks (same scores, same tie rule), O(pixels) state.
@@ -69,14 +85,20 @@ StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, c
   const int count = int(manifest.frames.size());
   for (int i = 0; i < count; ++i) {
     if (cancel.load()) return Status::Cancelled("reconstruction cancelled at frame " + std::to_string(i));
-    INSPECT_ASSIGN_OR_RETURN(StackFrameImage image, LoadStackFrameImage(dir, manifest, size_t(i)));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat decoded, source.frame(i));
+    StackFrameImage image;  // as LoadStackFrameImage: the colour frame, or the grey frame as stored
+    if (decoded.channels() == 3) {
+      image.colour = decoded;  // its luminance is taken below, after the warp
+    } else {
+      image.grey = decoded;
+    }
     const std::string name = "frame " + std::to_string(i) + " (" + manifest.frames[i].file + ")";
     if (i > 0 && image.is_colour() != colour.has_value()) {
       return Status::InvalidArgument(name + ": " + (image.is_colour() ? "colour (3 channels)" : "grey") +
                                      " differs from frame 0 (" + (colour ? "colour (3 channels)" : "grey") + ")");
     }
     if (!engine) {
-      INSPECT_ASSIGN_OR_RETURN(engine, SffEngine::Create(options, image.grey.size(), image.grey.type()));
+      INSPECT_ASSIGN_OR_RETURN(engine, SffEngine::Create(options, decoded.size(), CV_MAKETYPE(decoded.depth(), 1)));
       if (image.is_colour()) {
         INSPECT_ASSIGN_OR_RETURN(AllInFocusComposer c,
                                  AllInFocusComposer::Create(image.colour.size(), image.colour.type()));
@@ -99,6 +121,7 @@ StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, c
       INSPECT_ASSIGN_OR_RETURN(frame, aligner->Warp(frame, i));
     }
     INSPECT_RETURN_IF_ERROR(engine->PushFrame(frame, manifest.frames[i].z_um).WithContext(name));
+    if (source.release) source.release(i);
     if (on_frame) on_frame(i, count, manifest.frames[i].z_um, ComputeFrameStatistics(frame, manifest.bit_depth));
   }
   if (!engine) return Status::InvalidArgument("stack has no frames");

@@ -47,6 +47,22 @@ StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, c
                                              const StackFolderAlignment& alignment = {},
                                              AlignmentFigures* figures = nullptr);
 
+// The frames of a stack, by index, as stored (CV_8U/16U, 1 or 3 channels; DecodeStackFrame):
+// ReconstructStackFrames asks for them strictly in z order (twice with kEstimate alignment: the
+// registration pass, then the engine pass) and calls release(i) once frame i is in the engine.
+struct StackFrameSource {
+  std::function<StatusOr<cv::Mat>(int)> frame;
+  std::function<void(int)> release;  // may be empty
+};
+
+// ReconstructStackFolder on frames from `source` (e.g. a StackFrameDecoder,
+// core/stack_frame_decoder.h) instead of the folder: the same loop, the same result bit for bit.
+StatusOr<DepthResult> ReconstructStackFrames(const StackManifest& manifest, const StackFrameSource& source,
+                                             const SffOptions& options, const StackFrameCallback& on_frame,
+                                             const std::atomic<bool>& cancel,
+                                             const StackFolderAlignment& alignment = {},
+                                             AlignmentFigures* figures = nullptr);
+
 // Largest displacement (px) of a frame corner over the frames at z_um under the model,
 // relative to the middle frame: below ~0.5 px alignment changes nothing measurable.
 double MaxCornerDisplacementPx(const FocusBreathingModel& model, const std::vector<double>& z_um);

@@ -86,7 +86,8 @@ bool SafeEntryName(const std::string& name) {
 
 }  // namespace
 
-Status UnzipToFolder(const fs::path& zip_path, const fs::path& folder) {
+Status UnzipToFolder(const fs::path& zip_path, const fs::path& folder,
+                     const std::function<void(const std::string&)>& on_file) {
   int err = 0;
   std::unique_ptr<zip_t, decltype(&zip_discard)> za(zip_open(zip_path.c_str(), ZIP_RDONLY, &err), zip_discard);
   if (!za) return Status::DataLoss("cannot open the stored stack " + zip_path.filename().string());
@@ -95,7 +96,14 @@ Status UnzipToFolder(const fs::path& zip_path, const fs::path& folder) {
   if (ec) return WriteFailure(ec.value(), "cannot create " + folder.string());
   const zip_int64_t n = zip_get_num_entries(za.get(), 0);
   std::vector<char> buf(1 << 20);
+  // stack.json first (the archive sorts it after the frames): a reader of the frames needs it.
+  std::vector<zip_int64_t> order;
+  const zip_int64_t manifest = zip_name_locate(za.get(), "stack.json", 0);
+  if (manifest >= 0) order.push_back(manifest);
   for (zip_int64_t i = 0; i < n; ++i) {
+    if (i != manifest) order.push_back(i);
+  }
+  for (const zip_int64_t i : order) {
     zip_stat_t st;
     if (zip_stat_index(za.get(), zip_uint64_t(i), 0, &st) != 0 || (st.valid & ZIP_STAT_NAME) == 0) {
       return Status::DataLoss("stored stack " + zip_path.filename().string() + ": unreadable entry " +
@@ -125,6 +133,7 @@ Status UnzipToFolder(const fs::path& zip_path, const fs::path& folder) {
     if (std::fflush(out.get()) != 0) return WriteFailure(errno, "cannot write " + target.string());
     FILE* f = out.release();
     if (std::fclose(f) != 0) return WriteFailure(errno, "cannot write " + target.string());
+    if (on_file) on_file(name);
   }
   return Status::Ok();
 }

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <string>
 
 #include "core/status.h"
@@ -19,6 +20,9 @@ Status ZipFolder(const std::filesystem::path& folder, const std::filesystem::pat
 // without ".." (anything else: DATA_LOSS naming the entry, nothing is written outside `folder`).
 // A failed write returns WriteFailure's status (RESOURCE_EXHAUSTED "data disk full" on ENOSPC);
 // on any error the caller removes `folder`.
-Status UnzipToFolder(const std::filesystem::path& zip_path, const std::filesystem::path& folder);
+// on_file (may be empty) is called with each file's entry name once it is complete on disk;
+// stack.json is extracted first, so a stack's frames can be decoded as they come.
+Status UnzipToFolder(const std::filesystem::path& zip_path, const std::filesystem::path& folder,
+                     const std::function<void(const std::string&)>& on_file = {});
 
 }  // namespace inspection

@@ -96,7 +96,8 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   s->calibrations_->LoadActive().IgnoreError();  // logged; the server still serves without it
   s->results_ = std::make_unique<ResultFeed>(s->store_.get());
   s->runner_ =
-      std::make_unique<ProcedureRunner>(s->store_.get(), s->rig_.get(), s->calibrations_.get(), s->results_.get());
+      std::make_unique<ProcedureRunner>(s->store_.get(), s->rig_.get(), s->calibrations_.get(), s->results_.get(),
+                                        options.reconstruct);
   JobManagerOptions jo;
   jo.rig_queue_capacity = options.rig_queue_capacity;
   jo.on_event = [ops = s->ops_.get()](const v1::JobEvent& e) { ops->OnJobEvent(e); };
@@ -120,6 +121,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   so.janitor = s->janitor_.get();
   so.min_free_bytes = min_free_bytes;
   so.results = s->results_.get();
+  so.reconstruct = options.reconstruct;
   s->service_ = std::make_unique<InspectionServiceImpl>(so, s->store_.get(), s->jobs_.get(), s->rig_.get(),
                                                         s->calibrations_.get());
   if (options.no_rig) {

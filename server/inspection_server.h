@@ -54,6 +54,8 @@ struct ServerOptions {
   SimulatedRigOptions simulation;  // used when no rig is given to Start
   // Reconstruct only (the scale-out pool): no rig is opened; rig calls answer FAILED_PRECONDITION.
   bool no_rig = false;
+  // How reconstructions decode frames and write artifacts (server/job_work.h).
+  ReconstructPipelineOptions reconstruct;
   // Prometheus /metrics and the web dashboard (host:port, port 0 = any); empty = no HTTP port.
   std::string http_listen_address;
 };

@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <set>
 
 #include "core/stack.h"
@@ -56,9 +57,50 @@ grpc::Status StreamJob(grpc::ServerContext* ctx, const std::shared_ptr<JobRecord
   return Grpc(JobOutcome(r->Snapshot()));
 }
 
-// Receives an uploaded stack folder into `dir`. Errors name the file and field at fault.
+// Starts decoding an upload's frames as their files complete (core/stack_frame_decoder.h). The
+// decoder exists once stack.json is complete and parses; files completed before that are
+// submitted then. A stack.json that does not parse leaves the decoder null: the manifest check
+// after the upload names the fault, as before.
+class UploadDecoding {
+ public:
+  UploadDecoding(const fs::path& dir, const ReconstructPipelineOptions& options) : dir_(dir), options_(options) {}
+
+  void FileComplete(const std::string& path) {
+    if (options_.sequential) return;
+    if (decoder_) {
+      decoder_->SubmitFile(path);
+      return;
+    }
+    if (path != kStackManifestName) {
+      completed_.push_back(path);
+      return;
+    }
+    std::ifstream in(dir_ / path, std::ios::binary);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    auto manifest = ParseStackManifest(text);
+    if (!manifest.ok()) return;
+    StackFrameDecoderOptions o;
+    o.threads = options_.decode_threads;
+    o.max_kept_bytes = options_.max_decoded_bytes;
+    decoder_ = std::make_shared<StackFrameDecoder>(dir_, std::move(manifest).value(), o);
+    for (const std::string& f : completed_) decoder_->SubmitFile(f);
+    completed_.clear();
+  }
+
+  std::shared_ptr<StackFrameDecoder> Take() { return std::move(decoder_); }
+
+ private:
+  fs::path dir_;
+  ReconstructPipelineOptions options_;
+  std::vector<std::string> completed_;  // before stack.json
+  std::shared_ptr<StackFrameDecoder> decoder_;
+};
+
+// Receives an uploaded stack folder into `dir`, handing each complete file to `decoding`. Errors
+// name the file and field at fault.
 Status ReceiveUpload(grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructRequest>* stream,
-                     const ReconstructSource& upload, const fs::path& dir, int64_t max_bytes) {
+                     const ReconstructSource& upload, const fs::path& dir, int64_t max_bytes,
+                     UploadDecoding* decoding) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) return Status::Internal("cannot create upload folder: " + ec.message());
@@ -88,8 +130,12 @@ Status ReceiveUpload(grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructReque
       // ENOSPC: RESOURCE_EXHAUSTED "data disk full"; the upload folder goes with the request.
       return WriteFailure(errno ? errno : EIO, "cannot write uploaded file '" + c.path() + "'");
     }
+    out.close();  // on disk before a decode thread opens it
     sizes[c.path()] += int64_t(c.data().size());
-    if (c.last()) complete[c.path()] = true;
+    if (c.last()) {
+      complete[c.path()] = true;
+      decoding->FileComplete(c.path());
+    }
   }
   for (const auto& [path, size] : sizes) {
     if (!complete[path]) return Status::InvalidArgument("file '" + path + "' ended without a chunk marked last");
@@ -205,29 +251,55 @@ grpc::Status InspectionServiceImpl::Reconstruct(
   if (!source.ok()) return Grpc(source.status());
   fs::path dir;
   std::shared_ptr<const OwnedFolder> upload;  // removed on every early return
+  // Declared after `upload`: its decode threads are joined before the folder goes.
+  std::shared_ptr<StackFrameDecoder> decoded;
   if (source->upload) {
     if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
     upload = std::make_shared<const OwnedFolder>(store_->uploads_dir() / NewId("upload"));
     dir = upload->path();
-    if (Status s = ReceiveUpload(stream, *source, dir, options_.max_upload_bytes); !s.ok()) return Grpc(s);
+    UploadDecoding decoding(dir, options_.reconstruct);
+    Status received = ReceiveUpload(stream, *source, dir, options_.max_upload_bytes, &decoding);
+    decoded = decoding.Take();
+    if (!received.ok()) return Grpc(received);
   } else {
     // The stack is stored once, as the scan's stack.zip: the job reads its own extraction.
     if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
-    auto stored = OpenStoredStack(*store_, source->scan_id);
+    // Its frames decode as they are extracted (stack.json comes first).
+    std::optional<UploadDecoding> decoding;
+    auto stored = OpenStoredStack(*store_, source->scan_id, [&](const fs::path& folder, const std::string& file) {
+      if (!decoding) decoding.emplace(folder, options_.reconstruct);
+      decoding->FileComplete(file);
+    });
+    if (decoding) decoded = decoding->Take();
     if (!stored.ok()) return Grpc(stored.status());
     dir = stored->dir;
     upload = std::move(stored->extraction);
   }
-  // Validate the whole stack before a job exists: bad input never becomes a failed job.
+  // Validate the whole stack before a job exists: bad input never becomes a failed job. The
+  // frames were decoding while they arrived; the rest decode now, in parallel (a stored scan's
+  // all of them), and the job's engine takes them from memory in z order. Sequential: the path
+  // before issue 16 (decoded here to check them, and again by the job).
   auto manifest = ReadStackManifest(dir);
-  Status valid = manifest.ok() ? ValidateStackFrames(dir, *manifest) : manifest.status();
-  if (!valid.ok()) return Grpc(valid);
+  if (!manifest.ok()) return Grpc(manifest.status());
+  if (options_.reconstruct.sequential) {
+    decoded.reset();
+    if (Status s = ValidateStackFrames(dir, *manifest); !s.ok()) return Grpc(s);
+  } else {
+    if (!decoded) {
+      StackFrameDecoderOptions o;
+      o.threads = options_.reconstruct.decode_threads;
+      o.max_kept_bytes = options_.reconstruct.max_decoded_bytes;
+      decoded = std::make_shared<StackFrameDecoder>(dir, *manifest, o);
+    }
+    if (Status s = decoded->Finish(); !s.ok()) return Grpc(s);
+  }
   // The upload moves into the job's work: it goes when the job ends, or with the request when
   // no job is queued (invalid options, a duplicate request id, a full queue).
   auto r = jobs_->Submit(
       v1::JOB_KIND_RECONSTRUCT, start.request_id(), start.label(),
       [&, upload = std::move(upload)]() -> StatusOr<JobWork> {
         INSPECT_ASSIGN_OR_RETURN(ReconstructWork work, MapReconstructStart(start, dir, upload));
+        work.decoded = std::move(decoded);
         return JobWork(std::move(work));
       },
       who->name);

@@ -35,6 +35,8 @@ struct ServiceOptions {
   int64_t min_free_bytes = 0;
   // The inspection result feed (ListResults reads the store directly); must outlive the service.
   ResultFeed* results = nullptr;
+  // Frames decode while an upload arrives (server/job_work.h).
+  ReconstructPipelineOptions reconstruct;
 };
 
 // Authenticates the caller and checks the role `method` needs: UNAUTHENTICATED without or with

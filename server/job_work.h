@@ -12,6 +12,7 @@
 
 #include "core/depth_postprocess.h"
 #include "core/sff_engine.h"
+#include "core/stack_frame_decoder.h"
 #include "core/stack_alignment.h"
 #include "inspection/v1/inspection.pb.h"
 #include "server/inspection_result.h"
@@ -38,6 +39,19 @@ struct CalibrateWork {
   CalibrationOptions options;
 };
 
+// How a reconstruction reads its frames and writes its artifacts (issue 16 item 4).
+struct ReconstructPipelineOptions {
+  // Frames decode on this many threads while the upload arrives (or the stored scan is read);
+  // 0 = all hardware threads.
+  int decode_threads = 0;
+  // Decoded frames kept per reconstruction for the engine; beyond it the job decodes again.
+  int64_t max_decoded_bytes = StackFrameDecoderOptions{}.max_kept_bytes;
+  int artifact_threads = 0;  // artifact files written (and hashed) at once; 0 = all hardware threads
+  // The path before issue 16, for the end-to-end benchmark's baseline: every frame decoded after
+  // the upload to check it and again in the job, one after another; artifacts one at a time.
+  bool sequential = false;
+};
+
 // Reconstruct a stack folder that has already been validated (core/stack.h format).
 struct ReconstructWork {
   std::filesystem::path stack_dir;
@@ -46,6 +60,10 @@ struct ReconstructWork {
   // goes when the last copy of the work does (the job
   // ended, was cancelled while queued, or never got queued).
   std::shared_ptr<const OwnedFolder> upload;
+  // The frames of stack_dir, decoded (and checked) while the request was received; null = the
+  // job decodes them from stack_dir. Declared after `upload`: destroyed (its threads joined)
+  // before the folder goes.
+  std::shared_ptr<StackFrameDecoder> decoded;
   SffOptions sff;
   ReconstructionMethodSettings method;  // SFF with sff, or an integral method (thesis 5.4, 6.4)
   std::vector<DepthExportKind> extra_exports;

@@ -213,7 +213,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
   INSPECT_ASSIGN_OR_RETURN(ScanOutcome outcome, std::move(scanned));
   EmitPhase(context, v1::JOB_PHASE_STORING, 0.92);
 
-  INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher, ResultPublisher::Create(store_, job_id));
+  INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher, ResultPublisher::Create(store_, job_id, artifact_threads()));
   DepthExportMeta meta;
   meta.pixel_size_um = outcome.manifest.pixel_size_um;
   meta.description = "depth (um) of scan " + job_id;
@@ -333,6 +333,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     // The calibration active now; two passes over the folder without per-frame events (and
     // without a cancellation point inside them: ~1 s for 23 frames of 1024 x 768).
     const std::shared_ptr<const CalibrationBundle> bundle = calibrations_->active();
+    if (work.decoded) work.decoded->ReleaseAll();  // the integral methods read the folder themselves
     if (context.cancel->load()) return Status::Cancelled("reconstruction cancelled before it started");
     EmitPhase(context, v1::JOB_PHASE_RECONSTRUCTING, 0.05,
               std::string(ReconstructionMethodName(work.method.method)) + " over " + std::to_string(m.frames.size()) +
@@ -354,7 +355,18 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     // Unthresholded engine, then the post-processing (core/depth_postprocess.h) thresholds.
     SffOptions unthresholded = work.sff;
     unthresholded.min_confidence = 0.0;
-    auto r = ReconstructStackFolder(work.stack_dir, m, unthresholded, on_frame, *context.cancel, a, &alignment);
+    // Frames decoded while the request arrived come from memory, in z order, each freed once
+    // the engine has it; without them (the sequential path) the folder is read here.
+    StatusOr<DepthResult> r = Status::Internal("not run");
+    if (work.decoded) {
+      a.options.threads = 0;  // frames in memory, Frame thread-safe: neighbour pairs register concurrently
+      StackFrameSource source{[&](int i) { return work.decoded->Frame(i); },
+                              [&](int i) { work.decoded->Release(i); }};
+      r = ReconstructStackFrames(m, source, unthresholded, on_frame, *context.cancel, a, &alignment);
+      work.decoded->ReleaseAll();  // what a failure left
+    } else {
+      r = ReconstructStackFolder(work.stack_dir, m, unthresholded, on_frame, *context.cancel, a, &alignment);
+    }
     if (!r.ok()) {
       const bool alignment_error = r.status().message().rfind("alignment", 0) == 0;
       return alignment_error ? r.status().WithContext("options.alignment") : r.status();
@@ -368,11 +380,14 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   const double engine_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EmitPhase(context, v1::JOB_PHASE_STORING, 0.92);
 
-  INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher, ResultPublisher::Create(store_, context.job_id));
+  INSPECT_ASSIGN_OR_RETURN(ResultPublisher publisher,
+                           ResultPublisher::Create(store_, context.job_id, artifact_threads()));
   DepthExportMeta meta;
   meta.pixel_size_um = m.pixel_size_um;
   meta.description = "depth (um) from reconstruct job " + context.job_id;
+  const auto t_write = std::chrono::steady_clock::now();
   INSPECT_RETURN_IF_ERROR(publisher.WriteDepth(depth, meta, work.extra_exports));
+  const double write_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_write).count();
   // Ground truth travels with simulated stacks; without it (or unreadable) the summary has no
   // error figures, and the depth result stands on its own.
   cv::Mat truth;
@@ -393,7 +408,11 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   RecordMethod(work.method, isff, result.mutable_depth());
   RecordAlignment(alignment, result.mutable_depth());
   RecordPostProcess(postprocess, result.mutable_depth());
+  const auto t_publish = std::chrono::steady_clock::now();
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
+  spdlog::debug("job {}: reconstruction {:.3f} s, artifacts written {:.3f} s, hashed and published {:.3f} s",
+                context.job_id, engine_seconds, write_seconds,
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - t_publish).count());
   return result;
 }
 

@@ -22,8 +22,10 @@ namespace inspection {
 class ProcedureRunner final : public JobRunner {
  public:
   // `results` receives the inspection result of every scan that ran a recipe.
-  ProcedureRunner(DataStore* store, RigController* rig, CalibrationStore* calibrations, ResultFeed* results)
-      : store_(store), rig_(rig), calibrations_(calibrations), results_(results) {}
+  // pipeline: how reconstructions write their artifacts (artifact_threads, sequential).
+  ProcedureRunner(DataStore* store, RigController* rig, CalibrationStore* calibrations, ResultFeed* results,
+                  const ReconstructPipelineOptions& pipeline = {})
+      : store_(store), rig_(rig), calibrations_(calibrations), results_(results), pipeline_(pipeline) {}
 
   StatusOr<v1::JobResult> Run(const JobWork& work, const JobContext& context) override;
 
@@ -36,6 +38,8 @@ class ProcedureRunner final : public JobRunner {
   RigController* rig_;
   CalibrationStore* calibrations_;
   ResultFeed* results_;
+  ReconstructPipelineOptions pipeline_;
+  int artifact_threads() const { return pipeline_.sequential ? 1 : pipeline_.artifact_threads; }
 };
 
 }  // namespace inspection

@@ -5,23 +5,24 @@
 #include <system_error>
 
 #include "core/depth_metrics.h"
+#include "core/parallel_for.h"
 #include "server/artifact_files.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
 
-StatusOr<ResultPublisher> ResultPublisher::Create(DataStore* store, const std::string& job_id) {
+StatusOr<ResultPublisher> ResultPublisher::Create(DataStore* store, const std::string& job_id, int threads) {
   OwnedFolder dir(store->tmp_dir() / (job_id + ".artifacts"));
   std::error_code ec;
   fs::create_directories(dir.path(), ec);
   if (ec) return Status::Internal("cannot create " + dir.path().string() + ": " + ec.message());
-  return ResultPublisher(store, job_id, std::move(dir));
+  return ResultPublisher(store, job_id, std::move(dir), threads);
 }
 
 Status ResultPublisher::WriteDepth(const DepthResult& depth, const DepthExportMeta& meta,
                                    const std::vector<DepthExportKind>& extra_exports) {
   INSPECT_ASSIGN_OR_RETURN(std::vector<DepthArtifactFile> files,
-                           WriteDepthArtifacts(depth, dir_.path(), meta, extra_exports));
+                           WriteDepthArtifacts(depth, dir_.path(), meta, extra_exports, threads_));
   for (const DepthArtifactFile& f : files) files_.push_back({ToArtifactKind(f.kind), f.path});
   return Status::Ok();
 }
@@ -54,8 +55,13 @@ Status ResultPublisher::Zip(v1::ArtifactKind kind, const fs::path& folder, const
 
 Status ResultPublisher::Publish(v1::JobResult* result) {
   const fs::path final_dir = store_->artifacts_dir() / job_id_;
+  // Hashing reads every file once; independent files hash concurrently (one slot each).
+  std::vector<StatusOr<std::string>> sha(files_.size(), Status::Internal("not hashed"));
+  ParallelFor(int(files_.size()), ResolveThreads(threads_),
+              [&](int i, int) { sha[size_t(i)] = Sha256File(files_[size_t(i)].second); });
   std::vector<StoredArtifact> stored;
-  for (const auto& [kind, path] : files_) {
+  for (size_t i = 0; i < files_.size(); ++i) {
+    const auto& [kind, path] = files_[i];
     StoredArtifact a;
     a.job_id = job_id_;
     a.path = final_dir / path.filename();
@@ -65,8 +71,8 @@ Status ResultPublisher::Publish(v1::JobResult* result) {
     std::error_code ec;
     a.artifact.set_size_bytes(int64_t(fs::file_size(path, ec)));
     if (ec) return Status::Internal("artifact " + path.string() + ": " + ec.message());
-    INSPECT_ASSIGN_OR_RETURN(std::string sha, Sha256File(path));
-    a.artifact.set_sha256(sha);
+    if (!sha[i].ok()) return sha[i].status();
+    a.artifact.set_sha256(*sha[i]);
     a.artifact.set_media_type(MediaType(kind));
     stored.push_back(std::move(a));
   }

@@ -24,8 +24,9 @@ namespace inspection {
 
 class ResultPublisher {
  public:
-  // Creates the job's work folder under the store's tmp/.
-  static StatusOr<ResultPublisher> Create(DataStore* store, const std::string& job_id);
+  // Creates the job's work folder under the store's tmp/. threads: how many files are written and
+  // hashed at once (0 = all hardware threads, 1 = one after another).
+  static StatusOr<ResultPublisher> Create(DataStore* store, const std::string& job_id, int threads = 0);
 
   // depth.tiff, confidence.tiff, all_in_focus.png, depth_preview.png and the requested extras.
   Status WriteDepth(const DepthResult& depth, const DepthExportMeta& meta,
@@ -41,12 +42,13 @@ class ResultPublisher {
   Status Publish(v1::JobResult* result);
 
  private:
-  ResultPublisher(DataStore* store, std::string job_id, OwnedFolder dir)
-      : store_(store), job_id_(std::move(job_id)), dir_(std::move(dir)) {}
+  ResultPublisher(DataStore* store, std::string job_id, OwnedFolder dir, int threads)
+      : store_(store), job_id_(std::move(job_id)), dir_(std::move(dir)), threads_(threads) {}
 
   DataStore* store_;
   std::string job_id_;
   OwnedFolder dir_;
+  int threads_;
   std::vector<std::pair<v1::ArtifactKind, std::filesystem::path>> files_;
 };
 

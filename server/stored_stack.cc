@@ -8,7 +8,8 @@
 namespace inspection {
 namespace fs = std::filesystem;
 
-StatusOr<StoredStackFolder> OpenStoredStack(DataStore& store, const std::string& scan_id) {
+StatusOr<StoredStackFolder> OpenStoredStack(DataStore& store, const std::string& scan_id,
+                                            const StoredFileCallback& on_file) {
   StoredStackFolder out;
   std::error_code ec;
   const fs::path legacy = store.scans_dir() / scan_id;
@@ -31,7 +32,11 @@ StatusOr<StoredStackFolder> OpenStoredStack(DataStore& store, const std::string&
     return Status::DataLoss("the stored stack of scan " + scan_id + " is missing on the server");
   }
   auto folder = std::make_shared<const OwnedFolder>(store.uploads_dir() / NewId("stack"));
-  INSPECT_RETURN_IF_ERROR(UnzipToFolder(zip->path, folder->path()).WithContext("scan " + scan_id));
+  INSPECT_RETURN_IF_ERROR(UnzipToFolder(zip->path, folder->path(),
+                                        [&](const std::string& name) {
+                                          if (on_file) on_file(folder->path(), name);
+                                        })
+                              .WithContext("scan " + scan_id));
   out.dir = folder->path();
   out.extraction = std::move(folder);
   return out;

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -25,6 +26,10 @@ struct StoredStackFolder {
 // DATA_LOSS when the archive is missing or corrupt on the server; RESOURCE_EXHAUSTED "data disk
 // full" when the extraction (under the store's uploads/) runs out of space. Nothing is left on
 // any error.
-StatusOr<StoredStackFolder> OpenStoredStack(DataStore& store, const std::string& scan_id);
+// on_file (may be empty): (extraction folder, file's relative path) once each extracted file is
+// on disk, stack.json first (UnzipToFolder), so the frames can decode while the rest is extracted.
+using StoredFileCallback = std::function<void(const std::filesystem::path&, const std::string&)>;
+StatusOr<StoredStackFolder> OpenStoredStack(DataStore& store, const std::string& scan_id,
+                                            const StoredFileCallback& on_file = {});
 
 }  // namespace inspection

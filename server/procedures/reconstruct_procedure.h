@@ -31,11 +31,14 @@ struct DepthArtifactFile {
 };
 
 // Writes depth.tiff, confidence.tiff, all_in_focus.png, depth_preview.png and the requested
-// extras (kDepthPng16, kDepthPly, kDepthX3p) into dir. On error, files already written stay for
-// the caller to discard with the folder.
+// extras (kDepthPng16, kDepthPly, kDepthX3p) into dir, each file by its own task on up to
+// `threads` threads (0 = all hardware threads; 1 = one after another): they are independent.
+// Returns them in that order. On error (the first failing file in that order), files already
+// written stay for the caller to discard with the folder.
 StatusOr<std::vector<DepthArtifactFile>> WriteDepthArtifacts(const DepthResult& result,
                                                              const std::filesystem::path& dir,
                                                              const DepthExportMeta& meta,
-                                                             const std::vector<DepthExportKind>& extras);
+                                                             const std::vector<DepthExportKind>& extras,
+                                                             int threads = 0);
 
 }  // namespace inspection

@@ -126,6 +126,37 @@ TEST(StackAlignmentTest, EstimatesTheBreathingModelFromNeighbourPairs) {
   EXPECT_LT(cv::norm(a * corner - b * corner), 0.5);
 }
 
+// Issue 16: neighbour pairs registered concurrently give the sequential estimate bit for bit.
+TEST(StackAlignmentTest, ConcurrentPairsGiveTheSequentialModelExactly) {
+  const BreathingStack s = MakeStack({320, 240}, 11, 10.0, 0.02, 0.002, 3.0, -2.0);
+  auto load = [&](int i) -> StatusOr<cv::Mat> { return s.frames[size_t(i)]; };
+  auto sequential = EstimateFocusBreathing(load, s.z_um, {});
+  ASSERT_TRUE(sequential.ok()) << sequential.status().ToString();
+  for (int threads : {0, 2, 3}) {
+    StackAlignmentOptions o;
+    o.threads = threads;
+    auto concurrent = EstimateFocusBreathing(load, s.z_um, o);
+    ASSERT_TRUE(concurrent.ok()) << concurrent.status().ToString();
+    EXPECT_EQ(concurrent->scale_change_per_100um, sequential->scale_change_per_100um) << threads;
+    EXPECT_EQ(concurrent->rotation_rad_per_100um, sequential->rotation_rad_per_100um) << threads;
+    EXPECT_EQ(concurrent->shift_x_px_per_100um, sequential->shift_x_px_per_100um) << threads;
+    EXPECT_EQ(concurrent->shift_y_px_per_100um, sequential->shift_y_px_per_100um) << threads;
+    EXPECT_EQ(concurrent->fit_rms_px, sequential->fit_rms_px) << threads;
+    EXPECT_EQ(concurrent->frames, sequential->frames) << threads;
+  }
+  // A frame of another size is still named, concurrently or not.
+  std::vector<cv::Mat> frames = s.frames;
+  frames[6] = cv::Mat(200, 300, CV_8UC1, cv::Scalar(0));
+  auto bad = [&](int i) -> StatusOr<cv::Mat> { return frames[size_t(i)]; };
+  StackAlignmentOptions o;
+  o.threads = 2;
+  const Status a = EstimateFocusBreathing(bad, s.z_um, {}).status(), b = EstimateFocusBreathing(bad, s.z_um, o).status();
+  EXPECT_EQ(a.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(a.message(), "frame 6 differs in size");
+  EXPECT_EQ(b.code(), a.code());
+  EXPECT_EQ(b.message(), a.message());
+}
+
 TEST(StackAlignmentTest, AlignerWarpsEveryFrameOntoTheMiddleFrame) {
   const BreathingStack s = MakeStack({320, 240}, 9, 10.0, 0.03, 0.0, 6.0, 3.0, 0.0);  // all frames equally sharp
   auto a = StackAligner::Create(s.truth, FrameAlignment::kCalibrated, s.z_um, {320, 240});

@@ -61,6 +61,7 @@ class ServerTest : public ::testing::Test {
     opt.data_dir = data_dir_;
     opt.rig_queue_capacity = queue_capacity;
     opt.simulation = SimOptions();
+    opt.reconstruct = pipeline_;
     if (!control_) control_ = std::make_shared<RigControl>();
     auto sim = CreateSimulatedRig(opt.simulation);
     ASSERT_TRUE(sim.ok()) << sim.status().ToString();
@@ -84,6 +85,7 @@ class ServerTest : public ::testing::Test {
   }
 
   std::filesystem::path data_dir_;
+  ReconstructPipelineOptions pipeline_;  // for the next StartServer
   std::shared_ptr<RigControl> control_;
   std::unique_ptr<InspectionServer> server_;
   std::unique_ptr<client::InspectionClient> client_;
