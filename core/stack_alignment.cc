@@ -115,6 +115,18 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
   int failed = 0;
   cv::Mat previous;
   cv::Size size;
+  // Takes pair i's registration: its transform, or a counted failure (bad input is returned).
+  auto take = [&](int i, const StatusOr<FrameRegistration>& r) -> Status {
+    if (r.ok()) {
+      pair_t[size_t(i)] = r->transform;
+      ok[size_t(i)] = true;
+      return Status::Ok();
+    }
+    if (r.status().code() == StatusCode::kInvalidArgument) return r.status();
+    ++failed;
+    if (failures.size() < 200) failures += (failures.empty() ? "" : "; ") + PairName(i) + ": " + r.status().message();
+    return Status::Ok();
+  };
   // Concurrent pairs: each registered on its own thread, then taken in order below exactly as
   // the sequential loop takes them (same errors, same failures, same model).
   std::vector<std::optional<StatusOr<FrameRegistration>>> registered;
@@ -132,16 +144,7 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
   for (int i = 0; i < n; ++i) {
     if (!registered.empty() && i > 0 && registered[size_t(i)]) {
       // Registered concurrently; frames i-1 and i loaded and of the first frame's size.
-      const StatusOr<FrameRegistration>& r = *registered[size_t(i)];
-      if (r.ok()) {
-        pair_t[size_t(i)] = r->transform;
-        ok[size_t(i)] = true;
-      } else {
-        if (r.status().code() == StatusCode::kInvalidArgument) return r.status();
-        ++failed;
-        if (failures.size() < 200)
-          failures += (failures.empty() ? "" : "; ") + PairName(i) + ": " + r.status().message();
-      }
+      INSPECT_RETURN_IF_ERROR(take(i, *registered[size_t(i)]));
       continue;
     }
     if (i > 0 && previous.empty()) {
@@ -156,16 +159,7 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
       }
     } else {
       if (frame.size() != size) return Status::InvalidArgument("frame " + std::to_string(i) + " differs in size");
-      StatusOr<FrameRegistration> r = RegisterFrame(previous, frame, options.registration);
-      if (r.ok()) {
-        pair_t[size_t(i)] = r->transform;
-        ok[size_t(i)] = true;
-      } else {
-        if (r.status().code() == StatusCode::kInvalidArgument) return r.status();
-        ++failed;
-        if (failures.size() < 200)
-          failures += (failures.empty() ? "" : "; ") + PairName(i) + ": " + r.status().message();
-      }
+      INSPECT_RETURN_IF_ERROR(take(i, RegisterFrame(previous, frame, options.registration)));
     }
     previous = std::move(frame);
   }
