@@ -38,6 +38,7 @@
 
 #include "client_cli/inspection_client.h"
 #include "server/inspection_server.h"
+#include "tests/bench/process_memory.h"
 
 namespace fs = std::filesystem;
 namespace v1 = inspection::v1;
@@ -49,20 +50,9 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double Seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
-long ProcStatusKb(const char* key) {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind(key, 0) == 0) return std::atol(line.c_str() + std::strlen(key) + 1);
-  }
-  return -1;
-}
 
-// Resets the peak RSS (VmHWM) to the current RSS (Linux >= 4.0).
-void ResetPeakRss() {
-  std::ofstream out("/proc/self/clear_refs");
-  out << "5";
-}
+using inspection::bench::ProcStatusKb;
+using inspection::bench::ResetPeakRss;
 
 struct Args {
   int frames = 60, width = 1600, height = 1200, runs = 2, decode_threads = 0;

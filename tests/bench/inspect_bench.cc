@@ -23,6 +23,7 @@
 #include "core/depth_export.h"
 #include "core/sff_engine.h"
 #include "core/stack.h"
+#include "tests/bench/process_memory.h"
 
 namespace fs = std::filesystem;
 using inspection::DepthResult;
@@ -33,15 +34,6 @@ namespace {
 
 double Now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 
-// kB from /proc/self/status ("VmRSS" or "VmHWM").
-long ProcStatusKb(const char* key) {
-  std::ifstream in("/proc/self/status");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind(key, 0) == 0) return std::atol(line.c_str() + std::strlen(key) + 1);
-  }
-  return -1;
-}
 
 // User + system CPU seconds of the whole process (all threads).
 double CpuSeconds() {
@@ -50,12 +42,8 @@ double CpuSeconds() {
   return double(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) + 1e-6 * double(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
 }
 
-// Resets the peak RSS (VmHWM) to the current RSS (Linux >= 4.0).
-bool ResetPeakRss() {
-  std::ofstream out("/proc/self/clear_refs");
-  out << "5";
-  return bool(out.flush());
-}
+using inspection::bench::ProcStatusKb;
+using inspection::bench::ResetPeakRss;
 
 struct Args {
   std::string stack;
