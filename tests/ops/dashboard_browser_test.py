@@ -97,10 +97,14 @@ def main():
             m = re.match(r"(\d+) / (\d+)$", text)
             return (int(m.group(1)), int(m.group(2))) if m else None
         first = wait.until(lambda d: counter())
-        job_id = driver.find_element(By.ID, "live-job-id").text
+        # Read in one script call: the live panel re-renders on every poll, so an element found
+        # first and read afterwards can already be stale.
+        def text_of(element_id):
+            return driver.execute_script("return document.getElementById(arguments[0]).innerText;", element_id)
+        job_id = text_of("live-job-id")
         later = wait.until(lambda d: (c := counter()) and c[0] > first[0] and c)
         print(f"live job {job_id}: frame counter {first[0]} / {first[1]} advanced to {later[0]} / {later[1]}"
-              f" without a reload; mean grey {driver.find_element(By.ID, 'live-mean').text}")
+              f" without a reload; mean grey {text_of('live-mean')}")
         wait.until(lambda d: d.find_element(By.ID, "live-thumbnail").get_attribute("src").startswith("blob:"))
         driver.save_screenshot(os.path.join(out_dir, "dashboard_live.png"))
 
