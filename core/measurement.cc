@@ -40,8 +40,9 @@ StatusOr<ArealGroupResult> EvaluateArealGroup(const cv::Mat& depth_um, const cv:
   r.budgets[int(HeightParameter::kSq)] = MonteCarloBudget(mc[1]);
   r.budgets[int(HeightParameter::kSsk)] = MonteCarloBudget(mc[2]);
   r.budgets[int(HeightParameter::kSku)] = MonteCarloBudget(mc[3]);
+  const double range = LinearityRangeUm(depth_um, mask, *noise);
   // Shape parameters: the worst case of a height-dependent error (core/measurement_uncertainty.h).
-  const double delta_um = HeightDependentErrorBoundUm(depth_um, mask, *noise);
+  const double delta_um = HeightDependentErrorBoundUm(depth_um, mask, *noise, range);
   for (const HeightParameter shape : {HeightParameter::kSsk, HeightParameter::kSku}) {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat sign, ShapeParameterSensitivitySign(e.surface_um, shape));
     const size_t out = shape == HeightParameter::kSsk ? 2 : 3;
@@ -53,7 +54,6 @@ StatusOr<ArealGroupResult> EvaluateArealGroup(const cv::Mat& depth_um, const cv:
     }
     AddHeightDependentBound(r.budgets[int(shape)], bound);
   }
-  const double range = LinearityRangeUm(depth_um, mask, *noise);
   r.budgets[int(HeightParameter::kSp)] = ExtremeValueBudget(1, range, *noise);
   r.budgets[int(HeightParameter::kSv)] = ExtremeValueBudget(1, range, *noise);
   r.budgets[int(HeightParameter::kSz)] = ExtremeValueBudget(2, range, *noise);

@@ -291,7 +291,8 @@ cv::Mat WindowAveragingError(const cv::Mat& depth_um, int window_px) {
   return e;
 }
 
-double HeightDependentErrorBoundUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model) {
+double HeightDependentErrorBoundUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model,
+                                   double linearity_range_um) {
   const cv::Mat e = WindowAveragingError(depth_um, model.correlation_px);
   std::vector<float> flattening;
   for (int row = 0; row < depth_um.rows; ++row) {
@@ -308,7 +309,7 @@ double HeightDependentErrorBoundUm(const cv::Mat& depth_um, const cv::Mat& mask,
     std::nth_element(flattening.begin(), flattening.begin() + long(k), flattening.end());
     p99 = flattening[k];
   }
-  return 0.5 * LinearityRangeUm(depth_um, mask, model) + p99;
+  return 0.5 * linearity_range_um + p99;
 }
 
 StatusOr<cv::Mat> ShapeParameterSensitivitySign(const cv::Mat& surface_um, HeightParameter parameter) {

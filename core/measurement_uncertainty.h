@@ -134,8 +134,10 @@ StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& d
 // depth_um is NaN. window_px >= 1.
 cv::Mat WindowAveragingError(const cv::Mat& depth_um, int window_px);
 
-// delta of the comment above, for the pixels where mask is non-zero and depth finite.
-double HeightDependentErrorBoundUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model);
+// delta of the comment above, for the pixels where mask is non-zero and depth finite;
+// linearity_range_um is LinearityRangeUm over the same pixels (the caller has it already).
+double HeightDependentErrorBoundUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model,
+                                   double linearity_range_um);
 
 // sign(d Ssk / d z_p) or sign(d Sku / d z_p) (+1 / -1 as CV_32FC1, 0 where surface_um is NaN)
 // for the levelled surface of core/areal_parameters.h. parameter: kSsk or kSku, else

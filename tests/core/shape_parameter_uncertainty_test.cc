@@ -113,13 +113,13 @@ TEST(ShapeParameterUncertaintyTest, BoundIsTheLinearityHalfRangePlusTheFlattenin
   flat += testing::CorrelatedNoise(size, 0.002, 7, 3);
   auto mf = EstimateDepthNoise(flat, mask, o);
   ASSERT_TRUE(mf.ok());
-  EXPECT_LT(HeightDependentErrorBoundUm(flat, mask, *mf), 0.005);
+  EXPECT_LT(HeightDependentErrorBoundUm(flat, mask, *mf, LinearityRangeUm(flat, mask, *mf)), 0.005);
   // A 2 um cosine spans most of a step: half the table's range (0.1 um) plus ~0.04 um flattening.
   const cv::Mat cosine = testing::SampleSurface(
       size, 1.0, [](double x, double) { return 210.0 + 2.0 * std::cos(2 * kPi * (x - 0.5) / 64.0); });
   auto mc = EstimateDepthNoise(cosine, mask, o);
   ASSERT_TRUE(mc.ok());
-  const double delta = HeightDependentErrorBoundUm(cosine, mask, *mc);
+  const double delta = HeightDependentErrorBoundUm(cosine, mask, *mc, LinearityRangeUm(cosine, mask, *mc));
   EXPECT_NEAR(delta, 0.1 + 0.040, 0.01);
 }
 
