@@ -10,6 +10,7 @@
 #include <cmath>
 #include <limits>
 #include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace inspection {
 namespace {
@@ -43,18 +44,33 @@ Status DepthConsistencyOptions::Validate() const {
   if (!(max_residual_z_steps > 0.0) || !std::isfinite(max_residual_z_steps)) {
     return Status::InvalidArgument("consistency max_residual_z_steps must be > 0");
   }
+  if (!(max_window_mixing_z_steps >= 0.0) || !std::isfinite(max_window_mixing_z_steps)) {
+    return Status::InvalidArgument("consistency max_window_mixing_z_steps must be >= 0 (0: off)");
+  }
   return Status::Ok();
 }
 
 StatusOr<cv::Mat> LocalDepthResidual(const cv::Mat& raw_depth_um, int radius_px) {
+  LocalDepthPlane plane;
+  INSPECT_RETURN_IF_ERROR(FitLocalDepthPlanes(raw_depth_um, radius_px, &plane));
+  return plane.residual_um;
+}
+
+Status FitLocalDepthPlanes(const cv::Mat& raw_depth_um, int radius_px, LocalDepthPlane* plane) {
   if (raw_depth_um.empty() || raw_depth_um.type() != CV_32FC1) {
     return Status::InvalidArgument("raw_depth_um must be CV_32FC1");
   }
   if (radius_px < 1 || radius_px > 31) return Status::InvalidArgument("radius_px must be 1..31");
   // Mirroring needs the window to fit inside the image once.
   const int r = std::min(radius_px, std::min(raw_depth_um.rows, raw_depth_um.cols) - 1);
-  cv::Mat out(raw_depth_um.size(), CV_32FC1, cv::Scalar(0.f));
-  if (r < 1) return out;
+  plane->residual_um.create(raw_depth_um.size(), CV_32FC1);
+  plane->residual_um.setTo(0.f);
+  plane->slope_x.create(raw_depth_um.size(), CV_32FC1);
+  plane->slope_x.setTo(0.f);
+  plane->slope_y.create(raw_depth_um.size(), CV_32FC1);
+  plane->slope_y.setTo(0.f);
+  cv::Mat& out = plane->residual_um;
+  if (r < 1) return Status::Ok();
 
   // Sliding window sums of d, d^2, x d, y d and the NaN count in double, with O(width) state:
   // column sums over the window's rows are updated by one row in and one row out, then summed
@@ -107,12 +123,15 @@ StatusOr<cv::Mat> LocalDepthResidual(const cv::Mat& raw_depth_um, int radius_px)
             for (int q = 0; q < kQ; ++q) p1[q] = p[q] + c[q];
           }
           float* o = out.ptr<float>(y);
+          float* sx = plane->slope_x.ptr<float>(y);
+          float* sy = plane->slope_y.ptr<float>(y);
           const double my = mean_y[size_t(y)] - cy0, vy = var_y[size_t(y)];
           for (int x = 0; x < w; ++x) {
             const double* hi = &prefix[size_t(kQ) * (x + 2 * r + 1)];
             const double* lo = &prefix[size_t(kQ) * x];
             if (hi[4] - lo[4] > 0.5) {
               o[x] = inf;
+              sx[x] = sy[x] = std::numeric_limits<float>::quiet_NaN();
               continue;
             }
             const double m = (hi[0] - lo[0]) / n;
@@ -121,24 +140,79 @@ StatusOr<cv::Mat> LocalDepthResidual(const cv::Mat& raw_depth_um, int radius_px)
             const double cy = (hi[3] - lo[3]) / n - my * m;
             const double res = var_d - cx * cx / var_x[size_t(x)] - cy * cy / vy;
             o[x] = float(std::sqrt(std::max(res, 0.0)));
+            sx[x] = float(cx / var_x[size_t(x)]);
+            sy[x] = float(cy / vy);
           }
         }
       },
       4.0);  // 4 bands: each restarts its sums (2r + 1 rows), negligible
+  return Status::Ok();
+}
+
+StatusOr<cv::Mat> FocusEnergyCentroidOffset(const cv::Mat& all_in_focus, int focus_window_px) {
+  if (all_in_focus.empty() || (all_in_focus.channels() != 1 && all_in_focus.channels() != 3)) {
+    return Status::InvalidArgument("all_in_focus must be a grey or BGR image");
+  }
+  if (focus_window_px < 3 || focus_window_px % 2 == 0) {
+    return Status::InvalidArgument("focus_window_px must be odd and >= 3");
+  }
+  cv::Mat grey, gx, gy;
+  if (all_in_focus.channels() == 3) {
+    cv::cvtColor(all_in_focus, grey, cv::COLOR_BGR2GRAY);
+    grey.convertTo(grey, CV_32F);
+  } else {
+    all_in_focus.convertTo(grey, CV_32F);
+  }
+  cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0, 0.0, kBorder);
+  cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0, 0.0, kBorder);
+  const cv::Mat energy = gx.mul(gx) + gy.mul(gy);
+  const int r = focus_window_px / 2;
+  cv::Mat ones(1, 2 * r + 1, CV_32F, cv::Scalar(1.f)), ramp(1, 2 * r + 1, CV_32F);
+  for (int k = -r; k <= r; ++k) ramp.at<float>(0, k + r) = float(k);
+  cv::Mat sum, mx, my;
+  cv::sepFilter2D(energy, sum, CV_32F, ones, ones, cv::Point(-1, -1), 0.0, kBorder);
+  cv::sepFilter2D(energy, mx, CV_32F, ramp, ones, cv::Point(-1, -1), 0.0, kBorder);
+  cv::sepFilter2D(energy, my, CV_32F, ones, ramp, cv::Point(-1, -1), 0.0, kBorder);
+  std::vector<cv::Mat> channels(2);
+  cv::divide(mx, sum, channels[0]);
+  cv::divide(my, sum, channels[1]);
+  channels[0].setTo(0.f, sum <= 0.f);
+  channels[1].setTo(0.f, sum <= 0.f);
+  cv::Mat out;
+  cv::merge(channels, out);
   return out;
 }
 
 StatusOr<cv::Mat> RejectInconsistentDepth(const cv::Mat& depth_um, const cv::Mat& raw_depth_um, double z_step_um,
-                                          int focus_window_px, const DepthConsistencyOptions& options) {
+                                          int focus_window_px, const DepthConsistencyOptions& options,
+                                          const cv::Mat& all_in_focus) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
   if (depth_um.type() != CV_32FC1 || depth_um.size() != raw_depth_um.size()) {
     return Status::InvalidArgument("depth_um must be CV_32FC1 of raw_depth_um's size");
   }
   if (!(z_step_um > 0.0) || !std::isfinite(z_step_um)) return Status::InvalidArgument("z_step_um must be > 0");
+  if (!all_in_focus.empty() && all_in_focus.size() != raw_depth_um.size()) {
+    return Status::InvalidArgument("all_in_focus must have raw_depth_um's size");
+  }
   const int radius = options.radius_px > 0 ? options.radius_px : DefaultConsistencyRadius(focus_window_px);
-  INSPECT_ASSIGN_OR_RETURN(cv::Mat residual, LocalDepthResidual(raw_depth_um, std::clamp(radius, 1, 31)));
+  LocalDepthPlane plane;
+  INSPECT_RETURN_IF_ERROR(FitLocalDepthPlanes(raw_depth_um, std::clamp(radius, 1, 31), &plane));
   cv::Mat out = depth_um.clone();
-  out.setTo(std::numeric_limits<float>::quiet_NaN(), residual > options.max_residual_z_steps * z_step_um);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  out.setTo(nan, plane.residual_um > options.max_residual_z_steps * z_step_um);
+  if (!all_in_focus.empty() && options.max_window_mixing_z_steps > 0.0 && focus_window_px >= 3) {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat offset, FocusEnergyCentroidOffset(all_in_focus, focus_window_px | 1));
+    const double limit = options.max_window_mixing_z_steps * z_step_um;
+    for (int y = 0; y < out.rows; ++y) {
+      float* o = out.ptr<float>(y);
+      const float* sx = plane.slope_x.ptr<float>(y);
+      const float* sy = plane.slope_y.ptr<float>(y);
+      const cv::Vec2f* c = offset.ptr<cv::Vec2f>(y);
+      for (int x = 0; x < out.cols; ++x) {
+        if (std::abs(sx[x] * c[x][0] + sy[x] * c[x][1]) > limit) o[x] = nan;
+      }
+    }
+  }
   return out;
 }
 

@@ -32,7 +32,7 @@ StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector
     const double z_step = MedianZStep(z_um);
     if (!(z_step > 0.0)) return Status::InvalidArgument("z_um must hold at least two distinct positions");
     INSPECT_ASSIGN_OR_RETURN(cv::Mat kept, RejectInconsistentDepth(out.depth_um, raw.depth_um, z_step, focus_window_px,
-                                                                   o.consistency_options));
+                                                                   o.consistency_options, raw.all_in_focus));
     // Rejected here (finite before, NaN now): not measured, whatever the curve's own confidence.
     // (cv::compare's CMP_NE is false for NaN, so NaN is found as "not equal to itself" via ~EQ.)
     const cv::Mat rejected = (out.depth_um == out.depth_um) & ~(kept == kept);

@@ -201,7 +201,8 @@ Metrics Evaluate(const Scene& s, const Candidate& c, Cache* cache) {
   const auto t0 = Clock::now();
   if (c.consistency) {
     const DepthResult& raw = Run(s, c.engines[0], cache);
-    depth = RejectInconsistentDepth(depth, raw.depth_um, MedianZStep(s.z), c.engines[0].window, c.consistency_options)
+    depth = RejectInconsistentDepth(depth, raw.depth_um, MedianZStep(s.z), c.engines[0].window, c.consistency_options,
+                                    raw.all_in_focus)
                 .value();
   }
   if (c.refine.method != DepthRefinement::kNone) depth = RefineDepth(depth, conf, guide, c.refine).value();
@@ -426,6 +427,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
     std::snprintf(buf, sizeof buf, " + consistency r%d %.2g", radius > 0 ? radius : DefaultConsistencyRadius(k.window),
                   steps);
     c.name += buf;
+    // (the window-mixing check, core/depth_consistency.h, runs at its default with it)
     return c;
   };
   const DepthPostProcessOptions product_defaults;

@@ -61,6 +61,65 @@ TEST(DepthConsistencyTest, WindowsAcrossAStepAndOverNoiseAreRejected) {
   EXPECT_FALSE(std::isnan(wide->at<float>(12, 15)));
 }
 
+TEST(DepthConsistencyTest, FocusEnergyCentroidIsWhereTheWindowsGradientIs) {
+  // One bright pixel at (20, 20): its Sobel energy is symmetric about it, so every window that
+  // holds all of it has its centroid exactly there.
+  cv::Mat aif(41, 41, CV_8UC1, cv::Scalar(0));
+  aif.at<uchar>(20, 20) = 200;
+  auto c = FocusEnergyCentroidOffset(aif, 9);
+  ASSERT_TRUE(c.ok()) << c.status().ToString();
+  EXPECT_NEAR(c->at<cv::Vec2f>(20, 17)[0], 3.0f, 1e-4);  // (x 17, y 20): the energy 3 px to the right
+  EXPECT_NEAR(c->at<cv::Vec2f>(20, 17)[1], 0.0f, 1e-4);
+  EXPECT_NEAR(c->at<cv::Vec2f>(17, 20)[1], 3.0f, 1e-4);
+  EXPECT_NEAR(c->at<cv::Vec2f>(23, 22)[0], -2.0f, 1e-4);
+  EXPECT_NEAR(c->at<cv::Vec2f>(23, 22)[1], -3.0f, 1e-4);
+  EXPECT_EQ(c->at<cv::Vec2f>(5, 5), cv::Vec2f(0.f, 0.f));  // no gradient in the window
+  EXPECT_EQ(FocusEnergyCentroidOffset(aif, 8).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(FocusEnergyCentroidOffset(cv::Mat(), 9).status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(DepthConsistencyTest, WindowsWhoseFocusEnergyIsFarFromTheirPixelOnASlopeAreRejected) {
+  // A plane rising 0.5 um per pixel in x (residual 0: the plane check keeps it all) whose only
+  // texture is one bright pixel: a pixel 3 px from it got the depth of the texture, 1.5 um (1.5
+  // z steps) away from its own. The mixing estimate |slope . offset| rejects offsets > 1 px at
+  // max_window_mixing_z_steps 0.5; on a flat surface the same offsets cost nothing.
+  cv::Mat depth(41, 41, CV_32F);
+  for (int y = 0; y < depth.rows; ++y)
+    for (int x = 0; x < depth.cols; ++x) depth.at<float>(y, x) = 100.f + 0.5f * x;
+  cv::Mat aif(41, 41, CV_8UC1, cv::Scalar(0));
+  aif.at<uchar>(20, 20) = 200;
+  const DepthConsistencyOptions o;  // max_window_mixing_z_steps 0.5
+  auto kept = RejectInconsistentDepth(depth, depth, 1.0, 9, o, aif);
+  ASSERT_TRUE(kept.ok()) << kept.status().ToString();
+  EXPECT_TRUE(std::isnan(kept->at<float>(20, 17)));   // offset 3 px in x: 1.5 um
+  EXPECT_TRUE(std::isnan(kept->at<float>(20, 22)));   // offset -2 px: 1.0 um
+  EXPECT_FALSE(std::isnan(kept->at<float>(20, 19)));  // offset 1 px: 0.5 um, at the limit
+  EXPECT_FALSE(std::isnan(kept->at<float>(20, 20)));
+  EXPECT_FALSE(std::isnan(kept->at<float>(17, 20)));  // offset along y, where the plane is level
+  EXPECT_FALSE(std::isnan(kept->at<float>(5, 5)));    // no texture in the window: left to the confidence
+  // Only windows that reach the texture's energy (within 4 + 1 px of it) can be rejected.
+  // (cv::compare's CMP_NE is false for NaN: NaN is "not equal to itself" as ~EQ.)
+  auto nan_count = [](const cv::Mat& m) { return cv::countNonZero(~(m == m)); };
+  cv::Mat rejected = ~(*kept == *kept);
+  EXPECT_GE(cv::countNonZero(rejected), 2 * 3 * 7);  // at least |dx| 2..4 on rows 17..23
+  rejected(cv::Rect(15, 15, 11, 11)).setTo(0);
+  EXPECT_EQ(cv::countNonZero(rejected), 0);
+  // Without the image, or with the check off, nothing is rejected.
+  EXPECT_EQ(nan_count(*RejectInconsistentDepth(depth, depth, 1.0, 9, o)), 0);
+  DepthConsistencyOptions off;
+  off.max_window_mixing_z_steps = 0;
+  EXPECT_EQ(nan_count(*RejectInconsistentDepth(depth, depth, 1.0, 9, off, aif)), 0);
+  // Flat: the same texture, no slope, nothing rejected.
+  const cv::Mat flat(41, 41, CV_32F, cv::Scalar(100.f));
+  EXPECT_EQ(nan_count(*RejectInconsistentDepth(flat, flat, 1.0, 9, o, aif)), 0);
+  DepthConsistencyOptions bad;
+  bad.max_window_mixing_z_steps = -1;
+  EXPECT_NE(RejectInconsistentDepth(depth, depth, 1.0, 9, bad, aif).status().message().find("max_window_mixing"),
+            std::string::npos);
+  EXPECT_EQ(RejectInconsistentDepth(depth, depth, 1.0, 9, o, cv::Mat(4, 4, CV_8UC1)).status().code(),
+            StatusCode::kInvalidArgument);
+}
+
 TEST(DepthConsistencyTest, MedianZStepAndBadInput) {
   EXPECT_DOUBLE_EQ(MedianZStep({0, 5, 10, 12, 17}), 5.0);
   EXPECT_DOUBLE_EQ(MedianZStep({30, 27.5, 25, 22.5}), 2.5);

@@ -136,13 +136,13 @@ TEST_F(ScanModesTest, BiasWithinBoundOnTexturedFlatAndSaturatingSpecimens) {
   const IlluminationMode all[] = {
       IlluminationMode::kStd,      IlluminationMode::kHdr,     IlluminationMode::kAdaptIterative,
       IlluminationMode::kAdapt,    IlluminationMode::kTexture, IlluminationMode::kHfAdapt,
-      IlluminationMode::kAdaptedHf};
+      IlluminationMode::kAdaptedHf, IlluminationMode::kAuto};
   auto check = [](const std::string& what, const StatusOr<ModeRun>& r) {
     ASSERT_TRUE(r.ok()) << what << ": " << r.status().ToString();
     EXPECT_GE(r->error.valid_percent, 95.0) << what;
     EXPECT_LE(std::abs(r->error.mean_error_um), BiasBoundUm(r->z_step_um)) << what;
   };
-  // Specimens whose heights span many z steps.
+  // Specimens whose heights span many z steps: every mode, the default (AUTO) included.
   for (const char* specimen : {"wedge", "skew5", "skew10"}) {
     double best_std_texture_rmse = 1e9, default_rmse = 0;
     for (IlluminationMode m : all) {
@@ -152,29 +152,45 @@ TEST_F(ScanModesTest, BiasWithinBoundOnTexturedFlatAndSaturatingSpecimens) {
       if (m == IlluminationMode::kStd || m == IlluminationMode::kTexture) {
         best_std_texture_rmse = std::min(best_std_texture_rmse, r->error.rmse_um);
       }
-      if (m == IlluminationMode::kHfAdapt) default_rmse = r->error.rmse_um;
+      if (m == IlluminationMode::kAuto) default_rmse = r->error.rmse_um;
     }
-    // The default mode when calibrated (HF+ADAPT) against the better of STD and TEXTURE. With the
-    // defocus parabola STD and TEXTURE gained 20-50 % on the skewed planes and HF+ADAPT did not
-    // (README "Depth interpolation"): within 10 % on the wedge, not on skew5/skew10, where
-    // TEXTURE is the better mode for a part that never saturates (measured 1.17-1.40 on seeds
-    // 5, 11, 23; the bound guards against a further loss).
-    std::printf("%s: default HF+ADAPT RMSE %.3f um, better of STD and TEXTURE %.3f um, ratio %.2f\n", specimen,
+    // Issue 17's target for the default against the better of STD and TEXTURE: within 10 %.
+    std::printf("%s: default AUTO RMSE %.3f um, better of STD and TEXTURE %.3f um, ratio %.2f\n", specimen,
                 default_rmse, best_std_texture_rmse, default_rmse / best_std_texture_rmse);
-    EXPECT_LE(default_rmse, (std::string(specimen) == "wedge" ? 1.1 : 1.5) * best_std_texture_rmse) << specimen;
+    EXPECT_LE(default_rmse, 1.1 * best_std_texture_rmse) << specimen;
   }
   // Flat specimens put every pixel between the same two frames, so a sub-step interpolation
   // error is a bias of the whole map; the defocus parabola keeps these modes within the bound on
-  // the 1 um step and TEXTURE on the mirror (the Gaussian: -0.07 to -0.17 um).
+  // the 1 um step and TEXTURE and HF+ADAPT on the mirror (the Gaussian: -0.07 to -0.17 um). On a
+  // flat part one scan's bias also holds the stage's +-0.1 um repeatability on the 2-3 frames in
+  // focus (scan-to-scan sd 0.03-0.07 um, inspect-evaluate --repeats), so the bound is asserted
+  // on the mean of 4 scans (the systematic part) and each scan within twice the bound.
+  auto check_flat = [&](const std::string& specimen, IlluminationMode m) {
+    const std::string what = specimen + " " + IlluminationModeName(m);
+    double sum = 0, bound = 0;
+    constexpr int kScans = 4;
+    for (int k = 0; k < kScans; ++k) {
+      auto r = Scan(specimen, m);
+      ASSERT_TRUE(r.ok()) << what << ": " << r.status().ToString();
+      EXPECT_GE(r->error.valid_percent, 95.0) << what;
+      bound = BiasBoundUm(r->z_step_um);
+      EXPECT_LE(std::abs(r->error.mean_error_um), 2.0 * bound) << what << " scan " << k;
+      sum += r->error.mean_error_um;
+    }
+    std::printf("%s: mean bias over %d scans %+.3f um\n", what.c_str(), kScans, sum / kScans);
+    EXPECT_LE(std::abs(sum / kScans), bound) << what;
+  };
   for (IlluminationMode m : {IlluminationMode::kStd, IlluminationMode::kHdr, IlluminationMode::kAdaptIterative,
-                             IlluminationMode::kAdapt, IlluminationMode::kTexture}) {
-    check("step1um " + IlluminationModeName(m), Scan("step1um", m));
+                             IlluminationMode::kAdapt, IlluminationMode::kTexture, IlluminationMode::kAuto}) {
+    check_flat("step1um", m);
   }
-  check("mirror TEXTURE", Scan("mirror", IlluminationMode::kTexture));
+  for (IlluminationMode m : {IlluminationMode::kTexture, IlluminationMode::kHfAdapt, IlluminationMode::kAuto}) {
+    check_flat("mirror", m);
+  }
   // The saturating cutter, where STD and HDR3 leave pixels without depth: the adaptive modes.
   // (TEXTURE's bias there, -0.08 to -0.11 um, comes from pixels its checkerboard saturates.)
   for (IlluminationMode m : {IlluminationMode::kAdaptIterative, IlluminationMode::kAdapt, IlluminationMode::kHfAdapt,
-                             IlluminationMode::kAdaptedHf}) {
+                             IlluminationMode::kAdaptedHf, IlluminationMode::kAuto}) {
     check("cutter " + IlluminationModeName(m), Scan("cutter", m));
   }
   // The lag's signature was a bias whose sign followed the scan direction.
@@ -314,13 +330,14 @@ TEST_F(ScanModesTest, HfAdaptHasFewerOutliersThanStdOnCoin) {
 TEST_F(ScanModesTest, DefaultPostProcessingKeepsTexturedSpecimensAndRemovesWrongDepths) {
   ASSERT_NE(bundle_, nullptr);
   // Textured specimens measured through focus: the consistency check keeps (nearly) every pixel
-  // and the error does not change beyond scan-to-scan noise.
+  // and the error does not grow beyond scan-to-scan noise. (The window-mixing check takes up to
+  // ~1 % of the chamfer's flank, where the error was largest: STD sigma 0.60 -> 0.50 um.)
   for (const char* specimen : {"wedge", "chamfer"}) {
     for (const IlluminationMode mode : {IlluminationMode::kStd, IlluminationMode::kHfAdapt}) {
       auto off = Scan(specimen, mode, {}, 9, 0, nullptr, false, false);
       auto on = Scan(specimen, mode, {}, 9, 0, nullptr, false, true);
       ASSERT_TRUE(off.ok() && on.ok());
-      EXPECT_GT(on->error.valid_percent, off->error.valid_percent - 0.5) << specimen;
+      EXPECT_GT(on->error.valid_percent, off->error.valid_percent - 1.5) << specimen;
       EXPECT_LT(on->error.stddev_error_um, 1.1 * off->error.stddev_error_um) << specimen;
       // (Two scans differ by the stage's +-0.1 um repeatability, so the bias is held to its bound.)
       EXPECT_LE(std::abs(on->error.mean_error_um), 0.1) << specimen;
@@ -332,6 +349,20 @@ TEST_F(ScanModesTest, DefaultPostProcessingKeepsTexturedSpecimensAndRemovesWrong
   ASSERT_TRUE(off.ok() && on.ok());
   EXPECT_LT(on->error.valid_percent, off->error.valid_percent - 5.0);
   EXPECT_LT(on->error.rmse_um, 0.6 * off->error.rmse_um);
+  // The coin under the default's HF+ADAPT: beside the relief's dark 80 degree flanks the focus
+  // window is dominated by the bright field's edge, and the pixels got the field's height (a
+  // smooth ramp the plane check passes; bias about -0.6 um). The window-mixing check
+  // (core/depth_consistency.h) takes them off.
+  auto coin_off = Scan("coin", IlluminationMode::kHfAdapt, {}, 9, 0, nullptr, false, false);
+  auto coin_on = Scan("coin", IlluminationMode::kHfAdapt, {}, 9, 0, nullptr, false, true);
+  ASSERT_TRUE(coin_off.ok() && coin_on.ok());
+  std::printf("coin HF+ADAPT: without bias %+.3f RMSE %.3f valid %.1f %%; with bias %+.3f RMSE %.3f valid %.1f %%\n",
+              coin_off->error.mean_error_um, coin_off->error.rmse_um, coin_off->error.valid_percent,
+              coin_on->error.mean_error_um, coin_on->error.rmse_um, coin_on->error.valid_percent);
+  EXPECT_GT(std::abs(coin_off->error.mean_error_um), 0.3);
+  EXPECT_LE(std::abs(coin_on->error.mean_error_um), 0.1);
+  EXPECT_LT(coin_on->error.rmse_um, 0.5 * coin_off->error.rmse_um);
+  EXPECT_GT(coin_on->error.valid_percent, 80.0);
 }
 
 TEST_F(ScanModesTest, IterativeAdaptCompensatesPerZ) {
