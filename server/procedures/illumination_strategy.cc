@@ -11,6 +11,7 @@ std::unique_ptr<IlluminationStrategy> CreateIlluminationStrategy(const ScanPlan&
                                                                  const IlluminationSetup& setup) {
   switch (plan.mode) {
     case IlluminationMode::kStd:
+    case IlluminationMode::kAuto:  // resolved to a concrete mode before (illumination_auto.h)
       break;
     case IlluminationMode::kHdr:
       return MakeHdrIllumination(plan, *bundle, setup);

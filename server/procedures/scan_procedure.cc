@@ -358,7 +358,7 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
   }
   out.engine_finish_seconds = std::chrono::duration<double>(Clock::now() - t1).count();
   out.acquisition_seconds = std::chrono::duration<double>(t1 - t0).count();
-  if (SimulationControl* sim = rig.simulation()) {
+  if (rig.simulation() != nullptr) {
     // In the grid of the middle frame, the alignment's reference (the specimen grid without
     // focus breathing).
     out.ground_truth_um = GroundTruthInCameraGrid(rig, plan.z_um[(plan.z_um.size() - 1) / 2]);
