@@ -11,7 +11,10 @@
 //        (default 256x192, 96x72, seed 5, all tables, every specimen and mode)
 //        inspect-evaluate --natural [natural-evaluate's options]: the natural-scene evaluation
 // --repeats N scans every specimen and mode N times and reports the mean bias (the systematic part)
-// beside its scan-to-scan spread; --dump DIR writes each scan's error map and middle row.
+// beside its scan-to-scan spread; --dump DIR writes each scan's error map (PNG and text), its
+// all-in-focus image, its middle row (truth, measured, grey) and keeps its stack folder.
+// --user-scenes runs the bias tables on four scene.json user scenes instead of the built-ins
+// (WriteEvaluationScenes below).
 //        (tests/bench/natural_tables.h) instead
 // --bias-only prints only the bias table; --specimens / --modes restrict it (for quick checks).
 // --isff-only prints only the integral SFF part (--camera and --seed apply to it when given),
@@ -37,6 +40,7 @@
 #include "server/procedures/scan_procedure.h"
 #include "tests/bench/isff_tables.h"
 #include "tests/bench/natural_tables.h"
+#include "tests/lib/user_scene.h"
 
 namespace inspection {
 namespace {
@@ -104,6 +108,66 @@ std::string ErrorCells(const DepthErrorStats& e) {
 // The bias bound of README "Illumination modes": 0.1 um or 0.02 z steps, whichever is larger.
 double BiasBoundUm(double z_step_um) { return std::max(0.1, 0.02 * z_step_um); }
 
+// "file:/dir/name.json" -> "name"; built-in ids unchanged.
+std::string SpecimenLabel(const std::string& specimen) {
+  return specimen.rfind("file:", 0) == 0 ? fs::path(specimen.substr(5)).stem().string() : specimen;
+}
+
+// User scenes (scene.json, as a customer would load them) of the kinds a fixed default gets
+// wrong: a polished plane with a few pits and almost no texture, a well-textured terraced part
+// that never saturates, a shiny weld bead (~500:1 reflectance) and a textured dome. Heights
+// around 200 um like the built-ins; the rig derives its default scan range from each scene.
+std::vector<std::string> WriteEvaluationScenes(const fs::path& dir, cv::Size size, double px) {
+  const double w = size.width * px, h = size.height * px, base = 200.0;
+  std::vector<std::string> out;
+  test_scenes::UserSceneSpec pits;
+  pits.height_um = [=](double x, double y) {
+    double z = base;
+    const double cx[] = {0.25, 0.7, 0.45, 0.8}, cy[] = {0.3, 0.25, 0.7, 0.75};
+    for (int k = 0; k < 4; ++k) {
+      const double r = std::hypot(x - cx[k] * w, y - cy[k] * h) / (0.08 * std::min(w, h));
+      if (r < 1.0) z -= 3.0 * 0.5 * (1.0 + std::cos(M_PI * r));
+    }
+    return z;
+  };
+  pits.reflectance = [](double, double) { return 0.6; };
+  pits.texture_contrast = 0.03;
+  pits.texture_seed = 31;
+  out.push_back(test_scenes::WriteUserScene(dir, "pitted_polish", size, px, pits));
+  test_scenes::UserSceneSpec terraces;
+  terraces.height_um = [=](double x, double) {
+    const double t = x / w * 3.0;  // three terraces 8 um apart, joined by smooth ramps
+    const double k = std::floor(t), f = t - k, ramp = std::clamp((f - 0.85) / 0.15, 0.0, 1.0);
+    return base + 8.0 * (k + 0.5 * (1.0 - std::cos(M_PI * ramp)));
+  };
+  terraces.reflectance = [](double, double) { return 0.35; };
+  terraces.texture_seed = 32;
+  out.push_back(test_scenes::WriteUserScene(dir, "terraces", size, px, terraces));
+  test_scenes::UserSceneSpec bead;
+  const double bead_w = 0.3 * h;
+  bead.height_um = [=](double, double y) {
+    const double u = (y - 0.5 * h) / bead_w;
+    return base + (std::abs(u) < 1.0 ? 20.0 * std::sqrt(1.0 - u * u) : 0.0);
+  };
+  bead.reflectance = [=](double x, double y) {  // glints along the crest, ~500:1 against the base
+    const double u = (y - 0.5 * h) / bead_w;
+    const double ripple = 0.5 + 0.5 * std::cos(2.0 * M_PI * x / (0.1 * w));
+    return std::abs(u) < 1.0 ? 0.01 + 5.0 * std::exp(-u * u / 0.02) * ripple : 0.01 + 0.2;
+  };
+  bead.texture_contrast = 0.6;
+  bead.texture_seed = 33;
+  out.push_back(test_scenes::WriteUserScene(dir, "weld_bead", size, px, bead));
+  test_scenes::UserSceneSpec dome;
+  dome.height_um = [=](double x, double y) {
+    const double r = std::hypot(x - 0.5 * w, y - 0.5 * h), rd = 0.4 * std::min(w, h), R = 300.0;
+    return base + (r < rd ? std::sqrt(R * R - r * r) - std::sqrt(R * R - rd * rd) : 0.0);
+  };
+  dome.reflectance = [](double, double) { return 0.4; };
+  dome.texture_seed = 34;
+  out.push_back(test_scenes::WriteUserScene(dir, "dome", size, px, dome));
+  return out;
+}
+
 // Error map as a picture: blue = measured too high, red = too low, saturating at 2 z steps;
 // grey = no depth. For looking at where a bias comes from.
 void DumpErrorMap(const Run& r, const fs::path& dir, const std::string& name) {
@@ -118,6 +182,16 @@ void DumpErrorMap(const Run& r, const fs::path& dir, const std::string& name) {
       out.at<cv::Vec3b>(y, x) = t >= 0 ? cv::Vec3b(hi, lo, lo) : cv::Vec3b(lo, lo, hi);
     }
   cv::imwrite((dir / (name + "_error.png")).string(), out);
+  if (!r.all_in_focus.empty()) cv::imwrite((dir / (name + "_all_in_focus.png")).string(), r.all_in_focus);
+  // The whole map as text, one image row per line: measured - truth (um), nan = no depth.
+  if (FILE* f = std::fopen((dir / (name + "_error.txt")).string().c_str(), "w")) {
+    for (int y = 0; y < r.depth_um.rows; ++y) {
+      for (int x = 0; x < r.depth_um.cols; ++x)
+        std::fprintf(f, x ? " %.4g" : "%.4g", double(r.depth_um.at<float>(y, x) - r.truth_um.at<float>(y, x)));
+      std::fputc('\n', f);
+    }
+    std::fclose(f);
+  }
   // The middle row as text: column, truth, measured (um).
   if (FILE* f = std::fopen((dir / (name + "_row.txt")).string().c_str(), "w")) {
     const int y = r.depth_um.rows / 2;
@@ -152,6 +226,11 @@ struct Evaluator {
         dir / (specimen + "_" + std::to_string(int(mode)) + "_" + std::to_string(params.hdr_exposures));
     auto o = RunScan(*rig, *plan, stack, nullptr, cancel, bundle);
     std::error_code ec;
+    if (!dump_dir.empty()) {  // keep the stack beside the error maps
+      const fs::path kept = dump_dir / (SpecimenLabel(specimen) + "_" + IlluminationModeName(mode, params.hdr_exposures));
+      fs::remove_all(kept, ec);
+      fs::rename(stack, kept, ec);
+    }
     fs::remove_all(stack, ec);
     if (!o.ok()) {
       std::fprintf(stderr, "%s %s: %s\n", specimen.c_str(), IlluminationModeName(mode, params.hdr_exposures).c_str(),
@@ -169,7 +248,7 @@ struct Evaluator {
     r.decision = o->illumination_decision;
     r.chosen = IlluminationModeName(o->illumination, params.hdr_exposures);
     r.ok = true;
-    if (!dump_dir.empty()) DumpErrorMap(r, dump_dir, specimen + "_" + IlluminationModeName(mode, params.hdr_exposures));
+    if (!dump_dir.empty()) DumpErrorMap(r, dump_dir, SpecimenLabel(specimen) + "_" + IlluminationModeName(mode, params.hdr_exposures));
     return r;
   }
 };
@@ -204,6 +283,7 @@ int Main(int argc, char** argv) {
   ro.seed = 5;
   bool bias_only = false;
   bool no_consistency = false;
+  bool user_scenes = false;
   fs::path dump_dir;
   int repeats = 1;
   bool isff_only = false, no_isff = false, camera_given = false;
@@ -215,7 +295,7 @@ int Main(int argc, char** argv) {
   std::vector<IlluminationMode> modes(std::begin(all_modes), std::end(all_modes));
   const char* usage =
       "usage: inspect-evaluate [--camera WxH] [--projector WxH] [--seed N] [--bias-only] [--specimens a,b] "
-      "[--modes STD,ADAPT,...] [--isff-only | --no-isff] [--no-consistency] [--dump DIR] [--repeats N]\n";
+      "[--modes STD,ADAPT,...] [--isff-only | --no-isff] [--no-consistency] [--dump DIR] [--repeats N] [--user-scenes]\n";
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--dump" && i + 1 < argc) {
@@ -224,6 +304,10 @@ int Main(int argc, char** argv) {
     }
     if (a == "--no-consistency") {
       no_consistency = true;
+      continue;
+    }
+    if (a == "--user-scenes") {
+      user_scenes = true;
       continue;
     }
     if (a == "--bias-only" || a == "--isff-only" || a == "--no-isff") {
@@ -304,6 +388,12 @@ int Main(int argc, char** argv) {
       ro.camera_size.width, ro.camera_size.height, ro.projector_size.width, ro.projector_size.height,
       (unsigned long long)ro.seed, bundle->psf->influence_radius_px);
 
+  if (user_scenes) {
+    specimens = WriteEvaluationScenes(ev.dir / "scenes", ro.camera_size, ro.pixel_size_um);
+    bias_only = true;
+    std::printf("User scenes (--user-scenes): pitted_polish, terraces, weld_bead, dome in %s\n",
+                (ev.dir / "scenes").c_str());
+  }
   if (!bias_only) PrintThesisTables(ev);
   const int violations = PrintBiasTable(ev, specimens, modes, repeats);
   std::error_code ec;
@@ -439,7 +529,7 @@ void PrintThesisTables(Evaluator& ev) {
 int PrintBiasTable(Evaluator& ev, const std::vector<std::string>& specimens,
                    const std::vector<IlluminationMode>& modes, int repeats) {
   std::printf(
-      "\nBias: every built-in specimen with every mode at its default scan (5 um steps); sigma, bias, RMSE "
+      "\nBias: every specimen with every mode at its default scan (5 um steps); sigma, bias, RMSE "
       "[um]; the bound |bias| <= max(0.1 um, 0.02 z steps) applies where the mode measures >= 95 %% of pixels\n");
   if (repeats > 1) {
     std::printf(
@@ -448,11 +538,12 @@ int PrintBiasTable(Evaluator& ev, const std::vector<std::string>& specimens,
         "|bias|; the bound applies to the mean bias (the systematic part)\n",
         repeats);
   }
-  std::printf("%-8s %-10s  %6s %7s %6s %7s %6s %s %s\n", "Specimen", "Method", "sigma", "bias", "RMSE", "valid",
+  std::printf("%-13s %-10s  %6s %7s %6s %7s %6s %s %s\n", "Specimen", "Method", "sigma", "bias", "RMSE", "valid",
               "#imgs", repeats > 1 ? "bias-sd  worst " : "", "bound");
   int violations = 0;
   std::vector<std::string> auto_rows, default_rows;
-  for (const std::string& specimen : specimens) {
+  for (const std::string& specimen_id : specimens) {
+    const std::string specimen = SpecimenLabel(specimen_id);
     // AUTO against the best single mode: the lowest RMSE among modes measuring >= 95 % (else the
     // highest coverage), and its frames against STD's.
     const Run* best = nullptr;
@@ -462,11 +553,11 @@ int PrintBiasTable(Evaluator& ev, const std::vector<std::string>& specimens,
     runs.reserve(modes.size());
     for (IlluminationMode m : modes) {
       std::vector<Run> repeated;
-      for (int k = 0; k < repeats; ++k) repeated.push_back(ev.Scan(specimen, m, {}));
+      for (int k = 0; k < repeats; ++k) repeated.push_back(ev.Scan(specimen_id, m, {}));
       runs.push_back(Aggregate(std::move(repeated)));
       Run& r = runs.back();
       if (!r.ok) {
-        std::printf("%-8s %-10s  failed\n", specimen.c_str(), IlluminationModeName(m).c_str());
+        std::printf("%-13s %-10s  failed\n", specimen.c_str(), IlluminationModeName(m).c_str());
         continue;
       }
       if (m == IlluminationMode::kStd) std_images = r.images;
@@ -481,7 +572,7 @@ int PrintBiasTable(Evaluator& ev, const std::vector<std::string>& specimens,
       } else if (best) {
         char row[400];
         std::snprintf(row, sizeof(row),
-                      "%-8s %-10s RMSE %6.3f valid %5.1f%% | best %-10s RMSE %6.3f valid %5.1f%% | "
+                      "%-13s %-10s RMSE %6.3f valid %5.1f%% | best %-10s RMSE %6.3f valid %5.1f%% | "
                       "ratio %.2f | frames %d (STD %d) | %s",
                       specimen.c_str(), r.chosen.c_str(), r.error.rmse_um, r.error.valid_percent, best_name.c_str(),
                       best->error.rmse_um, best->error.valid_percent, r.error.rmse_um / best->error.rmse_um, r.images,
@@ -496,7 +587,7 @@ int PrintBiasTable(Evaluator& ev, const std::vector<std::string>& specimens,
       }
       char spread[48] = "";
       if (repeats > 1) std::snprintf(spread, sizeof(spread), " %6.3f %+7.3f", r.bias_sd_um, r.worst_scan_bias_um);
-      std::printf("%-8s %-10s  %s %6.1f%% %6d%s  %s%s\n", specimen.c_str(), IlluminationModeName(m).c_str(),
+      std::printf("%-13s %-10s  %s %6.1f%% %6d%s  %s%s\n", specimen.c_str(), IlluminationModeName(m).c_str(),
                   ErrorCells(r.error).c_str(), r.error.valid_percent, r.images, spread, verdict,
                   m == IlluminationMode::kAuto ? (" (ran " + r.chosen + ")").c_str() : "");
     }
@@ -527,7 +618,7 @@ int PrintBiasTable(Evaluator& ev, const std::vector<std::string>& specimens,
       common_rmse(*auto_run, *tex_run, &a2, &t2, &c2);
       const double own_better = std::min(std_run->error.rmse_um, tex_run->error.rmse_um);
       std::snprintf(row, sizeof(row),
-                    "%-8s AUTO(%s) %6.3f | own: STD %6.3f (%5.1f%%) TEXTURE %6.3f (%5.1f%%) ratio %.2f | "
+                    "%-13s AUTO(%s) %6.3f | own: STD %6.3f (%5.1f%%) TEXTURE %6.3f (%5.1f%%) ratio %.2f | "
                     "common with STD (%5.1f%%): %6.3f vs %6.3f ratio %.2f | with TEXTURE (%5.1f%%): %6.3f vs %6.3f "
                     "ratio %.2f",
                     specimen.c_str(), auto_run->chosen.c_str(), auto_run->error.rmse_um, std_run->error.rmse_um,

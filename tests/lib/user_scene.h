@@ -34,22 +34,48 @@ inline void WriteSceneTexture(const std::filesystem::path& path, cv::Size size, 
   cv::imwrite(path.string(), t16);
 }
 
-// height_um(x_um, y_um) at pixel centres; returns the specimen name "file:<dir>/<name>.json".
+// A user scene: height (um) and, optionally, linear reflectance as functions of the position
+// (x_um, y_um) of a pixel centre; the texture's contrast scales its deviation from 1.
+struct UserSceneSpec {
+  std::function<double(double, double)> height_um;
+  std::function<double(double, double)> reflectance;  // empty: the loader's default (0.5)
+  double texture_contrast = 1.0;
+  unsigned texture_seed = 1;
+};
+
+// Writes <name>.json, <name>_height.tiff, <name>_texture.png (and <name>_reflectance.tiff);
+// returns the specimen name "file:<dir>/<name>.json".
+inline std::string WriteUserScene(const std::filesystem::path& dir, const std::string& name, cv::Size size,
+                                  double pixel_size_um, const UserSceneSpec& spec) {
+  std::filesystem::create_directories(dir);
+  auto sample = [&](const std::function<double(double, double)>& f) {
+    cv::Mat m(size, CV_32F);
+    for (int r = 0; r < size.height; ++r) {
+      for (int c = 0; c < size.width; ++c) m.at<float>(r, c) = float(f((c + 0.5) * pixel_size_um, (r + 0.5) * pixel_size_um));
+    }
+    return m;
+  };
+  cv::imwrite((dir / (name + "_height.tiff")).string(), sample(spec.height_um));
+  WriteSceneTexture(dir / (name + "_texture.png"), size, spec.texture_seed);
+  std::ofstream json((dir / (name + ".json")).string());
+  json << "{\"height\": \"" << name << "_height.tiff\", \"texture\": \"" << name << "_texture.png\"";
+  if (spec.texture_contrast != 1.0) json << ", \"texture_contrast\": " << spec.texture_contrast;
+  if (spec.reflectance) {
+    cv::imwrite((dir / (name + "_reflectance.tiff")).string(), sample(spec.reflectance));
+    json << ", \"reflectance\": \"" << name << "_reflectance.tiff\", \"reflectance_scale\": 1";
+  }
+  json << "}\n";
+  return "file:" + (dir / (name + ".json")).string();
+}
+
+// height_um(x_um, y_um) at pixel centres, the default reflectance and full texture contrast.
 inline std::string WriteUserScene(const std::filesystem::path& dir, const std::string& name, cv::Size size,
                                   double pixel_size_um, const std::function<double(double, double)>& height_um,
                                   unsigned texture_seed) {
-  std::filesystem::create_directories(dir);
-  cv::Mat h(size, CV_32F);
-  for (int r = 0; r < size.height; ++r) {
-    for (int c = 0; c < size.width; ++c) {
-      h.at<float>(r, c) = float(height_um((c + 0.5) * pixel_size_um, (r + 0.5) * pixel_size_um));
-    }
-  }
-  cv::imwrite((dir / (name + "_height.tiff")).string(), h);
-  WriteSceneTexture(dir / (name + "_texture.png"), size, texture_seed);
-  std::ofstream((dir / (name + ".json")).string())
-      << "{\"height\": \"" << name << "_height.tiff\", \"texture\": \"" << name << "_texture.png\"}\n";
-  return "file:" + (dir / (name + ".json")).string();
+  UserSceneSpec spec;
+  spec.height_um = height_um;
+  spec.texture_seed = texture_seed;
+  return WriteUserScene(dir, name, size, pixel_size_um, spec);
 }
 
 }  // namespace inspection::test_scenes
