@@ -64,13 +64,16 @@ Status FitLocalDepthPlanes(const cv::Mat& raw_depth_um, int radius_px, LocalDept
   // Mirroring needs the window to fit inside the image once.
   const int r = std::min(radius_px, std::min(raw_depth_um.rows, raw_depth_um.cols) - 1);
   plane->residual_um.create(raw_depth_um.size(), CV_32FC1);
-  plane->residual_um.setTo(0.f);
   plane->slope_x.create(raw_depth_um.size(), CV_32FC1);
-  plane->slope_x.setTo(0.f);
   plane->slope_y.create(raw_depth_um.size(), CV_32FC1);
-  plane->slope_y.setTo(0.f);
   cv::Mat& out = plane->residual_um;
-  if (r < 1) return Status::Ok();
+  if (r < 1) {
+    out.setTo(0.f);
+    plane->slope_x.setTo(0.f);
+    plane->slope_y.setTo(0.f);
+    return Status::Ok();
+  }
+  // Every pixel is written below, in parallel (so are the new pages' first touches).
 
   // Sliding window sums of d, d^2, x d, y d and the NaN count in double, with O(width) state:
   // column sums over the window's rows are updated by one row in and one row out, then summed
