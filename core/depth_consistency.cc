@@ -64,13 +64,16 @@ Status FitLocalDepthPlanes(const cv::Mat& raw_depth_um, int radius_px, LocalDept
   // Mirroring needs the window to fit inside the image once.
   const int r = std::min(radius_px, std::min(raw_depth_um.rows, raw_depth_um.cols) - 1);
   plane->residual_um.create(raw_depth_um.size(), CV_32FC1);
-  plane->residual_um.setTo(0.f);
   plane->slope_x.create(raw_depth_um.size(), CV_32FC1);
-  plane->slope_x.setTo(0.f);
   plane->slope_y.create(raw_depth_um.size(), CV_32FC1);
-  plane->slope_y.setTo(0.f);
   cv::Mat& out = plane->residual_um;
-  if (r < 1) return Status::Ok();
+  if (r < 1) {
+    out.setTo(0.f);
+    plane->slope_x.setTo(0.f);
+    plane->slope_y.setTo(0.f);
+    return Status::Ok();
+  }
+  // Every pixel is written below, in parallel (so are the new pages' first touches).
 
   // Sliding window sums of d, d^2, x d, y d and the NaN count in double, with O(width) state:
   // column sums over the window's rows are updated by one row in and one row out, then summed
@@ -156,30 +159,62 @@ StatusOr<cv::Mat> FocusEnergyCentroidOffset(const cv::Mat& all_in_focus, int foc
   if (focus_window_px < 3 || focus_window_px % 2 == 0) {
     return Status::InvalidArgument("focus_window_px must be odd and >= 3");
   }
-  cv::Mat grey, gx, gy;
-  if (all_in_focus.channels() == 3) {
-    cv::cvtColor(all_in_focus, grey, cv::COLOR_BGR2GRAY);
-    grey.convertTo(grey, CV_32F);
-  } else {
-    all_in_focus.convertTo(grey, CV_32F);
-  }
-  cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0, 0.0, kBorder);
-  cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0, 0.0, kBorder);
-  const cv::Mat energy = gx.mul(gx) + gy.mul(gy);
+  // Sobel of an 8- or 16-bit image into CV_32F is exact (integer sums far below 2^24), so those
+  // are filtered as stored; other depths go through CV_32F as the gradient's own type.
+  cv::Mat grey = all_in_focus;
+  if (grey.channels() == 3) cv::cvtColor(all_in_focus, grey, cv::COLOR_BGR2GRAY);
+  if (grey.depth() != CV_8U && grey.depth() != CV_16U && grey.depth() != CV_32F) grey.convertTo(grey, CV_32F);
+  const int rows = grey.rows, cols = grey.cols;
   const int r = focus_window_px / 2;
   cv::Mat ones(1, 2 * r + 1, CV_32F, cv::Scalar(1.f)), ramp(1, 2 * r + 1, CV_32F);
   for (int k = -r; k <= r; ++k) ramp.at<float>(0, k + r) = float(k);
-  cv::Mat sum, mx, my;
-  cv::sepFilter2D(energy, sum, CV_32F, ones, ones, cv::Point(-1, -1), 0.0, kBorder);
-  cv::sepFilter2D(energy, mx, CV_32F, ramp, ones, cv::Point(-1, -1), 0.0, kBorder);
-  cv::sepFilter2D(energy, my, CV_32F, ones, ramp, cv::Point(-1, -1), 0.0, kBorder);
-  std::vector<cv::Mat> channels(2);
-  cv::divide(mx, sum, channels[0]);
-  cv::divide(my, sum, channels[1]);
-  channels[0].setTo(0.f, sum <= 0.f);
-  channels[1].setTo(0.f, sum <= 0.f);
-  cv::Mat out;
-  cv::merge(channels, out);
+  // Two passes over bands of rows, in parallel: the gradient energy, then its box sums and the
+  // centroid. A band is a view into the whole image, so the filters read the rows beyond it
+  // (and mirror only at the image's own border): every pixel is what whole-image filtering gives.
+  // Small bands keep the temporaries small (no fresh pages for each full-size intermediate).
+  constexpr int kBandRows = 32;
+  const int bands = (rows + kBandRows - 1) / kBandRows;
+  auto band_rows = [&](int b) { return cv::Range(b * kBandRows, std::min(rows, (b + 1) * kBandRows)); };
+  cv::Mat energy(rows, cols, CV_32F);
+  cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
+    cv::Mat gx, gy;
+    for (int b = range.start; b < range.end; ++b) {
+      const cv::Range band = band_rows(b);
+      const cv::Mat src = grey.rowRange(band);
+      cv::Sobel(src, gx, CV_32F, 1, 0, 3, 1.0, 0.0, kBorder);
+      cv::Sobel(src, gy, CV_32F, 0, 1, 3, 1.0, 0.0, kBorder);
+      for (int y = 0; y < src.rows; ++y) {
+        const float* a = gx.ptr<float>(y);
+        const float* c = gy.ptr<float>(y);
+        float* e = energy.ptr<float>(band.start + y);
+        for (int x = 0; x < cols; ++x) {
+          const float a2 = a[x] * a[x], c2 = c[x] * c[x];
+          e[x] = a2 + c2;
+        }
+      }
+    }
+  });
+  cv::Mat out(rows, cols, CV_32FC2);
+  cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
+    cv::Mat sum, mx, my;
+    for (int b = range.start; b < range.end; ++b) {
+      const cv::Range band = band_rows(b);
+      const cv::Mat e = energy.rowRange(band);
+      cv::sepFilter2D(e, sum, CV_32F, ones, ones, cv::Point(-1, -1), 0.0, kBorder);
+      cv::sepFilter2D(e, mx, CV_32F, ramp, ones, cv::Point(-1, -1), 0.0, kBorder);
+      cv::sepFilter2D(e, my, CV_32F, ones, ramp, cv::Point(-1, -1), 0.0, kBorder);
+      for (int y = 0; y < e.rows; ++y) {
+        const float* s = sum.ptr<float>(y);
+        const float* px = mx.ptr<float>(y);
+        const float* py = my.ptr<float>(y);
+        cv::Vec2f* o = out.ptr<cv::Vec2f>(band.start + y);
+        for (int x = 0; x < cols; ++x) {
+          // 0 where the window holds no gradient (a sum of squares: <= 0 means 0).
+          o[x] = s[x] <= 0.f ? cv::Vec2f(0.f, 0.f) : cv::Vec2f(px[x] / s[x], py[x] / s[x]);
+        }
+      }
+    }
+  });
   return out;
 }
 

@@ -99,8 +99,10 @@ IterationResult Iterate(const Level& L, Params& p) {
   const cv::Matx23d m = MatrixOf(p, c, half);
   cv::Mat warped;
   cv::warpAffine(L.frame, warped, m, L.reference.size(), cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
-  cv::Matx<double, 6, 6> H = cv::Matx<double, 6, 6>::zeros();
-  cv::Matx<double, 6, 1> g = cv::Matx<double, 6, 1>::zeros();
+  // Normal equations in local arrays, fully unrolled (each sum stays in a register or a plain
+  // stack slot instead of a Matx element the compiler keeps in memory: ~5x faster); the same
+  // sums in the same order as element-wise accumulation.
+  double hs[6][6] = {}, gs[6] = {};
   double sw = 0, st = 0, sww = 0, stt = 0, swt = 0;
   long n = 0;
   for (int y = 1; y < h - 1; ++y) {
@@ -118,9 +120,11 @@ IterationResult Iterate(const Level& L, Params& p) {
       const double ix = 0.5 * (wr[x + 1] - wr[x - 1]) * p.gain, iy = 0.5 * (dn[x] - up[x]) * p.gain;
       const double j[6] = {ix * u + iy * v, -ix * v + iy * u, ix, iy, iw, 1.0};
       const double r = p.gain * iw + p.offset - t;
+#pragma GCC unroll 6
       for (int i = 0; i < 6; ++i) {
-        g(i) += j[i] * r;
-        for (int k = i; k < 6; ++k) H(i, k) += j[i] * j[k];
+        gs[i] += j[i] * r;
+#pragma GCC unroll 6
+        for (int k = i; k < 6; ++k) hs[i][k] += j[i] * j[k];
       }
       sw += iw, st += t, sww += iw * iw, stt += t * t, swt += iw * t;
       ++n;
@@ -129,8 +133,12 @@ IterationResult Iterate(const Level& L, Params& p) {
   IterationResult out;
   out.valid_share = double(n) / std::max(1, (w - 2) * (h - 2));
   if (n < 64) return out;
-  for (int i = 0; i < 6; ++i)
-    for (int k = 0; k < i; ++k) H(i, k) = H(k, i);
+  cv::Matx<double, 6, 6> H;
+  cv::Matx<double, 6, 1> g;
+  for (int i = 0; i < 6; ++i) {
+    g(i) = gs[i];
+    for (int k = 0; k < 6; ++k) H(i, k) = k >= i ? hs[i][k] : hs[k][i];
+  }
   const double cov = swt / n - (sw / n) * (st / n);
   const double vw = sww / n - (sw / n) * (sw / n), vt = stt / n - (st / n) * (st / n);
   out.correlation = vw > 0 && vt > 0 ? cov / std::sqrt(vw * vt) : 0.0;
@@ -146,6 +154,35 @@ IterationResult Iterate(const Level& L, Params& p) {
 
 }  // namespace
 
+StatusOr<RegistrationPyramid> PrepareRegistration(const cv::Mat& frame, const FrameRegistrationOptions& o) {
+  INSPECT_RETURN_IF_ERROR(o.Validate());
+  const int t = frame.type();
+  if (frame.empty() || (t != CV_8UC1 && t != CV_16UC1 && t != CV_32FC1)) {
+    return Status::InvalidArgument("frames to register must be CV_8UC1, CV_16UC1 or CV_32FC1");
+  }
+  if (frame.cols < 32 || frame.rows < 32) {
+    return Status::InvalidArgument("frames are " + std::to_string(frame.cols) + "x" + std::to_string(frame.rows) +
+                                   " px; registration needs at least 32x32");
+  }
+  // Working size: the frame scaled so its longer side is at most max_side_px.
+  const double shrink = std::min(1.0, double(o.max_side_px) / std::max(frame.cols, frame.rows));
+  const cv::Size work(std::max(16, int(std::lround(frame.cols * shrink))),
+                      std::max(16, int(std::lround(frame.rows * shrink))));
+  RegistrationPyramid out;
+  out.frame_size = frame.size();
+  cv::Mat f;
+  cv::resize(Standardised(frame), f, work, 0, 0, cv::INTER_AREA);
+  for (int k = 0; k < o.pyramid_levels; ++k) {
+    const cv::Size s(int(std::lround(work.width / std::pow(2.0, k))), int(std::lround(work.height / std::pow(2.0, k))));
+    if (k > 0 && (s.width < 16 || s.height < 16)) break;
+    cv::Mat level;
+    cv::resize(f, level, s, 0, 0, cv::INTER_AREA);
+    if (o.smoothing_sigma_px > 0) cv::GaussianBlur(level, level, cv::Size(), o.smoothing_sigma_px);
+    out.levels.push_back(std::move(level));
+  }
+  return out;
+}
+
 StatusOr<FrameRegistration> RegisterFrame(const cv::Mat& reference, const cv::Mat& frame,
                                           const FrameRegistrationOptions& o) {
   INSPECT_RETURN_IF_ERROR(o.Validate());
@@ -156,33 +193,33 @@ StatusOr<FrameRegistration> RegisterFrame(const cv::Mat& reference, const cv::Ma
     }
   }
   if (reference.size() != frame.size()) return Status::InvalidArgument("frames to register differ in size");
-  if (reference.cols < 32 || reference.rows < 32) {
-    return Status::InvalidArgument("frames are " + std::to_string(reference.cols) + "x" +
-                                   std::to_string(reference.rows) + " px; registration needs at least 32x32");
+  INSPECT_ASSIGN_OR_RETURN(RegistrationPyramid r, PrepareRegistration(reference, o));
+  INSPECT_ASSIGN_OR_RETURN(RegistrationPyramid f, PrepareRegistration(frame, o));
+  return RegisterPyramids(r, f, o);
+}
+
+StatusOr<FrameRegistration> RegisterPyramids(const RegistrationPyramid& ref_pyramid,
+                                             const RegistrationPyramid& frame_pyramid,
+                                             const FrameRegistrationOptions& o) {
+  INSPECT_RETURN_IF_ERROR(o.Validate());
+  if (ref_pyramid.frame_size != frame_pyramid.frame_size ||
+      ref_pyramid.levels.size() != frame_pyramid.levels.size() || ref_pyramid.levels.empty()) {
+    return Status::InvalidArgument("frames to register differ in size");
   }
-  // Working size: the frame scaled so its longer side is at most max_side_px.
-  const double shrink = std::min(1.0, double(o.max_side_px) / std::max(reference.cols, reference.rows));
-  const cv::Size work(std::max(16, int(std::lround(reference.cols * shrink))),
-                      std::max(16, int(std::lround(reference.rows * shrink))));
-  std::vector<Level> levels;
-  {
-    cv::Mat r, f;
-    cv::resize(Standardised(reference), r, work, 0, 0, cv::INTER_AREA);
-    cv::resize(Standardised(frame), f, work, 0, 0, cv::INTER_AREA);
-    for (int k = 0; k < o.pyramid_levels; ++k) {
-      const cv::Size s(int(std::lround(work.width / std::pow(2.0, k))),
-                       int(std::lround(work.height / std::pow(2.0, k))));
-      if (k > 0 && (s.width < 16 || s.height < 16)) break;
-      Level L;
-      cv::resize(r, L.reference, s, 0, 0, cv::INTER_AREA);
-      cv::resize(f, L.frame, s, 0, 0, cv::INTER_AREA);
-      if (o.smoothing_sigma_px > 0) {
-        cv::GaussianBlur(L.reference, L.reference, cv::Size(), o.smoothing_sigma_px);
-        cv::GaussianBlur(L.frame, L.frame, cv::Size(), o.smoothing_sigma_px);
-      }
-      levels.push_back(std::move(L));
+  const cv::Size reference = ref_pyramid.frame_size;
+  std::vector<Level> levels(ref_pyramid.levels.size());
+  for (size_t k = 0; k < levels.size(); ++k) {
+    if (ref_pyramid.levels[k].size() != frame_pyramid.levels[k].size()) {
+      return Status::InvalidArgument("frames to register were prepared with different options");
     }
+    levels[k].reference = ref_pyramid.levels[k];
+    levels[k].frame = frame_pyramid.levels[k];
   }
+  // The coarsest level is copied: cv::phaseCorrelate below multiplies its inputs by the window in
+  // place when their size is already a DFT size (e.g. 128 x 96), and the prepared pyramids are
+  // shared with the frames' other pair. The coarse iterations then see what they always saw.
+  levels.back().reference = levels.back().reference.clone();
+  levels.back().frame = levels.back().frame.clone();
   // Start: translation from phase correlation on the coarsest level (large drifts), else zero.
   Params p;
   {
@@ -238,8 +275,8 @@ StatusOr<FrameRegistration> RegisterFrame(const cv::Mat& reference, const cv::Ma
   const cv::Point2d c0((L0.reference.cols - 1) * 0.5, (L0.reference.rows - 1) * 0.5);
   const SimilarityTransform w = SimilarityOf(MatrixOf(p, c0, 0.5 * std::max(L0.reference.cols, L0.reference.rows)), c0);
   out.transform = w;
-  out.transform.shift_x_px = w.shift_x_px * double(reference.cols) / L0.reference.cols;
-  out.transform.shift_y_px = w.shift_y_px * double(reference.rows) / L0.reference.rows;
+  out.transform.shift_x_px = w.shift_x_px * double(reference.width) / L0.reference.cols;
+  out.transform.shift_y_px = w.shift_y_px * double(reference.height) / L0.reference.rows;
   return out;
 }
 

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/status.h"
 
@@ -54,5 +55,18 @@ struct FrameRegistration {
 // message says which.
 StatusOr<FrameRegistration> RegisterFrame(const cv::Mat& reference, const cv::Mat& frame,
                                           const FrameRegistrationOptions& options);
+
+// RegisterFrame in two steps, for frames that take part in several registrations (each frame of
+// a stack is registered to both neighbours): the working images of one frame (standardised,
+// shrunk to max_side_px, smoothed pyramid), then the alignment of two such pyramids. The result
+// is RegisterFrame's bit for bit; preparing a frame is most of a registration's cost.
+struct RegistrationPyramid {
+  cv::Size frame_size;          // of the frame it was prepared from
+  std::vector<cv::Mat> levels;  // CV_32FC1, finest (the working size) first
+};
+StatusOr<RegistrationPyramid> PrepareRegistration(const cv::Mat& frame, const FrameRegistrationOptions& options);
+// Both prepared with these options from frames of one size (else INVALID_ARGUMENT).
+StatusOr<FrameRegistration> RegisterPyramids(const RegistrationPyramid& reference, const RegistrationPyramid& frame,
+                                             const FrameRegistrationOptions& options);
 
 }  // namespace inspection

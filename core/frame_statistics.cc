@@ -16,16 +16,19 @@ FrameStatistics Compute(const cv::Mat& frame, int bit_depth) {
   uint64_t n_sat = 0, n_under = 0;
   for (int y = 0; y < frame.rows; ++y) {
     const T* row = frame.ptr<T>(y);
-    double rs = 0, rs2 = 0;
+    // Integer row sums (exact, as the double sums of integers were; the loop vectorises).
+    uint64_t rs = 0, rs2 = 0, rsat = 0, runder = 0;
     for (int x = 0; x < frame.cols; ++x) {
-      const double v = row[x];
+      const uint64_t v = row[x];
       rs += v;
       rs2 += v * v;
-      n_sat += row[x] >= sat;
-      n_under += row[x] < under;
+      rsat += row[x] >= sat;
+      runder += row[x] < under;
     }
-    sum += rs;
-    sum2 += rs2;
+    sum += double(rs);
+    sum2 += double(rs2);
+    n_sat += rsat;
+    n_under += runder;
   }
   const double n = double(frame.total());
   FrameStatistics s;

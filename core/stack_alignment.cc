@@ -113,7 +113,6 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
   std::vector<bool> ok(static_cast<size_t>(n), false);
   std::string failures;
   int failed = 0;
-  cv::Mat previous;
   cv::Size size;
   // Takes pair i's registration: its transform, or a counted failure (bad input is returned).
   auto take = [&](int i, const StatusOr<FrameRegistration>& r) -> Status {
@@ -127,28 +126,52 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
     if (failures.size() < 200) failures += (failures.empty() ? "" : "; ") + PairName(i) + ": " + r.status().message();
     return Status::Ok();
   };
-  // Concurrent pairs: each registered on its own thread, then taken in order below exactly as
-  // the sequential loop takes them (same errors, same failures, same model).
+  // Each frame's working images are prepared once and serve both of its pairs.
+  // Concurrent pairs: the pairs are cut into one run of neighbours per thread, each run
+  // registered in order on its own thread (a run's first frame is prepared twice), then taken in
+  // order below exactly as the sequential loop takes them (same errors, failures and model).
   std::vector<std::optional<StatusOr<FrameRegistration>>> registered;
   if (options.threads != 1) {
     registered.resize(size_t(n));
     INSPECT_ASSIGN_OR_RETURN(cv::Mat first, load(0));
-    if (first.cols >= 32 && first.rows >= 32) ParallelFor(n - 1, ResolveThreads(options.threads), [&](int task, int) {
-      const int i = task + 1;
-      StatusOr<cv::Mat> a = i == 1 ? StatusOr<cv::Mat>(first) : load(i - 1);
-      StatusOr<cv::Mat> b = load(i);
-      if (!a.ok() || !b.ok() || a->size() != first.size() || b->size() != first.size()) return;  // the loop reports it
-      registered[size_t(i)] = RegisterFrame(*a, *b, options.registration);
+    const int runs = std::min(n - 1, ResolveThreads(options.threads));
+    if (first.cols >= 32 && first.rows >= 32) ParallelFor(runs, runs, [&](int run, int) {
+      const int begin = 1 + (n - 1) * run / runs, end = 1 + (n - 1) * (run + 1) / runs;  // pairs [begin, end)
+      std::optional<RegistrationPyramid> previous_pyramid;
+      for (int i = begin; i < end; ++i) {
+        if (!previous_pyramid) {
+          StatusOr<cv::Mat> a = i == 1 ? StatusOr<cv::Mat>(first) : load(i - 1);
+          if (!a.ok() || a->size() != first.size()) return;  // the loop below reports it
+          StatusOr<RegistrationPyramid> pa = PrepareRegistration(*a, options.registration);
+          if (!pa.ok()) {
+            registered[size_t(i)] = pa.status();
+            return;
+          }
+          previous_pyramid = std::move(pa).value();
+        }
+        StatusOr<cv::Mat> b = load(i);
+        if (!b.ok() || b->size() != first.size()) return;  // the loop reports it
+        StatusOr<RegistrationPyramid> pb = PrepareRegistration(*b, options.registration);
+        if (!pb.ok()) {
+          registered[size_t(i)] = pb.status();
+          return;
+        }
+        registered[size_t(i)] = RegisterPyramids(*previous_pyramid, *pb, options.registration);
+        previous_pyramid = std::move(pb).value();
+      }
     });
   }
+  std::optional<RegistrationPyramid> previous;
   for (int i = 0; i < n; ++i) {
     if (!registered.empty() && i > 0 && registered[size_t(i)]) {
       // Registered concurrently; frames i-1 and i loaded and of the first frame's size.
       INSPECT_RETURN_IF_ERROR(take(i, *registered[size_t(i)]));
+      previous.reset();
       continue;
     }
-    if (i > 0 && previous.empty()) {
-      INSPECT_ASSIGN_OR_RETURN(previous, load(i - 1));  // after concurrent pairs
+    if (i > 0 && !previous) {
+      INSPECT_ASSIGN_OR_RETURN(cv::Mat before, load(i - 1));  // after concurrent pairs
+      INSPECT_ASSIGN_OR_RETURN(previous, PrepareRegistration(before, options.registration));
     }
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(i));
     if (i == 0) {
@@ -157,11 +180,13 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
         return Status::InvalidArgument("alignment needs frames of at least 32x32 px (frames are " +
                                        std::to_string(size.width) + "x" + std::to_string(size.height) + ")");
       }
-    } else {
-      if (frame.size() != size) return Status::InvalidArgument("frame " + std::to_string(i) + " differs in size");
-      INSPECT_RETURN_IF_ERROR(take(i, RegisterFrame(previous, frame, options.registration)));
+    } else if (frame.size() != size) {
+      return Status::InvalidArgument("frame " + std::to_string(i) + " differs in size");
     }
-    previous = std::move(frame);
+    if (i == 0 && !registered.empty() && registered[1]) continue;  // pair 1 ran concurrently
+    INSPECT_ASSIGN_OR_RETURN(RegistrationPyramid current, PrepareRegistration(frame, options.registration));
+    if (i > 0) INSPECT_RETURN_IF_ERROR(take(i, RegisterPyramids(*previous, current, options.registration)));
+    previous = std::move(current);
   }
   const int pairs = n - 1;
   if (pairs - failed < 2 || failed > options.max_failed_pair_share * pairs) {

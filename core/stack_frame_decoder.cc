@@ -3,10 +3,14 @@
 #include "core/stack_frame_decoder.h"
 
 #include <algorithm>
+#include <cstring>
+#include <fstream>
+#include <string>
 #include <system_error>
 #include <utility>
 
 #include "core/parallel_for.h"
+#include "core/png_frame_decode.h"
 
 namespace inspection {
 
@@ -14,12 +18,33 @@ namespace {
 
 int64_t BytesOf(const cv::Mat& m) { return int64_t(m.total() * m.elemSize()); }
 
+// Frame `index` as DecodeStackFrame gives it; a plain PNG (most stacks) through the fast path
+// (core/png_frame_decode.h), whose pixels are the same. Anything else, or a file the fast path
+// does not take, the general way, which also words the errors.
+StatusOr<cv::Mat> DecodeFrameFile(const std::filesystem::path& dir, const StackManifest& manifest, int index) {
+  if (index >= 0 && index < int(manifest.frames.size())) {
+    std::ifstream in(dir / manifest.frames[size_t(index)].file, std::ios::binary);
+    char signature[8] = {};
+    if (in.read(signature, sizeof signature) && std::memcmp(signature, "\x89PNG\r\n\x1a\n", 8) == 0) {
+      in.seekg(0, std::ios::end);
+      const std::streamoff size = in.tellg();
+      std::string file(size > 0 ? size_t(size) : 0, '\0');
+      in.seekg(0);
+      if (size > 0 && in.read(file.data(), size)) {
+        cv::Mat image = DecodePlainPng(file);
+        if (!image.empty()) return image;
+      }
+    }
+  }
+  return DecodeStackFrame(dir, manifest, size_t(index));
+}
+
 }  // namespace
 
 StackFrameDecoder::StackFrameDecoder(std::filesystem::path dir, StackManifest manifest,
                                      const StackFrameDecoderOptions& options, StackFrameDecodeFn decode)
     : dir_(std::move(dir)), manifest_(std::move(manifest)), options_(options), decode_(std::move(decode)) {
-  if (!decode_) decode_ = [this](int i) { return DecodeStackFrame(dir_, manifest_, size_t(i)); };
+  if (!decode_) decode_ = [this](int i) { return DecodeFrameFile(dir_, manifest_, i); };
   slots_.resize(manifest_.frames.size());
   for (size_t i = 0; i < manifest_.frames.size(); ++i) by_file_.emplace(manifest_.frames[i].file, int(i));
   const int n = std::min(ResolveThreads(options_.threads), std::max(1, int(slots_.size())));

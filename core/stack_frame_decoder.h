@@ -24,7 +24,8 @@
 
 namespace inspection {
 
-// Decodes frame `index` as stored (DecodeStackFrame by default; tests inject their own).
+// Decodes frame `index` as stored (by default DecodeStackFrame's pixels, plain PNGs through
+// core/png_frame_decode.h; tests inject their own).
 using StackFrameDecodeFn = std::function<StatusOr<cv::Mat>(int index)>;
 
 struct StackFrameDecoderOptions {

@@ -18,6 +18,7 @@
 //
 //   e2e-bench [--frames 60] [--width 1600] [--height 1200] [--runs 2] [--colour]
 //             [--alignment none|estimate] [--work DIR] [--decode-threads 0] [--verbose]
+//             [--only parallel|sequential]   (one path alone, e.g. under perf; no ratios)
 #include <grpcpp/grpcpp.h>
 #include <spdlog/spdlog.h>
 
@@ -58,6 +59,7 @@ struct Args {
   int frames = 60, width = 1600, height = 1200, runs = 2, decode_threads = 0;
   bool colour = false, verbose = false;
   std::string alignment;  // empty = the request's default (estimate, unaligned when it fails)
+  std::string only;       // "parallel" or "sequential": that path alone (profiling)
   fs::path work = fs::temp_directory_path() / "e2e-bench";
 };
 
@@ -78,6 +80,9 @@ bool ParseArgs(int argc, char** argv, Args* a) {
     } else if (k == "--alignment" && (v = next())) {
       a->alignment = v;
       if (a->alignment != "none" && a->alignment != "estimate") return false;
+    } else if (k == "--only" && (v = next())) {
+      a->only = v;
+      if (a->only != "parallel" && a->only != "sequential") return false;
     } else if (k == "--work" && (v = next())) {
       a->work = v;
     } else {
@@ -247,7 +252,8 @@ int main(int argc, char** argv) {
   Args a;
   if (!ParseArgs(argc, argv, &a)) {
     std::cerr << "usage: e2e-bench [--frames 60] [--width 1600] [--height 1200] [--runs 2] [--colour]\n"
-                 "                 [--alignment none|estimate] [--work DIR] [--decode-threads 0] [--verbose]\n";
+                 "                 [--alignment none|estimate] [--work DIR] [--decode-threads 0] [--verbose]\n"
+                 "                 [--only parallel|sequential]\n";
     return 2;
   }
   // The servers' per-job lines would bury the table; --verbose shows them with the jobs' timings.
@@ -269,6 +275,7 @@ int main(int argc, char** argv) {
               "artifacts", "download", "total", "engine_s", "peakRSS");
   for (int run = 0; run < a.runs; ++run) {
     for (bool sequential : {true, false}) {
+      if (!a.only.empty() && sequential != (a.only == "sequential")) continue;
       Phases p;
       Outputs o;
       if (!RunOnce(a, stack, sequential, run, &p, &o)) return 1;

@@ -5,7 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 #include <random>
+#include <vector>
 
 namespace inspection {
 namespace {
@@ -76,6 +78,61 @@ TEST(DepthConsistencyTest, FocusEnergyCentroidIsWhereTheWindowsGradientIs) {
   EXPECT_EQ(c->at<cv::Vec2f>(5, 5), cv::Vec2f(0.f, 0.f));  // no gradient in the window
   EXPECT_EQ(FocusEnergyCentroidOffset(aif, 8).status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(FocusEnergyCentroidOffset(cv::Mat(), 9).status().code(), StatusCode::kInvalidArgument);
+}
+
+// The centroid offset as whole-image filters give it (the definition; the implementation filters
+// bands of rows in parallel): Sobel energy, three box sums, their ratios, 0 without energy.
+cv::Mat WholeImageCentroidOffset(const cv::Mat& all_in_focus, int window_px) {
+  constexpr int kBorder = cv::BORDER_REFLECT_101;
+  cv::Mat grey, gx, gy;
+  if (all_in_focus.channels() == 3) {
+    cv::cvtColor(all_in_focus, grey, cv::COLOR_BGR2GRAY);
+    grey.convertTo(grey, CV_32F);
+  } else {
+    all_in_focus.convertTo(grey, CV_32F);
+  }
+  cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0, 0.0, kBorder);
+  cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0, 0.0, kBorder);
+  const cv::Mat energy = gx.mul(gx) + gy.mul(gy);
+  const int r = window_px / 2;
+  cv::Mat ones(1, 2 * r + 1, CV_32F, cv::Scalar(1.f)), ramp(1, 2 * r + 1, CV_32F);
+  for (int k = -r; k <= r; ++k) ramp.at<float>(0, k + r) = float(k);
+  cv::Mat sum, mx, my;
+  cv::sepFilter2D(energy, sum, CV_32F, ones, ones, cv::Point(-1, -1), 0.0, kBorder);
+  cv::sepFilter2D(energy, mx, CV_32F, ramp, ones, cv::Point(-1, -1), 0.0, kBorder);
+  cv::sepFilter2D(energy, my, CV_32F, ones, ramp, cv::Point(-1, -1), 0.0, kBorder);
+  std::vector<cv::Mat> channels(2);
+  cv::divide(mx, sum, channels[0]);
+  cv::divide(my, sum, channels[1]);
+  channels[0].setTo(0.f, sum <= 0.f);
+  channels[1].setTo(0.f, sum <= 0.f);
+  cv::Mat out;
+  cv::merge(channels, out);
+  return out;
+}
+
+TEST(DepthConsistencyTest, FocusEnergyCentroidInBandsEqualsTheWholeImageFilters) {
+  // Sizes that do not divide into the 32-row bands, a band of fewer rows than the window, flat
+  // patches (no energy) beside texture; grey 8/16 bit, float and colour.
+  cv::RNG rng(7);
+  for (const cv::Size size : {cv::Size(97, 70), cv::Size(41, 33), cv::Size(64, 129)}) {
+    for (const int type : {CV_8UC1, CV_16UC1, CV_32FC1, CV_8UC3}) {
+      cv::Mat image(size, type);
+      rng.fill(image, cv::RNG::UNIFORM, cv::Scalar::all(0), cv::Scalar::all(type == CV_16UC1 ? 65535 : 255));
+      image(cv::Rect(0, 0, size.width / 3, size.height / 2)).setTo(cv::Scalar::all(17));
+      for (const int window : {3, 9}) {
+        auto c = FocusEnergyCentroidOffset(image, window);
+        ASSERT_TRUE(c.ok()) << c.status().ToString();
+        const cv::Mat want = WholeImageCentroidOffset(image, window);
+        ASSERT_EQ(c->type(), CV_32FC2);
+        ASSERT_EQ(c->size(), size);
+        // Same filters on the same pixels: equal to the last bit.
+        EXPECT_EQ(cv::norm(*c, want, cv::NORM_INF), 0.0)
+            << size << " type " << type << " window " << window;
+        EXPECT_EQ(c->at<cv::Vec2f>(2, 2), cv::Vec2f(0.f, 0.f));  // inside the flat patch
+      }
+    }
+  }
 }
 
 TEST(DepthConsistencyTest, WindowsWhoseFocusEnergyIsFarFromTheirPixelOnASlopeAreRejected) {

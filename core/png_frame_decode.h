@@ -1,0 +1,19 @@
+// A fast path for the most common stack frame file, a plain PNG (grey or RGB, 8 or 16 bit, not
+// interlaced), decoded in one pass with libdeflate into the frame's own buffer: the frames of an
+// upload decode while it arrives (core/stack_frame_decoder.h), and PNG inflation was most of the
+// end-to-end time of a reconstruction (issue 16). The pixels are cv::imread's bit for bit (PNG is
+// lossless): the same channel order (BGR) and byte order (native) as cv::IMREAD_UNCHANGED.
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <string_view>
+
+namespace inspection {
+
+// The image in `file` (a whole PNG file's bytes): CV_8UC1, CV_16UC1, CV_8UC3 or CV_16UC3 (BGR).
+// An empty Mat when the file is anything else or anything this path does not take (palette,
+// alpha, transparency chunk, bit depth < 8, interlace, a bad checksum, truncated or corrupt data):
+// the caller then decodes it the general way (cv::imread), which also names what is wrong.
+cv::Mat DecodePlainPng(std::string_view file);
+
+}  // namespace inspection
