@@ -24,6 +24,7 @@ packages=(
   libaravis-dev aravis-tools aravis-tools-cli libusb-1.0-0-dev umockdev
   libspdlog-dev libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libtiff-dev libzip-dev libsqlite3-dev libssl-dev
+  libdeflate-dev  # core/png_frame_decode: the stack frames' PNG fast path
   gwyddion  # a real x3p reader: tests open our x3p with gwyddion-thumbnailer
   python3 python3-yaml  # deploy/validate_manifests.sh, tests/fault/kill9_test.sh (Debian's /usr/bin/python3)
   python3-grpcio python3-protobuf  # examples/python: the MES client (tests/mes)

@@ -89,7 +89,9 @@ StatusOr<std::pair<DepthResult, double>> Reconstruct(const fs::path& dir, const 
 }
 
 Row RigRow(const std::string& specimen, const Perturbation& p, cv::Size size, const fs::path& dir) {
-  Row row{specimen, p};
+  Row row;
+  row.specimen = specimen;
+  row.p = p;
   SimulatedRigOptions o;
   o.specimen = specimen;
   o.camera_size = size;
@@ -151,7 +153,9 @@ Row RigRow(const std::string& specimen, const Perturbation& p, cv::Size size, co
 // The natural scene's frames seen through breathing optics: frame k (at z = 5 k um) warped by the
 // model, the truth (frame units -> um) moved into the middle frame's grid.
 Row NaturalRow(const Perturbation& p, cv::Size size) {
-  Row row{"natural", p};
+  Row row;
+  row.specimen = "natural";
+  row.p = p;
   NaturalSceneOptions no;
   no.size = size;
   no.frames = 30;

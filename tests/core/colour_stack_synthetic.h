@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <stdexcept>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
@@ -72,7 +73,7 @@ inline StackManifest WriteColourStack(const std::filesystem::path& dir, const Co
     cv::imwrite((dir / name).string(), frame);
     m.frames.push_back({name, s.z_step_um * i, 1000, "uniform:128"});
   }
-  WriteStackManifest(dir, m);
+  if (const Status written = WriteStackManifest(dir, m); !written.ok()) throw std::runtime_error(written.ToString());
   return m;
 }
 

@@ -10,7 +10,7 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 cd "$here"
 secs="${1:-60}"
 build="${FUZZ_BUILD_DIR:-build-fuzz}"
-targets=(fuzz_stack_manifest fuzz_rig_config fuzz_access_policy fuzz_request_validators fuzz_recipe_document)
+targets=(fuzz_stack_manifest fuzz_png_frame_decode fuzz_rig_config fuzz_access_policy fuzz_request_validators fuzz_recipe_document)
 
 export CCACHE_BASEDIR="$here"
 CC=clang-15 CXX=clang++-15 cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
