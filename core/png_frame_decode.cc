@@ -64,7 +64,7 @@ struct Decompressor {
 
 }  // namespace
 
-cv::Mat DecodePlainPng(std::string_view file) {
+cv::Mat DecodePlainPng(std::string_view file, size_t max_raw_bytes) {
   static constexpr unsigned char kSignature[8] = {137, 80, 78, 71, 13, 10, 26, 10};
   if (file.size() < 8 || std::memcmp(file.data(), kSignature, 8) != 0) return {};
   const auto* bytes = reinterpret_cast<const unsigned char*>(file.data());
@@ -104,8 +104,11 @@ cv::Mat DecodePlainPng(std::string_view file) {
   const int channels = colour_type == 2 ? 3 : 1, sample_bytes = bit_depth / 8;
   const size_t bpp = size_t(channels) * sample_bytes, stride = size_t(width) * bpp;
   const size_t raw_bytes = size_t(height) * (stride + 1);
+  // Larger frames take the general path, whose decoder applies OpenCV's own image-size limits:
+  // the buffer below is allocated from the header before the data is seen.
   if (width > uint32_t(std::numeric_limits<int>::max()) / bpp ||
-      raw_bytes / (stride + 1) != height || raw_bytes > size_t(std::numeric_limits<int>::max())) {
+      raw_bytes / (stride + 1) != height || raw_bytes > max_raw_bytes ||
+      raw_bytes > size_t(std::numeric_limits<int>::max())) {
     return {};
   }
   // One buffer: the inflated rows (a filter byte each, so `height` bytes more than the image),

@@ -6,14 +6,19 @@
 #pragma once
 
 #include <opencv2/core.hpp>
+#include <cstddef>
 #include <string_view>
 
 namespace inspection {
 
 // The image in `file` (a whole PNG file's bytes): CV_8UC1, CV_16UC1, CV_8UC3 or CV_16UC3 (BGR).
 // An empty Mat when the file is anything else or anything this path does not take (palette,
-// alpha, transparency chunk, bit depth < 8, interlace, a bad checksum, truncated or corrupt data):
+// alpha, transparency chunk, bit depth < 8, interlace, more than max_raw_bytes of raw rows, a
+// bad checksum, truncated or corrupt data):
 // the caller then decodes it the general way (cv::imread), which also names what is wrong.
-cv::Mat DecodePlainPng(std::string_view file);
+// max_raw_bytes: the largest inflated size (rows with their filter bytes) this path allocates from
+// the header; larger images take the general path, whose decoder applies OpenCV's size limits.
+inline constexpr size_t kPngFastPathMaxRawBytes = size_t(1) << 28;  // 256 MiB
+cv::Mat DecodePlainPng(std::string_view file, size_t max_raw_bytes = kPngFastPathMaxRawBytes);
 
 }  // namespace inspection

@@ -129,6 +129,10 @@ TEST(PngFrameDecodeTest, WhatItDoesNotTakeOrCannotTrustComesBackEmpty) {
   cv::Mat taller(31, 40, CV_8UC1, cv::Scalar(9));
   const std::string tall = Encode(taller, 3);
   EXPECT_TRUE(DecodePlainPng(signature + ihdr + tall.substr(8 + 25)).empty());
+  // An image whose rows inflate to more than max_raw_bytes goes to the general decoder before
+  // any buffer is allocated from its header (40 x 30 grey: 30 x 41 = 1230 bytes).
+  EXPECT_TRUE(DecodePlainPng(file, 1229).empty());
+  EXPECT_TRUE(SameImage(DecodePlainPng(file, 1230), grey));
 }
 
 }  // namespace
