@@ -70,6 +70,7 @@ Status StackAlignmentOptions::Validate() const {
   }
   if (!(max_pair_residual_px > 0)) return Status::InvalidArgument("max_pair_residual_px must be > 0");
   if (threads < 0) return Status::InvalidArgument("threads must be >= 0 (0 = all hardware threads)");
+  if (max_pairs < 0 || max_pairs == 1) return Status::InvalidArgument("max_pairs must be 0 (all) or >= 2");
   return Status::Ok();
 }
 
@@ -95,19 +96,18 @@ double CornerRms(const cv::Matx23d& a, const cv::Matx23d& b, cv::Size s) {
   return std::sqrt(sum / 4);
 }
 
-std::string PairName(int i) { return std::to_string(i - 1) + "->" + std::to_string(i); }
-
-}  // namespace
-
-StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusOr<cv::Mat>(int)>& load,
-                                                     const std::vector<double>& z_um,
-                                                     const StackAlignmentOptions& options) {
-  INSPECT_RETURN_IF_ERROR(options.Validate());
-  const int n = int(z_um.size());
-  if (n < 3) {
-    return Status::InvalidArgument("alignment needs at least 3 frames to estimate scale and drift through z (got " +
-                                   std::to_string(n) + ")");
-  }
+// The estimate on a chain of the stack's frames: chain[j] is a frame index, load and z_um are the
+// stack's. Pair j is (chain[j - 1], chain[j]).
+StatusOr<FocusBreathingModel> EstimateOnChain(const std::function<StatusOr<cv::Mat>(int)>& stack_load,
+                                              const std::vector<double>& stack_z_um, const std::vector<int>& chain,
+                                              const StackAlignmentOptions& options) {
+  const int n = int(chain.size());
+  auto load = [&](int j) { return stack_load(chain[size_t(j)]); };
+  std::vector<double> z_um(size_t(n), 0.0);
+  for (int j = 0; j < n; ++j) z_um[size_t(j)] = stack_z_um[size_t(chain[size_t(j)])];
+  auto PairName = [&](int j) {
+    return std::to_string(chain[size_t(j - 1)]) + "->" + std::to_string(chain[size_t(j)]);
+  };
   // Registration of each frame to its predecessor: p_i = pair[i](p_{i-1}).
   std::vector<SimilarityTransform> pair_t(static_cast<size_t>(n));
   std::vector<bool> ok(static_cast<size_t>(n), false);
@@ -181,7 +181,7 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
                                        std::to_string(size.width) + "x" + std::to_string(size.height) + ")");
       }
     } else if (frame.size() != size) {
-      return Status::InvalidArgument("frame " + std::to_string(i) + " differs in size");
+      return Status::InvalidArgument("frame " + std::to_string(chain[size_t(i)]) + " differs in size");
     }
     if (i == 0 && !registered.empty() && registered[1]) continue;  // pair 1 ran concurrently
     INSPECT_ASSIGN_OR_RETURN(RegistrationPyramid current, PrepareRegistration(frame, options.registration));
@@ -198,7 +198,7 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
   FocusBreathingModel m;
   m.reference_z_um = z_um.front();
   m.frame_size = size;
-  m.frames = n;
+  m.frames = int(stack_z_um.size());
   const cv::Point2d c = m.centre_px();
   // Per pair, the change of each model quantity per 100 um. The pair's transform is
   // F(z_i) F(z_{i-1})^-1, so its scale is s_i / s_{i-1} and its shift d_i - A_i A_{i-1}^-1 d_{i-1}:
@@ -255,6 +255,25 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
         std::to_string(options.max_pair_residual_px) + " px: " + worst + ")");
   }
   return m;
+}
+
+}  // namespace
+
+StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusOr<cv::Mat>(int)>& load,
+                                                     const std::vector<double>& z_um,
+                                                     const StackAlignmentOptions& options) {
+  INSPECT_RETURN_IF_ERROR(options.Validate());
+  const int n = int(z_um.size());
+  if (n < 3) {
+    return Status::InvalidArgument("alignment needs at least 3 frames to estimate scale and drift through z (got " +
+                                   std::to_string(n) + ")");
+  }
+  // Long stacks: frames `stride` apart, and the last frame (see max_pairs).
+  const int stride = options.max_pairs > 0 ? std::max(1, (n - 1 + options.max_pairs - 1) / options.max_pairs) : 1;
+  std::vector<int> chain;
+  for (int i = 0; i < n; i += stride) chain.push_back(i);
+  if (chain.back() != n - 1) chain.push_back(n - 1);
+  return EstimateOnChain(load, z_um, chain, options);
 }
 
 double MaxCornerDisplacementPx(const FocusBreathingModel& model, const std::vector<double>& z_um) {

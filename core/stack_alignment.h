@@ -67,6 +67,12 @@ struct StackAlignmentOptions {
   // concurrently: load must be thread-safe and is called for both frames of each pair (so use it
   // on frames held in memory, e.g. a StackFrameDecoder's); the model is the same bit for bit.
   int threads = 1;
+  // At most this many pairs are registered (0 = every neighbour pair). A longer stack registers
+  // frames `stride` = ceil((n - 1) / max_pairs) apart (and its last frame to the last one taken):
+  // the chain still spans every step, so a jump anywhere shows in one pair, at a fraction of the
+  // cost. What it no longer sees is one frame out of line between two in line. 30 pairs are
+  // plenty for the medians; frames two or three steps apart share most of their defocus.
+  int max_pairs = 30;
   Status Validate() const;
 };
 

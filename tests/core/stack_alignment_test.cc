@@ -57,6 +57,29 @@ TEST(FrameRegistrationTest, RecoversScaleRotationAndShiftBetweenDifferentlyBlurr
   EXPECT_GT(r->correlation, 0.9);
 }
 
+// Frames over twice max_side_px are first shrunk by a whole factor as stored (8 or 16 bit), then
+// in float: the transform is still found to the same accuracy in full-frame pixels.
+TEST(FrameRegistrationTest, LargeFramesShrunkByAWholeFactorFirstRegisterAsAccurately) {
+  const cv::Mat texture = Texture({1200, 900}, 4);  // shrink 2 (as stored), then 600 -> 512 in float
+  SimilarityTransform truth;
+  truth.scale = 0.988;
+  truth.rotation_rad = -0.003;
+  truth.shift_x_px = -5.2;
+  truth.shift_y_px = 2.7;
+  const cv::Mat reference = Render(texture, {}, 1.0, 1), frame = Render(texture, truth, 1.8, 2);
+  for (int depth : {CV_8U, CV_16U}) {
+    cv::Mat a, b;
+    reference.convertTo(a, depth, depth == CV_16U ? 256.0 : 1.0);
+    frame.convertTo(b, depth, depth == CV_16U ? 256.0 : 1.0);
+    auto r = RegisterFrame(a, b, {});
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    EXPECT_NEAR(r->transform.scale, truth.scale, 5e-4) << depth;
+    EXPECT_NEAR(r->transform.rotation_rad, truth.rotation_rad, 5e-4) << depth;
+    EXPECT_NEAR(r->transform.shift_x_px, truth.shift_x_px, 0.15) << depth;
+    EXPECT_NEAR(r->transform.shift_y_px, truth.shift_y_px, 0.15) << depth;
+  }
+}
+
 TEST(FrameRegistrationTest, LargeDriftIsFoundByThePhaseCorrelationStart) {
   const cv::Mat texture = Texture({512, 384}, 5);
   SimilarityTransform truth;
@@ -155,6 +178,48 @@ TEST(StackAlignmentTest, ConcurrentPairsGiveTheSequentialModelExactly) {
   EXPECT_EQ(a.message(), "frame 6 differs in size");
   EXPECT_EQ(b.code(), a.code());
   EXPECT_EQ(b.message(), a.message());
+}
+
+// Issue 16: a long stack registers a chain of frames `stride` apart (max_pairs); the model
+// matches the truth as the all-neighbour estimate does, and a pair is named by its frames.
+TEST(StackAlignmentTest, LongStacksRegisterAChainOfFramesStrideApart) {
+  const BreathingStack s = MakeStack({256, 192}, 41, 5.0, 0.02, 0.002, 3.0, -2.0, 0.03);
+  auto load = [&](int i) -> StatusOr<cv::Mat> { return s.frames[size_t(i)]; };
+  int loads = 0;
+  auto counting = [&](int i) -> StatusOr<cv::Mat> {
+    ++loads;
+    return s.frames[size_t(i)];
+  };
+  StackAlignmentOptions every, chain;
+  every.max_pairs = 0;
+  chain.max_pairs = 10;  // stride 4: frames 0, 4, ..., 40
+  auto all = EstimateFocusBreathing(load, s.z_um, every);
+  auto strided = EstimateFocusBreathing(counting, s.z_um, chain);
+  ASSERT_TRUE(all.ok()) << all.status().ToString();
+  ASSERT_TRUE(strided.ok()) << strided.status().ToString();
+  EXPECT_EQ(loads, 11);
+  EXPECT_EQ(strided->frames, 41);
+  for (const FocusBreathingModel* m : {&*all, &*strided}) {
+    EXPECT_NEAR(m->scale_change_per_100um, 0.02, 5e-4);
+    EXPECT_NEAR(m->rotation_rad_per_100um, 0.002, 4e-4);
+    EXPECT_NEAR(m->shift_x_px_per_100um, 3.0, 0.2);
+    EXPECT_NEAR(m->shift_y_px_per_100um, -2.0, 0.2);
+  }
+  // Frames from 18 on jump 6 px sideways: the jump falls inside the chain's pair 16->20, which
+  // disagrees with the model, and is named so.
+  std::vector<cv::Mat> jumped = s.frames;
+  for (int i = 18; i < 41; ++i) {
+    cv::warpAffine(s.frames[size_t(i)], jumped[size_t(i)], cv::Matx23d(1, 0, 6, 0, 1, 0), s.frames[0].size(),
+                   cv::INTER_LINEAR, cv::BORDER_REFLECT_101);
+  }
+  chain.max_failed_pair_share = 0.05;
+  auto failed = EstimateFocusBreathing([&](int i) -> StatusOr<cv::Mat> { return jumped[size_t(i)]; }, s.z_um, chain);
+  ASSERT_FALSE(failed.ok());
+  EXPECT_EQ(failed.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(failed.status().message().find("1 of 10 disagree"), std::string::npos) << failed.status().ToString();
+  EXPECT_NE(failed.status().message().find(": 16->20)"), std::string::npos) << failed.status().ToString();
+  chain.max_pairs = 1;
+  EXPECT_EQ(EstimateFocusBreathing(load, s.z_um, chain).status().code(), StatusCode::kInvalidArgument);
 }
 
 TEST(StackAlignmentTest, AlignerWarpsEveryFrameOntoTheMiddleFrame) {
