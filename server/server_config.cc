@@ -184,6 +184,13 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
       {"retention_keep_last", &C::retention_keep_last,
        "retention: the newest N finished jobs are kept whatever the limits (pinned jobs always are)"},
       {"retention_interval_s", &C::retention_interval_s, "retention: seconds between sweeps"},
+      {"decode_threads", &C::decode_threads,
+       "reconstruct: threads decoding a stack's frames as they arrive; 0: all hardware threads"},
+      {"decode_budget_mb", &C::decode_budget_mb,
+       "reconstruct: decoded frames kept per reconstruction (MiB); frames beyond it are decoded again when the "
+       "engine needs them (bounds memory)"},
+      {"artifact_threads", &C::artifact_threads,
+       "reconstruct: artifact files written at once; 0: all hardware threads"},
   };
   return keys;
 }
@@ -342,6 +349,9 @@ Status ValidateConfig(const InspectdConfig& c) {
   if (c.retention_interval_s < 1) {
     return bad("retention_interval_s", std::to_string(c.retention_interval_s), "must be >= 1");
   }
+  if (c.decode_threads < 0) return bad("decode_threads", std::to_string(c.decode_threads), "must be >= 0");
+  if (c.decode_budget_mb < 0) return bad("decode_budget_mb", std::to_string(c.decode_budget_mb), "must be >= 0");
+  if (c.artifact_threads < 0) return bad("artifact_threads", std::to_string(c.artifact_threads), "must be >= 0");
   if (c.tls_cert.empty() != c.tls_key.empty()) {
     return Status::InvalidArgument("TLS needs both tls_cert and tls_key (only " +
                                    std::string(c.tls_cert.empty() ? "tls_key" : "tls_cert") + " is set)");
@@ -378,6 +388,9 @@ StatusOr<ServerOptions> ToServerOptions(const InspectdConfig& c) {
   o.retention.keep_last = c.retention_keep_last;
   o.retention_interval_s = c.retention_interval_s;
   o.no_rig = c.no_rig;
+  o.reconstruct.decode_threads = c.decode_threads;
+  o.reconstruct.max_decoded_bytes = int64_t(c.decode_budget_mb) << 20;
+  o.reconstruct.artifact_threads = c.artifact_threads;
   o.http_listen_address = c.http_listen;
   o.simulation.specimen = c.specimen;
   o.simulation.seed = c.seed;

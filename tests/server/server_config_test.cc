@@ -55,7 +55,7 @@ TEST(ServerConfig, NamesDerivedFromTheKey) {
   EXPECT_EQ(key->FlagName(), "--auth-token-file");
   EXPECT_EQ(key->EnvironmentName(), "INSPECTD_AUTH_TOKEN_FILE");
   EXPECT_EQ(FindConfigKey("auth-token-file"), nullptr);  // file keys use '_' only
-  EXPECT_EQ(InspectdConfigKeys().size(), 27u);           // every inspectd flag before --config
+  EXPECT_EQ(InspectdConfigKeys().size(), 30u);           // every inspectd flag before --config
 }
 
 TEST(ServerConfig, OperationsSettingsAreCheckedAndReachServerOptions) {
@@ -90,6 +90,38 @@ TEST(ServerConfig, OperationsSettingsAreCheckedAndReachServerOptions) {
   c.no_rig = true;
   c.rig_config = "/etc/inspection/rig.json";
   rejected(c, "no_rig and rig_config exclude each other");
+}
+
+// Issue 16: the reconstruction pipeline's decode threads, decode budget and artifact threads.
+TEST(ServerConfig, ReconstructPipelineSettingsReachServerOptions) {
+  const ServerOptions d;
+  auto defaults = ToServerOptions(InspectdConfig{});
+  ASSERT_TRUE(defaults.ok());
+  EXPECT_EQ(defaults->reconstruct.decode_threads, d.reconstruct.decode_threads);
+  EXPECT_EQ(defaults->reconstruct.max_decoded_bytes, d.reconstruct.max_decoded_bytes);
+  EXPECT_EQ(defaults->reconstruct.artifact_threads, d.reconstruct.artifact_threads);
+  EXPECT_EQ(InspectdConfig{}.decode_budget_mb, 1024);
+
+  ConfigLayers layers;
+  layers.environment = {{"INSPECTD_DECODE_THREADS", "3"}, {"INSPECTD_DECODE_BUDGET_MB", "256"}};
+  layers.flags = {{"artifact_threads", "1"}};
+  auto r = ResolveInspectdConfig(layers);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  auto options = ToServerOptions(r->config);
+  ASSERT_TRUE(options.ok()) << options.status().ToString();
+  EXPECT_EQ(options->reconstruct.decode_threads, 3);
+  EXPECT_EQ(options->reconstruct.max_decoded_bytes, int64_t(256) << 20);
+  EXPECT_EQ(options->reconstruct.artifact_threads, 1);
+  EXPECT_FALSE(options->reconstruct.sequential);
+
+  InspectdConfig c;
+  c.decode_budget_mb = -1;
+  const Status s = ValidateConfig(c);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("decode_budget_mb '-1' must be >= 0"), std::string::npos) << s.message();
+  c = InspectdConfig();
+  c.decode_threads = -2;
+  EXPECT_NE(ValidateConfig(c).message().find("decode_threads"), std::string::npos);
 }
 
 TEST_F(ConfigFileTest, FlagsOverrideEnvironmentOverrideFileOverrideDefaults) {
