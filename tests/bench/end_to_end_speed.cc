@@ -19,6 +19,8 @@
 //   e2e-bench [--frames 60] [--width 1600] [--height 1200] [--runs 2] [--colour]
 //             [--alignment none|estimate] [--work DIR] [--decode-threads 0] [--verbose]
 //             [--only parallel|sequential]   (one path alone, e.g. under perf; no ratios)
+//             [--focus-stack BIN]   (also time `BIN --nocrop --depthmap=...` on the same PNGs, once
+//                                    per run between ours, and print ours against it)
 #include <grpcpp/grpcpp.h>
 #include <spdlog/spdlog.h>
 
@@ -26,6 +28,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -60,6 +63,7 @@ struct Args {
   bool colour = false, verbose = false;
   std::string alignment;  // empty = the request's default (estimate, unaligned when it fails)
   std::string only;       // "parallel" or "sequential": that path alone (profiling)
+  std::string focus_stack;  // focus-stack's binary: timed per run as the external baseline
   fs::path work = fs::temp_directory_path() / "e2e-bench";
 };
 
@@ -85,11 +89,30 @@ bool ParseArgs(int argc, char** argv, Args* a) {
       if (a->only != "parallel" && a->only != "sequential") return false;
     } else if (k == "--work" && (v = next())) {
       a->work = v;
+    } else if (k == "--focus-stack" && (v = next())) {
+      a->focus_stack = v;
     } else {
       return false;
     }
   }
   return a->frames >= 3 && a->width >= 32 && a->height >= 32;
+}
+
+// focus-stack's whole-process wall time on the stack's PNGs (its depth map and merged image go to
+// the work folder); < 0 when it fails.
+double TimeFocusStack(const Args& a, const fs::path& stack) {
+  std::string cmd = "'" + a.focus_stack + "' --nocrop --depthmap='" + (a.work / "focus_stack_depth.png").string() +
+                    "' --output='" + (a.work / "focus_stack_merged.jpg").string() + "'";
+  for (int k = 0; k < a.frames; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%04d.png", k);
+    cmd += " '" + (stack / name).string() + "'";
+  }
+  cmd += " > '" + (a.work / "focus_stack.log").string() + "' 2>&1";
+  const auto t0 = Clock::now();
+  const int rc = std::system(cmd.c_str());
+  const double s = Seconds(t0, Clock::now());
+  return rc == 0 ? s : -1.0;
 }
 
 // The stack: frame k = the texture blurred by sigma(|z_k - h(x, y)|), interpolated between
@@ -253,7 +276,7 @@ int main(int argc, char** argv) {
   if (!ParseArgs(argc, argv, &a)) {
     std::cerr << "usage: e2e-bench [--frames 60] [--width 1600] [--height 1200] [--runs 2] [--colour]\n"
                  "                 [--alignment none|estimate] [--work DIR] [--decode-threads 0] [--verbose]\n"
-                 "                 [--only parallel|sequential]\n";
+                 "                 [--only parallel|sequential] [--focus-stack BIN]\n";
     return 2;
   }
   // The servers' per-job lines would bury the table; --verbose shows them with the jobs' timings.
@@ -273,7 +296,17 @@ int main(int argc, char** argv) {
   bool identical = true;
   std::printf("\n%-12s %3s %8s %8s %8s %9s %8s %8s %8s %9s\n", "path", "run", "upload", "decode", "engine",
               "artifacts", "download", "total", "engine_s", "peakRSS");
+  std::vector<double> focus_stack_s;
   for (int run = 0; run < a.runs; ++run) {
+    if (!a.focus_stack.empty()) {
+      const double t = TimeFocusStack(a, stack);
+      if (t < 0) {
+        std::cerr << "e2e-bench: " << a.focus_stack << " failed; see " << (a.work / "focus_stack.log").string() << "\n";
+        return 1;
+      }
+      focus_stack_s.push_back(t);
+      std::printf("%-12s %3d %62.3f\n", "focus-stack", run, t);
+    }
     for (bool sequential : {true, false}) {
       if (!a.only.empty() && sequential != (a.only == "sequential")) continue;
       Phases p;
@@ -313,6 +346,12 @@ int main(int argc, char** argv) {
   std::printf("peak RSS of the whole process: sequential %.0f MiB, parallel %.0f MiB (%.2fx the decoded stack)\n",
               median(true, &Phases::peak_rss_abs_mb), median(false, &Phases::peak_rss_abs_mb),
               median(false, &Phases::peak_rss_abs_mb) / decoded_mb);
+  if (!focus_stack_s.empty()) {
+    const double fs_median = Median(focus_stack_s), ours = median(false, &Phases::total);
+    std::printf("focus-stack (--nocrop --depthmap, whole process), median of %d: %.3f s; ours (parallel, total): "
+                "%.3f s; ratio %.1fx\n",
+                int(focus_stack_s.size()), fs_median, ours, ours > 0 ? fs_median / ours : 0.0);
+  }
   std::printf("depth, confidence, all-in-focus bit-identical across all runs: %s\n", identical ? "yes" : "NO");
   return identical ? 0 : 1;
 }
