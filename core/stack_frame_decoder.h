@@ -16,6 +16,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -27,6 +28,11 @@ namespace inspection {
 // Decodes frame `index` as stored (by default DecodeStackFrame's pixels, plain PNGs through
 // core/png_frame_decode.h; tests inject their own).
 using StackFrameDecodeFn = std::function<StatusOr<cv::Mat>(int index)>;
+
+// Frame `index` from its file's bytes in memory (a stored scan's archive entry): a plain PNG
+// through the fast path, anything else DecodeStackFrameBytes; the pixels and errors of the
+// default decode of that file on disk.
+StatusOr<cv::Mat> DecodeStackFrameInMemory(std::string_view file, const StackManifest& manifest, int index);
 
 struct StackFrameDecoderOptions {
   int threads = 0;  // decode threads; 0 = all hardware threads
