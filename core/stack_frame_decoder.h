@@ -1,5 +1,6 @@
-// Decodes a stack folder's frames (core/stack.h) on a few threads as their files become
-// complete (an upload's last chunk, an extracted archive entry), in whatever order they finish,
+// Decodes a stack's frames (core/stack.h) on a few threads as their files become complete (an
+// upload's last chunk) or from bytes in memory (a stored scan's archive entries, through an
+// injected decode function), in whatever order they finish,
 // and hands them to the SFF engine loop (core/stack_reconstruct.h) strictly in z order: the
 // streaming engine of thesis 3.1 is fed frame by frame as before, only the decoding moved off
 // its path. Decoded frames are kept up to a byte budget; a frame beyond it is checked and

@@ -1,8 +1,8 @@
 // File helpers for artifacts: content digests for integrity checks and the stack archive.
 #pragma once
 
-#include <filesystem>
 #include <cstdint>
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -24,8 +24,8 @@ Status ZipFolder(const std::filesystem::path& folder, const std::filesystem::pat
 
 // Reads the files of a zip archive (the stack.zip artifact) into memory or to disk, by entry name.
 // Opening checks every entry name: relative paths without ".." (anything else: DATA_LOSS naming
-// the entry), so nothing read can land outside a target folder. The archive stays open while the
-// reader lives: a reconstruction reads a stored scan even if the scan is deleted meanwhile.
+// the entry), so nothing read can land outside a target folder. The archive file stays open
+// while the reader lives (removing it meanwhile does not cut the reader off).
 // Thread-safe: libzip's archive handle is not, so each read takes a lock (it copies stored
 // bytes; the callers decode them in parallel outside it).
 class ZipReader {

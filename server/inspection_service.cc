@@ -276,8 +276,8 @@ grpc::Status InspectionServiceImpl::Reconstruct(
   }
   // Validate the whole stack before a job exists: bad input never becomes a failed job. The
   // frames were decoding while they arrived; the rest decode now, in parallel (a stored scan's
-  // all of them, from its archive), and the job's engine takes them from memory in z order. Sequential: the path
-  // before issue 16 (decoded here to check them, and again by the job).
+  // all of them, from its archive), and the job's engine takes them from memory in z order.
+  // Sequential: the path before issue 16 (decoded here to check them, and again by the job).
   auto manifest = stored_manifest ? StatusOr<StackManifest>(*stored_manifest) : ReadStackManifest(dir);
   if (!manifest.ok()) return Grpc(manifest.status());
   if (options_.reconstruct.sequential) {

@@ -333,7 +333,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   AlignmentFigures alignment;
   DepthPostProcessFigures postprocess;
   if (work.method.integral()) {
-    // The calibration active now; two passes over the folder without per-frame events (and
+    // The calibration active now; two passes over the frames without per-frame events (and
     // without a cancellation point inside them: ~1 s for 23 frames of 1024 x 768).
     const std::shared_ptr<const CalibrationBundle> bundle = calibrations_->active();
     if (context.cancel->load()) return Status::Cancelled("reconstruction cancelled before it started");
