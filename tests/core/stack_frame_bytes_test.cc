@@ -51,9 +51,9 @@ TEST_F(StackFrameBytesTest, EveryFormatDecodesToTheFilesPixels) {
   const struct {
     const char* file;
     int type;
-  } cases[] = {{"g8.png", CV_8UC1},  {"g16.png", CV_16UC1}, {"c8.png", CV_8UC3},  {"c16.png", CV_16UC3},
-               {"g8.tiff", CV_8UC1}, {"g16.tif", CV_16UC1}, {"c16.tiff", CV_16UC3}, {"g8.jpg", CV_8UC1},
-               {"c8.jpg", CV_8UC3}};
+  } cases[] = {{"g8.png", CV_8UC1},    {"g16.png", CV_16UC1}, {"c8.png", CV_8UC3},
+               {"c16.png", CV_16UC3},  {"g8.tiff", CV_8UC1},  {"g16.tif", CV_16UC1},
+               {"c16.tiff", CV_16UC3}, {"g8.jpg", CV_8UC1},   {"c8.jpg", CV_8UC3}};
   for (const auto& c : cases) {
     ASSERT_TRUE(cv::imwrite((dir_ / c.file).string(), Pattern(c.type))) << c.file;
     const StackManifest m = ManifestFor(c.file);
