@@ -11,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include "core/colour.h"
 #include "core/stack.h"
 
 namespace inspection {
@@ -347,22 +348,44 @@ StatusOr<IsffResult> ReconstructIntegralSffWithTemplate(const std::vector<cv::Ma
   return r;
 }
 
-StatusOr<IsffResult> ReconstructIntegralSffStack(const std::filesystem::path& dir, const IntegralPsf* ipsf,
-                                                 const IsffOptions& options) {
+namespace {
+
+Status CheckIntegralInputs(const IntegralPsf* ipsf, const IsffOptions& options) {
   if (ipsf == nullptr) {
     return Status::FailedPrecondition(
         "ISFF needs an integral PSF: run the calibration step integral_psf (CALIBRATION_STEP_INTEGRAL_PSF)");
   }
   INSPECT_RETURN_IF_ERROR(options.Validate());
-  INSPECT_RETURN_IF_ERROR(ipsf->Validate());
+  return ipsf->Validate();
+}
+
+}  // namespace
+
+StatusOr<IsffResult> ReconstructIntegralSffStack(const std::filesystem::path& dir, const IntegralPsf* ipsf,
+                                                 const IsffOptions& options) {
+  INSPECT_RETURN_IF_ERROR(CheckIntegralInputs(ipsf, options));
   INSPECT_ASSIGN_OR_RETURN(StackManifest manifest, ReadStackManifest(dir));
+  const StackFrameSource source{[&](int i) { return DecodeStackFrame(dir, manifest, size_t(i)); }, {}};
+  return ReconstructIntegralSffFrames(manifest, source, ipsf, options);
+}
+
+StatusOr<IsffResult> ReconstructIntegralSffFrames(const StackManifest& manifest, const StackFrameSource& source,
+                                                  const IntegralPsf* ipsf, const IsffOptions& options) {
+  INSPECT_RETURN_IF_ERROR(CheckIntegralInputs(ipsf, options));
   std::vector<double> z_um;
   for (const StackFrame& f : manifest.frames) z_um.push_back(f.z_um);
+  // What LoadStackFrame gives: the frame as stored, or a colour frame's luminance.
+  auto grey_frame = [&](size_t i) -> StatusOr<cv::Mat> {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, source.frame(int(i)));
+    if (f.channels() == 1) return f;
+    return LuminanceOf(f);
+  };
   int frame_type = -1;
   cv::Size size;
-  // Pass 1 takes frame 0's type and size; every later read (pass 1 and 2) must match them.
+  // Pass 1 takes frame 0's type and size; every later read (pass 1 and 2) must match them. The
+  // frames stay with the source for pass 2 (a decoder keeps what its budget allows).
   auto first_pass_frame = [&](size_t i) -> StatusOr<cv::Mat> {
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, LoadStackFrame(dir, manifest, i));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, grey_frame(i));
     if (i == 0) {
       frame_type = f.type();
       size = f.size();
@@ -375,7 +398,8 @@ StatusOr<IsffResult> ReconstructIntegralSffStack(const std::filesystem::path& di
   INSPECT_ASSIGN_OR_RETURN(RestoredTemplate t,
                            RestoreFromIntegralImage(manifest.frames.size(), first_pass_frame, *ipsf, options));
   auto second_pass_frame = [&](size_t i) -> StatusOr<cv::Mat> {
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, LoadStackFrame(dir, manifest, i));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, grey_frame(i));
+    if (source.release) source.release(int(i));  // its last use: the engine takes it now
     if (f.type() != frame_type || f.size() != size) {
       return Status::InvalidArgument("frame " + std::to_string(i) + " (" + manifest.frames[i].file +
                                      "): changed between the two passes");

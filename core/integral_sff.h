@@ -22,6 +22,7 @@
 #include "core/calibration_bundle.h"
 #include "core/integral_psf.h"
 #include "core/ncc_focus.h"
+#include "core/stack_reconstruct.h"
 #include "core/status.h"
 
 namespace inspection {
@@ -133,5 +134,12 @@ StatusOr<IsffResult> ReconstructIntegralSffWithTemplate(const std::vector<cv::Ma
 // O(pixels) memory whatever the frame count. Errors name the frame or manifest field.
 StatusOr<IsffResult> ReconstructIntegralSffStack(const std::filesystem::path& dir, const IntegralPsf* ipsf,
                                                  const IsffOptions& options);
+
+// The same two passes on frames from `source` (as stored, by index; a colour frame is reduced to
+// its luminance as LoadStackFrame does), e.g. a StackFrameDecoder (core/stack_frame_decoder.h)
+// fed from memory: the same result bit for bit. Each frame is asked for twice, in z order, and
+// released after its pass-2 read. manifest: the stack's (frames, z).
+StatusOr<IsffResult> ReconstructIntegralSffFrames(const StackManifest& manifest, const StackFrameSource& source,
+                                                  const IntegralPsf* ipsf, const IsffOptions& options);
 
 }  // namespace inspection

@@ -186,6 +186,20 @@ std::string FrameName(const StackManifest& m, size_t index) {
   return "frame " + std::to_string(index) + " (" + m.frames[index].file + ")";
 }
 
+// The checks every decoded frame passes (a failed decode is an empty image): CV_8U or CV_16U, 1
+// or 3 channels. Shared by the file and the in-memory decode, so their errors are the same.
+StatusOr<cv::Mat> CheckDecodedFrame(const std::string& name, cv::Mat img) {
+  if (img.empty()) return Status::InvalidArgument(name + ": cannot decode image (expected PNG, TIFF or JPEG)");
+  if (img.channels() != 1 && img.channels() != 3) {
+    return Status::InvalidArgument(name + ": has " + std::to_string(img.channels()) +
+                                   " channels; frames must be grey (1 channel) or colour (3 channels)");
+  }
+  if (img.depth() != CV_8U && img.depth() != CV_16U) {
+    return Status::InvalidArgument(name + ": pixel type must be 8- or 16-bit unsigned");
+  }
+  return img;
+}
+
 // Decodes a frame as stored: CV_8U or CV_16U, 1 or 3 channels.
 StatusOr<cv::Mat> DecodeFrame(const fs::path& dir, const StackManifest& m, size_t index) {
   if (index >= m.frames.size()) return Status::OutOfRange("frame index " + std::to_string(index));
@@ -196,15 +210,7 @@ StatusOr<cv::Mat> DecodeFrame(const fs::path& dir, const StackManifest& m, size_
   } catch (const cv::Exception& e) {
     return Status::InvalidArgument(name + ": cannot decode: " + e.what());
   }
-  if (img.empty()) return Status::InvalidArgument(name + ": cannot decode image (expected PNG, TIFF or JPEG)");
-  if (img.channels() != 1 && img.channels() != 3) {
-    return Status::InvalidArgument(name + ": has " + std::to_string(img.channels()) +
-                                   " channels; frames must be grey (1 channel) or colour (3 channels)");
-  }
-  if (img.depth() != CV_8U && img.depth() != CV_16U) {
-    return Status::InvalidArgument(name + ": pixel type must be 8- or 16-bit unsigned");
-  }
-  return img;
+  return CheckDecodedFrame(name, std::move(img));
 }
 
 const char* ChannelsName(int channels) { return channels == 3 ? "colour (3 channels)" : "grey"; }
@@ -231,6 +237,20 @@ StatusOr<cv::Mat> LoadStackFrame(const fs::path& dir, const StackManifest& m, si
 
 StatusOr<cv::Mat> DecodeStackFrame(const fs::path& dir, const StackManifest& m, size_t index) {
   return DecodeFrame(dir, m, index);
+}
+
+StatusOr<cv::Mat> DecodeStackFrameBytes(std::string_view file, const StackManifest& m, size_t index) {
+  if (index >= m.frames.size()) return Status::OutOfRange("frame index " + std::to_string(index));
+  const std::string name = FrameName(m, index);
+  cv::Mat img;
+  try {
+    // imdecode reads the buffer only; the header is a view, no copy.
+    const cv::Mat buffer(1, int(file.size()), CV_8UC1, const_cast<char*>(file.data()));
+    if (!file.empty()) img = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    return Status::InvalidArgument(name + ": cannot decode: " + e.what());
+  }
+  return CheckDecodedFrame(name, std::move(img));
 }
 
 Status CheckStackFrameShape(const StackManifest& m, size_t index, const StackFrameShape& first,

@@ -20,6 +20,7 @@
 #include <opencv2/core.hpp>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/status.h"
@@ -96,6 +97,10 @@ StatusOr<cv::Mat> LoadStackFrame(const std::filesystem::path& dir, const StackMa
 // Decodes one frame as stored: CV_8U or CV_16U, 1 (grey) or 3 (colour, BGR) channels. Errors
 // name the frame. The decode step the parallel decoder (core/stack_frame_decoder.h) runs.
 StatusOr<cv::Mat> DecodeStackFrame(const std::filesystem::path& dir, const StackManifest& manifest, size_t index);
+
+// DecodeStackFrame on the bytes of the frame's file held in memory (e.g. read from a stored
+// scan's archive): cv::imdecode instead of cv::imread, the same pixels and the same errors.
+StatusOr<cv::Mat> DecodeStackFrameBytes(std::string_view file, const StackManifest& manifest, size_t index);
 
 // What a decoded frame looks like, enough to check it against frame 0 after its pixels are gone.
 struct StackFrameShape {

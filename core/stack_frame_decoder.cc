@@ -41,6 +41,14 @@ StatusOr<cv::Mat> DecodeFrameFile(const std::filesystem::path& dir, const StackM
 
 }  // namespace
 
+StatusOr<cv::Mat> DecodeStackFrameInMemory(std::string_view file, const StackManifest& manifest, int index) {
+  if (file.size() >= 8 && std::memcmp(file.data(), "\x89PNG\r\n\x1a\n", 8) == 0) {
+    cv::Mat image = DecodePlainPng(file);
+    if (!image.empty()) return image;
+  }
+  return DecodeStackFrameBytes(file, manifest, size_t(index));
+}
+
 StackFrameDecoder::StackFrameDecoder(std::filesystem::path dir, StackManifest manifest,
                                      const StackFrameDecoderOptions& options, StackFrameDecodeFn decode)
     : dir_(std::move(dir)), manifest_(std::move(manifest)), options_(options), decode_(std::move(decode)) {

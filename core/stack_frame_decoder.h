@@ -1,5 +1,6 @@
-// Decodes a stack folder's frames (core/stack.h) on a few threads as their files become
-// complete (an upload's last chunk, an extracted archive entry), in whatever order they finish,
+// Decodes a stack's frames (core/stack.h) on a few threads as their files become complete (an
+// upload's last chunk) or from bytes in memory (a stored scan's archive entries, through an
+// injected decode function), in whatever order they finish,
 // and hands them to the SFF engine loop (core/stack_reconstruct.h) strictly in z order: the
 // streaming engine of thesis 3.1 is fed frame by frame as before, only the decoding moved off
 // its path. Decoded frames are kept up to a byte budget; a frame beyond it is checked and
@@ -16,6 +17,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -27,6 +29,11 @@ namespace inspection {
 // Decodes frame `index` as stored (by default DecodeStackFrame's pixels, plain PNGs through
 // core/png_frame_decode.h; tests inject their own).
 using StackFrameDecodeFn = std::function<StatusOr<cv::Mat>(int index)>;
+
+// Frame `index` from its file's bytes in memory (a stored scan's archive entry): a plain PNG
+// through the fast path, anything else DecodeStackFrameBytes; the pixels and errors of the
+// default decode of that file on disk.
+StatusOr<cv::Mat> DecodeStackFrameInMemory(std::string_view file, const StackManifest& manifest, int index);
 
 struct StackFrameDecoderOptions {
   int threads = 0;  // decode threads; 0 = all hardware threads

@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -86,26 +87,15 @@ bool SafeEntryName(const std::string& name) {
 
 }  // namespace
 
-Status UnzipToFolder(const fs::path& zip_path, const fs::path& folder,
-                     const std::function<void(const std::string&)>& on_file) {
+StatusOr<std::shared_ptr<ZipReader>> ZipReader::Open(const fs::path& zip_path) {
   int err = 0;
-  std::unique_ptr<zip_t, decltype(&zip_discard)> za(zip_open(zip_path.c_str(), ZIP_RDONLY, &err), zip_discard);
+  zip_t* za = zip_open(zip_path.c_str(), ZIP_RDONLY, &err);
   if (!za) return Status::DataLoss("cannot open the stored stack " + zip_path.filename().string());
-  std::error_code ec;
-  fs::create_directories(folder, ec);
-  if (ec) return WriteFailure(ec.value(), "cannot create " + folder.string());
-  const zip_int64_t n = zip_get_num_entries(za.get(), 0);
-  std::vector<char> buf(1 << 20);
-  // stack.json first (the archive sorts it after the frames): a reader of the frames needs it.
-  std::vector<zip_int64_t> order;
-  const zip_int64_t manifest = zip_name_locate(za.get(), "stack.json", 0);
-  if (manifest >= 0) order.push_back(manifest);
+  std::shared_ptr<ZipReader> reader(new ZipReader(za));
+  const zip_int64_t n = zip_get_num_entries(za, 0);
   for (zip_int64_t i = 0; i < n; ++i) {
-    if (i != manifest) order.push_back(i);
-  }
-  for (const zip_int64_t i : order) {
     zip_stat_t st;
-    if (zip_stat_index(za.get(), zip_uint64_t(i), 0, &st) != 0 || (st.valid & ZIP_STAT_NAME) == 0) {
+    if (zip_stat_index(za, zip_uint64_t(i), 0, &st) != 0 || (st.valid & ZIP_STAT_NAME) == 0) {
       return Status::DataLoss("stored stack " + zip_path.filename().string() + ": unreadable entry " +
                               std::to_string(i));
     }
@@ -115,26 +105,79 @@ Status UnzipToFolder(const fs::path& zip_path, const fs::path& folder,
       return Status::DataLoss("stored stack " + zip_path.filename().string() + ": entry '" + name +
                               "' is not a relative path inside the stack");
     }
-    const fs::path target = folder / fs::path(name);
-    fs::create_directories(target.parent_path(), ec);
-    if (ec) return WriteFailure(ec.value(), "cannot create " + target.parent_path().string());
-    std::unique_ptr<zip_file_t, decltype(&zip_fclose)> in(zip_fopen_index(za.get(), zip_uint64_t(i), 0), zip_fclose);
-    if (!in) return Status::DataLoss("stored stack: cannot read entry '" + name + "'");
-    std::unique_ptr<FILE, decltype(&std::fclose)> out(std::fopen(target.c_str(), "wb"), std::fclose);
-    if (!out) return WriteFailure(errno, "cannot write " + target.string());
-    for (;;) {
-      const zip_int64_t got = zip_fread(in.get(), buf.data(), buf.size());
-      if (got < 0) return Status::DataLoss("stored stack: entry '" + name + "' is corrupt");
-      if (got == 0) break;
-      if (std::fwrite(buf.data(), 1, size_t(got), out.get()) != size_t(got)) {
-        return WriteFailure(errno, "cannot write " + target.string());
-      }
-    }
-    if (std::fflush(out.get()) != 0) return WriteFailure(errno, "cannot write " + target.string());
-    FILE* f = out.release();
-    if (std::fclose(f) != 0) return WriteFailure(errno, "cannot write " + target.string());
-    if (on_file) on_file(name);
+    reader->files_.push_back(name);
+    reader->index_[name] = i;
   }
+  return reader;
+}
+
+ZipReader::~ZipReader() { zip_discard(archive_); }
+
+bool ZipReader::Contains(const std::string& name) const { return index_.count(name) > 0; }
+
+namespace {
+
+// Streams entry `index` of `za` into `sink` in 1 MiB pieces. libzip checks the entry's CRC when
+// the read reaches its end, so the loop reads until end of entry, never just `size` bytes.
+Status ReadEntry(zip_t* za, int64_t index, const std::string& name,
+                 const std::function<Status(const char*, size_t)>& sink) {
+  std::unique_ptr<zip_file_t, decltype(&zip_fclose)> in(zip_fopen_index(za, zip_uint64_t(index), 0), zip_fclose);
+  if (!in) return Status::DataLoss("stored stack: cannot read entry '" + name + "'");
+  std::vector<char> buf(1 << 20);
+  for (;;) {
+    const zip_int64_t got = zip_fread(in.get(), buf.data(), buf.size());
+    if (got < 0) return Status::DataLoss("stored stack: entry '" + name + "' is corrupt");
+    if (got == 0) return Status::Ok();
+    INSPECT_RETURN_IF_ERROR(sink(buf.data(), size_t(got)));
+  }
+}
+
+}  // namespace
+
+StatusOr<std::string> ZipReader::Read(const std::string& name) const {
+  const auto it = index_.find(name);
+  if (it == index_.end()) return Status::NotFound("stored stack: no entry '" + name + "'");
+  std::string out;
+  std::lock_guard lock(mu_);
+  zip_stat_t st;
+  if (zip_stat_index(archive_, zip_uint64_t(it->second), 0, &st) == 0 && (st.valid & ZIP_STAT_SIZE) != 0) {
+    out.reserve(size_t(st.size));
+  }
+  INSPECT_RETURN_IF_ERROR(ReadEntry(archive_, it->second, name, [&](const char* data, size_t n) {
+    out.append(data, n);
+    return Status::Ok();
+  }));
+  return out;
+}
+
+Status ZipReader::Extract(const std::string& name, const fs::path& target) const {
+  const auto it = index_.find(name);
+  if (it == index_.end()) return Status::NotFound("stored stack: no entry '" + name + "'");
+  std::error_code ec;
+  fs::create_directories(target.parent_path(), ec);
+  if (ec) return WriteFailure(ec.value(), "cannot create " + target.parent_path().string());
+  std::unique_ptr<FILE, decltype(&std::fclose)> out(std::fopen(target.c_str(), "wb"), std::fclose);
+  if (!out) return WriteFailure(errno, "cannot write " + target.string());
+  std::lock_guard lock(mu_);
+  INSPECT_RETURN_IF_ERROR(ReadEntry(archive_, it->second, name, [&](const char* data, size_t n) {
+    if (std::fwrite(data, 1, n, out.get()) != n) return WriteFailure(errno, "cannot write " + target.string());
+    return Status::Ok();
+  }));
+  if (std::fflush(out.get()) != 0) return WriteFailure(errno, "cannot write " + target.string());
+  FILE* f = out.release();
+  if (std::fclose(f) != 0) return WriteFailure(errno, "cannot write " + target.string());
+  return Status::Ok();
+}
+
+Status UnzipToFolder(const fs::path& zip_path, const fs::path& folder) {
+  INSPECT_ASSIGN_OR_RETURN(std::shared_ptr<ZipReader> reader, ZipReader::Open(zip_path));
+  std::error_code ec;
+  fs::create_directories(folder, ec);
+  if (ec) return WriteFailure(ec.value(), "cannot create " + folder.string());
+  // stack.json first (the archive sorts it after the frames): a reader of the frames needs it.
+  std::vector<std::string> order = reader->files();
+  std::stable_partition(order.begin(), order.end(), [](const std::string& n) { return n == "stack.json"; });
+  for (const std::string& name : order) INSPECT_RETURN_IF_ERROR(reader->Extract(name, folder / fs::path(name)));
   return Status::Ok();
 }
 

@@ -253,8 +253,10 @@ grpc::Status InspectionServiceImpl::Reconstruct(
   std::shared_ptr<const OwnedFolder> upload;  // removed on every early return
   // Declared after `upload`: its decode threads are joined before the folder goes.
   std::shared_ptr<StackFrameDecoder> decoded;
+  std::optional<StackManifest> stored_manifest;  // a stored scan's, checked against its archive
+  StackFrameDecodeFn decode_stored;              // empty: the frames decode from `dir`
+  if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
   if (source->upload) {
-    if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
     upload = std::make_shared<const OwnedFolder>(store_->uploads_dir() / NewId("upload"));
     dir = upload->path();
     UploadDecoding decoding(dir, options_.reconstruct);
@@ -262,24 +264,21 @@ grpc::Status InspectionServiceImpl::Reconstruct(
     decoded = decoding.Take();
     if (!received.ok()) return Grpc(received);
   } else {
-    // The stack is stored once, as the scan's stack.zip: the job reads its own extraction.
-    if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
-    // Its frames decode as they are extracted (stack.json comes first).
-    std::optional<UploadDecoding> decoding;
-    auto stored = OpenStoredStack(*store_, source->scan_id, [&](const fs::path& folder, const std::string& file) {
-      if (!decoding) decoding.emplace(folder, options_.reconstruct);
-      decoding->FileComplete(file);
-    });
-    if (decoding) decoded = decoding->Take();
+    // The stack is stored once, as the scan's stack.zip: its frames are read from the archive and
+    // decoded in memory, in parallel; only stack.json and the ground truth go to the job's folder.
+    auto stored = OpenStoredStack(*store_, source->scan_id,
+                                  options_.reconstruct.sequential ? StoredFrames::kExtracted : StoredFrames::kInMemory);
     if (!stored.ok()) return Grpc(stored.status());
     dir = stored->dir;
     upload = std::move(stored->extraction);
+    stored_manifest = std::move(stored->manifest);
+    decode_stored = std::move(stored->decode);
   }
   // Validate the whole stack before a job exists: bad input never becomes a failed job. The
   // frames were decoding while they arrived; the rest decode now, in parallel (a stored scan's
-  // all of them), and the job's engine takes them from memory in z order. Sequential: the path
-  // before issue 16 (decoded here to check them, and again by the job).
-  auto manifest = ReadStackManifest(dir);
+  // all of them, from its archive), and the job's engine takes them from memory in z order.
+  // Sequential: the path before issue 16 (decoded here to check them, and again by the job).
+  auto manifest = stored_manifest ? StatusOr<StackManifest>(*stored_manifest) : ReadStackManifest(dir);
   if (!manifest.ok()) return Grpc(manifest.status());
   if (options_.reconstruct.sequential) {
     decoded.reset();
@@ -289,7 +288,7 @@ grpc::Status InspectionServiceImpl::Reconstruct(
       StackFrameDecoderOptions o;
       o.threads = options_.reconstruct.decode_threads;
       o.max_kept_bytes = options_.reconstruct.max_decoded_bytes;
-      decoded = std::make_shared<StackFrameDecoder>(dir, *manifest, o);
+      decoded = std::make_shared<StackFrameDecoder>(dir, *manifest, o, decode_stored);
     }
     if (Status s = decoded->Finish(); !s.ok()) return Grpc(s);
   }

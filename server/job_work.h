@@ -52,17 +52,18 @@ struct ReconstructPipelineOptions {
   bool sequential = false;
 };
 
-// Reconstruct a stack folder that has already been validated (core/stack.h format).
+// Reconstruct a stack (core/stack.h format) that has already been validated.
 struct ReconstructWork {
   std::filesystem::path stack_dir;
   std::string source_scan_id;  // the stored scan read; empty for an upload
-  // Set for an uploaded stack or a stored scan's extraction (server/stored_stack.h): the folder
-  // goes when the last copy of the work does (the job
-  // ended, was cancelled while queued, or never got queued).
+  // Set for an uploaded stack or a stored scan's private folder (server/stored_stack.h): the
+  // folder goes when the last copy of the work does (the job ended, was cancelled while queued,
+  // or never got queued).
   std::shared_ptr<const OwnedFolder> upload;
-  // The frames of stack_dir, decoded (and checked) while the request was received; null = the
-  // job decodes them from stack_dir. Declared after `upload`: destroyed (its threads joined)
-  // before the folder goes.
+  // The stack's frames, decoded (and checked) while the request was received, from stack_dir or
+  // from a stored scan's archive (then stack_dir holds no frames); null = the job decodes them
+  // from stack_dir (the sequential path). Declared after `upload`: destroyed (its threads
+  // joined) before the folder goes.
   std::shared_ptr<StackFrameDecoder> decoded;
   SffOptions sff;
   ReconstructionMethodSettings method;  // SFF with sff, or an integral method (thesis 5.4, 6.4)

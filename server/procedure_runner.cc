@@ -318,7 +318,10 @@ StatusOr<v1::JobResult> ProcedureRunner::RunCalibrate(const CalibrateWork& work,
 
 StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& work, const JobContext& context) {
   EmitPhase(context, v1::JOB_PHASE_PREPARING);
-  INSPECT_ASSIGN_OR_RETURN(StackManifest m, ReadStackManifest(work.stack_dir));
+  // The manifest the request was checked against: a stored scan's folder holds no frames (they
+  // are read from its archive), so only the sequential path reads the folder's.
+  INSPECT_ASSIGN_OR_RETURN(StackManifest m, work.decoded ? StatusOr<StackManifest>(work.decoded->manifest())
+                                                          : ReadStackManifest(work.stack_dir));
   auto on_frame = [&](int i, int n, double z, const FrameStatistics& st) {
     context.emit([&](v1::JobEvent& e) {
       FillFrameEvent(v1::JOB_PHASE_RECONSTRUCTING, i, n, z, m.frames[i].exposure_us, st, &e);
@@ -330,16 +333,25 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   AlignmentFigures alignment;
   DepthPostProcessFigures postprocess;
   if (work.method.integral()) {
-    // The calibration active now; two passes over the folder without per-frame events (and
+    // The calibration active now; two passes over the frames without per-frame events (and
     // without a cancellation point inside them: ~1 s for 23 frames of 1024 x 768).
     const std::shared_ptr<const CalibrationBundle> bundle = calibrations_->active();
-    if (work.decoded) work.decoded->ReleaseAll();  // the integral methods read the folder themselves
     if (context.cancel->load()) return Status::Cancelled("reconstruction cancelled before it started");
     EmitPhase(context, v1::JOB_PHASE_RECONSTRUCTING, 0.05,
               std::string(ReconstructionMethodName(work.method.method)) + " over " + std::to_string(m.frames.size()) +
                   " frames: integral image, restoration, correlation");
-    INSPECT_ASSIGN_OR_RETURN(IsffResult r,
-                             ReconstructStackFolderIntegralSff(work.stack_dir, work.method, work.sff, bundle.get()));
+    // Decoded frames come from memory (both passes; pass 2 frees each); the sequential path reads
+    // the folder.
+    StatusOr<IsffResult> integral = Status::Internal("not run");
+    if (work.decoded) {
+      StackFrameSource source{[&](int i) { return work.decoded->Frame(i); },
+                              [&](int i) { work.decoded->Release(i); }};
+      integral = ReconstructStackIntegralSff(m, source, work.method, work.sff, bundle.get());
+      work.decoded->ReleaseAll();  // what a failure left
+    } else {
+      integral = ReconstructStackFolderIntegralSff(work.stack_dir, work.method, work.sff, bundle.get());
+    }
+    INSPECT_ASSIGN_OR_RETURN(IsffResult r, std::move(integral));
     depth = std::move(r.depth);
     isff = FiguresOf(r);
   } else {

@@ -88,4 +88,14 @@ StatusOr<IsffResult> ReconstructStackFolderIntegralSff(const std::filesystem::pa
   return ReconstructIntegralSffStack(dir, &*bundle->integral_psf, IsffOptionsFor(settings, sff));
 }
 
+StatusOr<IsffResult> ReconstructStackIntegralSff(const StackManifest& manifest, const StackFrameSource& source,
+                                                 const ReconstructionMethodSettings& settings, const SffOptions& sff,
+                                                 const CalibrationBundle* bundle) {
+  if (!settings.integral()) return Status::Internal("ReconstructStackIntegralSff called for SFF");
+  INSPECT_RETURN_IF_ERROR(settings.Validate());
+  INSPECT_RETURN_IF_ERROR(CheckStackFolderMethod(settings, bundle));
+  INSPECT_RETURN_IF_ERROR(CheckIntegralIllumination(manifest.illumination));
+  return ReconstructIntegralSffFrames(manifest, source, &*bundle->integral_psf, IsffOptionsFor(settings, sff));
+}
+
 }  // namespace inspection

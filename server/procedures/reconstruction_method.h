@@ -66,4 +66,10 @@ StatusOr<IsffResult> ReconstructStackFolderIntegralSff(const std::filesystem::pa
                                                        const ReconstructionMethodSettings& settings,
                                                        const SffOptions& sff, const CalibrationBundle* bundle);
 
+// The same on a stack's frames from `source` (ReconstructIntegralSffFrames: e.g. decoded from a
+// stored scan's archive in memory); manifest: the stack's.
+StatusOr<IsffResult> ReconstructStackIntegralSff(const StackManifest& manifest, const StackFrameSource& source,
+                                                 const ReconstructionMethodSettings& settings, const SffOptions& sff,
+                                                 const CalibrationBundle* bundle);
+
 }  // namespace inspection

@@ -6,12 +6,14 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/depth_metrics.h"
 #include "core/stack.h"
+#include "core/stack_frame_decoder.h"
 
 namespace inspection {
 namespace {
@@ -221,9 +223,20 @@ TEST(IntegralSffTest, StackFolderTwoPassesMatchInMemory) {
   ASSERT_TRUE(WriteStackManifest(dir, m).ok());
   auto a = ReconstructIntegralSffStack(dir, &ipsf, {});
   auto b = ReconstructIntegralSff(frames, s.z, &ipsf, {});
+  // From a decoder that keeps nothing (budget 0): every frame decoded again for each pass.
+  StackFrameDecoderOptions none;
+  none.max_kept_bytes = 0;
+  StackFrameDecoder decoder(dir, m, none);
+  ASSERT_TRUE(decoder.Finish().ok());
+  const StackFrameSource source{[&](int i) { return decoder.Frame(i); }, [&](int i) { decoder.Release(i); }};
+  auto c = ReconstructIntegralSffFrames(m, source, &ipsf, {});
   std::filesystem::remove_all(dir);
   ASSERT_TRUE(a.ok()) << a.status().ToString();
   ASSERT_TRUE(b.ok());
+  ASSERT_TRUE(c.ok()) << c.status().ToString();
+  EXPECT_EQ(decoder.decoded_frames(), 3 * int(frames.size()));  // the check, pass 1, pass 2
+  EXPECT_EQ(cv::norm(a->focused_template, c->focused_template, cv::NORM_INF), 0.0);
+  EXPECT_EQ(0, std::memcmp(a->depth.depth_um.data, c->depth.depth_um.data, a->depth.depth_um.total() * sizeof(float)));
   EXPECT_EQ(cv::norm(a->depth.depth_um == a->depth.depth_um, b->depth.depth_um == b->depth.depth_um, cv::NORM_INF), 0);
   EXPECT_EQ(cv::norm(a->focused_template, b->focused_template, cv::NORM_INF), 0.0);
   cv::Mat da = a->depth.depth_um.clone(), db = b->depth.depth_um.clone();
