@@ -22,16 +22,7 @@ namespace fs = std::filesystem;
 
 constexpr int kBorderPx = 7;  // the 7 x 7 windows see the image border there (isff_rig_test.cc)
 
-// The procedures test's rig (tests/procedures/isff_rig_test.cc): 256 x 192 camera, a projector
-// that lights the whole field, seed 5; SKEW5 by default.
-SimulatedRigOptions IsffRig() {
-  SimulatedRigOptions o;
-  o.specimen = "skew5";
-  o.seed = 5;
-  o.camera_size = {256, 192};
-  o.projector_size = {72, 92};
-  return o;
-}
+// IsffRig(): tests/server/server_fixture.h.
 
 v1::ScanRequest ScanWith(v1::ReconstructionMethod method) {
   v1::ScanRequest r;

@@ -36,6 +36,17 @@ inline std::filesystem::path ExtractStoredStack(const std::filesystem::path& dat
   return dest;
 }
 
+// The integral SFF tests' rig (tests/procedures/isff_rig_test.cc): 256 x 192 camera, a projector
+// that lights the whole field, seed 5; SKEW5.
+inline SimulatedRigOptions IsffRig() {
+  SimulatedRigOptions o;
+  o.specimen = "skew5";
+  o.seed = 5;
+  o.camera_size = {256, 192};
+  o.projector_size = {72, 92};
+  return o;
+}
+
 class ServerTest : public ::testing::Test {
  protected:
   void SetUp() override { data_dir_ = UniqueTempDir("data"); }

@@ -43,14 +43,31 @@ std::string ReadFile(const fs::path& p) {
 
 class StoredScanReconstructTest : public ServerTest {
  protected:
-  // The integral SFF test's rig (isff_api_test.cc): small, and the projector lights the field.
-  SimulatedRigOptions SimOptions() override {
-    SimulatedRigOptions o;
-    o.specimen = "skew5";
-    o.seed = 5;
-    o.camera_size = {256, 192};
-    o.projector_size = {72, 92};
-    return o;
+  // The integral SFF tests' rig: small, and the projector lights the field.
+  SimulatedRigOptions SimOptions() override { return IsffRig(); }
+
+  // The file of frame `index` in an extracted stack folder.
+  static std::string FrameFile(const fs::path& folder, int index) {
+    auto m = ReadStackManifest(folder);
+    EXPECT_TRUE(m.ok()) << m.status().ToString();
+    return m.ok() && index < int(m->frames.size()) ? m->frames[size_t(index)].file : std::string();
+  }
+
+  // Reconstructs the stored scan on the parallel path, then on the sequential one: each is refused
+  // with `code`, creates no job and leaves nothing under uploads/. Returns both messages.
+  std::vector<std::string> RefusedOnBothPaths(const std::string& scan_id, grpc::StatusCode code) {
+    const int jobs = JobCount();
+    std::vector<std::string> messages;
+    for (bool sequential : {false, true}) {
+      Restart(sequential);
+      v1::Job job;
+      const grpc::Status s = Reconstruct(scan_id, v1::RECONSTRUCTION_METHOD_SFF, &job);
+      EXPECT_EQ(s.error_code(), code) << s.error_message();
+      messages.push_back(s.error_message());
+      EXPECT_EQ(FilesUnder(data_dir_ / "uploads"), std::set<std::string>{});
+      EXPECT_EQ(JobCount(), jobs);
+    }
+    return messages;
   }
 
   // A scan; for ISFF (uniform illumination, as the integral methods need) calibrated first.
@@ -177,9 +194,7 @@ TEST_F(StoredScanReconstructTest, ACorruptFrameEntryIsDataLossNamingItAsBefore) 
   StartServer();
   const std::string scan_id = ScanStack(false);
   const fs::path extracted = ExtractStoredStack(data_dir_, scan_id, UniqueTempDir("extracted"));
-  auto m = ReadStackManifest(extracted);
-  ASSERT_TRUE(m.ok());
-  const std::string file = m->frames[3].file;
+  const std::string file = FrameFile(extracted, 3);
   // Stored uncompressed: the frame's bytes are in the archive as they are in the file.
   std::string zip = ReadFile(StackZip(scan_id));
   const std::string frame = ReadFile(extracted / file);
@@ -189,17 +204,7 @@ TEST_F(StoredScanReconstructTest, ACorruptFrameEntryIsDataLossNamingItAsBefore) 
   std::ofstream(StackZip(scan_id), std::ios::binary | std::ios::trunc) << zip;
   fs::remove_all(extracted);
 
-  const int jobs = JobCount();
-  std::vector<std::string> messages;
-  for (bool sequential : {false, true}) {
-    Restart(sequential);
-    v1::Job job;
-    const grpc::Status s = Reconstruct(scan_id, v1::RECONSTRUCTION_METHOD_SFF, &job);
-    EXPECT_EQ(s.error_code(), grpc::StatusCode::DATA_LOSS) << s.error_message();
-    messages.push_back(s.error_message());
-    EXPECT_EQ(FilesUnder(data_dir_ / "uploads"), std::set<std::string>{});
-    EXPECT_EQ(JobCount(), jobs);
-  }
+  const std::vector<std::string> messages = RefusedOnBothPaths(scan_id, grpc::StatusCode::DATA_LOSS);
   EXPECT_EQ(messages[0], "scan " + scan_id + ": stored stack: entry '" + file + "' is corrupt");
   EXPECT_EQ(messages[0], messages[1]);
 }
@@ -210,24 +215,12 @@ TEST_F(StoredScanReconstructTest, AFrameThatIsNoImageIsInvalidArgumentNamingItAs
   StartServer();
   const std::string scan_id = ScanStack(false);
   const fs::path extracted = ExtractStoredStack(data_dir_, scan_id, UniqueTempDir("extracted"));
-  auto m = ReadStackManifest(extracted);
-  ASSERT_TRUE(m.ok());
-  const std::string file = m->frames[3].file;
+  const std::string file = FrameFile(extracted, 3);
   std::ofstream(extracted / file, std::ios::binary | std::ios::trunc) << "not an image";
   ASSERT_TRUE(ZipFolder(extracted, StackZip(scan_id)).ok());
   fs::remove_all(extracted);
 
-  const int jobs = JobCount();
-  std::vector<std::string> messages;
-  for (bool sequential : {false, true}) {
-    Restart(sequential);
-    v1::Job job;
-    const grpc::Status s = Reconstruct(scan_id, v1::RECONSTRUCTION_METHOD_SFF, &job);
-    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
-    messages.push_back(s.error_message());
-    EXPECT_EQ(FilesUnder(data_dir_ / "uploads"), std::set<std::string>{});
-    EXPECT_EQ(JobCount(), jobs);
-  }
+  const std::vector<std::string> messages = RefusedOnBothPaths(scan_id, grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(messages[0], "frame 3 (" + file + "): cannot decode image (expected PNG, TIFF or JPEG)");
   EXPECT_EQ(messages[0], messages[1]);
 }
