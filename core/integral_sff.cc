@@ -11,7 +11,6 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
-#include "core/colour.h"
 #include "core/stack.h"
 
 namespace inspection {
@@ -374,18 +373,12 @@ StatusOr<IsffResult> ReconstructIntegralSffFrames(const StackManifest& manifest,
   INSPECT_RETURN_IF_ERROR(CheckIntegralInputs(ipsf, options));
   std::vector<double> z_um;
   for (const StackFrame& f : manifest.frames) z_um.push_back(f.z_um);
-  // What LoadStackFrame gives: the frame as stored, or a colour frame's luminance.
-  auto grey_frame = [&](size_t i) -> StatusOr<cv::Mat> {
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, source.frame(int(i)));
-    if (f.channels() == 1) return f;
-    return LuminanceOf(f);
-  };
   int frame_type = -1;
   cv::Size size;
   // Pass 1 takes frame 0's type and size; every later read (pass 1 and 2) must match them. The
   // frames stay with the source for pass 2 (a decoder keeps what its budget allows).
   auto first_pass_frame = [&](size_t i) -> StatusOr<cv::Mat> {
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, grey_frame(i));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, source.grey(int(i)));
     if (i == 0) {
       frame_type = f.type();
       size = f.size();
@@ -398,7 +391,7 @@ StatusOr<IsffResult> ReconstructIntegralSffFrames(const StackManifest& manifest,
   INSPECT_ASSIGN_OR_RETURN(RestoredTemplate t,
                            RestoreFromIntegralImage(manifest.frames.size(), first_pass_frame, *ipsf, options));
   auto second_pass_frame = [&](size_t i) -> StatusOr<cv::Mat> {
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, grey_frame(i));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, source.grey(int(i)));
     if (source.release) source.release(int(i));  // its last use: the engine takes it now
     if (f.type() != frame_type || f.size() != size) {
       return Status::InvalidArgument("frame " + std::to_string(i) + " (" + manifest.frames[i].file +

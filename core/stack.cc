@@ -231,8 +231,7 @@ StatusOr<StackFrameImage> LoadStackFrameImage(const fs::path& dir, const StackMa
 
 StatusOr<cv::Mat> LoadStackFrame(const fs::path& dir, const StackManifest& m, size_t index) {
   INSPECT_ASSIGN_OR_RETURN(cv::Mat img, DecodeFrame(dir, m, index));
-  if (img.channels() == 1) return img;
-  return LuminanceOf(img);
+  return LuminanceOf(img);  // grey frames as they are
 }
 
 StatusOr<cv::Mat> DecodeStackFrame(const fs::path& dir, const StackManifest& m, size_t index) {

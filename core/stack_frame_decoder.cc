@@ -18,6 +18,10 @@ namespace {
 
 int64_t BytesOf(const cv::Mat& m) { return int64_t(m.total() * m.elemSize()); }
 
+bool HasPngSignature(std::string_view bytes) {
+  return bytes.size() >= 8 && std::memcmp(bytes.data(), "\x89PNG\r\n\x1a\n", 8) == 0;
+}
+
 // Frame `index` as DecodeStackFrame gives it; a plain PNG (most stacks) through the fast path
 // (core/png_frame_decode.h), whose pixels are the same. Anything else, or a file the fast path
 // does not take, the general way, which also words the errors.
@@ -25,7 +29,7 @@ StatusOr<cv::Mat> DecodeFrameFile(const std::filesystem::path& dir, const StackM
   if (index >= 0 && index < int(manifest.frames.size())) {
     std::ifstream in(dir / manifest.frames[size_t(index)].file, std::ios::binary);
     char signature[8] = {};
-    if (in.read(signature, sizeof signature) && std::memcmp(signature, "\x89PNG\r\n\x1a\n", 8) == 0) {
+    if (in.read(signature, sizeof signature) && HasPngSignature(std::string_view(signature, sizeof signature))) {
       in.seekg(0, std::ios::end);
       const std::streamoff size = in.tellg();
       std::string file(size > 0 ? size_t(size) : 0, '\0');
@@ -42,7 +46,7 @@ StatusOr<cv::Mat> DecodeFrameFile(const std::filesystem::path& dir, const StackM
 }  // namespace
 
 StatusOr<cv::Mat> DecodeStackFrameInMemory(std::string_view file, const StackManifest& manifest, int index) {
-  if (file.size() >= 8 && std::memcmp(file.data(), "\x89PNG\r\n\x1a\n", 8) == 0) {
+  if (HasPngSignature(file)) {
     cv::Mat image = DecodePlainPng(file);
     if (!image.empty()) return image;
   }

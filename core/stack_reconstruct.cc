@@ -10,16 +10,15 @@
 
 namespace inspection {
 
-namespace {
-
-// The aligner for the folder's frames, or nullopt when the frames are used as they are.
-// The grey image focus is measured on: the frame as stored, or a colour frame's luminance.
-StatusOr<cv::Mat> GreyFrame(const StackFrameSource& source, int index) {
-  INSPECT_ASSIGN_OR_RETURN(cv::Mat image, source.frame(index));
+StatusOr<cv::Mat> StackFrameSource::grey(int index) const {
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat image, frame(index));
   if (image.channels() == 1) return image;
   return LuminanceOf(image);
 }
 
+namespace {
+
+// The aligner for the folder's frames, or nullopt when the frames are used as they are.
 StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& source, const StackManifest& manifest,
                                                        const StackFolderAlignment& a, const std::atomic<bool>& cancel,
                                                        AlignmentFigures* figures) {
@@ -41,7 +40,7 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
       auto load = [&](int i) -> StatusOr<cv::Mat> {
         if (cancel.load())
           return Status::Cancelled("reconstruction cancelled while aligning frame " + std::to_string(i));
-        return GreyFrame(source, i);  // errors name the frame
+        return source.grey(i);  // errors name the frame
       };
       StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
       if (!estimate.ok()) {
@@ -55,7 +54,7 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
       break;
     }
   }
-  INSPECT_ASSIGN_OR_RETURN(cv::Mat first, GreyFrame(source, 0));
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat first, source.grey(0));
   INSPECT_ASSIGN_OR_RETURN(StackAligner aligner, StackAligner::Create(model, a.alignment, z_um, first.size()));
   if (figures) *figures = aligner.figures();
   return std::optional<StackAligner>(std::move(aligner));

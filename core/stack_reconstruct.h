@@ -53,6 +53,10 @@ StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, c
 struct StackFrameSource {
   std::function<StatusOr<cv::Mat>(int)> frame;
   std::function<void(int)> release;  // may be empty
+
+  // The grey image focus is measured on: frame(index) as stored, or a colour frame's luminance
+  // (LuminanceOf, core/colour.h).
+  StatusOr<cv::Mat> grey(int index) const;
 };
 
 // ReconstructStackFolder on frames from `source` (e.g. a StackFrameDecoder,

@@ -84,8 +84,10 @@ StatusOr<IsffResult> ReconstructStackFolderIntegralSff(const std::filesystem::pa
   INSPECT_RETURN_IF_ERROR(settings.Validate());
   INSPECT_RETURN_IF_ERROR(CheckStackFolderMethod(settings, bundle));
   INSPECT_ASSIGN_OR_RETURN(StackManifest manifest, ReadStackManifest(dir));
-  INSPECT_RETURN_IF_ERROR(CheckIntegralIllumination(manifest.illumination));
-  return ReconstructIntegralSffStack(dir, &*bundle->integral_psf, IsffOptionsFor(settings, sff));
+  // The frames version on the folder's frames (it repeats the checks above, which cost nothing;
+  // they come first here so a bad request is named before the folder is read).
+  const StackFrameSource folder{[&](int i) { return DecodeStackFrame(dir, manifest, size_t(i)); }, {}};
+  return ReconstructStackIntegralSff(manifest, folder, settings, sff, bundle);
 }
 
 StatusOr<IsffResult> ReconstructStackIntegralSff(const StackManifest& manifest, const StackFrameSource& source,
