@@ -364,7 +364,7 @@ StatusOr<IsffResult> ReconstructIntegralSffStack(const std::filesystem::path& di
                                                  const IsffOptions& options) {
   INSPECT_RETURN_IF_ERROR(CheckIntegralInputs(ipsf, options));
   INSPECT_ASSIGN_OR_RETURN(StackManifest manifest, ReadStackManifest(dir));
-  const StackFrameSource source{[&](int i) { return DecodeStackFrame(dir, manifest, size_t(i)); }, {}};
+  const StackFrameSource source{[&](int i) { return DecodeStackFrame(dir, manifest, size_t(i)); }, {}, {}};
   return ReconstructIntegralSffFrames(manifest, source, ipsf, options);
 }
 

@@ -119,6 +119,8 @@ void StackFrameDecoder::Work() {
     slot.state = State::kDecoding;
     lock.unlock();
     StatusOr<cv::Mat> image = decode_(index);
+    std::optional<FrameStatistics> statistics;
+    if (image.ok() && image->channels() == 1) statistics = ComputeFrameStatistics(*image, manifest_.bit_depth);
     lock.lock();
     ++decoded_;
     if (!image.ok()) {
@@ -126,6 +128,7 @@ void StackFrameDecoder::Work() {
       slot.error = image.status();
     } else {
       slot.shape = StackFrameShape::Of(*image);
+      slot.statistics = statistics;
       const int64_t bytes = BytesOf(*image);
       if (kept_bytes_ + bytes <= options_.max_kept_bytes) {
         slot.image = std::move(image).value();
@@ -204,6 +207,12 @@ StatusOr<cv::Mat> StackFrameDecoder::Frame(int index) {
   }
   lock.unlock();
   return DecodeOne(index);
+}
+
+std::optional<FrameStatistics> StackFrameDecoder::Statistics(int index) const {
+  std::lock_guard lock(mu_);
+  if (index < 0 || index >= int(slots_.size())) return std::nullopt;
+  return slots_[size_t(index)].statistics;
 }
 
 void StackFrameDecoder::Release(int index) {

@@ -21,6 +21,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/frame_statistics.h"
 #include "core/stack.h"
 #include "core/status.h"
 
@@ -68,6 +69,10 @@ class StackFrameDecoder {
   // Frame `index` as stored (CV_8U/16U, 1 or 3 channels), waiting for its decode (queued now if
   // it was not); a dropped frame is decoded here. The cv::Mat shares the kept pixels.
   StatusOr<cv::Mat> Frame(int index);
+  // The progress-event statistics (core/frame_statistics.h) of grey frame `index` as stored,
+  // computed by the thread that decoded it while its pixels were in cache; nullopt for colour
+  // frames and frames not (yet) decoded by the pool. Kept after Release.
+  std::optional<FrameStatistics> Statistics(int index) const;
   // The consumer is done with frame `index`: its pixels are freed (a later Frame decodes again).
   void Release(int index);
   // Frees every kept frame (the consumer reads the folder itself).
@@ -85,6 +90,7 @@ class StackFrameDecoder {
     State state = State::kIdle;
     cv::Mat image;  // kKept
     std::optional<StackFrameShape> shape;
+    std::optional<FrameStatistics> statistics;  // grey frames decoded by the pool
     Status error = Status::Ok();  // kFailed
   };
 

@@ -121,7 +121,13 @@ StatusOr<DepthResult> ReconstructStackFrames(const StackManifest& manifest, cons
     }
     INSPECT_RETURN_IF_ERROR(engine->PushFrame(frame, manifest.frames[i].z_um).WithContext(name));
     if (source.release) source.release(i);
-    if (on_frame) on_frame(i, count, manifest.frames[i].z_um, ComputeFrameStatistics(frame, manifest.bit_depth));
+    if (on_frame) {
+      // Frames as stored (grey, not warped): the source may know their statistics already.
+      std::optional<FrameStatistics> statistics;
+      if (!colour && !(aligner && aligner->warps()) && source.statistics) statistics = source.statistics(i);
+      if (!statistics) statistics = ComputeFrameStatistics(frame, manifest.bit_depth);
+      on_frame(i, count, manifest.frames[i].z_um, *statistics);
+    }
   }
   if (!engine) return Status::InvalidArgument("stack has no frames");
   INSPECT_ASSIGN_OR_RETURN(DepthResult result, engine->Finish());

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <filesystem>
 #include <functional>
+#include <optional>
 
 #include "core/frame_statistics.h"
 #include "core/sff_engine.h"
@@ -53,6 +54,9 @@ StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, c
 struct StackFrameSource {
   std::function<StatusOr<cv::Mat>(int)> frame;
   std::function<void(int)> release;  // may be empty
+  // May be empty or return nullopt: the statistics of grey frame(index) as stored, if already
+  // known (a StackFrameDecoder computes them on its threads); else they are computed here.
+  std::function<std::optional<FrameStatistics>(int)> statistics;
 
   // The grey image focus is measured on: frame(index) as stored, or a colour frame's luminance
   // (LuminanceOf, core/colour.h).

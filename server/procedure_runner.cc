@@ -345,7 +345,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     StatusOr<IsffResult> integral = Status::Internal("not run");
     if (work.decoded) {
       StackFrameSource source{[&](int i) { return work.decoded->Frame(i); },
-                              [&](int i) { work.decoded->Release(i); }};
+                              [&](int i) { work.decoded->Release(i); }, {}};
       integral = ReconstructStackIntegralSff(m, source, work.method, work.sff, bundle.get());
       work.decoded->ReleaseAll();  // what a failure left
     } else {
@@ -373,7 +373,8 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     if (work.decoded) {
       a.options.threads = 0;  // frames in memory, Frame thread-safe: neighbour pairs register concurrently
       StackFrameSource source{[&](int i) { return work.decoded->Frame(i); },
-                              [&](int i) { work.decoded->Release(i); }};
+                              [&](int i) { work.decoded->Release(i); },
+                              [&](int i) { return work.decoded->Statistics(i); }};
       r = ReconstructStackFrames(m, source, unthresholded, on_frame, *context.cancel, a, &alignment);
       work.decoded->ReleaseAll();  // what a failure left
     } else {

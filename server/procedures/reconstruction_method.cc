@@ -86,7 +86,7 @@ StatusOr<IsffResult> ReconstructStackFolderIntegralSff(const std::filesystem::pa
   INSPECT_ASSIGN_OR_RETURN(StackManifest manifest, ReadStackManifest(dir));
   // The frames version on the folder's frames (it repeats the checks above, which cost nothing;
   // they come first here so a bad request is named before the folder is read).
-  const StackFrameSource folder{[&](int i) { return DecodeStackFrame(dir, manifest, size_t(i)); }, {}};
+  const StackFrameSource folder{[&](int i) { return DecodeStackFrame(dir, manifest, size_t(i)); }, {}, {}};
   return ReconstructStackIntegralSff(manifest, folder, settings, sff, bundle);
 }
 

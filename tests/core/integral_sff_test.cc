@@ -228,7 +228,7 @@ TEST(IntegralSffTest, StackFolderTwoPassesMatchInMemory) {
   none.max_kept_bytes = 0;
   StackFrameDecoder decoder(dir, m, none);
   ASSERT_TRUE(decoder.Finish().ok());
-  const StackFrameSource source{[&](int i) { return decoder.Frame(i); }, [&](int i) { decoder.Release(i); }};
+  const StackFrameSource source{[&](int i) { return decoder.Frame(i); }, [&](int i) { decoder.Release(i); }, {}};
   auto c = ReconstructIntegralSffFrames(m, source, &ipsf, {});
   std::filesystem::remove_all(dir);
   ASSERT_TRUE(a.ok()) << a.status().ToString();

@@ -49,7 +49,8 @@ StackManifest WriteGreyStack(const fs::path& dir) {
 }
 
 StackFrameSource SourceOf(StackFrameDecoder& decoder) {
-  return {[&decoder](int i) { return decoder.Frame(i); }, [&decoder](int i) { decoder.Release(i); }};
+  return {[&decoder](int i) { return decoder.Frame(i); }, [&decoder](int i) { decoder.Release(i); },
+          [&decoder](int i) { return decoder.Statistics(i); }};
 }
 
 void ExpectBitIdentical(const DepthResult& a, const DepthResult& b) {
@@ -86,7 +87,12 @@ TEST(StackFrameDecoderTest, ParallelDecodeIsBitIdenticalToSequentialFolderLoop) 
     a.alignment = c.alignment;
     a.fall_back_to_none = true;
     std::atomic<bool> cancel{false};
-    auto sequential = ReconstructStackFolder(dir, m, SffOptions{}, {}, cancel, a);
+    // The progress events' statistics: computed in the loop (sequential) or by the decode threads.
+    std::vector<FrameStatistics> sequential_stats, parallel_stats;
+    auto collect = [](std::vector<FrameStatistics>* into) {
+      return [into](int, int, double, const FrameStatistics& st) { into->push_back(st); };
+    };
+    auto sequential = ReconstructStackFolder(dir, m, SffOptions{}, collect(&sequential_stats), cancel, a);
     ASSERT_TRUE(sequential.ok()) << sequential.status().ToString();
 
     StackFrameDecoderOptions o;
@@ -97,9 +103,22 @@ TEST(StackFrameDecoderTest, ParallelDecodeIsBitIdenticalToSequentialFolderLoop) 
     ASSERT_TRUE(decoder.Finish().ok());
     StackFolderAlignment concurrent = a;  // as the server runs it on decoded frames
     concurrent.options.threads = 0;
-    auto parallel = ReconstructStackFrames(m, SourceOf(decoder), SffOptions{}, {}, cancel, concurrent);
+    for (int i = 0; i < int(m.frames.size()); ++i) {
+      EXPECT_EQ(decoder.Statistics(i).has_value(), !c.colour) << "grey frames' statistics come from the pool";
+    }
+    auto parallel =
+        ReconstructStackFrames(m, SourceOf(decoder), SffOptions{}, collect(&parallel_stats), cancel, concurrent);
     ASSERT_TRUE(parallel.ok()) << parallel.status().ToString();
     ExpectBitIdentical(*parallel, *sequential);
+    ASSERT_EQ(parallel_stats.size(), m.frames.size());
+    ASSERT_EQ(sequential_stats.size(), m.frames.size());
+    for (size_t i = 0; i < m.frames.size(); ++i) {
+      EXPECT_EQ(parallel_stats[i].mean_grey, sequential_stats[i].mean_grey) << i;
+      EXPECT_EQ(parallel_stats[i].stddev_grey, sequential_stats[i].stddev_grey) << i;
+      EXPECT_EQ(parallel_stats[i].saturated_percent, sequential_stats[i].saturated_percent) << i;
+      EXPECT_EQ(parallel_stats[i].underexposed_percent, sequential_stats[i].underexposed_percent) << i;
+      EXPECT_GT(parallel_stats[i].stddev_grey, 0.0) << i;
+    }
     EXPECT_EQ(c.colour ? 3 : 1, parallel->all_in_focus.channels());
     // Every frame was decoded once (alignment's pass reads the kept frames) and released after
     // the engine took it.
