@@ -161,7 +161,7 @@ void AddLaneSums(const LaneSums& lanes, double hs[6][6], double gs[6], double* s
 #endif
 
 // One Gauss-Newton step; updates p. Residual r = gain * I(W(x)) + offset - T(x).
-IterationResult Iterate(const Level& L, Params& p) {
+IterationResult Iterate(const Level& L, Params& p, bool use_simd) {
   const int w = L.reference.cols, h = L.reference.rows;
   const cv::Point2d c((w - 1) * 0.5, (h - 1) * 0.5);
   const double half = 0.5 * std::max(w, h);
@@ -175,7 +175,8 @@ IterationResult Iterate(const Level& L, Params& p) {
   double s5[5] = {};  // sw, st, sww, stt, swt: the correlation's sums
   long n = 0;
 #if defined(__x86_64__)
-  static const bool avx2 = CpuHasAvx2() && __builtin_cpu_supports("fma");
+  static const bool cpu_avx2 = CpuHasAvx2() && __builtin_cpu_supports("fma");
+  const bool avx2 = use_simd && cpu_avx2;
 #endif
   for (int y = 1; y < h - 1; ++y) {
     const float* wr = warped.ptr<float>(y);
@@ -352,7 +353,7 @@ StatusOr<FrameRegistration> RegisterPyramids(const RegistrationPyramid& ref_pyra
     const Level& L = levels[size_t(k)];
     bool converged = false;
     for (int it = 0; it < o.max_iterations; ++it) {
-      last = Iterate(L, p);
+      last = Iterate(L, p, o.use_simd);
       ++out.iterations;
       if (!last.solved) {
         return Status::FailedPrecondition(last.valid_share < 0.25

@@ -40,6 +40,9 @@ struct FrameRegistrationOptions {
   int max_iterations = 40;       // per level
   double convergence_px = 0.01;  // stop when the update moves no corner by more than this
   double min_correlation = 0.5;  // zero-mean NCC after alignment; below = not registered
+  // The AVX2 kernel for the Gauss-Newton sums where the CPU has AVX2 and FMA (float lanes per
+  // row; transforms agree with the portable double loop to ~1e-6 px); false: the portable loop.
+  bool use_simd = true;
   Status Validate() const;
 };
 

@@ -57,6 +57,32 @@ TEST(FrameRegistrationTest, RecoversScaleRotationAndShiftBetweenDifferentlyBlurr
   EXPECT_GT(r->correlation, 0.9);
 }
 
+// The AVX2 kernel (float lanes per row, where the CPU has it) and the portable double loop give
+// the same transform to far below the registration's accuracy, on a transform with every part.
+TEST(FrameRegistrationTest, VectorisedAndPortableSumsGiveTheSameTransform) {
+  const cv::Mat texture = Texture({640, 480}, 5);
+  SimilarityTransform truth;
+  truth.scale = 0.985;
+  truth.rotation_rad = -0.003;
+  truth.shift_x_px = -4.2;
+  truth.shift_y_px = 1.7;
+  const cv::Mat reference = Render(texture, {}, 0.8, 3);
+  const cv::Mat frame = Render(texture, truth, 1.4, 4);
+  FrameRegistrationOptions portable;
+  portable.use_simd = false;
+  auto a = RegisterFrame(reference, frame, {});
+  auto b = RegisterFrame(reference, frame, portable);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  ASSERT_TRUE(b.ok()) << b.status().ToString();
+  EXPECT_NEAR(a->transform.scale, b->transform.scale, 1e-6);
+  EXPECT_NEAR(a->transform.rotation_rad, b->transform.rotation_rad, 1e-6);
+  EXPECT_NEAR(a->transform.shift_x_px, b->transform.shift_x_px, 1e-4);
+  EXPECT_NEAR(a->transform.shift_y_px, b->transform.shift_y_px, 1e-4);
+  EXPECT_NEAR(a->correlation, b->correlation, 1e-6);
+  EXPECT_NEAR(b->transform.scale, truth.scale, 5e-4);
+  EXPECT_NEAR(b->transform.shift_x_px, truth.shift_x_px, 0.1);
+}
+
 // Frames over twice max_side_px are first shrunk by a whole factor as stored (8 or 16 bit), then
 // in float: the transform is still found to the same accuracy in full-frame pixels.
 TEST(FrameRegistrationTest, LargeFramesShrunkByAWholeFactorFirstRegisterAsAccurately) {
