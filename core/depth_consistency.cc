@@ -35,6 +35,57 @@ void CoordinateStats(int len, int r, std::vector<double>* mean, std::vector<doub
   }
 }
 
+#if defined(__clang__) || !defined(__x86_64__)
+#define INSPECT_PLANE_KERNEL
+#else
+#define INSPECT_PLANE_KERNEL __attribute__((target_clones("avx2", "default")))
+#endif
+
+// The window sums of FitLocalDepthPlanes, one plane array per quantity so that the row loops
+// vectorise (with the NaN test as a select, not a branch): the same operations in the same
+// order as the per-pixel loops they replaced, so the sums are the same to the last bit.
+struct PlaneSums {
+  double* q[5];  // d, d^2, x d, y d, NaN count
+};
+
+// Adds (sign +1) or removes (-1) one depth row to the column sums.
+INSPECT_PLANE_KERNEL void AddDepthRow(const float* __restrict s, int w, double centre, double cx0, double yc,
+                                      double sign, double* __restrict c0, double* __restrict c1,
+                                      double* __restrict c2, double* __restrict c3, double* __restrict c4) {
+  for (int x = 0; x < w; ++x) {
+    // Both sides computed, then selected: no branch, so the loop vectorises (a NaN or inf
+    // depth's d is computed and dropped).
+    const double v = s[x], dv = v - centre;
+    const bool finite = v - v == 0.0;  // std::isfinite (inf - inf and NaN - NaN are NaN)
+    const double d = finite ? dv : 0.0;
+    c0[x] += sign * d;
+    c1[x] += sign * d * d;
+    c2[x] += sign * (x - cx0) * d;
+    c3[x] += sign * yc * d;
+    c4[x] += finite ? 0.0 : sign;
+  }
+}
+
+// One output row from the prefix sums over the extended row (lo at x, hi at x + 2r + 1).
+INSPECT_PLANE_KERNEL void PlaneRow(const PlaneSums& prefix, int w, int r, double n, const double* __restrict mean_x,
+                                   const double* __restrict var_x, double my, double vy, float* __restrict o,
+                                   float* __restrict sx, float* __restrict sy) {
+  const double *p0 = prefix.q[0], *p1 = prefix.q[1], *p2 = prefix.q[2], *p3 = prefix.q[3], *p4 = prefix.q[4];
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  const int span = 2 * r + 1;
+  for (int x = 0; x < w; ++x) {
+    const bool holes = p4[x + span] - p4[x] > 0.5;
+    const double m = (p0[x + span] - p0[x]) / n;
+    const double var_d = (p1[x + span] - p1[x]) / n - m * m;
+    const double cx = (p2[x + span] - p2[x]) / n - mean_x[x] * m;
+    const double cy = (p3[x + span] - p3[x]) / n - my * m;
+    const double res = var_d - cx * cx / var_x[x] - cy * cy / vy;
+    o[x] = holes ? inf : float(std::sqrt(std::max(res, 0.0)));
+    sx[x] = holes ? nan : float(cx / var_x[x]);
+    sy[x] = holes ? nan : float(cy / vy);
+  }
+}
+
 }  // namespace
 
 Status DepthConsistencyOptions::Validate() const {
@@ -88,30 +139,23 @@ Status FitLocalDepthPlanes(const cv::Mat& raw_depth_um, int radius_px, LocalDept
   CoordinateStats(w, r, &mean_x, &var_x);
   CoordinateStats(h, r, &mean_y, &var_y);
   const double n = double(2 * r + 1) * (2 * r + 1);
-  const float inf = std::numeric_limits<float>::infinity();
   std::vector<int> xmap(size_t(w + 2 * r));  // extended position -> mirrored column
   for (int i = 0; i < w + 2 * r; ++i) xmap[size_t(i)] = cv::borderInterpolate(i - r, w, kBorder);
 
+  // mean_x relative to the image centre, as the sums' x is.
+  std::vector<double> mean_xc(size_t(w), 0.0);
+  for (int x = 0; x < w; ++x) mean_xc[size_t(x)] = mean_x[size_t(x)] - cx0;
   // Bands of rows in parallel, each with its own column sums (started at its first row).
   cv::parallel_for_(
       cv::Range(0, h),
       [&](const cv::Range& band) {
-        std::vector<double> col(size_t(kQ) * w, 0.0), prefix(size_t(kQ) * (w + 2 * r + 1), 0.0);
+        const size_t ext = size_t(w + 2 * r + 1);
+        std::vector<double> col(size_t(kQ) * w, 0.0), prefix(size_t(kQ) * ext, 0.0);
+        PlaneSums c, p;
+        for (int q = 0; q < kQ; ++q) c.q[q] = &col[size_t(q) * w], p.q[q] = &prefix[size_t(q) * ext];
         auto add_row = [&](int row, double sign) {
-          const float* s = raw_depth_um.ptr<float>(row);
-          const double yc = row - cy0;
-          for (int x = 0; x < w; ++x) {
-            double* c = &col[size_t(kQ) * x];
-            if (std::isfinite(s[x])) {
-              const double d = s[x] - centre;
-              c[0] += sign * d;
-              c[1] += sign * d * d;
-              c[2] += sign * (x - cx0) * d;
-              c[3] += sign * yc * d;
-            } else {
-              c[4] += sign;
-            }
-          }
+          AddDepthRow(raw_depth_um.ptr<float>(row), w, centre, cx0, row - cy0, sign, c.q[0], c.q[1], c.q[2], c.q[3],
+                      c.q[4]);
         };
         for (int k = band.start - r; k <= band.start + r; ++k) add_row(cv::borderInterpolate(k, h, kBorder), 1.0);
         for (int y = band.start; y < band.end; ++y) {
@@ -119,33 +163,22 @@ Status FitLocalDepthPlanes(const cv::Mat& raw_depth_um, int radius_px, LocalDept
             add_row(cv::borderInterpolate(y + r, h, kBorder), 1.0);
             add_row(cv::borderInterpolate(y - r - 1, h, kBorder), -1.0);
           }
-          for (int i = 0; i < w + 2 * r; ++i) {  // prefix[i + 1] = sum of col over extended positions 0..i
-            const double* c = &col[size_t(kQ) * xmap[size_t(i)]];
-            const double* p = &prefix[size_t(kQ) * i];
-            double* p1 = &prefix[size_t(kQ) * (i + 1)];
-            for (int q = 0; q < kQ; ++q) p1[q] = p[q] + c[q];
-          }
-          float* o = out.ptr<float>(y);
-          float* sx = plane->slope_x.ptr<float>(y);
-          float* sy = plane->slope_y.ptr<float>(y);
-          const double my = mean_y[size_t(y)] - cy0, vy = var_y[size_t(y)];
-          for (int x = 0; x < w; ++x) {
-            const double* hi = &prefix[size_t(kQ) * (x + 2 * r + 1)];
-            const double* lo = &prefix[size_t(kQ) * x];
-            if (hi[4] - lo[4] > 0.5) {
-              o[x] = inf;
-              sx[x] = sy[x] = std::numeric_limits<float>::quiet_NaN();
-              continue;
+          // prefix[i + 1] = sum of col over extended positions 0..i; the five running sums in
+          // one loop, so their dependency chains overlap.
+          {
+            double *p0 = p.q[0], *p1 = p.q[1], *p2 = p.q[2], *p3 = p.q[3], *p4 = p.q[4];
+            const double *c0 = c.q[0], *c1 = c.q[1], *c2 = c.q[2], *c3 = c.q[3], *c4 = c.q[4];
+            for (int i = 0; i < w + 2 * r; ++i) {
+              const int xi = xmap[size_t(i)];
+              p0[i + 1] = p0[i] + c0[xi];
+              p1[i + 1] = p1[i] + c1[xi];
+              p2[i + 1] = p2[i] + c2[xi];
+              p3[i + 1] = p3[i] + c3[xi];
+              p4[i + 1] = p4[i] + c4[xi];
             }
-            const double m = (hi[0] - lo[0]) / n;
-            const double var_d = (hi[1] - lo[1]) / n - m * m;
-            const double cx = (hi[2] - lo[2]) / n - (mean_x[size_t(x)] - cx0) * m;
-            const double cy = (hi[3] - lo[3]) / n - my * m;
-            const double res = var_d - cx * cx / var_x[size_t(x)] - cy * cy / vy;
-            o[x] = float(std::sqrt(std::max(res, 0.0)));
-            sx[x] = float(cx / var_x[size_t(x)]);
-            sy[x] = float(cy / vy);
           }
+          PlaneRow(p, w, r, n, mean_xc.data(), var_x.data(), mean_y[size_t(y)] - cy0, var_y[size_t(y)],
+                   out.ptr<float>(y), plane->slope_x.ptr<float>(y), plane->slope_y.ptr<float>(y));
         }
       },
       4.0);  // 4 bands: each restarts its sums (2r + 1 rows), negligible
@@ -232,22 +265,31 @@ StatusOr<cv::Mat> RejectInconsistentDepth(const cv::Mat& depth_um, const cv::Mat
   const int radius = options.radius_px > 0 ? options.radius_px : DefaultConsistencyRadius(focus_window_px);
   LocalDepthPlane plane;
   INSPECT_RETURN_IF_ERROR(FitLocalDepthPlanes(raw_depth_um, std::clamp(radius, 1, 31), &plane));
-  cv::Mat out = depth_um.clone();
-  const float nan = std::numeric_limits<float>::quiet_NaN();
-  out.setTo(nan, plane.residual_um > options.max_residual_z_steps * z_step_um);
+  cv::Mat offset;  // the window-mixing check's centroid offsets, when it runs
   if (!all_in_focus.empty() && options.max_window_mixing_z_steps > 0.0 && focus_window_px >= 3) {
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat offset, FocusEnergyCentroidOffset(all_in_focus, focus_window_px | 1));
-    const double limit = options.max_window_mixing_z_steps * z_step_um;
-    for (int y = 0; y < out.rows; ++y) {
+    INSPECT_ASSIGN_OR_RETURN(offset, FocusEnergyCentroidOffset(all_in_focus, focus_window_px | 1));
+  }
+  // Both checks in one pass over bands of rows. The residual limit is compared in float, as
+  // cv::compare of a CV_32F image with a scalar does (the scalar rounded to float).
+  const float residual_limit = float(options.max_residual_z_steps * z_step_um);
+  const double mixing_limit = options.max_window_mixing_z_steps * z_step_um;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  cv::Mat out(depth_um.size(), CV_32FC1);
+  cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      const float* d = depth_um.ptr<float>(y);
+      const float* res = plane.residual_um.ptr<float>(y);
       float* o = out.ptr<float>(y);
+      for (int x = 0; x < out.cols; ++x) o[x] = res[x] > residual_limit ? nan : d[x];
+      if (offset.empty()) continue;
       const float* sx = plane.slope_x.ptr<float>(y);
       const float* sy = plane.slope_y.ptr<float>(y);
       const cv::Vec2f* c = offset.ptr<cv::Vec2f>(y);
       for (int x = 0; x < out.cols; ++x) {
-        if (std::abs(sx[x] * c[x][0] + sy[x] * c[x][1]) > limit) o[x] = nan;
+        if (std::abs(sx[x] * c[x][0] + sy[x] * c[x][1]) > mixing_limit) o[x] = nan;
       }
     }
-  }
+  });
   return out;
 }
 
