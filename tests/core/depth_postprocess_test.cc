@@ -38,9 +38,24 @@ std::vector<double> Z() {
 }
 
 TEST(DepthPostProcessTest, DefaultsRejectLowConfidenceAndInconsistentPixelsOnly) {
-  const DepthResult raw = Synthetic();
-  auto r = PostProcessDepth(raw, Z(), 7, DepthPostProcessOptions{});
+  DepthResult raw = Synthetic();
+  // The threshold is inclusive, in float: exactly 0.4f is kept, the float just below is not.
+  raw.confidence.at<float>(2, 2) = 0.4f;
+  raw.confidence.at<float>(2, 3) = std::nextafter(0.4f, 0.f);
+  const cv::Mat raw_depth = raw.depth_um.clone(), raw_confidence = raw.confidence.clone();
+  DepthPostProcessFigures figures;
+  auto r = PostProcessDepth(raw, Z(), 7, DepthPostProcessOptions{}, &figures);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
+  // The input is left as it was (the result has its own pixels).
+  EXPECT_EQ(cv::norm(raw.depth_um, raw_depth, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(raw.confidence, raw_confidence, cv::NORM_INF), 0.0);
+  EXPECT_FALSE(std::isnan(r->depth_um.at<float>(2, 2)));
+  EXPECT_TRUE(std::isnan(r->depth_um.at<float>(2, 3)));
+  // Rejected by consistency = above the threshold and now without depth, with confidence 0.
+  const cv::Mat above = raw.confidence >= 0.4f, rejected = above & (r->confidence == 0.f);
+  EXPECT_GT(cv::countNonZero(rejected), 0);
+  EXPECT_EQ(cv::countNonZero(rejected & (r->depth_um == r->depth_um)), 0);
+  EXPECT_NEAR(figures.consistency_rejected_fraction, double(cv::countNonZero(rejected)) / rejected.total(), 1e-12);
   // Low confidence: NaN, confidence kept (it says why).
   EXPECT_TRUE(std::isnan(r->depth_um.at<float>(5, 40)));
   EXPECT_FLOAT_EQ(r->confidence.at<float>(5, 40), 0.1f);
