@@ -116,6 +116,9 @@ bool Unfilter(int filter, const unsigned char* in, const unsigned char* up, unsi
   }
 }
 
+// Per-thread buffers above this are freed after use rather than kept for the next frame.
+constexpr size_t kKeptBufferBytes = size_t(64) << 20;
+
 struct Decompressor {
   libdeflate_decompressor* d = libdeflate_alloc_decompressor();
   ~Decompressor() {
@@ -132,7 +135,16 @@ cv::Mat DecodePlainPng(std::string_view file, size_t max_raw_bytes) {
   uint32_t width = 0, height = 0;
   int bit_depth = 0, colour_type = 0;
   bool header = false, end = false;
-  std::string idat;
+  // The IDAT chunks' bytes, joined (libpng writes 8 KiB chunks; libdeflate inflates one buffer).
+  // A buffer per thread, reused from frame to frame: a fresh one per frame cost ~200 page faults.
+  thread_local std::string idat;
+  idat.clear();
+  struct TrimOnReturn {  // an unusually large frame's buffer is not kept
+    std::string& s;
+    ~TrimOnReturn() {
+      if (s.capacity() > kKeptBufferBytes) s = std::string();
+    }
+  } trim{idat};
   for (size_t pos = 8; pos + 12 <= file.size();) {
     const uint32_t length = Be32(bytes + pos);
     if (length > file.size() - pos - 12) return {};
@@ -151,7 +163,7 @@ cv::Mat DecodePlainPng(std::string_view file, size_t max_raw_bytes) {
       if ((colour_type != 0 && colour_type != 2) || (bit_depth != 8 && bit_depth != 16)) return {};
       header = true;
     } else if (name == "IDAT") {
-      if (idat.empty()) idat.reserve(file.size());
+      if (idat.capacity() < file.size()) idat.reserve(file.size());
       idat.append(reinterpret_cast<const char*>(data), length);
     } else if (name == "IEND") {
       end = true;
@@ -183,7 +195,6 @@ cv::Mat DecodePlainPng(std::string_view file, size_t max_raw_bytes) {
       LIBDEFLATE_SUCCESS) {
     return {};  // corrupt, truncated or longer than the image
   }
-  idat = std::string();
   const std::vector<unsigned char> zeros(stride, 0);
   for (size_t y = 0; y < height; ++y) {
     const unsigned char* in = base + y * (stride + 1);

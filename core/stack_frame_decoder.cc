@@ -32,10 +32,14 @@ StatusOr<cv::Mat> DecodeFrameFile(const std::filesystem::path& dir, const StackM
     if (in.read(signature, sizeof signature) && HasPngSignature(std::string_view(signature, sizeof signature))) {
       in.seekg(0, std::ios::end);
       const std::streamoff size = in.tellg();
-      std::string file(size > 0 ? size_t(size) : 0, '\0');
+      // The file's bytes in a buffer of the decode thread, reused from frame to frame (a fresh,
+      // zero-filled one per frame cost ~200 page faults and a pass over it).
+      thread_local std::string buffer;
+      if (size > 0 && buffer.size() < size_t(size)) buffer.resize(size_t(size));
       in.seekg(0);
-      if (size > 0 && in.read(file.data(), size)) {
-        cv::Mat image = DecodePlainPng(file);
+      if (size > 0 && in.read(buffer.data(), size)) {
+        cv::Mat image = DecodePlainPng(std::string_view(buffer.data(), size_t(size)));
+        if (buffer.size() > (size_t(64) << 20)) buffer = std::string();  // an unusually large frame's
         if (!image.empty()) return image;
       }
     }
