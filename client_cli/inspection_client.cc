@@ -288,7 +288,11 @@ grpc::Status InspectionClient::ReconstructUpload(const std::filesystem::path& st
     stream_open = stream->Write(first);
   }
   int64_t sent_bytes = 0;
-  std::vector<char> buf(kChunkBytes);
+  // One message for every chunk, the file read straight into its data field: the buffer keeps
+  // its capacity from chunk to chunk (no copy into the message, no fresh megabyte per chunk).
+  v1::ReconstructRequest msg;
+  v1::StackFileChunk* chunk = msg.mutable_file_chunk();
+  std::string* data = chunk->mutable_data();
   for (size_t i = 0; stream_open && local_error.ok() && i < files.size(); ++i) {
     const UploadFile& file = files[i];
     std::ifstream in(file.path, std::ios::binary);
@@ -300,17 +304,16 @@ grpc::Status InspectionClient::ReconstructUpload(const std::filesystem::path& st
     int64_t offset = 0;
     // Empty files still send one (empty, last) chunk so the server sees every listed file.
     do {
-      in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+      data->resize(kChunkBytes);
+      in.read(data->data(), static_cast<std::streamsize>(kChunkBytes));
       const std::streamsize n = in.gcount();
       if (in.bad()) {
         local_error = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, file.relative + ": read error");
         break;
       }
-      v1::ReconstructRequest msg;
-      v1::StackFileChunk* chunk = msg.mutable_file_chunk();
+      data->resize(static_cast<size_t>(n));
       chunk->set_path(file.relative);
       chunk->set_offset(offset);
-      chunk->set_data(buf.data(), static_cast<size_t>(n));
       offset += n;
       chunk->set_last(offset >= file.size_bytes || in.eof());
       const bool last = chunk->last();

@@ -2,6 +2,7 @@
 // concurrently: each is a pure function of the result, so only the wall time changes.
 #include "server/procedures/reconstruct_procedure.h"
 
+#include <algorithm>
 #include <functional>
 #include <opencv2/imgcodecs.hpp>
 
@@ -45,7 +46,14 @@ StatusOr<std::vector<DepthArtifactFile>> WriteDepthArtifacts(const DepthResult& 
     }
   }
   std::vector<Status> written(tasks.size(), Status::Ok());  // one slot per task: no shared writes
-  ParallelFor(int(tasks.size()), ResolveThreads(threads), [&](int i, int) {
+  // Started longest first (the preview: colour map and a 3-channel PNG, several times a TIFF's
+  // time), so the others fill the remaining threads; the files keep their order.
+  std::vector<int> order(tasks.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = int(i);
+  std::stable_partition(order.begin(), order.end(),
+                        [&](int i) { return tasks[size_t(i)].file.kind == DepthExportKind::kDepthPreviewPng; });
+  ParallelFor(int(tasks.size()), ResolveThreads(threads), [&](int k, int) {
+    const int i = order[size_t(k)];
     try {
       written[size_t(i)] = tasks[size_t(i)].write(tasks[size_t(i)].file.path);
     } catch (const cv::Exception& e) {  // never across the thread boundary
