@@ -273,6 +273,14 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
   std::vector<int> chain;
   for (int i = 0; i < n; i += stride) chain.push_back(i);
   if (chain.back() != n - 1) chain.push_back(n - 1);
+  if (options.coarse_first && options.registration.max_side_px >= 64) {
+    StackAlignmentOptions coarse = options;
+    coarse.registration.max_side_px = options.registration.max_side_px / 2;
+    coarse.registration.pyramid_levels = std::max(1, options.registration.pyramid_levels - 1);
+    StatusOr<FocusBreathingModel> m = EstimateOnChain(load, z_um, chain, coarse);
+    if (m.ok() && MaxCornerDisplacementPx(*m, z_um) < 0.5 * kNegligibleAlignmentPx) return m;
+    // Moving, or no answer at that size (errors included): the full estimate decides and words it.
+  }
   return EstimateOnChain(load, z_um, chain, options);
 }
 

@@ -73,6 +73,12 @@ struct StackAlignmentOptions {
   // cost. What it no longer sees is one frame out of line between two in line. 30 pairs are
   // plenty for the medians; frames two or three steps apart share most of their defocus.
   int max_pairs = 30;
+  // Most stacks do not move (a telecentric objective, a good stage): the same estimate at half
+  // the working size (max_side_px / 2, one pyramid level fewer; about a quarter of the cost)
+  // runs first, and when its model moves no frame corner by half of kNegligibleAlignmentPx that
+  // model is the answer (the aligner then leaves the frames as they are, as it would with the
+  // full estimate). Otherwise, or when it fails, the full estimate runs as if it had not.
+  bool coarse_first = true;
   Status Validate() const;
 };
 

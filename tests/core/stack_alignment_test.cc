@@ -206,6 +206,44 @@ TEST(StackAlignmentTest, ConcurrentPairsGiveTheSequentialModelExactly) {
   EXPECT_EQ(b.message(), a.message());
 }
 
+// A stack that does not move is decided by the half-size estimate alone (each frame loaded
+// once); a moving one gets the full estimate, exactly the model without the coarse pass.
+TEST(StackAlignmentTest, CoarseEstimateFirstDecidesStacksThatDoNotMove) {
+  for (const bool moving : {false, true}) {
+    SCOPED_TRACE(moving ? "moving" : "still");
+    const BreathingStack s = moving ? MakeStack({512, 384}, 13, 10.0, 0.02, 0.002, 3.0, -2.0)
+                                    : MakeStack({512, 384}, 13, 10.0, 0.0, 0.0, 0.0, 0.0);
+    int loads = 0;
+    auto counting = [&](int i) -> StatusOr<cv::Mat> {
+      ++loads;
+      return s.frames[size_t(i)];
+    };
+    StackAlignmentOptions full_only;
+    full_only.coarse_first = false;
+    auto full = EstimateFocusBreathing(counting, s.z_um, full_only);
+    ASSERT_TRUE(full.ok()) << full.status().ToString();
+    const int full_loads = loads;
+    loads = 0;
+    auto m = EstimateFocusBreathing(counting, s.z_um, {});
+    ASSERT_TRUE(m.ok()) << m.status().ToString();
+    if (!moving) {
+      EXPECT_EQ(loads, full_loads) << "one estimate, at half size";
+      EXPECT_LT(MaxCornerDisplacementPx(*m, s.z_um), 0.5 * kNegligibleAlignmentPx);
+      EXPECT_LT(MaxCornerDisplacementPx(*full, s.z_um), kNegligibleAlignmentPx);
+      auto aligner = StackAligner::Create(*m, FrameAlignment::kEstimate, s.z_um, s.frames[0].size());
+      ASSERT_TRUE(aligner.ok());
+      EXPECT_FALSE(aligner->warps());
+    } else {
+      EXPECT_EQ(loads, 2 * full_loads) << "the coarse pass, then the full estimate";
+      EXPECT_EQ(m->scale_change_per_100um, full->scale_change_per_100um);
+      EXPECT_EQ(m->rotation_rad_per_100um, full->rotation_rad_per_100um);
+      EXPECT_EQ(m->shift_x_px_per_100um, full->shift_x_px_per_100um);
+      EXPECT_EQ(m->shift_y_px_per_100um, full->shift_y_px_per_100um);
+      EXPECT_NEAR(m->scale_change_per_100um, 0.02, 5e-4);
+    }
+  }
+}
+
 // Issue 16: a long stack registers a chain of frames `stride` apart (max_pairs); the model
 // matches the truth as the all-neighbour estimate does, and a pair is named by its frames.
 TEST(StackAlignmentTest, LongStacksRegisterAChainOfFramesStrideApart) {
@@ -219,6 +257,7 @@ TEST(StackAlignmentTest, LongStacksRegisterAChainOfFramesStrideApart) {
   StackAlignmentOptions every, chain;
   every.max_pairs = 0;
   chain.max_pairs = 10;  // stride 4: frames 0, 4, ..., 40
+  chain.coarse_first = false;  // one pass, so the loads count the chain (the coarse pass: above)
   auto all = EstimateFocusBreathing(load, s.z_um, every);
   auto strided = EstimateFocusBreathing(counting, s.z_um, chain);
   ASSERT_TRUE(all.ok()) << all.status().ToString();
