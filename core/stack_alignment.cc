@@ -278,7 +278,7 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
     coarse.registration.max_side_px = options.registration.max_side_px / 2;
     coarse.registration.pyramid_levels = std::max(1, options.registration.pyramid_levels - 1);
     StatusOr<FocusBreathingModel> m = EstimateOnChain(load, z_um, chain, coarse);
-    if (m.ok() && MaxCornerDisplacementPx(*m, z_um) < 0.5 * kNegligibleAlignmentPx) return m;
+    if (m.ok() && MaxCornerDisplacementPx(*m, z_um) < kNegligibleAlignmentPx) return m;
     // Moving, or no answer at that size (errors included): the full estimate decides and words it.
   }
   return EstimateOnChain(load, z_um, chain, options);

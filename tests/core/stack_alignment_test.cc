@@ -228,7 +228,7 @@ TEST(StackAlignmentTest, CoarseEstimateFirstDecidesStacksThatDoNotMove) {
     ASSERT_TRUE(m.ok()) << m.status().ToString();
     if (!moving) {
       EXPECT_EQ(loads, full_loads) << "one estimate, at half size";
-      EXPECT_LT(MaxCornerDisplacementPx(*m, s.z_um), 0.5 * kNegligibleAlignmentPx);
+      EXPECT_LT(MaxCornerDisplacementPx(*m, s.z_um), kNegligibleAlignmentPx);
       EXPECT_LT(MaxCornerDisplacementPx(*full, s.z_um), kNegligibleAlignmentPx);
       auto aligner = StackAligner::Create(*m, FrameAlignment::kEstimate, s.z_um, s.frames[0].size());
       ASSERT_TRUE(aligner.ok());
