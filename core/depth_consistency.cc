@@ -66,8 +66,9 @@ INSPECT_PLANE_KERNEL void AddDepthRow(const float* __restrict s, int w, double c
   }
 }
 
-// One output row from the prefix sums over the extended row (lo at x, hi at x + 2r + 1).
-INSPECT_PLANE_KERNEL void PlaneRow(const PlaneSums& prefix, int w, int r, double n, const double* __restrict mean_x,
+// One output row from the prefix sums over the extended row (lo at x, hi at x + 2r + 1);
+// mean_xc: the window's mean x relative to the image centre, my the same for y.
+INSPECT_PLANE_KERNEL void PlaneRow(const PlaneSums& prefix, int w, int r, double n, const double* __restrict mean_xc,
                                    const double* __restrict var_x, double my, double vy, float* __restrict o,
                                    float* __restrict sx, float* __restrict sy) {
   const double *p0 = prefix.q[0], *p1 = prefix.q[1], *p2 = prefix.q[2], *p3 = prefix.q[3], *p4 = prefix.q[4];
@@ -77,7 +78,7 @@ INSPECT_PLANE_KERNEL void PlaneRow(const PlaneSums& prefix, int w, int r, double
     const bool holes = p4[x + span] - p4[x] > 0.5;
     const double m = (p0[x + span] - p0[x]) / n;
     const double var_d = (p1[x + span] - p1[x]) / n - m * m;
-    const double cx = (p2[x + span] - p2[x]) / n - mean_x[x] * m;
+    const double cx = (p2[x + span] - p2[x]) / n - mean_xc[x] * m;
     const double cy = (p3[x + span] - p3[x]) / n - my * m;
     const double res = var_d - cx * cx / var_x[x] - cy * cy / vy;
     o[x] = holes ? inf : float(std::sqrt(std::max(res, 0.0)));

@@ -116,9 +116,6 @@ bool Unfilter(int filter, const unsigned char* in, const unsigned char* up, unsi
   }
 }
 
-// Per-thread buffers above this are freed after use rather than kept for the next frame.
-constexpr size_t kKeptBufferBytes = size_t(64) << 20;
-
 struct Decompressor {
   libdeflate_decompressor* d = libdeflate_alloc_decompressor();
   ~Decompressor() {
@@ -142,7 +139,7 @@ cv::Mat DecodePlainPng(std::string_view file, size_t max_raw_bytes) {
   struct TrimOnReturn {  // an unusually large frame's buffer is not kept
     std::string& s;
     ~TrimOnReturn() {
-      if (s.capacity() > kKeptBufferBytes) s = std::string();
+      if (s.capacity() > kPngFastPathKeptBufferBytes) s = std::string();
     }
   } trim{idat};
   for (size_t pos = 8; pos + 12 <= file.size();) {

@@ -20,5 +20,8 @@ namespace inspection {
 // the header; larger images take the general path, whose decoder applies OpenCV's size limits.
 inline constexpr size_t kPngFastPathMaxRawBytes = size_t(1) << 28;  // 256 MiB
 cv::Mat DecodePlainPng(std::string_view file, size_t max_raw_bytes = kPngFastPathMaxRawBytes);
+// Decoding keeps its per-thread byte buffers from frame to frame up to this size; a larger
+// frame's buffer is freed after use.
+inline constexpr size_t kPngFastPathKeptBufferBytes = size_t(64) << 20;
 
 }  // namespace inspection

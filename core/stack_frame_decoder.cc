@@ -39,7 +39,7 @@ StatusOr<cv::Mat> DecodeFrameFile(const std::filesystem::path& dir, const StackM
       in.seekg(0);
       if (size > 0 && in.read(buffer.data(), size)) {
         cv::Mat image = DecodePlainPng(std::string_view(buffer.data(), size_t(size)));
-        if (buffer.size() > (size_t(64) << 20)) buffer = std::string();  // an unusually large frame's
+        if (buffer.size() > kPngFastPathKeptBufferBytes) buffer = std::string();
         if (!image.empty()) return image;
       }
     }
