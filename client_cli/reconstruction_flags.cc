@@ -103,6 +103,9 @@ void ReconstructionFlags::Add(CLI::App* cmd) {
                   "Edge-aware smoothing of the depth guided by the all-in-focus image: none (default) | "
                   "weighted-median | guided-filter")
       ->check(CLI::IsMember(Keys(Refinements()), CLI::ignore_case));
+  cmd->add_flag("--illumination-invariant", illumination_invariant,
+                "SFF: focus measure divided by the window's mean grey squared, for frames lit differently "
+                "(ADAPT-family scans, flicker); off by default (README)");
   cmd->add_flag("--fill", fill,
                 "Fill pixels without depth from measured neighbours (interpolated, not measured; off by default)");
 }
@@ -120,6 +123,7 @@ v1::ReconstructionOptions ReconstructionFlags::ToProto() const {
   if (no_consistency) o.set_depth_consistency(false);
   if (!refinement.empty()) o.set_refinement(Refinements().at(Lower(refinement)));
   if (fill) o.set_fill_low_confidence(true);
+  if (illumination_invariant) o.set_illumination_invariant(true);
   return o;
 }
 

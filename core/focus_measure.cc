@@ -3,6 +3,7 @@
 // moment measures in double (they subtract large, nearly equal sums).
 #include "core/focus_measure.h"
 
+#include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 #include <string>
@@ -65,6 +66,51 @@ std::vector<double> ChebyshevPolynomial(int m, int n_points) {
   const double s = 1.0 / std::sqrt(ChebyshevNorm(m, N));
   for (double& v : t) v *= s;
   return t;
+}
+
+int IlluminationPower(FocusMeasure measure) {
+  switch (measure) {
+    case FocusMeasure::kModifiedLaplacian:
+      return 1;
+    case FocusMeasure::kHelmliMean:
+    case FocusMeasure::kChebyshevMoments:
+      return 0;
+    case FocusMeasure::kSumModifiedLaplacian:
+    case FocusMeasure::kTenengrad:
+    case FocusMeasure::kGreyLevelVariance:
+    case FocusMeasure::kGreyLevelLocalVariance:
+      break;
+  }
+  return 2;
+}
+
+Status NormaliseFocusByIllumination(const cv::Mat& frame, FocusMeasure measure, int window_px, cv::Mat* focus) {
+  if (frame.empty()) return Status::InvalidArgument("frame is empty");
+  if (frame.type() != CV_8UC1 && frame.type() != CV_16UC1 && frame.type() != CV_32FC1) {
+    return Status::InvalidArgument("frame must be CV_8UC1, CV_16UC1 or CV_32FC1");
+  }
+  if (window_px < 3 || window_px > 31 || window_px % 2 == 0) {
+    return Status::InvalidArgument("window_px " + std::to_string(window_px) + " must be odd and between 3 and 31");
+  }
+  if (focus == nullptr || focus->type() != CV_32FC1 || focus->size() != frame.size()) {
+    return Status::InvalidArgument("focus map must be CV_32FC1 of the frame's size");
+  }
+  const int power = IlluminationPower(measure);
+  if (power == 0) return Status::Ok();
+  const double full_scale = frame.depth() == CV_8U ? 255.0 : frame.depth() == CV_16U ? 65535.0 : 1.0;
+  const float floor_grey = static_cast<float>(full_scale / 256.0);
+  cv::Mat f32;
+  frame.convertTo(f32, CV_32F);
+  const cv::Mat mu = WindowMean(f32, window_px);
+  for (int y = 0; y < frame.rows; ++y) {
+    const float* m = mu.ptr<float>(y);
+    float* f = focus->ptr<float>(y);
+    for (int x = 0; x < frame.cols; ++x) {
+      const float light = std::max(m[x], floor_grey);
+      f[x] /= power == 1 ? light : light * light;
+    }
+  }
+  return Status::Ok();
 }
 
 Status ComputeFocusMeasure(const cv::Mat& frame, FocusMeasure measure, int window_px, cv::Mat* focus) {

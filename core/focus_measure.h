@@ -42,6 +42,24 @@ namespace inspection {
 //                         eq. 3.15 whose mean is the one of the centre's window.
 Status ComputeFocusMeasure(const cv::Mat& frame, FocusMeasure measure, int window_px, cv::Mat* focus);
 
+// How a measure of `measure` scales with the illumination: a frame lit s times brighter has a
+// focus map s^power times larger. 2 for Tenengrad, SML and the variances, 1 for the modified
+// Laplacian, 0 for the scale-free ratios (Helmli mean, Chebyshev moments).
+int IlluminationPower(FocusMeasure measure);
+
+// Makes a focus map of `measure` independent of how brightly its frame was lit: divides it in
+// place by the frame's window mean (same window_px, same borders) to IlluminationPower(measure).
+// Why: the ADAPT family (thesis 5.1) lights every z with its own compensation pattern, predicted
+// from the frame before, so the light on a point changes from frame to frame while it passes
+// through focus; a measure that grows with the square of the light then takes that change into
+// the focus curve and moves its peak (on the coin the window mean fell from 145 to 112 grey
+// across the three frames around focus: a factor 1.7 in Tenengrad, and the field's depth moved
+// by -0.5 to -1.4 um). The ratio is the same for any scale of the light. Means below 1/256 of
+// the frame type's full scale (one grey level at 8 bit; 1/256 for float frames) are taken as
+// that floor: there the grey value is noise. frame: CV_8UC1, CV_16UC1 or CV_32FC1; focus:
+// CV_32FC1 of the frame's size.
+Status NormaliseFocusByIllumination(const cv::Mat& frame, FocusMeasure measure, int window_px, cv::Mat* focus);
+
 // kHelmliMean's floor of a ratio's terms, relative to the frame's mean grey value.
 inline constexpr double kHelmliFloorOfMean = 1.0 / 128.0;
 

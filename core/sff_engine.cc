@@ -62,7 +62,7 @@ Status CheckCreate(const SffOptions& options, cv::Size frame_size, int frame_typ
 }
 
 bool UseFused(const SffOptions& o, int frame_type) {
-  return frame_type == CV_8UC1 && o.focus_measure == FocusMeasure::kTenengrad;
+  return frame_type == CV_8UC1 && o.focus_measure == FocusMeasure::kTenengrad && !o.illumination_invariant;
 }
 
 bool UseCompact(const SffOptions& o, int frame_type) {

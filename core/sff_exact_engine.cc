@@ -47,6 +47,11 @@ class ExactEngine final : public SffEngine {
       cv::Mat focus;
       INSPECT_RETURN_IF_ERROR(ComputeFocusMeasure(frame, options_.focus_measure, options_.window_px, &focus)
                                   .WithContext("frame " + std::to_string(k)));
+      if (options_.illumination_invariant) {
+        INSPECT_RETURN_IF_ERROR(
+            NormaliseFocusByIllumination(frame, options_.focus_measure, options_.window_px, &focus)
+                .WithContext("frame " + std::to_string(k)));
+      }
       const int bands = std::min(size_.height, threads_ * 4);
       ParallelFor(bands, threads_, [&](int b, int) {
         const int y_begin = size_.height * b / bands, y_end = size_.height * (b + 1) / bands;

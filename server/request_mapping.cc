@@ -163,6 +163,7 @@ StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::Reconstructi
   if (o.window_px() != 0) s.window_px = o.window_px();
   INSPECT_ASSIGN_OR_RETURN(s.interpolation, MapInterpolation(o.interpolation(), field));
   if (o.has_min_confidence()) s.min_confidence = o.min_confidence();
+  s.illumination_invariant = o.illumination_invariant();
   INSPECT_RETURN_IF_ERROR(s.Validate().WithContext(field));
   ReconstructionMethodSettings& m = out.method;
   INSPECT_ASSIGN_OR_RETURN(m.method, MapReconstructionMethod(o.method(), field));
@@ -214,6 +215,10 @@ StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::Reconstructi
     }
     if (post.fill_low_confidence) {
       return Status::InvalidArgument(field + ".fill_low_confidence applies to SFF only (method " + method_name + ")");
+    }
+    if (s.illumination_invariant) {
+      return Status::InvalidArgument(field + ".illumination_invariant applies to SFF only (method " + method_name +
+                                     ")");
     }
   }
   INSPECT_RETURN_IF_ERROR(post.Validate().WithContext(field));

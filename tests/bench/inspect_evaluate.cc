@@ -14,7 +14,8 @@
 // beside its scan-to-scan spread; --dump DIR writes each scan's error map (PNG and text), its
 // all-in-focus image, its middle row (truth, measured, grey) and keeps its stack folder.
 // --user-scenes runs the bias tables on four scene.json user scenes instead of the built-ins
-// (WriteEvaluationScenes below).
+// (WriteEvaluationScenes below). --illumination-invariant scans with
+// SffOptions::illumination_invariant (the focus measure divided by the window mean squared).
 //        (tests/bench/natural_tables.h) instead
 // --bias-only prints only the bias table; --specimens / --modes restrict it (for quick checks).
 // --isff-only prints only the integral SFF part (--camera and --seed apply to it when given),
@@ -208,6 +209,7 @@ struct Evaluator {
   fs::path dir;
   bool consistency = true;  // the depth consistency check of the post-processing (--no-consistency: off)
   fs::path dump_dir;        // --dump: error maps written here (empty: none)
+  bool illumination_invariant = false;  // --illumination-invariant: SffOptions::illumination_invariant
 
   Run Scan(const std::string& specimen, IlluminationMode mode, IlluminationParams params, double z_step_um = 0) {
     Run r;
@@ -221,6 +223,7 @@ struct Evaluator {
     plan->params = params;
     plan->sff.window_px = kWindowPx;
     plan->postprocess.consistency = consistency;
+    plan->sff.illumination_invariant = illumination_invariant;
     std::atomic<bool> cancel{false};
     const fs::path stack =
         dir / (specimen + "_" + std::to_string(int(mode)) + "_" + std::to_string(params.hdr_exposures));
@@ -284,6 +287,7 @@ int Main(int argc, char** argv) {
   bool bias_only = false;
   bool no_consistency = false;
   bool user_scenes = false;
+  bool illumination_invariant = false;
   fs::path dump_dir;
   int repeats = 1;
   bool isff_only = false, no_isff = false, camera_given = false;
@@ -295,7 +299,8 @@ int Main(int argc, char** argv) {
   std::vector<IlluminationMode> modes(std::begin(all_modes), std::end(all_modes));
   const char* usage =
       "usage: inspect-evaluate [--camera WxH] [--projector WxH] [--seed N] [--bias-only] [--specimens a,b] "
-      "[--modes STD,ADAPT,...] [--isff-only | --no-isff] [--no-consistency] [--dump DIR] [--repeats N] [--user-scenes]\n";
+      "[--modes STD,ADAPT,...] [--isff-only | --no-isff] [--no-consistency] [--dump DIR] [--repeats N] [--user-scenes] "
+      "[--illumination-invariant]\n";
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--dump" && i + 1 < argc) {
@@ -304,6 +309,10 @@ int Main(int argc, char** argv) {
     }
     if (a == "--no-consistency") {
       no_consistency = true;
+      continue;
+    }
+    if (a == "--illumination-invariant") {
+      illumination_invariant = true;
       continue;
     }
     if (a == "--user-scenes") {
@@ -381,7 +390,7 @@ int Main(int argc, char** argv) {
     return 1;
   }
   Evaluator ev{rig->get(), &*bundle, fs::temp_directory_path() / ("inspect_evaluate_" + std::to_string(::getpid())),
-               !no_consistency, dump_dir};
+               !no_consistency, dump_dir, illumination_invariant};
   std::printf(
       "Simulated rig: camera %dx%d, projector %dx%d, seed %llu; sigma_p %.2f px; Tenengrad 9x9; "
       "outlier = |error| > 2 z steps or no depth counted apart (valid %%)\n\n",

@@ -246,6 +246,58 @@ TEST(FocusMeasureTest, SharperImageScoresHigherForEveryMeasure) {
   }
 }
 
+// A frame lit s times brighter (the ADAPT family changes the light at every z): every measure
+// divided by the window mean to its illumination power gives the map of the unlit-scaled frame,
+// while the raw measure grows as s^power. Float frames, so no quantisation enters.
+TEST(FocusMeasureTest, NormalisedByIlluminationIsTheSameForAnyLight) {
+  cv::Mat base(40, 40, CV_32F);
+  std::mt19937 rng(9);
+  for (int y = 0; y < 40; ++y)
+    for (int x = 0; x < 40; ++x) base.at<float>(y, x) = float(60 + rng() % 100);
+  cv::GaussianBlur(base, base, cv::Size(0, 0), 0.8, 0.8, cv::BORDER_REFLECT_101);
+  const double s = 1.7;
+  const cv::Mat brighter = base * s;
+  const std::pair<FocusMeasure, int> expected_power[] = {
+      {FocusMeasure::kModifiedLaplacian, 1},     {FocusMeasure::kSumModifiedLaplacian, 2},
+      {FocusMeasure::kTenengrad, 2},             {FocusMeasure::kGreyLevelVariance, 2},
+      {FocusMeasure::kGreyLevelLocalVariance, 2}, {FocusMeasure::kHelmliMean, 0},
+      {FocusMeasure::kChebyshevMoments, 0}};
+  for (const auto& [fm, power] : expected_power) {
+    EXPECT_EQ(IlluminationPower(fm), power) << FocusMeasureName(fm);
+    cv::Mat a, b;
+    ASSERT_TRUE(ComputeFocusMeasure(base, fm, 7, &a).ok());
+    ASSERT_TRUE(ComputeFocusMeasure(brighter, fm, 7, &b).ok());
+    // Raw: the light's power shows (checked at the centre).
+    EXPECT_NEAR(b.at<float>(20, 20) / a.at<float>(20, 20), std::pow(s, power), 1e-3 * std::pow(s, power))
+        << FocusMeasureName(fm);
+    const cv::Mat raw_a = a.clone();
+    ASSERT_TRUE(NormaliseFocusByIllumination(base, fm, 7, &a).ok());
+    ASSERT_TRUE(NormaliseFocusByIllumination(brighter, fm, 7, &b).ok());
+    double hi = 0;
+    cv::minMaxLoc(a, nullptr, &hi);
+    EXPECT_LT(cv::norm(a, b, cv::NORM_INF), 1e-4 * hi) << FocusMeasureName(fm);
+    if (power == 0) EXPECT_EQ(cv::norm(a, raw_a, cv::NORM_INF), 0.0) << FocusMeasureName(fm);
+  }
+  // Tenengrad by hand at one pixel: the raw value over the 7x7 mean squared.
+  cv::Mat t, mean;
+  ASSERT_TRUE(ComputeFocusMeasure(base, FocusMeasure::kTenengrad, 7, &t).ok());
+  const float raw = t.at<float>(20, 20);
+  const double mu = cv::mean(base(cv::Rect(17, 17, 7, 7)))[0];
+  ASSERT_TRUE(NormaliseFocusByIllumination(base, FocusMeasure::kTenengrad, 7, &t).ok());
+  EXPECT_NEAR(t.at<float>(20, 20), raw / (mu * mu), 1e-5 * raw / (mu * mu));
+  // A black frame: the floor (one grey level of 8 bit) keeps the ratio finite.
+  const cv::Mat black(12, 12, CV_8U, cv::Scalar(0));
+  cv::Mat fb;
+  ASSERT_TRUE(ComputeFocusMeasure(black, FocusMeasure::kTenengrad, 3, &fb).ok());
+  ASSERT_TRUE(NormaliseFocusByIllumination(black, FocusMeasure::kTenengrad, 3, &fb).ok());
+  EXPECT_EQ(cv::norm(fb, cv::NORM_INF), 0.0);
+  // Bad input names what is wrong.
+  cv::Mat wrong(5, 5, CV_32F, cv::Scalar(1));
+  EXPECT_EQ(NormaliseFocusByIllumination(base, FocusMeasure::kTenengrad, 7, &wrong).code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(NormaliseFocusByIllumination(base, FocusMeasure::kTenengrad, 8, &t).code(), StatusCode::kInvalidArgument);
+}
+
 TEST(FocusMeasureTest, RejectsBadWindowAndType) {
   cv::Mat out;
   const cv::Mat img(9, 9, CV_8U, cv::Scalar(1));

@@ -221,7 +221,9 @@ TEST_F(IsffApiTest, BadThresholdAndConflictingOptionsNameTheField) {
   Case illumination{ScanWith(v1::RECONSTRUCTION_METHOD_ISFF_GT), "illumination"};
   illumination.request.set_illumination(v1::ILLUMINATION_MODE_TEXTURE);
   Case unknown{ScanWith(static_cast<v1::ReconstructionMethod>(42)), "reconstruction.method"};
-  for (const Case& c : {threshold_without_fast, focus_measure, illumination, unknown}) {
+  Case invariant{ScanWith(v1::RECONSTRUCTION_METHOD_ISFF), "reconstruction.illumination_invariant applies to SFF only"};
+  invariant.request.mutable_reconstruction()->set_illumination_invariant(true);
+  for (const Case& c : {threshold_without_fast, focus_measure, illumination, unknown, invariant}) {
     v1::Job job;
     grpc::Status s = client_->Scan(c.request, nullptr, &job);
     EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << c.field;
