@@ -116,7 +116,8 @@ std::string SpecimenLabel(const std::string& specimen) {
 
 // User scenes (scene.json, as a customer would load them) of the kinds a fixed default gets
 // wrong: a polished plane with a few pits and almost no texture, a well-textured terraced part
-// that never saturates, a shiny weld bead (~500:1 reflectance) and a textured dome. Heights
+// that never saturates, a shiny weld bead (~500:1 reflectance), a textured dome and solder bumps
+// glinting on a dark board. Heights
 // around 200 um like the built-ins; the rig derives its default scan range from each scene.
 std::vector<std::string> WriteEvaluationScenes(const fs::path& dir, cv::Size size, double px) {
   const double w = size.width * px, h = size.height * px, base = 200.0;
@@ -166,6 +167,30 @@ std::vector<std::string> WriteEvaluationScenes(const fs::path& dir, cv::Size siz
   dome.reflectance = [](double, double) { return 0.4; };
   dome.texture_seed = 34;
   out.push_back(test_scenes::WriteUserScene(dir, "dome", size, px, dome));
+  // Solder bumps on a dark board: six 15 um caps of shiny tin (glints ~300:1 against the board at
+  // their tops) on a dark solder mask (reflectance 0.015).
+  test_scenes::UserSceneSpec bumps;
+  const double bump_r = 0.16 * std::min(w, h), cap_h = 15.0;
+  const double bx[] = {0.2, 0.5, 0.8, 0.2, 0.5, 0.8}, by[] = {0.3, 0.3, 0.3, 0.72, 0.72, 0.72};
+  auto bump_at = [=](double x, double y) {  // (distance / radius) to the nearest bump centre
+    double best = 1e9;
+    for (int k = 0; k < 6; ++k) best = std::min(best, std::hypot(x - bx[k] * w, y - by[k] * h) / bump_r);
+    return best;
+  };
+  bumps.height_um = [=](double x, double y) {
+    const double r = bump_at(x, y);
+    if (r >= 1.0) return base;
+    const double R = (bump_r * bump_r + cap_h * cap_h) / (2.0 * cap_h);  // sphere through the rim
+    const double d = r * bump_r;
+    return base + std::sqrt(R * R - d * d) - (R - cap_h);
+  };
+  bumps.reflectance = [=](double x, double y) {
+    const double r = bump_at(x, y);
+    return r < 1.0 ? 0.3 + 4.5 * std::exp(-r * r / 0.03) : 0.015;
+  };
+  bumps.texture_contrast = 0.6;
+  bumps.texture_seed = 35;
+  out.push_back(test_scenes::WriteUserScene(dir, "solder_bumps", size, px, bumps));
   return out;
 }
 

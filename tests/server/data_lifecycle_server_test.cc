@@ -279,7 +279,7 @@ TEST_F(DiskFullTest, UploadThatFillsTheDiskIsResourceExhaustedAndLeavesNoUpload)
     rng.fill(noise, cv::RNG::UNIFORM, 0, 256);
     const std::string name = "frame_" + std::to_string(i) + ".png";
     ASSERT_TRUE(cv::imwrite((stack / name).string(), noise));
-    m.frames.push_back({name, 10.0 * i, 1000.0});
+    m.frames.push_back({name, 10.0 * i, 1000.0, ""});
   }
   ASSERT_TRUE(WriteStackManifest(stack, m).ok());
   v1::Job job;
