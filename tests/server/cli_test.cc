@@ -75,6 +75,23 @@ TEST_F(CliTest, PostProcessingFlagsReachTheServerAndItsFiguresArePrinted) {
   r = Run({"scan", "--out", (work_ / "isff").string(), "--method", "isff-gt", "--fill"});
   EXPECT_EQ(r.exit_code, 4);
   EXPECT_NE(r.err.find("reconstruction.fill_low_confidence"), std::string::npos) << r.err;
+  // --illumination-invariant reaches the engine: under STD the cutter's glints light their
+  // defocused halos brighter than the texture beside them; divided by the window's light, the
+  // focus measure follows the texture (README "Bias and the default, re-checked").
+  r = Run({"scan", "--out", (work_ / "default").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_TRUE(client_->GetJob(NewestJobId(), &job).ok());
+  const v1::DepthSummary plain = job.result().depth();
+  r = Run({"scan", "--out", (work_ / "invariant").string(), "--illumination-invariant"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_TRUE(client_->GetJob(NewestJobId(), &job).ok());
+  const v1::DepthSummary invariant = job.result().depth();
+  std::printf("cutter STD: RMSE %.3f um at %.1f %%; illumination-invariant %.3f um at %.1f %%\n", plain.rmse_um(),
+              plain.valid_percent(), invariant.rmse_um(), invariant.valid_percent());
+  EXPECT_LT(invariant.rmse_um(), 0.8 * plain.rmse_um());
+  r = Run({"scan", "--out", (work_ / "isff2").string(), "--method", "isff-gt", "--illumination-invariant"});
+  EXPECT_EQ(r.exit_code, 4);
+  EXPECT_NE(r.err.find("reconstruction.illumination_invariant"), std::string::npos) << r.err;
 }
 
 TEST_F(CliTest, JsonScanIsOneEventPerLineThenOneResultObject) {
