@@ -34,6 +34,19 @@ void SecondDerivatives(const cv::Mat& f32, cv::Mat* ixx, cv::Mat* iyy) {
   cv::sepFilter2D(f32, *iyy, CV_32F, one, h.t(), cv::Point(-1, -1), 0, kBorder);
 }
 
+// The input checks every whole-frame map shares: a grey frame of a supported type, an odd
+// window of 3..31.
+Status CheckFrameAndWindow(const cv::Mat& frame, int window_px) {
+  if (frame.empty()) return Status::InvalidArgument("frame is empty");
+  if (frame.type() != CV_8UC1 && frame.type() != CV_16UC1 && frame.type() != CV_32FC1) {
+    return Status::InvalidArgument("frame must be CV_8UC1, CV_16UC1 or CV_32FC1");
+  }
+  if (window_px < 3 || window_px > 31 || window_px % 2 == 0) {
+    return Status::InvalidArgument("window_px " + std::to_string(window_px) + " must be odd and between 3 and 31");
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 double ChebyshevNorm(int m, int n_points) {
@@ -85,13 +98,7 @@ int IlluminationPower(FocusMeasure measure) {
 }
 
 Status NormaliseFocusByIllumination(const cv::Mat& frame, FocusMeasure measure, int window_px, cv::Mat* focus) {
-  if (frame.empty()) return Status::InvalidArgument("frame is empty");
-  if (frame.type() != CV_8UC1 && frame.type() != CV_16UC1 && frame.type() != CV_32FC1) {
-    return Status::InvalidArgument("frame must be CV_8UC1, CV_16UC1 or CV_32FC1");
-  }
-  if (window_px < 3 || window_px > 31 || window_px % 2 == 0) {
-    return Status::InvalidArgument("window_px " + std::to_string(window_px) + " must be odd and between 3 and 31");
-  }
+  INSPECT_RETURN_IF_ERROR(CheckFrameAndWindow(frame, window_px));
   if (focus == nullptr || focus->type() != CV_32FC1 || focus->size() != frame.size()) {
     return Status::InvalidArgument("focus map must be CV_32FC1 of the frame's size");
   }
@@ -114,13 +121,7 @@ Status NormaliseFocusByIllumination(const cv::Mat& frame, FocusMeasure measure, 
 }
 
 Status ComputeFocusMeasure(const cv::Mat& frame, FocusMeasure measure, int window_px, cv::Mat* focus) {
-  if (frame.empty()) return Status::InvalidArgument("frame is empty");
-  if (frame.type() != CV_8UC1 && frame.type() != CV_16UC1 && frame.type() != CV_32FC1) {
-    return Status::InvalidArgument("frame must be CV_8UC1, CV_16UC1 or CV_32FC1");
-  }
-  if (window_px < 3 || window_px > 31 || window_px % 2 == 0) {
-    return Status::InvalidArgument("window_px " + std::to_string(window_px) + " must be odd and between 3 and 31");
-  }
+  INSPECT_RETURN_IF_ERROR(CheckFrameAndWindow(frame, window_px));
   if (frame.rows < 2 || frame.cols < 2) return Status::InvalidArgument("frame must be at least 2x2");
   const int w = window_px;
   const double n_window = double(w) * w;
