@@ -26,7 +26,7 @@ struct ReconstructionFlags {
   std::string alignment;                      // none | estimate | calibrated; empty = server default
   bool no_consistency = false;                // depth_consistency = false (the server's default is true)
   std::string refinement;                     // none | weighted-median | guided-filter; empty = none
-  bool illumination_invariant = false;       // illumination_invariant
+  bool illumination_invariant = false;        // illumination_invariant
   bool fill = false;                          // fill_low_confidence
 
   // Adds the options to `cmd`, writing into this object (which must outlive the parse).

@@ -44,8 +44,9 @@ struct DepthResult {
 // each tile across the chunk, so the state is streamed through memory once per 8 frames (the
 // chunk's frames are held by reference meanwhile; at most 7 frames wait, and Finish processes
 // them); ReconstructInMemory runs each tile across all frames so its state stays in cache.
-// Other measures and 16-bit frames compute the whole-frame focus map (core/focus_measure.h) and
-// share the same state update. inspect-bench measures it (tests/bench/inspect_bench.cc).
+// Other measures, 16-bit frames and illumination_invariant compute the whole-frame focus map
+// (core/focus_measure.h) and share the same state update. inspect-bench measures it
+// (tests/bench/inspect_bench.cc).
 // Implementation: core/sff_engine.cc (Create), sff_compact_engine.cc (the scan default),
 // sff_exact_engine.cc (every other case), sff_batch.cc (ReconstructInMemory).
 class SffEngine {

@@ -2,7 +2,8 @@
 // core/sff_state.h): the line fit (eq. 3.25-3.29) and every focus measure of 3.1.3 but 8-bit
 // Tenengrad with maximum / Gaussian interpolation (that case: sff_compact_engine.cc).
 // Per frame: the fused Tenengrad kernel over tiles (8-bit Tenengrad, line fit), or the whole
-// focus map of core/focus_measure.h and the same state update over row bands (all others).
+// focus map of core/focus_measure.h (normalised by the light with illumination_invariant) and the
+// same state update over row bands (all others).
 #include <algorithm>
 #include <atomic>
 #include <string>

@@ -50,11 +50,12 @@ struct SffOptions {
   // focus with >= ~20 frames and rejects > 99 % of textureless (grey + noise) pixels
   // (tests/core/sff_engine_test.cc); with fewer frames the noise level is less certain.
   double min_confidence = 0.4;
-  // Frames lit differently from one another (each z its own projected pattern: the ADAPT family,
-  // stack.json pattern "adapted"): every frame's focus map is divided by its window mean to the
+  // For frames lit differently from one another (each z its own projected pattern, as the ADAPT
+  // family's scans; flicker): every frame's focus map is divided by its window mean to the
   // measure's illumination power (NormaliseFocusByIllumination, core/focus_measure.h), so the
-  // change of light from frame to frame does not move the focus curve's peak. Runs the
-  // whole-frame focus map path (not the fused 8-bit Tenengrad kernel).
+  // change of light from frame to frame does not move the focus curve's peak. Off by default:
+  // on glinting parts the window mean is not the light (README "Bias and the default,
+  // re-checked"). Runs the whole-frame focus map path (not the fused 8-bit Tenengrad kernel).
   bool illumination_invariant = false;
   // Worker threads for the per-frame pass; 0 = all hardware threads.
   int threads = 0;
