@@ -44,17 +44,11 @@ struct ModeRun {
 // README "Illumination modes": |bias| <= 0.1 um or 0.02 z steps, whichever is larger.
 double BiasBoundUm(double z_step_um) { return std::max(0.1, 0.02 * z_step_um); }
 
-// Sigma of a's depth error on the pixels both a and b measured: a method that leaves the hard
-// pixels without depth is not rewarded for it.
-double SigmaOnCommonPixels(const ModeRun& a, const ModeRun& b) {
+// a's depth error on the pixels both a and b measured: a method that leaves the hard pixels
+// without depth is not rewarded for it.
+DepthErrorStats ErrorOnCommonPixels(const ModeRun& a, const ModeRun& b) {
   const cv::Mat both = (a.depth_um == a.depth_um) & (b.depth_um == b.depth_um);
-  return CompareDepth(a.depth_um, a.truth_um, both, 10.0, 9).stddev_error_um;
-}
-
-// RMSE of a's depth error on the pixels both a and b measured.
-double RmseOnCommonPixels(const ModeRun& a, const ModeRun& b) {
-  const cv::Mat both = (a.depth_um == a.depth_um) & (b.depth_um == b.depth_um);
-  return CompareDepth(a.depth_um, a.truth_um, both, 10.0, 9).rmse_um;
+  return CompareDepth(a.depth_um, a.truth_um, both, 10.0, 9);
 }
 
 class ScanModesTest : public ::testing::Test {
@@ -278,7 +272,8 @@ TEST_F(ScanModesTest, AdaptiveModesMeasureSaturatingCutterWithFewFrames) {
   // the pixels both measured. (Plain ADAPT, whose corrections may no longer follow the glints'
   // focus, is not: 1.1 against 0.85 um, README.)
   EXPECT_LT(hf->error.rmse_um, hdr_run->error.rmse_um);
-  const double hf_common = SigmaOnCommonPixels(*hf, *hdr_run), hdr_common = SigmaOnCommonPixels(*hdr_run, *hf);
+  const double hf_common = ErrorOnCommonPixels(*hf, *hdr_run).stddev_error_um;
+  const double hdr_common = ErrorOnCommonPixels(*hdr_run, *hf).stddev_error_um;
   std::printf("cutter on common pixels: HF+ADAPT %.3f um, HDR3 %.3f um\n", hf_common, hdr_common);
   EXPECT_LT(hf_common, hdr_common);
 }
@@ -386,9 +381,10 @@ TEST_F(ScanModesTest, IlluminationInvariantFocusBringsHfAdaptToTextureOnTheCoin)
   auto plain = Scan("coin", IlluminationMode::kHfAdapt, {}, 9, 0, nullptr, false, true);
   auto invariant = Scan("coin", IlluminationMode::kHfAdapt, {}, 9, 0, nullptr, false, true, true);
   ASSERT_TRUE(texture.ok() && plain.ok() && invariant.ok());
-  const double plain_common = RmseOnCommonPixels(*plain, *texture), texture_vs_plain = RmseOnCommonPixels(*texture, *plain);
-  const double invariant_common = RmseOnCommonPixels(*invariant, *texture);
-  const double texture_vs_invariant = RmseOnCommonPixels(*texture, *invariant);
+  const double plain_common = ErrorOnCommonPixels(*plain, *texture).rmse_um;
+  const double texture_vs_plain = ErrorOnCommonPixels(*texture, *plain).rmse_um;
+  const double invariant_common = ErrorOnCommonPixels(*invariant, *texture).rmse_um;
+  const double texture_vs_invariant = ErrorOnCommonPixels(*texture, *invariant).rmse_um;
   std::printf("coin, common pixels with TEXTURE: HF+ADAPT %.3f against %.3f um (ratio %.2f); illumination-invariant "
               "%.3f against %.3f um (ratio %.2f)\n",
               plain_common, texture_vs_plain, plain_common / texture_vs_plain, invariant_common, texture_vs_invariant,
