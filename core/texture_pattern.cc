@@ -91,22 +91,27 @@ StatusOr<cv::Mat> AddHfPatternToIrradiance(const cv::Mat& adapted_irradiance, co
     return Status::InvalidArgument("checkerboard mask must be CV_8UC1 of the irradiance's size");
   }
   INSPECT_RETURN_IF_ERROR(prf.Validate());
-  // Mean irradiance of the grey pair around g; non-decreasing in g since the prf is.
+  // Mean irradiance of the grey pair around g; non-decreasing in g since the prf is. g stops at
+  // 255 - d: above it the clamp at 255 would shrink the pair's swing (at g = 255 to 255 / 191,
+  // 0.44 of full irradiance instead of 0.75 with the simulated gamma-2 projector), and the pixels
+  // asking for that much light are the darkest, where texture is needed most. The pair keeps its
+  // full 2d swing there and gives up mean light the projector could not supply anyway.
   const int d = int(std::lround(255.0 * psi));
+  const int g_max = 255 - d;
   double pair_mean[256];
-  for (int g = 0; g < 256; ++g) {
-    pair_mean[g] = 0.5 * (prf.relative_irradiance[size_t(std::min(g + d, 255))] +
-                          prf.relative_irradiance[size_t(std::max(g - d, 0))]);
+  for (int g = 0; g <= g_max; ++g) {
+    pair_mean[g] = 0.5 * (prf.relative_irradiance[size_t(g + d)] + prf.relative_irradiance[size_t(std::max(g - d, 0))]);
   }
+  const double* end = pair_mean + g_max + 1;
   cv::Mat out(adapted_irradiance.size(), CV_8UC1);
   for (int y = 0; y < out.rows; ++y) {
     const float* e = adapted_irradiance.ptr<float>(y);
     const uint8_t* c = cb.ptr<uint8_t>(y);
     uint8_t* o = out.ptr<uint8_t>(y);
     for (int x = 0; x < out.cols; ++x) {
-      const double* hi = std::lower_bound(pair_mean, pair_mean + 256, double(e[x]));
+      const double* hi = std::lower_bound(static_cast<const double*>(pair_mean), end, double(e[x]));
       int g = int(hi - pair_mean);
-      if (g == 256 || (g > 0 && double(e[x]) - pair_mean[g - 1] <= *hi - double(e[x]))) --g;  // nearer neighbour
+      if (g > g_max || (g > 0 && double(e[x]) - pair_mean[g - 1] <= *hi - double(e[x]))) --g;  // nearer neighbour
       o[x] = uint8_t(std::clamp(c[x] ? g + d : g - d, 0, 255));
     }
   }

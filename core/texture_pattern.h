@@ -41,7 +41,12 @@ StatusOr<cv::Mat> AddHfPattern(const cv::Mat& adapted, const cv::Mat& cb, double
 // Eq. 5.17-5.18 for an adapted projector irradiance (CV_32FC1, prf units; e.g. the output of
 // the compensation): per pixel the grey g + 255 psi where CB = 1 and g - 255 psi where CB = 0
 // (clamped to [0, 255]), with g chosen so that the pair's mean irradiance,
-// (prf(g + 255 psi) + prf(g - 255 psi)) / 2, is the adapted irradiance. Adding the same grey
+// (prf(g + 255 psi) + prf(g - 255 psi)) / 2, is the adapted irradiance. g is at most
+// 255 - 255 psi: where the compensation asks for more light than that pair gives (dark parts of
+// the specimen), the pair stays at 255 / 255 - 2 * 255 psi, keeping the texture's full swing,
+// instead of clamping g + 255 psi at 255 as eq. 5.18 would (which shrinks the swing where the
+// texture is needed most: on the weld bead's dark flanks HF+ADAPT measured 62 % of the pixels
+// with the clamp and 71 % without). Adding the same grey
 // offsets to prf^-1(adapted) instead (AddHfPattern) adds mean light through the convex prf, so the
 // camera image misses the compensation's target (mean grey 160-180 for a target of 140 with the
 // simulated gamma-2 projector) and texture peaks saturate at focus. Returns CV_8UC1.

@@ -276,7 +276,9 @@ TEST(FocusMeasureTest, NormalisedByIlluminationIsTheSameForAnyLight) {
     double hi = 0;
     cv::minMaxLoc(a, nullptr, &hi);
     EXPECT_LT(cv::norm(a, b, cv::NORM_INF), 1e-4 * hi) << FocusMeasureName(fm);
-    if (power == 0) EXPECT_EQ(cv::norm(a, raw_a, cv::NORM_INF), 0.0) << FocusMeasureName(fm);
+    if (power == 0) {
+      EXPECT_EQ(cv::norm(a, raw_a, cv::NORM_INF), 0.0) << FocusMeasureName(fm);
+    }
   }
   // Tenengrad by hand at one pixel: the raw value over the 7x7 mean squared.
   cv::Mat t, mean;

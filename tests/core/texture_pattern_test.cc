@@ -84,11 +84,24 @@ TEST(TexturePatternTest, AddedHfPatternKeepsTheAdaptedMeanIrradiance) {
       EXPECT_GT(cv::mean(prf.IrradianceImage(*plain))[0], e + 0.05);
     }
   }
-  // Beyond the brightest pair the pattern stays at g = 255 (255 / 191).
-  auto top = AddHfPatternToIrradiance(cv::Mat(size, CV_32FC1, cv::Scalar(1.0f)), cb, 0.25, prf);
-  ASSERT_TRUE(top.ok());
-  EXPECT_EQ(top->at<uint8_t>(0, 0), 255);
-  EXPECT_EQ(top->at<uint8_t>(0, 1), 191);
+  // Asking for more light than the brightest full-swing pair (g = 255 - 64: 255 / 127, mean
+  // irradiance 0.625) keeps that pair rather than clamping 255 + 64 (255 / 191 would shrink the
+  // texture's irradiance swing: 0.44 instead of 0.75 of full scale).
+  const double brightest = 0.5 * (prf.Irradiance(255) + prf.Irradiance(127));
+  EXPECT_NEAR(brightest, 0.625, 0.001);
+  for (float e : {0.64f, 0.8f, 1.0f}) {
+    auto top = AddHfPatternToIrradiance(cv::Mat(size, CV_32FC1, cv::Scalar(e)), cb, 0.25, prf);
+    ASSERT_TRUE(top.ok());
+    EXPECT_EQ(top->at<uint8_t>(0, 0), 255) << e;
+    EXPECT_EQ(top->at<uint8_t>(0, 1), 127) << e;
+  }
+  // Just below it the pair follows the request with its full swing.
+  auto below = AddHfPatternToIrradiance(cv::Mat(size, CV_32FC1, cv::Scalar(float(brightest - 0.02))), cb, 0.25, prf);
+  ASSERT_TRUE(below.ok());
+  EXPECT_EQ(below->at<uint8_t>(0, 0) - below->at<uint8_t>(0, 1), 128);
+  EXPECT_LT(below->at<uint8_t>(0, 0), 255);
+  EXPECT_NEAR(0.5 * (prf.Irradiance(below->at<uint8_t>(0, 0)) + prf.Irradiance(below->at<uint8_t>(0, 1))),
+              brightest - 0.02, 0.004);
   EXPECT_EQ(AddHfPatternToIrradiance(cv::Mat(size, CV_8UC1), cb, 0.25, prf).status().code(),
             StatusCode::kInvalidArgument);
   EXPECT_EQ(AddHfPatternToIrradiance(cv::Mat(size, CV_32FC1, cv::Scalar(0.3f)), cb, 1.5, prf).status().code(),
