@@ -376,6 +376,7 @@ StatusOr<DepthResult> NccFocusEngine::Finish() {
       s.curvature_sq_sum = double(m.curv_all[i]) - double(m.curv_excl[i]);
       s.curvature_count = std::max(0, n - 2) - excluded;
       s.peak_at_end = mi == 0 || mi == n_total - 1;
+      s.flank_terms = FlankTermCount(mi, n);
       const float c = FocusConfidence(s);
       r.confidence.at<float>(y, x) = c;
       if (c >= m.o.min_confidence) {

@@ -69,6 +69,7 @@ size_t FinishExactSpan(const StatePlanes<T, P>& st, size_t off, int count, const
     s.curvature_sq_sum = double(st.curv_all[i]) - double(st.curv_excl[i]);
     s.curvature_count = std::max(0, n - 2) - excluded;
     s.peak_at_end = m == 0 || m == n - 1;
+    s.flank_terms = FlankTermCount(m, n);
     const float c = FocusConfidence(s);
     conf[x] = c;
     if (c >= o.min_confidence) {

@@ -233,7 +233,14 @@ __attribute__((target("avx2"))) size_t TenengradKernels<Isa::kAvx2>::FinishCompa
     const __m256i count = _mm256_sub_epi32(_mm256_set1_epi32(std::max(0, n - 2)), excluded);
     const __m256 sq = _mm256_max_ps(zero, _mm256_and_ps(AsPs(w2), sum_mask));
     const __m256 countf = _mm256_cvtepi32_ps(count);
-    __m256 sigma = _mm256_sqrt_ps(_mm256_div_ps(sq, _mm256_mul_ps(_mm256_set1_ps(6.f), _mm256_max_ps(countf, one))));
+    // FocusConfidence: the flank terms count 1 + kFlankTermExtraWeight times. FlankTermCount(m,
+    // n) = (m >= 3) + (m <= n - 4); the compare masks are -1 where true.
+    const __m256i flank_terms = _mm256_sub_epi32(
+        izero, _mm256_add_epi32(_mm256_cmpgt_epi32(m, _mm256_set1_epi32(2)),
+                                _mm256_cmpgt_epi32(_mm256_set1_epi32(n - 3), m)));
+    const __m256 weighted = _mm256_add_ps(
+        countf, _mm256_mul_ps(_mm256_set1_ps(float(kFlankTermExtraWeight)), _mm256_cvtepi32_ps(flank_terms)));
+    __m256 sigma = _mm256_sqrt_ps(_mm256_div_ps(sq, _mm256_mul_ps(_mm256_set1_ps(6.f), _mm256_max_ps(weighted, one))));
     sigma = _mm256_and_ps(sigma, _mm256_cmp_ps(countf, zero, _CMP_GT_OQ));
     sigma = _mm256_max_ps(sigma, _mm256_mul_ps(_mm256_set1_ps(1e-3f), best));
     __m256 c = _mm256_sub_ps(one, _mm256_div_ps(_mm256_mul_ps(_mm256_set1_ps(float(kConfidenceSnrZero)), sigma),

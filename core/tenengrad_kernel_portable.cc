@@ -148,7 +148,9 @@ size_t TenengradKernels<Isa::kPortable>::FinishCompact(CompactPtrs s, int x_begi
     const int32_t count_t = std::max(0, n - 2) - excluded;
     const float sq = maxps(0.f, FromBits(w2 & kSumMask));
     const float countf = float(count_t);
-    float sigma = std::sqrt(sq / (6.f * maxps(countf, 1.f)));
+    // FocusConfidence: the flank terms count 1 + kFlankTermExtraWeight times.
+    const float weighted = countf + float(kFlankTermExtraWeight) * float(FlankTermCount(m, n));
+    float sigma = std::sqrt(sq / (6.f * maxps(weighted, 1.f)));
     if (!(countf > 0.f)) sigma = 0.f;
     sigma = maxps(sigma, 1e-3f * best);
     float c = 1.f - (float(kConfidenceSnrZero) * sigma) / maxps(prominence, 1e-30f);

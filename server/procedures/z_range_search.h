@@ -28,12 +28,16 @@ inline constexpr int kSearchCellProjectorPx = 2;
 // Most coarse frames one search may take (a window / step needing more is INVALID_ARGUMENT).
 inline constexpr int kMaxCoarseFrames = 200;
 inline constexpr double kDefaultCoarseSteps = 4.0;
-// The fine scan takes at least this many frames, whatever the part's height: the SFF engine's
+// The fine scan takes at least this many frames, whatever the part's height: a flat part gets
+// its focus frame and 3 steps on each side (the largest margin). The SFF engine's
 // confidence (core/depth_interpolation.h FocusConfidence) estimates each curve's noise from its
-// second differences away from the peak, and on short stacks those are the peak's own flanks.
-// Measured on flat parts at 5 um steps (plane, step1um, seeds 5 and 7, 320x240): 6 frames
-// 3-5 % valid, 8 frames 20-98 %, 10 frames 93-100 %, 12 frames 100 %.
-inline constexpr int kMinFineFrames = 12;
+// second differences away from the peak; on short stacks most of those hold the peak's own
+// flanks, which it weights down (FocusCurveSummary::flank_terms). Measured at 5 um steps
+// (autorange-evaluate, 3 seeds, 512x384, STD): plane and step1um at 7 frames 91-100 % valid
+// (12 frames were needed before the flank weighting; 7 then kept 3-64 %); skew5 at 320x240, 9
+// frames, 99.4-99.6 % (87 % before). Textureless parts under STD (mirror) get a wrong depth on
+// 2.8-3.1 % of their pixels at 7 frames, 0.1 % at 12.
+inline constexpr int kMinFineFrames = 7;
 inline constexpr double kDefaultMarginSteps = 1.5;
 
 // Defaults for a request that leaves them unset (0): window = the rig's default scan range

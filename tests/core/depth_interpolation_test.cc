@@ -233,6 +233,7 @@ TEST(DepthInterpolationTest, ConfidenceOnAnalyticCurves) {
     s.curvature_sq_sum = sq;
     s.curvature_count = terms;
     s.peak_at_end = m == 0 || m == int(f.size()) - 1;
+    s.flank_terms = FlankTermCount(m, int(f.size()));
     return s;
   };
   const float c_peak = FocusConfidence(summarise(Gaussian(z, 14.3, 2.0, 100.0, 5.0)));
@@ -259,6 +260,33 @@ TEST(DepthInterpolationTest, ConfidenceOnAnalyticCurves) {
   EXPECT_NEAR(FocusConfidence(s), 0.5 * (1.0 - 4.0 / (6.0 / std::sqrt(5.0 / 12.0))), 1e-6);
   // Constant curve: no prominence, confidence 0.
   EXPECT_EQ(FocusConfidence(summarise(std::vector<double>(10, 7.0))), 0.f);
+}
+
+// A 7-frame stack centred on its peak leaves only the two second differences that hold the
+// peak's flanks (t_2 and t_6). By hand for the noiseless curve 0.05, 0.12, 0.45, 1, 0.45, 0.12,
+// 0.05: t_2 = t_6 = 0.26, mean 0.3200. Counted plainly: sigma = sqrt(2 * 0.26^2 / (6 * 2)) =
+// 0.1061, s = 0.68 / 0.1061 = 6.41 and c = 0.376 < 0.4: rejected although perfect. Each flank
+// term counted as 3: sigma = sqrt(0.1352 / (6 * 6)) = 0.0613, s = 11.1, c = 0.640.
+TEST(DepthInterpolationTest, ShortStackCentredOnItsPeakKeepsItsConfidence) {
+  EXPECT_EQ(FlankTermCount(3, 7), 2);
+  EXPECT_EQ(FlankTermCount(3, 8), 2);  // t_7 (frames 5..7) is counted there too, not a flank term
+  EXPECT_EQ(FlankTermCount(2, 6), 1);
+  EXPECT_EQ(FlankTermCount(0, 9), 1);
+  EXPECT_EQ(FlankTermCount(1, 4), 0);
+  FocusCurveSummary s;
+  s.peak = 1.0;
+  s.mean = (0.05 + 0.12 + 0.45 + 1.0 + 0.45 + 0.12 + 0.05) / 7.0;
+  s.curvature_sq_sum = 2 * 0.26 * 0.26;
+  s.curvature_count = 2;
+  EXPECT_NEAR(FocusConfidence(s), 1.0 - 4.0 * std::sqrt(s.curvature_sq_sum / 12.0) / (1.0 - s.mean), 1e-6);
+  EXPECT_NEAR(FocusConfidence(s), 0.376, 0.001);
+  s.flank_terms = 2;
+  EXPECT_NEAR(FocusConfidence(s), 1.0 - 4.0 * std::sqrt(s.curvature_sq_sum / 36.0) / (1.0 - s.mean), 1e-6);
+  EXPECT_NEAR(FocusConfidence(s), 0.640, 0.001);
+  // A 9-frame curve with the peak in the middle: two flank terms and two far ones (weight 8).
+  s.curvature_sq_sum = 2 * 0.26 * 0.26 + 2 * 0.01 * 0.01;
+  s.curvature_count = 4;
+  EXPECT_NEAR(FocusConfidence(s), 1.0 - 4.0 * std::sqrt(s.curvature_sq_sum / 48.0) / (1.0 - s.mean), 1e-6);
 }
 
 }  // namespace

@@ -172,6 +172,36 @@ TEST(SffEngineTest, TexturelessStackIsRejected) {
   EXPECT_EQ(cv::countNonZero(rf.confidence), 0);
 }
 
+// The shortest stack the automatic z range takes on a flat part (server/procedures/
+// z_range_search.h kMinFineFrames): 7 frames, 5 um apart, centred on the plane. Every path
+// (fused 8-bit kernel with compact state, exact state) keeps the textured plane; grey + noise
+// is still mostly rejected, though with 7 frames the noise level is less certain than with 21
+// (TexturelessStackIsRejected: < 1 %).
+TEST(SffEngineTest, SevenFrameStackCentredOnAFlatPartKeepsItAndRejectsNoise) {
+  const std::vector<double> z = UniformZ(7, -15.0, 5.0);
+  const cv::Size size(120, 90);
+  // PSF sigma 0.15 px per um of defocus (the simulated thesis rig: 0.21, plus texture whose
+  // coarse components widen its curves): the peak's neighbours 5 um away keep about half of its
+  // focus measure, so its flanks are curved. Counting the flank terms plainly (core/
+  // depth_interpolation.h FocusConfidence) this stack kept 46 % of the plane; noise 5.8 %.
+  const auto plane = TiltedPlaneStack(size, z, 0.3, 0.0, 0.0, CV_8U, 0.5, 0.6, 0.15);
+  const auto noise = testing::TexturelessStack(size, 7, 2.0, 5);
+  for (const bool exact : {false, true}) {
+    SffOptions o;
+    o.interpolation = exact ? DepthInterpolation::kLineFit : DepthInterpolation::kDefocusParabola;  // line fit: exact state
+    const DepthResult r = Streamed(o, plane.frames, plane.z_um);
+    const auto e = CompareDepth(r.depth_um, plane.height_um);
+    const DepthResult rn = Streamed(o, noise, z);
+    std::printf("[figures] 7 frames centred on a plane (%s): coverage %.4f, RMSE %.3f um; grey + noise coverage %.4f\n",
+                exact ? "exact state" : "compact state", r.valid_fraction, e.rmse_um, rn.valid_fraction);
+    EXPECT_GT(r.valid_fraction, 0.97);
+    EXPECT_LT(e.rmse_um, 1.0);
+    // 11 % (5.8 % counting the flank terms plainly; 21 frames: < 1 %, TexturelessStackIsRejected):
+    // the price of short stacks, whose noise level rests on two to four terms.
+    EXPECT_LT(rn.valid_fraction, 0.13);
+  }
+}
+
 TEST(SffEngineTest, TexturedAndTexturelessHalvesInOneImage) {
   // Left half textured plane, right half flat grey + noise: depth on the left, NaN on the right.
   const auto s = TiltedPlaneStack(cv::Size(100, 60), UniformZ(21, 0.0, 1.0), 8.0, 0.02, 0.02);
