@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "client_cli/inspection_client.h"
 #include "server/artifact_files.h"
@@ -17,6 +18,13 @@ namespace inspection::testing {
 
 namespace v1 = ::inspection::v1;
 
+// The folders UniqueTempDir made since the last RemoveUniqueTempDirs (ServerTest's TearDown
+// removes them, so a test's extracted stacks and outputs do not pile up in /tmp).
+inline std::vector<std::filesystem::path>& UniqueTempDirsMade() {
+  static std::vector<std::filesystem::path> dirs;
+  return dirs;
+}
+
 inline std::filesystem::path UniqueTempDir(const std::string& tag) {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
   std::filesystem::path p = std::filesystem::temp_directory_path() /
@@ -24,7 +32,14 @@ inline std::filesystem::path UniqueTempDir(const std::string& tag) {
                              (info ? std::string(info->test_suite_name()) + "_" + info->name() : std::string("x")));
   std::filesystem::remove_all(p);
   std::filesystem::create_directories(p);
+  UniqueTempDirsMade().push_back(p);
   return p;
+}
+
+inline void RemoveUniqueTempDirs() {
+  std::error_code ec;
+  for (const auto& p : UniqueTempDirsMade()) std::filesystem::remove_all(p, ec);
+  UniqueTempDirsMade().clear();
 }
 
 // A stored scan's stack folder as a user would upload it: the server keeps the stack only as the
@@ -54,7 +69,7 @@ class ServerTest : public ::testing::Test {
     if (control_) control_->Release();  // never leave a held capture behind
     client_.reset();
     server_.reset();
-    std::filesystem::remove_all(data_dir_);
+    RemoveUniqueTempDirs();  // data_dir_ among them
   }
 
   // Small camera: physics identical to the default, frames fast to render.
