@@ -122,10 +122,11 @@ inline int FlankTermCount(int m, int n) { return (m >= 3 ? 1 : 0) + (m + 3 <= n 
 // short stacks, where they are most or all of the terms: a noiseless defocus peak sampled as
 // the thesis rig samples it (F / F_max = 0.05, 0.12, 0.45, 1, 0.45, 0.12, 0.05) gets s = 6.4
 // counted plainly, which min_confidence 0.4 (s >= 6.7) rejects. Measured on the simulated rig
-// (STD / TEXTURE, 5 um steps): 7 frames centred on a flat part kept 35-83 % of it plainly and
-// 99.3 % weighted; 9 frames over skew5 (4 steps tall) 86 % -> 99.3 %; textured stacks of >= 9
-// frames are unchanged. Noise curves (grey + noise) are kept 7.8 % of the time at 7 frames
-// (3.7 % plainly), 3.1 % at 9 (1.2 %), 1.0 % at 12 (0.4 %), 0.1 % at 21 (0.0 %).
+// (5 um steps): 7 frames centred on a flat part (plane, step1um; STD) kept 3-64 % of it plainly
+// and 91-100 % weighted; 9 frames over skew5 (4 steps tall) 87 % -> 99.5 %; the lens under
+// TEXTURE at 11 frames 93 % -> 100 %; stacks of >= 13 frames through textured parts the same.
+// The price is in noise: a grey + noise stack (tests/core/sff_engine_test.cc) keeps 11 % of its
+// pixels at 7 frames (5.8 % plainly) and 0.8 % at 21 (test bound 1 %).
 // With the peak's signal-to-noise ratio s = (F_max - mean) / sigma:
 //   confidence = clamp(1 - kConfidenceSnrZero / s, 0, 1),
 // halved when the peak is on the first or last frame (the true peak may lie outside the stack).
