@@ -145,20 +145,8 @@ std::vector<std::string> WriteEvaluationScenes(const fs::path& dir, cv::Size siz
   terraces.reflectance = [](double, double) { return 0.35; };
   terraces.texture_seed = 32;
   out.push_back(test_scenes::WriteUserScene(dir, "terraces", size, px, terraces));
-  test_scenes::UserSceneSpec bead;
-  const double bead_w = 0.3 * h;
-  bead.height_um = [=](double, double y) {
-    const double u = (y - 0.5 * h) / bead_w;
-    return base + (std::abs(u) < 1.0 ? 20.0 * std::sqrt(1.0 - u * u) : 0.0);
-  };
-  bead.reflectance = [=](double x, double y) {  // glints along the crest, ~500:1 against the base
-    const double u = (y - 0.5 * h) / bead_w;
-    const double ripple = 0.5 + 0.5 * std::cos(2.0 * M_PI * x / (0.1 * w));
-    return std::abs(u) < 1.0 ? 0.01 + 5.0 * std::exp(-u * u / 0.02) * ripple : 0.01 + 0.2;
-  };
-  bead.texture_contrast = 0.6;
-  bead.texture_seed = 33;
-  out.push_back(test_scenes::WriteUserScene(dir, "weld_bead", size, px, bead));
+  // A weld bead: glints along the crest, ~500:1 against its dark flanks.
+  out.push_back(test_scenes::WriteUserScene(dir, "weld_bead", size, px, test_scenes::WeldBeadScene(size, px)));
   test_scenes::UserSceneSpec dome;
   dome.height_um = [=](double x, double y) {
     const double r = std::hypot(x - 0.5 * w, y - 0.5 * h), rd = 0.4 * std::min(w, h), R = 300.0;

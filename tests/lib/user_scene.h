@@ -4,6 +4,7 @@
 // 16-bit texture PNG.
 #pragma once
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -66,6 +67,26 @@ inline std::string WriteUserScene(const std::filesystem::path& dir, const std::s
   }
   json << "}\n";
   return "file:" + (dir / (name + ".json")).string();
+}
+
+// A 20 um weld bead across the middle of the field (a half ellipse, 0.6 of the field's height
+// wide) on a flat base at 200 um, with glints along its crest ~500:1 against its dark flanks
+// (reflectance 0.01; the base 0.21). inspect-evaluate's user scene and ScanModesTest's.
+inline UserSceneSpec WeldBeadScene(cv::Size size, double pixel_size_um) {
+  const double w = size.width * pixel_size_um, h = size.height * pixel_size_um, bead_w = 0.3 * h;
+  UserSceneSpec bead;
+  bead.height_um = [=](double, double y) {
+    const double u = (y - 0.5 * h) / bead_w;
+    return 200.0 + (std::abs(u) < 1.0 ? 20.0 * std::sqrt(1.0 - u * u) : 0.0);
+  };
+  bead.reflectance = [=](double x, double y) {
+    const double u = (y - 0.5 * h) / bead_w;
+    const double ripple = 0.5 + 0.5 * std::cos(2.0 * M_PI * x / (0.1 * w));
+    return std::abs(u) < 1.0 ? 0.01 + 5.0 * std::exp(-u * u / 0.02) * ripple : 0.01 + 0.2;
+  };
+  bead.texture_contrast = 0.6;
+  bead.texture_seed = 33;
+  return bead;
 }
 
 // height_um(x_um, y_um) at pixel centres, the default reflectance and full texture contrast.
