@@ -30,6 +30,9 @@ Status FocusRangeSearchOptions::Validate() const {
   if (!(min_cluster_percent >= 0.0 && min_cluster_percent <= 100.0)) {
     return Status::InvalidArgument("min_cluster_percent must be in [0, 100]");
   }
+  if (!(stop_settled_percent >= 0.0 && stop_settled_percent <= 100.0)) {
+    return Status::InvalidArgument("stop_settled_percent must be in [0, 100]");
+  }
   return Status::Ok();
 }
 
@@ -87,6 +90,38 @@ Status FocusRangeAccumulator::PushFrame(const cv::Mat& frame, double z_um) {
   focus_.push_back(energy);
   z_um_.push_back(z_um);
   return Status::Ok();
+}
+
+double FocusRangeAccumulator::SettledPercent() const {
+  const int n = frames();
+  if (n < 3) return 0.0;
+  const cv::Size size = focus_[0].size();
+  std::vector<const float*> rows(static_cast<size_t>(n));
+  long settled = 0;
+  for (int r = 0; r < size.height; ++r) {
+    for (int k = 0; k < n; ++k) rows[size_t(k)] = focus_[size_t(k)].ptr<float>(r);
+    for (int c = 0; c < size.width; ++c) {
+      int best = 0;
+      float f_max = rows[0][c], f_min = rows[0][c];
+      for (int k = 1; k < n; ++k) {
+        const float f = rows[size_t(k)][c];
+        if (f > f_max) {
+          f_max = f;
+          best = k;
+        }
+        f_min = std::min(f_min, f);
+      }
+      // The same tests as Finish's, except that the peak need not have a frame below it (focus
+      // at or below the window's start is passed too).
+      if (best + 2 >= n) continue;
+      if (!(f_max >= options_.min_peak_ratio * std::max(double(f_min), 1e-6))) continue;
+      if (!(f_max >= options_.min_sharpness * rows[size_t(best + 2)][c])) continue;
+      if (best >= 2 && !(f_max >= options_.min_sharpness * rows[size_t(best - 2)][c])) continue;
+      if (saturated_[size_t(best)].at<float>(r, c) > options_.max_saturated_share) continue;
+      ++settled;
+    }
+  }
+  return 100.0 * double(settled) / double(size.area());
 }
 
 namespace {
@@ -246,6 +281,15 @@ StatusOr<FocusRangeEstimate> FocusRangeAccumulator::Finish() const {
   e.z_low_um = Percentile(kept, options_.tail_percent);
   e.z_high_um = Percentile(kept, 100.0 - options_.tail_percent);
   return e;
+}
+
+double SearchPatternCoarseStepUm(double blur_radius_px_per_um, double camera_px_per_projector_px) {
+  if (!(blur_radius_px_per_um > 0.0) || !(camera_px_per_projector_px > 0.0)) return 0.0;
+  const double period_px = 2.0 * kSearchCellProjectorPx * camera_px_per_projector_px;
+  // Rounded down to whole um (0.5 um below 2 um): a step an operator reads as it is, never
+  // coarser than the optics allow.
+  const double step = 2.0 * period_px / (M_PI * blur_radius_px_per_um);
+  return step >= 2.0 ? std::floor(step) : std::max(0.5, std::floor(2.0 * step) / 2.0);
 }
 
 StatusOr<std::vector<double>> CoarseSweepZ(const ZRangeSearchSettings& s, double travel_min_um, double travel_max_um,

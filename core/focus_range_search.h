@@ -20,6 +20,20 @@
 
 namespace inspection {
 
+// Checkerboard cell of the search pattern the coarse sweep projects, projector pixels.
+inline constexpr int kSearchCellProjectorPx = 2;
+
+// The coarse step the search pattern's focus curve allows, from the optics: the pattern's
+// fundamental (period P = 2 cells, camera px) is blurred twice by the shared objective (on its
+// way to the specimen and back), each time by a PSF of sigma r/2 = k dz/2 (k: blur-circle radius
+// per um of defocus, camera px), so its Tenengrad falls as exp(-2 pi^2 k^2 dz^2 / P^2). The step
+// is the one at whose half that is 1/e^2: S = 2 P / (pi k). Every surface then has a frame within
+// S/2 of its focus holding >= 14 % of its peak energy, and the frames either side sample the
+// curve's flanks. Rounded down to whole um (half um below 2 um). Thesis rig (NA 0.3, 0.74 um px:
+// k = 0.425; 3.4 camera px per projector px): 20.4 -> 20 um, 4 of its 5.06 um steps.
+// k <= 0 or a scale <= 0: 0 (unknown).
+double SearchPatternCoarseStepUm(double blur_radius_px_per_um, double camera_px_per_projector_px);
+
 // What a scan request asks of the automatic z range (ScanRequest.z_range_search).
 struct ZRangeSearchSettings {
   double window_start_um = 0.0;  // search window, stage z (either order; normalised low..high)
@@ -54,6 +68,16 @@ struct FocusRangeSearchOptions {
   // this radius (reduced pixels) is dropped as inconsistent.
   int consistency_radius = 3;
   double min_cluster_percent = 5.0;
+  // The sweep may end early (FocusRangeAccumulator::SettledPercent) once this share of the
+  // reduced field has a focus peak the sweep has passed by two frames; 0 = never, sweep the whole
+  // window. A depth map is single-valued: a pixel whose peak has been passed has no second
+  // surface further on, so once (almost) the whole field has settled the rest of the window can
+  // only hold the few unsettled pixels' focus, and a surface that small is dropped by the
+  // clustering above anyway (< min_cluster_percent). Textured parts settle to 98.7-100 % two
+  // frames after their last peak (image borders and steep flanks stay unsettled); parts with
+  // large dark, clipped or textureless areas (cutter, coin: 30-45 %) never reach it and sweep
+  // the whole window.
+  double stop_settled_percent = 98.0;
   Status Validate() const;
 };
 
@@ -79,6 +103,10 @@ class FocusRangeAccumulator {
   // CV_8UC1 or CV_16UC1 frames of frame_size; z strictly monotonic over the pushes.
   Status PushFrame(const cv::Mat& frame, double z_um);
   int frames() const { return int(z_um_.size()); }
+  // Share (percent) of the reduced pixels whose focus curve, so far, has a peak that stands out
+  // of its floor (min_peak_ratio), is unclipped and has fallen by min_sharpness two frames after
+  // it: the sweep has passed their focus. 0 before 3 frames. O(pixels x frames).
+  double SettledPercent() const;
   // Needs >= 3 frames. FAILED_PRECONDITION when fewer than min_resolved_percent of the reduced
   // pixels resolve a peak (the message gives the share and the likely causes).
   StatusOr<FocusRangeEstimate> Finish() const;

@@ -157,6 +157,8 @@ Status WriteStackManifest(const fs::path& dir, const StackManifest& m) {
                {"focus_low_um", r->focus_low_um},
                {"focus_high_um", r->focus_high_um},
                {"resolved_percent", r->resolved_percent},
+               {"settled_percent", r->settled_percent},
+               {"stopped_early", r->stopped_early},
                {"z_start_um", r->z_start_um},
                {"z_end_um", r->z_end_um},
                {"search_seconds", r->search_seconds},

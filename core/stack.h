@@ -45,6 +45,10 @@ struct ZRangeSearchRecord {
   double focus_low_um = 0.0;              // where the sweep found focus (percentiles of the peaks)
   double focus_high_um = 0.0;
   double resolved_percent = 0.0;  // share of the field with a resolved focus peak
+  // Share of the field whose focus the sweep had passed when it ended; stopped_early: it ended
+  // before the window's end because that share was reached (core/focus_range_search.h).
+  double settled_percent = 0.0;
+  bool stopped_early = false;
   double z_start_um = 0.0;        // the range chosen for the stack (frames above)
   double z_end_um = 0.0;
   double search_seconds = 0.0;  // the sweep and its analysis, wall time

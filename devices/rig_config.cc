@@ -321,7 +321,11 @@ StatusOr<RigConfig> ParseRigConfig(const std::string& text) {
   INSPECT_RETURN_IF_ERROR(scan.Number("z_end_um", &c.scan_defaults.z_end_um));
   INSPECT_RETURN_IF_ERROR(scan.Number("z_step_um", &c.scan_defaults.z_step_um));
   INSPECT_RETURN_IF_ERROR(scan.Number("exposure_us", &c.scan_defaults.exposure_us));
+  INSPECT_RETURN_IF_ERROR(scan.Number("focus_search_step_um", &c.scan_defaults.focus_search_step_um));
   INSPECT_RETURN_IF_ERROR(scan.NoUnknownKeys());
+  if (!(c.scan_defaults.focus_search_step_um >= 0.0) || !std::isfinite(c.scan_defaults.focus_search_step_um)) {
+    return ConfigError("scan_defaults.focus_search_step_um", "must be >= 0 (0: 4 z steps)");
+  }
   INSPECT_RETURN_IF_ERROR(Positive("scan_defaults.z_step_um", c.scan_defaults.z_step_um));
   INSPECT_RETURN_IF_ERROR(Positive("scan_defaults.exposure_us", c.scan_defaults.exposure_us));
   for (auto [key, z] : {std::pair<const char*, double>{"scan_defaults.z_start_um", c.scan_defaults.z_start_um},

@@ -63,8 +63,9 @@ void FillFrameEvent(v1::JobPhase phase, int index, int count, double z_um, doubl
 
 // Frames of a scan with an automatic z range, for its progress (RunScan below).
 struct ProgressFrames {
-  int coarse = 0;         // the sweep's frames (known from its first event)
-  int fine_estimate = 0;  // the fine scan's frames until its first event tells
+  int coarse_planned = 0;  // the sweep's frames over the whole window (known from its first event)
+  int coarse_taken = 0;    // those it took: fewer when it stopped early (the field had settled)
+  int fine_estimate = 0;   // the fine scan's frames until its first event tells
 };
 
 void EmitPhase(const JobContext& context, v1::JobPhase phase, double progress = 0.0, const std::string& message = "") {
@@ -196,13 +197,17 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
         FillFrameEvent(phase, f.index, f.count, f.z_um, f.exposure_us, f.statistics, &e);
         e.mutable_frame()->set_acquisition_index(f.acquisition);
       } else {
-        if (f.z_range_search) frames.coarse = f.count;
-        const int done = f.z_range_search ? f.index : frames.coarse + f.index;
-        const int total = frames.coarse + (f.z_range_search ? frames.fine_estimate : f.count);
+        if (f.z_range_search) {
+          frames.coarse_planned = f.count;
+          frames.coarse_taken = f.index + 1;
+        }
+        // Never goes back: coarse_taken <= coarse_planned and the fine count <= its estimate.
+        const int done = f.z_range_search ? f.index : frames.coarse_taken + f.index;
+        const int total = f.z_range_search ? frames.coarse_planned + frames.fine_estimate : frames.coarse_taken + f.count;
         FillFrameEvent(phase, done, total, f.z_um, f.exposure_us, f.statistics, &e);
         e.mutable_frame()->set_frame_index(f.index);  // within its phase
         e.mutable_frame()->set_frame_count(f.count);
-        e.mutable_frame()->set_acquisition_index(f.acquisition + (f.z_range_search ? 0 : frames.coarse));
+        e.mutable_frame()->set_acquisition_index(f.acquisition + (f.z_range_search ? 0 : frames.coarse_taken));
       }
       e.mutable_frame()->set_stack_frame(f.stack_frame);
     });
@@ -243,6 +248,8 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
     z->set_focus_low_um(r->focus_low_um);
     z->set_focus_high_um(r->focus_high_um);
     z->set_resolved_percent(r->resolved_percent);
+    z->set_settled_percent(r->settled_percent);
+    z->set_stopped_early(r->stopped_early);
     z->set_margin_um(r->margin_um);
     z->set_z_start_um(r->z_start_um);
     z->set_z_end_um(r->z_end_um);

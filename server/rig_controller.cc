@@ -107,6 +107,7 @@ void RigController::FillStatus(v1::RigStatus* st) {
   st->mutable_scan_defaults()->set_z_end_um(d.z_end_um);
   st->mutable_scan_defaults()->set_z_step_um(d.z_step_um);
   st->mutable_scan_defaults()->set_exposure_us(d.exposure_us);
+  st->mutable_scan_defaults()->set_focus_search_step_um(d.focus_search_step_um);
 }
 
 }  // namespace inspection

@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
+#include "core/focus_range_search.h"
 #include "devices/sim/image_formation.h"
 #include "devices/sim/specimen.h"
 
@@ -106,6 +107,7 @@ struct SimState {
   std::pair<double, double> z_range_um{0.0, 0.0};  // including z_offset_um
   double z_offset_um = 0.0;                        // SetSpecimenZOffsetUm
   double default_exposure_us = 10000.0;
+  double focus_search_step_um = 0.0;  // from the optics, ScanDefaults
   cv::Mat pattern;
   double stage_z_um = 0.0;  // actual position, including the repeatability error
   double exposure_us = 10000.0;
@@ -287,8 +289,10 @@ class SimulatedRig : public Rig, public SimulationControl {
   ScanDefaults scan_defaults() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
     // The unshifted range: the rig's default range does not know where a part was placed.
-    return ScanDefaultsFor({s_->z_range_um.first - s_->z_offset_um, s_->z_range_um.second - s_->z_offset_um},
-                           s_->default_exposure_us);
+    ScanDefaults d = ScanDefaultsFor(
+        {s_->z_range_um.first - s_->z_offset_um, s_->z_range_um.second - s_->z_offset_um}, s_->default_exposure_us);
+    d.focus_search_step_um = s_->focus_search_step_um;
+    return d;
   }
   SimulationControl* simulation() override { return this; }
 
@@ -386,6 +390,11 @@ StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& opt
   state->options = options;
   state->stage_rng.seed(MixSeed(options.seed, 0x57A6E));
   state->pattern = cv::Mat(options.projector_size, CV_8UC1, cv::Scalar(128));
+  {
+    INSPECT_ASSIGN_OR_RETURN(ImageFormationOptions f, ImageFormationOptionsFor(options));
+    state->focus_search_step_um =
+        SearchPatternCoarseStepUm(f.defocus.blur_radius_px_per_um, f.geometry.camera_px_per_projector_px);
+  }
   INSPECT_RETURN_IF_ERROR(state->LoadSpecimen(options.specimen).WithContext("specimen: "));
   return std::unique_ptr<Rig>(new SimulatedRig(std::move(state)));
 }

@@ -22,7 +22,10 @@ StatusOr<ZRangeSearchSettings> ResolveZRangeSearch(const ZRangeSearchSettings& r
     s.window_start_um = std::min(defaults.z_start_um, defaults.z_end_um);
     s.window_end_um = std::max(defaults.z_start_um, defaults.z_end_um);
   }
-  if (s.coarse_step_um == 0.0) s.coarse_step_um = kDefaultCoarseSteps * fine_step_um;
+  if (s.coarse_step_um == 0.0) {
+    s.coarse_step_um =
+        defaults.focus_search_step_um > 0.0 ? defaults.focus_search_step_um : kDefaultCoarseSteps * fine_step_um;
+  }
   if (s.margin_um == 0.0) s.margin_um = kDefaultMarginSteps * fine_step_um;
   if (!(s.margin_um >= 0.0) || !std::isfinite(s.margin_um)) {
     return Status::InvalidArgument(
@@ -41,6 +44,8 @@ struct CoarseSweep {
   std::vector<double> z_um;
   std::vector<StackFrame> frames;
   FocusRangeEstimate estimate;
+  double settled_percent = 0.0;  // when the sweep ended
+  bool stopped_early = false;    // before the window's end: the field had settled
 };
 
 StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::path& stack_dir,
@@ -52,9 +57,10 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
   CoarseSweep sweep;
   INSPECT_ASSIGN_OR_RETURN(sweep.z_um,
                            CoarseSweepZ(s, stage.min_z_um(), stage.max_z_um(), kMaxCoarseFrames, "z_range_search."));
+  const FocusRangeSearchOptions search_options;
   INSPECT_ASSIGN_OR_RETURN(
       FocusRangeAccumulator acc,
-      FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, camera.frame_size(), camera.bit_depth()));
+      FocusRangeAccumulator::Create(search_options, camera.frame_size(), camera.bit_depth()));
   // 64/192 rather than 0/255: the same mean as STD's grey 128 without doubling the light on
   // parts exposed for it (clipped squares would hide the pattern's edges).
   const cv::Mat pattern = 64 + 128 * CheckerboardMask(rig.projector().resolution(), kSearchCellProjectorPx);
@@ -98,7 +104,17 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
       ev.z_range_search = true;
       on_frame(ev);
     }
+    // The rest of the window can hold no more focus than the few unsettled pixels'
+    // (FocusRangeSearchOptions::stop_settled_percent): skip it.
+    if (search_options.stop_settled_percent > 0.0 && i + 1 < n) {
+      sweep.settled_percent = acc.SettledPercent();
+      if (sweep.settled_percent >= search_options.stop_settled_percent) {
+        sweep.stopped_early = true;
+        break;
+      }
+    }
   }
+  if (!sweep.stopped_early) sweep.settled_percent = acc.SettledPercent();
   INSPECT_ASSIGN_OR_RETURN(sweep.estimate, acc.Finish());
   return sweep;
 }
@@ -140,6 +156,8 @@ StatusOr<ScanOutcome> RunScanWithZRangeSearch(Rig& rig, const ScanPlan& plan, co
   r.focus_low_um = sweep.estimate.z_low_um;
   r.focus_high_um = sweep.estimate.z_high_um;
   r.resolved_percent = sweep.estimate.resolved_percent;
+  r.settled_percent = sweep.settled_percent;
+  r.stopped_early = sweep.stopped_early;
   r.z_start_um = fine.z_um.front();
   r.z_end_um = fine.z_um.back();
   r.search_seconds = search_seconds;

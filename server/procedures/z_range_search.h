@@ -22,9 +22,9 @@
 
 namespace inspection {
 
-// Checkerboard cell of the search pattern, projector pixels (3.4 camera pixels each on the
-// thesis rig: a period of ~14 camera pixels, resolved by the focus measure at 1/4 scale).
-inline constexpr int kSearchCellProjectorPx = 2;
+// The pattern's cell is kSearchCellProjectorPx (core/focus_range_search.h): 3.4 camera pixels
+// per projector pixel on the thesis rig, a period of ~14 camera pixels, resolved by the focus
+// measure at 1/4 scale.
 // Most coarse frames one search may take (a window / step needing more is INVALID_ARGUMENT).
 inline constexpr int kMaxCoarseFrames = 200;
 inline constexpr double kDefaultCoarseSteps = 4.0;
@@ -41,8 +41,11 @@ inline constexpr int kMinFineFrames = 7;
 inline constexpr double kDefaultMarginSteps = 1.5;
 
 // Defaults for a request that leaves them unset (0): window = the rig's default scan range
-// (RigStatus.scan_defaults: where parts sit on this rig); coarse step = kDefaultCoarseSteps fine
-// steps; margin = kDefaultMarginSteps fine steps. Checks the window against the stage travel
+// (RigStatus.scan_defaults: where parts sit on this rig); coarse step = the rig's
+// focus_search_step_um (set by its optics, not by the fine step: a 1 um fine step would take
+// 4 um coarse steps, 5x the frames the search pattern needs, and a 10 um one 40 um steps that
+// miss its focus), or kDefaultCoarseSteps fine steps on a rig that does not know it; margin =
+// kDefaultMarginSteps fine steps. Checks the window against the stage travel
 // and the step against the window; errors name the field under "z_range_search.".
 StatusOr<ZRangeSearchSettings> ResolveZRangeSearch(const ZRangeSearchSettings& requested, double fine_step_um,
                                                    const ScanDefaults& defaults, const Stage& stage);

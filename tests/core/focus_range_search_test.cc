@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
@@ -145,6 +146,50 @@ TEST(ChooseFineRangeTest, WholeStepsCentredOnTheRangeWithinTheTravel) {
   r = ChooseFineRange(e, 5.0, 5.0, 3, 0.0, 25000.0);
   EXPECT_DOUBLE_EQ(r.z_start_um, 0.0);
   EXPECT_NEAR(r.z_end_um, 30.0, 1e-9);
+}
+
+// The sweep may stop once the field has settled (FocusRangeSearchOptions::stop_settled_percent):
+// each half of the two-level part counts once the sweep is two frames past its focus frame
+// (233 um: frame 240 at index 7, settled from index 9; 271 um: frame 280 at index 9, settled
+// from index 11); a textureless half never counts. The 3 of 64 reduced columns whose window
+// straddles the 38 um step see both levels (two peaks: not sharp) and never settle; with the
+// right half textureless they see the left half's texture alone and settle with it.
+TEST(FocusRangeSearchTest, FieldSettlesTwoFramesPastEachLevelsFocus) {
+  for (bool right_textured : {true, false}) {
+    auto acc = FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8);
+    ASSERT_TRUE(acc.ok());
+    EXPECT_DOUBLE_EQ(acc->SettledPercent(), 0.0);
+    std::vector<double> settled;
+    uint64_t seed = 1;
+    for (double z = 100.0; z <= 400.0 + 1e-9; z += 20.0) {
+      cv::Mat frame = Frame(233.0, 271.0, z, seed++);
+      if (!right_textured) frame(cv::Rect(128, 0, 128, 192)).setTo(128);
+      ASSERT_TRUE(acc->PushFrame(frame, z).ok());
+      settled.push_back(acc->SettledPercent());
+    }
+    const std::string which = right_textured ? "textured" : "half textureless";
+    const double step_columns = 100.0 * 3.0 / 64.0;
+    EXPECT_LT(settled[8], 2.0) << which;
+    if (right_textured) {
+      EXPECT_NEAR(settled[9], 50.0 - step_columns / 3.0, 1.0);
+      EXPECT_NEAR(settled[10], 50.0 - step_columns / 3.0, 1.0);
+      EXPECT_NEAR(settled[11], 100.0 - step_columns, 0.5);
+      EXPECT_NEAR(settled.back(), 100.0 - step_columns, 0.5);
+    } else {
+      EXPECT_NEAR(settled[9], 50.0 + 2.0 * step_columns / 3.0 + step_columns / 3.0, 1.0);
+      EXPECT_NEAR(*std::max_element(settled.begin(), settled.end()), settled[9], 1e-9);
+    }
+  }
+}
+
+TEST(SearchPatternCoarseStepTest, FollowsTheOpticsRoundedDown) {
+  // 2 P / (pi k), P = 4 projector px: thesis rig 20.37 -> 20 um.
+  EXPECT_DOUBLE_EQ(SearchPatternCoarseStepUm(0.425, 3.4), 20.0);
+  EXPECT_DOUBLE_EQ(SearchPatternCoarseStepUm(0.425 / 2.0, 3.4), 40.0);  // half the NA-ish blur: 40.7
+  EXPECT_DOUBLE_EQ(SearchPatternCoarseStepUm(5.0, 3.4), 1.5);           // 1.73 -> half um
+  EXPECT_DOUBLE_EQ(SearchPatternCoarseStepUm(50.0, 3.4), 0.5);          // never below 0.5
+  EXPECT_DOUBLE_EQ(SearchPatternCoarseStepUm(0.0, 3.4), 0.0);           // unknown optics
+  EXPECT_DOUBLE_EQ(SearchPatternCoarseStepUm(0.425, 0.0), 0.0);
 }
 
 }  // namespace

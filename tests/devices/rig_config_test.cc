@@ -29,7 +29,7 @@ std::string RealConfig(const std::string& fb_path) {
          fb_path + R"(",
                   "mode": {"width": 8, "height": 4, "bits_per_pixel": 16},
                   "region": {"x": 2, "y": 0, "width": 4, "height": 4}, "flip_horizontal": true},
-    "scan_defaults": {"z_start_um": 200, "z_end_um": 400, "z_step_um": 2.5}
+    "scan_defaults": {"z_start_um": 200, "z_end_um": 400, "z_step_um": 2.5, "focus_search_step_um": 12}
   })";
 }
 
@@ -92,6 +92,7 @@ TEST(RigConfigTest, RealDriverConfigIsParsed) {
   EXPECT_TRUE(c->projector.flip_horizontal);
   EXPECT_DOUBLE_EQ(c->scan_defaults.z_step_um, 2.5);
   EXPECT_DOUBLE_EQ(c->scan_defaults.exposure_us, 8000.0);  // from the camera unless stated
+  EXPECT_DOUBLE_EQ(c->scan_defaults.focus_search_step_um, 12.0);
 }
 
 TEST(RigConfigTest, ErrorsNameTheKey) {
@@ -126,6 +127,10 @@ TEST(RigConfigTest, ErrorsNameTheKey) {
               HasSubstr("simulation.camera_bit_depth must be 8 or 12"));
   EXPECT_THAT(ParseError(R"({"simulation": {"specimen": "skew5"}, "cameras": {}})").message(),
               HasSubstr("rig config: cameras is not a known key"));
+  EXPECT_EQ(ParseError(R"({"camera": {"driver": "aravis"}, )" + base +
+                       R"(, "scan_defaults": {"focus_search_step_um": -1}})")
+                .message(),
+            "rig config: scan_defaults.focus_search_step_um must be >= 0 (0: 4 z steps)");
   EXPECT_THAT(ParseError("{ not json").message(), HasSubstr("not valid JSON"));
   EXPECT_EQ(ParseError("[1, 2]").code(), StatusCode::kInvalidArgument);
 }
