@@ -10,6 +10,7 @@
 //
 // Usage: autorange-evaluate [--seeds 5,11,23] [--specimens all|a,b,...] [--camera WxH]
 //                           [--window A:B] [--fine-step UM] [--coarse-step UM] [--margin UM]
+//                           [--keep DIR]   (keep each run's stack, coarse frames included, in DIR)
 #include <unistd.h>
 
 #include <algorithm>
@@ -22,6 +23,8 @@
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <opencv2/imgcodecs.hpp>
 
 #include "devices/sim/simulated_rig.h"
 #include "devices/sim/specimen.h"
@@ -54,7 +57,7 @@ std::vector<std::string> Split(const std::string& s, char sep) {
 }
 
 Row RunOne(const std::string& specimen, uint64_t seed, cv::Size camera, double w0, double w1, double fine_step,
-           double coarse_step, double margin, const fs::path& work) {
+           double coarse_step, double margin, const fs::path& work, bool keep) {
   Row row;
   row.specimen = specimen;
   row.seed = seed;
@@ -96,7 +99,11 @@ Row RunOne(const std::string& specimen, uint64_t seed, cv::Size camera, double w
   std::atomic<bool> cancel{false};
   const fs::path dir = work / (specimen + "-" + std::to_string(seed));
   auto out = RunScanWithZRangeSearch(rig, plan, dir, nullptr, cancel, nullptr);
-  fs::remove_all(dir);
+  if (!keep) {
+    fs::remove_all(dir);
+  } else if (out.ok()) {
+    cv::imwrite((dir / "truth_um.tiff").string(), truth);  // CV_32FC1 ground truth, for analysis
+  }
   if (!out.ok()) {
     row.error = out.status().ToString();
     return row;
@@ -123,6 +130,7 @@ int Main(int argc, char** argv) {
   std::vector<std::string> specimens = BuiltinSpecimenNames();
   cv::Size camera{1024, 768};
   double w0 = 100.0, w1 = 600.0, fine_step = 5.0, coarse_step = 0.0, margin = 0.0;
+  fs::path keep_dir;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (i + 1 >= argc) {
@@ -145,12 +153,15 @@ int Main(int argc, char** argv) {
       coarse_step = std::stod(v);
     } else if (a == "--margin") {
       margin = std::stod(v);
+    } else if (a == "--keep") {
+      keep_dir = v;
     } else {
       std::fprintf(stderr, "autorange-evaluate: unknown option %s\n", a.c_str());
       return 2;
     }
   }
-  const fs::path work = fs::temp_directory_path() / ("autorange-evaluate-" + std::to_string(::getpid()));
+  const fs::path work =
+      keep_dir.empty() ? fs::temp_directory_path() / ("autorange-evaluate-" + std::to_string(::getpid())) : keep_dir;
   std::printf("automatic z range: window %.1f .. %.1f um, fine step %.2f um, camera %dx%d\n", w0, w1, fine_step,
               camera.width, camera.height);
   std::printf("%-8s %4s %7s | %-17s | %-17s | %6s %6s | %7s %7s | %6s %4s %5s | %5s | %6s\n", "specimen", "seed",
@@ -160,7 +171,7 @@ int Main(int argc, char** argv) {
   double worst_cover = 100.0, worst_margin = -1e9, worst_inner = 1e9, max_cf = 0.0, sum_t = 0.0;
   for (const auto& specimen : specimens) {
     for (uint64_t seed : seeds) {
-      const Row r = RunOne(specimen, seed, camera, w0, w1, fine_step, coarse_step, margin, work);
+      const Row r = RunOne(specimen, seed, camera, w0, w1, fine_step, coarse_step, margin, work, !keep_dir.empty());
       if (!r.error.empty()) {
         std::printf("%-8s %4llu %7.1f | %s\n", r.specimen.c_str(), (unsigned long long)r.seed, r.offset_um,
                     r.error.c_str());
@@ -186,7 +197,7 @@ int Main(int argc, char** argv) {
       "search time / fine scan time mean %.2f\n",
       rows, failures, worst_cover, worst_inner, worst_margin, max_cf, rows ? sum_t / rows : 0.0);
   std::error_code ec;
-  fs::remove_all(work, ec);
+  if (keep_dir.empty()) fs::remove_all(work, ec);
   return failures == 0 ? 0 : 1;
 }
 
