@@ -127,9 +127,9 @@ void RegisterScanCommand(CLI::App& app, CliContext& context) {
         double a = 0.0, b = 0.0;
         return ParseWindow(v, &a, &b) ? std::string() : std::string("expected A:B in um, e.g. 100:600");
       });
-  cmd->add_option("--coarse-step", f->coarse_step_um, "--auto-range: coarse sweep step, um (unset: 4 z steps)")
+  cmd->add_option("--coarse-step", f->coarse_step_um, "--auto-range: coarse sweep step, um (unset: the rig's, from its optics)")
       ->needs(auto_range);
-  cmd->add_option("--margin", f->margin_um, "--auto-range: margin added each side, um (unset: 1.5 z steps)")
+  cmd->add_option("--margin", f->margin_um, "--auto-range: margin added each side, um (unset: 1.5 z steps, >= 1/4 coarse step)")
       ->needs(auto_range);
   cmd->add_option("--illumination", f->illumination,
                   "std | hdr | adapt-it | adapt | texture | hf+adapt | adapted-hf | auto (unset: server default)")

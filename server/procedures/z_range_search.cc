@@ -26,10 +26,13 @@ StatusOr<ZRangeSearchSettings> ResolveZRangeSearch(const ZRangeSearchSettings& r
     s.coarse_step_um =
         defaults.focus_search_step_um > 0.0 ? defaults.focus_search_step_um : kDefaultCoarseSteps * fine_step_um;
   }
-  if (s.margin_um == 0.0) s.margin_um = kDefaultMarginSteps * fine_step_um;
+  if (s.margin_um == 0.0) {
+    s.margin_um = std::max(kDefaultMarginSteps * fine_step_um, kDefaultMarginCoarseSteps * s.coarse_step_um);
+  }
   if (!(s.margin_um >= 0.0) || !std::isfinite(s.margin_um)) {
     return Status::InvalidArgument(
-        "z_range_search.margin_um must be >= 0 (0 = " + std::to_string(int(kDefaultMarginSteps)) + " fine steps)");
+        "z_range_search.margin_um must be >= 0 (0 = the default: 1.5 fine steps, at least a quarter of the coarse "
+        "step)");
   }
   // The window and step checks, with the fields' names.
   INSPECT_RETURN_IF_ERROR(

@@ -39,14 +39,20 @@ inline constexpr double kDefaultCoarseSteps = 4.0;
 // 2.8-3.1 % of their pixels at 7 frames, 0.1 % at 12.
 inline constexpr int kMinFineFrames = 7;
 inline constexpr double kDefaultMarginSteps = 1.5;
+// The margin covers the search's own error, which is set by the coarse step, not the fine one:
+// at 20 um coarse steps up to 4 um inwards (the cutter's top: its clipped land resolves no peak,
+// autorange-evaluate). With 1.5 fine steps alone, 2 um fine steps (3 um margin) cut the
+// cutter's top (93 % coverage at seed 23).
+inline constexpr double kDefaultMarginCoarseSteps = 0.25;
 
 // Defaults for a request that leaves them unset (0): window = the rig's default scan range
 // (RigStatus.scan_defaults: where parts sit on this rig); coarse step = the rig's
 // focus_search_step_um (set by its optics, not by the fine step: a 1 um fine step would take
 // 4 um coarse steps, 5x the frames the search pattern needs, and a 10 um one 40 um steps that
 // miss its focus), or kDefaultCoarseSteps fine steps on a rig that does not know it; margin =
-// kDefaultMarginSteps fine steps. Checks the window against the stage travel
-// and the step against the window; errors name the field under "z_range_search.".
+// kDefaultMarginSteps fine steps but at least kDefaultMarginCoarseSteps coarse steps. Checks
+// the window against the stage travel and the step against the window; errors name the field
+// under "z_range_search.".
 StatusOr<ZRangeSearchSettings> ResolveZRangeSearch(const ZRangeSearchSettings& requested, double fine_step_um,
                                                    const ScanDefaults& defaults, const Stage& stage);
 

@@ -181,6 +181,40 @@ TEST(ZRangeSearchBudgetTest, CoarseFramesAtMostAQuarterOfTheFineScanNearThePart)
   EXPECT_GE(cv::countNonZero((truth >= r.z_start_um) & (truth <= r.z_end_um)), 0.99 * double(truth.total()));
 }
 
+// At fine steps well below the coarse step the margin is set by the search's own error: the
+// cutter's clipped top resolves no coarse peak and the search places its top ~4 um low. A margin
+// of 1.5 fine steps (3 um at 2 um steps) cut it (93.4 % of the pixels inside, autorange-evaluate
+// seed 23); a quarter of the 20 um coarse step (5 um) holds it.
+TEST(ZRangeSearchMarginTest, FineStepsBelowTheSearchErrorKeepTheWholePart) {
+  SimulatedRigOptions o;
+  o.specimen = "cutter";
+  o.seed = 23;
+  o.camera_size = {512, 384};
+  auto rig = CreateSimulatedRig(o);
+  ASSERT_TRUE(rig.ok());
+  SimulationControl* sim = (*rig)->simulation();
+  ASSERT_TRUE(sim->SetSpecimenZOffsetUm(243.6).ok());
+  ScanPlan plan;
+  plan.exposure_us = (*rig)->scan_defaults().exposure_us;
+  plan.z_step_um = 2.0;
+  auto s = ResolveZRangeSearch({kWindowLowUm, kWindowHighUm, 0.0, 0.0}, 2.0, (*rig)->scan_defaults(), (*rig)->stage());
+  ASSERT_TRUE(s.ok()) << s.status().ToString();
+  EXPECT_DOUBLE_EQ(s->margin_um, 5.0);
+  plan.z_range_search = *s;
+  const fs::path dir = fs::temp_directory_path() / ("zrange-margin-" + std::to_string(::getpid()));
+  std::atomic<bool> cancel{false};
+  auto out = RunScanWithZRangeSearch(**rig, plan, dir, nullptr, cancel, nullptr);
+  fs::remove_all(dir);
+  ASSERT_TRUE(out.ok()) << out.status().ToString();
+  const ZRangeSearchRecord& r = *out->manifest.z_range_search;
+  const cv::Mat truth = sim->GroundTruthDepthUm();
+  const double inside = cv::countNonZero((truth >= r.z_start_um) & (truth <= r.z_end_um));
+  EXPECT_GE(inside, 0.99 * double(truth.total())) << r.z_start_um << " .. " << r.z_end_um;
+  // The search's top estimate is below the truth's P99.5 (the error the margin is for).
+  std::vector<float> h(truth.begin<float>(), truth.end<float>());
+  EXPECT_LT(r.focus_high_um, Percentile(h, 99.5) - 3.0);
+}
+
 // The coarse step comes from the rig's optics (ScanDefaults.focus_search_step_um: 20 um on the
 // simulated thesis rig, whatever the fine step); a rig that does not know it takes 4 fine steps.
 TEST(ZRangeSearchDefaultsTest, DefaultsComeFromTheRigsOpticsAndRange) {
@@ -196,12 +230,14 @@ TEST(ZRangeSearchDefaultsTest, DefaultsComeFromTheRigsOpticsAndRange) {
     EXPECT_DOUBLE_EQ(s->window_start_um, d.z_start_um);
     EXPECT_DOUBLE_EQ(s->window_end_um, d.z_end_um);
     EXPECT_DOUBLE_EQ(s->coarse_step_um, 20.0) << fine;
-    EXPECT_DOUBLE_EQ(s->margin_um, 1.5 * fine);
+    // 1.5 fine steps, but at least a quarter of the coarse step (the search's own error).
+    EXPECT_DOUBLE_EQ(s->margin_um, std::max(1.5 * fine, 5.0)) << fine;
   }
   d.focus_search_step_um = 0.0;
   auto unknown = ResolveZRangeSearch({}, 2.0, d, (*rig)->stage());
   ASSERT_TRUE(unknown.ok());
   EXPECT_DOUBLE_EQ(unknown->coarse_step_um, 8.0);
+  EXPECT_DOUBLE_EQ(unknown->margin_um, 3.0);
   // A higher NA blurs faster per um: a shorter step (tan(asin 0.6) / 0.74 = 1.01 px/um: 8 um).
   o.numerical_aperture = 0.6;
   auto high_na = CreateSimulatedRig(o);
