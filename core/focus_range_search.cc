@@ -87,6 +87,26 @@ Status FocusRangeAccumulator::PushFrame(const cv::Mat& frame, double z_um) {
   energy = gx.mul(gx) + gy.mul(gy);
   cv::boxFilter(energy, energy, CV_32F, cv::Size(options_.window_px, options_.window_px), cv::Point(-1, -1), true,
                 cv::BORDER_REFLECT);
+  if (focus_.empty()) {
+    max_ = energy.clone();
+    min_ = energy.clone();
+    argmax_ = cv::Mat::zeros(energy.size(), CV_32SC1);
+  } else {
+    const int k = int(focus_.size());
+    for (int r = 0; r < energy.rows; ++r) {
+      const float* e = energy.ptr<float>(r);
+      float* f_max = max_.ptr<float>(r);
+      float* f_min = min_.ptr<float>(r);
+      int* best = argmax_.ptr<int>(r);
+      for (int c = 0; c < energy.cols; ++c) {
+        if (e[c] > f_max[c]) {
+          f_max[c] = e[c];
+          best[c] = k;
+        }
+        f_min[c] = std::min(f_min[c], e[c]);
+      }
+    }
+  }
   focus_.push_back(energy);
   z_um_.push_back(z_um);
   return Status::Ok();
@@ -95,33 +115,24 @@ Status FocusRangeAccumulator::PushFrame(const cv::Mat& frame, double z_um) {
 double FocusRangeAccumulator::SettledPercent() const {
   const int n = frames();
   if (n < 3) return 0.0;
-  const cv::Size size = focus_[0].size();
-  std::vector<const float*> rows(static_cast<size_t>(n));
   long settled = 0;
-  for (int r = 0; r < size.height; ++r) {
-    for (int k = 0; k < n; ++k) rows[size_t(k)] = focus_[size_t(k)].ptr<float>(r);
-    for (int c = 0; c < size.width; ++c) {
-      int best = 0;
-      float f_max = rows[0][c], f_min = rows[0][c];
-      for (int k = 1; k < n; ++k) {
-        const float f = rows[size_t(k)][c];
-        if (f > f_max) {
-          f_max = f;
-          best = k;
-        }
-        f_min = std::min(f_min, f);
-      }
+  for (int r = 0; r < max_.rows; ++r) {
+    const float* f_max = max_.ptr<float>(r);
+    const float* f_min = min_.ptr<float>(r);
+    const int* best = argmax_.ptr<int>(r);
+    for (int c = 0; c < max_.cols; ++c) {
       // The same tests as Finish's, except that the peak need not have a frame below it (focus
       // at or below the window's start is passed too).
-      if (best + 2 >= n) continue;
-      if (!(f_max >= options_.min_peak_ratio * std::max(double(f_min), 1e-6))) continue;
-      if (!(f_max >= options_.min_sharpness * rows[size_t(best + 2)][c])) continue;
-      if (best >= 2 && !(f_max >= options_.min_sharpness * rows[size_t(best - 2)][c])) continue;
-      if (saturated_[size_t(best)].at<float>(r, c) > options_.max_saturated_share) continue;
+      const int b = best[c];
+      if (b + 2 >= n) continue;
+      if (!(f_max[c] >= options_.min_peak_ratio * std::max(double(f_min[c]), 1e-6))) continue;
+      if (!(f_max[c] >= options_.min_sharpness * focus_[size_t(b + 2)].at<float>(r, c))) continue;
+      if (b >= 2 && !(f_max[c] >= options_.min_sharpness * focus_[size_t(b - 2)].at<float>(r, c))) continue;
+      if (saturated_[size_t(b)].at<float>(r, c) > options_.max_saturated_share) continue;
       ++settled;
     }
   }
-  return 100.0 * double(settled) / double(size.area());
+  return 100.0 * double(settled) / double(max_.total());
 }
 
 namespace {

@@ -105,7 +105,8 @@ class FocusRangeAccumulator {
   int frames() const { return int(z_um_.size()); }
   // Share (percent) of the reduced pixels whose focus curve, so far, has a peak that stands out
   // of its floor (min_peak_ratio), is unclipped and has fallen by min_sharpness two frames after
-  // it: the sweep has passed their focus. 0 before 3 frames. O(pixels x frames).
+  // it: the sweep has passed their focus. 0 before 3 frames. O(reduced pixels): the running
+  // maximum, its frame and the minimum are kept per pixel as frames arrive.
   double SettledPercent() const;
   // Needs >= 3 frames. FAILED_PRECONDITION when fewer than min_resolved_percent of the reduced
   // pixels resolve a peak (the message gives the share and the likely causes).
@@ -118,6 +119,8 @@ class FocusRangeAccumulator {
   std::vector<double> z_um_;
   std::vector<cv::Mat> saturated_;  // CV_32FC1 share of saturated pixels in each window
   std::vector<cv::Mat> focus_;      // CV_32FC1 reduced focus measure per frame
+  cv::Mat max_, min_;               // CV_32FC1 running maximum / minimum of each pixel's curve
+  cv::Mat argmax_;                  // CV_32SC1 frame of the maximum (the first, on ties)
 };
 
 // The coarse z positions covering [window low, window high] at coarse_step_um, including both
