@@ -27,8 +27,10 @@ int PrintRigStatus(const v1::RigStatus& rig, const Output& out) {
             << rig.queued_jobs() << "/" << rig.queue_capacity() << '\n';
   if (rig.simulated()) std::cout << "simulated rig, specimen: " << rig.specimen() << '\n';
   const auto& d = rig.scan_defaults();
-  std::cout << Format("pixel size: %.4f um; scan defaults: z %.1f .. %.1f um step %.2f um, exposure %.0f us\n",
+  std::cout << Format("pixel size: %.4f um; scan defaults: z %.1f .. %.1f um step %.2f um, exposure %.0f us",
                       rig.pixel_size_um(), d.z_start_um(), d.z_end_um(), d.z_step_um(), d.exposure_us());
+  if (d.focus_search_step_um() > 0.0) std::cout << Format(", focus search step %.1f um", d.focus_search_step_um());
+  std::cout << '\n';
   std::cout << "server version: " << rig.server_version() << '\n';
   return kExitOk;
 }

@@ -322,6 +322,12 @@ TEST_F(CliTest, StatusJobsAndSpecimenAsJson) {
   EXPECT_EQ(status["state"], "RIG_STATE_READY");
   EXPECT_EQ(status["simulated"], true);
   EXPECT_EQ(status["specimen"], "skew5");
+  // The rig's optics set the automatic z range's coarse step (20 um on the simulated thesis rig).
+  EXPECT_EQ(status["scan_defaults"]["focus_search_step_um"], 20.0) << status.dump();
+  r = Run({"status"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("step 5.00 um, exposure "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" us, focus search step 20.0 um\n"), std::string::npos) << r.out;
 
   r = Run({"--json", "specimen", "set", "lens"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
