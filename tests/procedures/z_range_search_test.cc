@@ -36,15 +36,23 @@ struct Placed {
   std::vector<float> heights;
 };
 
-// The specimen at a random height with its whole range 10 um inside the window.
-Placed PlaceAtRandomHeight(const std::string& specimen, uint64_t seed) {
+// A 512x384 simulated rig with the specimen moved by offset_um.
+std::unique_ptr<Rig> RigWithSpecimenAt(const std::string& specimen, uint64_t seed, double offset_um) {
   SimulatedRigOptions o;
   o.specimen = specimen;
   o.seed = seed;
   o.camera_size = {512, 384};
   auto rig = CreateSimulatedRig(o);
   EXPECT_TRUE(rig.ok()) << rig.status().ToString();
-  Placed p{std::move(*rig), {}};
+  if (!rig.ok()) return nullptr;
+  EXPECT_TRUE((*rig)->simulation()->SetSpecimenZOffsetUm(offset_um).ok());
+  return std::move(*rig);
+}
+
+// The specimen at a random height with its whole range 10 um inside the window.
+Placed PlaceAtRandomHeight(const std::string& specimen, uint64_t seed) {
+  Placed p{RigWithSpecimenAt(specimen, seed, 0.0), {}};
+  if (!p.rig) return p;
   SimulationControl* sim = p.rig->simulation();
   const auto [lo, hi] = sim->SpecimenZRangeUm();
   std::mt19937_64 rng(seed);
@@ -75,6 +83,7 @@ class ZRangeSearchTest : public ::testing::TestWithParam<std::pair<const char*, 
 TEST_P(ZRangeSearchTest, RangeHoldsTheTrueHeightsWithAtMostThreeStepsToSpare) {
   const auto [specimen, seed] = GetParam();
   Placed p = PlaceAtRandomHeight(specimen, seed);
+  ASSERT_TRUE(p.rig);
   const ScanPlan plan = SearchPlan(*p.rig);
   std::vector<ScanFrameEvent> events;
   std::atomic<bool> cancel{false};
@@ -152,33 +161,38 @@ INSTANTIATE_TEST_SUITE_P(Specimens, ZRangeSearchTest,
                                            std::pair{"mirror", uint64_t(5)}, std::pair{"lens", uint64_t(6)}),
                          [](const auto& info) { return std::string(info.param.first); });
 
+// The search and the scan in a temporary folder, removed afterwards.
+StatusOr<ScanOutcome> SearchAndScan(Rig& rig, const ScanPlan& plan, const std::string& tag) {
+  const fs::path dir = fs::temp_directory_path() / ("zrange-" + tag + "-" + std::to_string(::getpid()));
+  std::atomic<bool> cancel{false};
+  auto out = RunScanWithZRangeSearch(rig, plan, dir, nullptr, cancel, nullptr);
+  fs::remove_all(dir);
+  return out;
+}
+
+// Share of the ground truth's pixels inside the chosen range.
+double Coverage(Rig& rig, const ZRangeSearchRecord& r) {
+  const cv::Mat truth = rig.simulation()->GroundTruthDepthUm();
+  return double(cv::countNonZero((truth >= r.z_start_um) & (truth <= r.z_end_um))) / double(truth.total());
+}
+
 // When the search window is a few times the part's height (a fixture that places parts within
 // +-50 um) and the fine step is fine, the sweep costs <= 25 % of the fine scan's frames: wedge
 // (109 um high at 512x384), 2 um steps, a window of 100 um around it, coarse step 20 um.
 TEST(ZRangeSearchBudgetTest, CoarseFramesAtMostAQuarterOfTheFineScanNearThePart) {
-  SimulatedRigOptions o;
-  o.specimen = "wedge";
-  o.seed = 9;
-  o.camera_size = {512, 384};
-  auto rig = CreateSimulatedRig(o);
-  ASSERT_TRUE(rig.ok());
-  SimulationControl* sim = (*rig)->simulation();
-  ASSERT_TRUE(sim->SetSpecimenZOffsetUm(83.0).ok());
-  const auto [lo, hi] = sim->SpecimenZRangeUm();
+  std::unique_ptr<Rig> rig = RigWithSpecimenAt("wedge", 9, 83.0);
+  ASSERT_TRUE(rig);
+  const auto [lo, hi] = rig->simulation()->SpecimenZRangeUm();
   ScanPlan plan;
-  plan.exposure_us = (*rig)->scan_defaults().exposure_us;
+  plan.exposure_us = rig->scan_defaults().exposure_us;
   plan.z_step_um = 2.0;
   plan.z_range_search = ZRangeSearchSettings{std::floor(lo) - 50.0, std::ceil(hi) + 50.0, 20.0, 3.0};
-  const fs::path dir = fs::temp_directory_path() / ("zrange-budget-" + std::to_string(::getpid()));
-  std::atomic<bool> cancel{false};
-  auto out = RunScanWithZRangeSearch(**rig, plan, dir, nullptr, cancel, nullptr);
-  fs::remove_all(dir);
+  auto out = SearchAndScan(*rig, plan, "budget");
   ASSERT_TRUE(out.ok()) << out.status().ToString();
   const ZRangeSearchRecord& r = *out->manifest.z_range_search;
   EXPECT_LE(double(r.coarse_frames.size()), 0.25 * double(out->manifest.frames.size()))
       << r.coarse_frames.size() << " coarse, " << out->manifest.frames.size() << " fine";
-  const cv::Mat truth = sim->GroundTruthDepthUm();
-  EXPECT_GE(cv::countNonZero((truth >= r.z_start_um) & (truth <= r.z_end_um)), 0.99 * double(truth.total()));
+  EXPECT_GE(Coverage(*rig, r), 0.99);
 }
 
 // At fine steps well below the coarse step the margin is set by the search's own error: the
@@ -186,33 +200,22 @@ TEST(ZRangeSearchBudgetTest, CoarseFramesAtMostAQuarterOfTheFineScanNearThePart)
 // of 1.5 fine steps (3 um at 2 um steps) cut it (93.4 % of the pixels inside, autorange-evaluate
 // seed 23); a quarter of the 20 um coarse step (5 um) holds it.
 TEST(ZRangeSearchMarginTest, FineStepsBelowTheSearchErrorKeepTheWholePart) {
-  SimulatedRigOptions o;
-  o.specimen = "cutter";
-  o.seed = 23;
-  o.camera_size = {512, 384};
-  auto rig = CreateSimulatedRig(o);
-  ASSERT_TRUE(rig.ok());
-  SimulationControl* sim = (*rig)->simulation();
-  ASSERT_TRUE(sim->SetSpecimenZOffsetUm(243.6).ok());
+  std::unique_ptr<Rig> rig = RigWithSpecimenAt("cutter", 23, 243.6);
+  ASSERT_TRUE(rig);
   ScanPlan plan;
-  plan.exposure_us = (*rig)->scan_defaults().exposure_us;
+  plan.exposure_us = rig->scan_defaults().exposure_us;
   plan.z_step_um = 2.0;
-  auto s = ResolveZRangeSearch({kWindowLowUm, kWindowHighUm, 0.0, 0.0}, 2.0, (*rig)->scan_defaults(), (*rig)->stage());
+  auto s = ResolveZRangeSearch({kWindowLowUm, kWindowHighUm, 0.0, 0.0}, 2.0, rig->scan_defaults(), rig->stage());
   ASSERT_TRUE(s.ok()) << s.status().ToString();
   EXPECT_DOUBLE_EQ(s->margin_um, 5.0);
   plan.z_range_search = *s;
-  const fs::path dir = fs::temp_directory_path() / ("zrange-margin-" + std::to_string(::getpid()));
-  std::atomic<bool> cancel{false};
-  auto out = RunScanWithZRangeSearch(**rig, plan, dir, nullptr, cancel, nullptr);
-  fs::remove_all(dir);
+  auto out = SearchAndScan(*rig, plan, "margin");
   ASSERT_TRUE(out.ok()) << out.status().ToString();
   const ZRangeSearchRecord& r = *out->manifest.z_range_search;
-  const cv::Mat truth = sim->GroundTruthDepthUm();
-  const double inside = cv::countNonZero((truth >= r.z_start_um) & (truth <= r.z_end_um));
-  EXPECT_GE(inside, 0.99 * double(truth.total())) << r.z_start_um << " .. " << r.z_end_um;
+  EXPECT_GE(Coverage(*rig, r), 0.99) << r.z_start_um << " .. " << r.z_end_um;
   // The search's top estimate is below the truth's P99.5 (the error the margin is for).
-  std::vector<float> h(truth.begin<float>(), truth.end<float>());
-  EXPECT_LT(r.focus_high_um, Percentile(h, 99.5) - 3.0);
+  const cv::Mat truth = rig->simulation()->GroundTruthDepthUm();
+  EXPECT_LT(r.focus_high_um, Percentile(std::vector<float>(truth.begin<float>(), truth.end<float>()), 99.5) - 3.0);
 }
 
 // The coarse step comes from the rig's optics (ScanDefaults.focus_search_step_um: 20 um on the
