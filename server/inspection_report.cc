@@ -292,7 +292,11 @@ std::string ScanMetadataTable(const v1::DepthSummary& d, const cv::Mat& depth_um
     const v1::ZRangeSearchResult& z = d.z_range_search();
     html += Row("Automatic z range",
                 "searched " + FormatFixed(z.window_start_um(), 1) + " … " + FormatFixed(z.window_end_um(), 1) +
-                    " µm, focus " + FormatFixed(z.focus_low_um(), 1) + " … " + FormatFixed(z.focus_high_um(), 1) +
+                    " µm (" + std::to_string(z.coarse_frame_count()) + " coarse frames at " +
+                    FormatFixed(z.coarse_step_um(), 1) + " µm" +
+                    (z.stopped_early() ? ", stopped early: " + FormatFixed(z.settled_percent(), 1) + " % past focus"
+                                       : std::string()) +
+                    "), focus " + FormatFixed(z.focus_low_um(), 1) + " … " + FormatFixed(z.focus_high_um(), 1) +
                     " µm, scanned " + FormatFixed(z.z_start_um(), 1) + " … " + FormatFixed(z.z_end_um(), 1) + " µm");
   }
   if (d.has_ground_truth()) {

@@ -321,6 +321,32 @@ TEST(InspectionReport, EmbeddedPngsDecodeToTheDownscaledSizes) {
   EXPECT_EQ(Render(SmallInput(v1::VERDICT_OK)).find("id=\"all-in-focus\""), std::string::npos);
 }
 
+// The automatic z range's row: window, the coarse frames it took (and why it stopped), where it
+// found focus and what was scanned.
+TEST(InspectionReport, AutomaticZRangeRowSaysHowTheSearchEnded) {
+  InspectionReportInput in = SmallInput(v1::VERDICT_OK);
+  v1::ZRangeSearchResult* z = in.depth.mutable_z_range_search();
+  z->set_window_start_um(100);
+  z->set_window_end_um(600);
+  z->set_coarse_step_um(20);
+  z->set_coarse_frame_count(9);
+  z->set_focus_low_um(200.27);
+  z->set_focus_high_um(265.02);
+  z->set_z_start_um(192.66);
+  z->set_z_end_um(272.64);
+  z->set_settled_percent(99.21);
+  z->set_stopped_early(true);
+  std::string html = Render(in);
+  EXPECT_NE(html.find("searched 100.0 … 600.0 µm (9 coarse frames at 20.0 µm, stopped early: 99.2 % past focus), "
+                      "focus 200.3 … 265.0 µm, scanned 192.7 … 272.6 µm"),
+            std::string::npos)
+      << html;
+  z->set_stopped_early(false);
+  z->set_coarse_frame_count(26);
+  html = Render(in);
+  EXPECT_NE(html.find("searched 100.0 … 600.0 µm (26 coarse frames at 20.0 µm), focus"), std::string::npos);
+}
+
 TEST(InspectionReport, BadMapsAreInvalidArgument) {
   InspectionReportInput in = SmallInput(v1::VERDICT_OK);
   in.depth_um = cv::Mat();
