@@ -112,24 +112,32 @@ Status FocusRangeAccumulator::PushFrame(const cv::Mat& frame, double z_um) {
   return Status::Ok();
 }
 
+bool FocusRangeAccumulator::PeakIsFocus(int r, int c) const {
+  const int n = frames();
+  const int best = argmax_.at<int>(r, c);
+  const float f_max = max_.at<float>(r, c);
+  // The floor: noise and the texture's residue far from focus. A curve that never leaves it
+  // (textureless, or focus outside the window) resolves nothing.
+  if (!(f_max >= options_.min_peak_ratio * std::max(double(min_.at<float>(r, c)), 1e-6))) return false;
+  // Sharpness: two coarse steps away the curve must have fallen by min_sharpness (a focus peak;
+  // a defocused highlight's halo changes slowly and fails).
+  float f_far = 0.0f;
+  if (best >= 2) f_far = std::max(f_far, focus_[size_t(best - 2)].at<float>(r, c));
+  if (best + 2 < n) f_far = std::max(f_far, focus_[size_t(best + 2)].at<float>(r, c));
+  if (!(f_max >= options_.min_sharpness * f_far)) return false;
+  return saturated_[size_t(best)].at<float>(r, c) <= options_.max_saturated_share;
+}
+
 double FocusRangeAccumulator::SettledPercent() const {
   const int n = frames();
   if (n < 3) return 0.0;
   long settled = 0;
   for (int r = 0; r < max_.rows; ++r) {
-    const float* f_max = max_.ptr<float>(r);
-    const float* f_min = min_.ptr<float>(r);
     const int* best = argmax_.ptr<int>(r);
     for (int c = 0; c < max_.cols; ++c) {
-      // The same tests as Finish's, except that the peak need not have a frame below it (focus
-      // at or below the window's start is passed too).
-      const int b = best[c];
-      if (b + 2 >= n) continue;
-      if (!(f_max[c] >= options_.min_peak_ratio * std::max(double(f_min[c]), 1e-6))) continue;
-      if (!(f_max[c] >= options_.min_sharpness * focus_[size_t(b + 2)].at<float>(r, c))) continue;
-      if (b >= 2 && !(f_max[c] >= options_.min_sharpness * focus_[size_t(b - 2)].at<float>(r, c))) continue;
-      if (saturated_[size_t(b)].at<float>(r, c) > options_.max_saturated_share) continue;
-      ++settled;
+      // Finish's tests, with the frame two past the peak taken; the peak need not have a frame
+      // below it (focus at or below the window's start is passed too).
+      if (best[c] + 2 < n && PeakIsFocus(r, c)) ++settled;
     }
   }
   return 100.0 * double(settled) / double(max_.total());
@@ -219,52 +227,24 @@ StatusOr<FocusRangeEstimate> FocusRangeAccumulator::Finish() const {
   e.peak_z_um.create(size, CV_32FC1);
   std::vector<float> peaks;
   peaks.reserve(size_t(size.area()));
-  std::vector<const float*> rows(static_cast<size_t>(n));
   long at_first = 0, at_last = 0;
   for (int r = 0; r < size.height; ++r) {
-    for (int k = 0; k < n; ++k) rows[size_t(k)] = focus_[size_t(k)].ptr<float>(r);
+    const int* best_row = argmax_.ptr<int>(r);
+    const float* max_row = max_.ptr<float>(r);
     float* out = e.peak_z_um.ptr<float>(r);
     for (int c = 0; c < size.width; ++c) {
-      int best = 0;
-      float f_max = rows[0][c], f_min = rows[0][c];
-      for (int k = 1; k < n; ++k) {
-        const float f = rows[size_t(k)][c];
-        if (f > f_max) {
-          f_max = f;
-          best = k;
-        }
-        f_min = std::min(f_min, f);
-      }
-      // The floor: noise and the texture's residue far from focus. A curve that never leaves
-      // it (textureless, or focus outside the window) resolves nothing.
-      const double floor = std::max(double(f_min), 1e-6);
-      if (!(f_max >= options_.min_peak_ratio * floor)) {
-        out[c] = std::numeric_limits<float>::quiet_NaN();
-        continue;
-      }
-      // Sharpness: two coarse steps away the curve must have fallen by min_sharpness (a
-      // focus peak; a defocused highlight's halo changes slowly and fails).
-      float f_far = 0.0f;
-      if (best >= 2) f_far = std::max(f_far, rows[size_t(best - 2)][c]);
-      if (best + 2 < n) f_far = std::max(f_far, rows[size_t(best + 2)][c]);
-      if (!(f_max >= options_.min_sharpness * f_far)) {
-        out[c] = std::numeric_limits<float>::quiet_NaN();
-        continue;
-      }
-      if (saturated_[size_t(best)].at<float>(r, c) > options_.max_saturated_share) {
-        out[c] = std::numeric_limits<float>::quiet_NaN();
-        continue;
-      }
+      out[c] = std::numeric_limits<float>::quiet_NaN();
+      if (!PeakIsFocus(r, c)) continue;
       // A maximum at the first or last frame says only that focus lies at or beyond the window's
       // end (or a halo grows towards it): counted, not used for the range.
+      const int best = best_row[c];
       if (best == 0 || best == n - 1) {
         (best == 0 ? at_first : at_last) += 1;
-        out[c] = std::numeric_limits<float>::quiet_NaN();
         continue;
       }
-      const double z = DefocusParabolaPeakZ(z_um_[size_t(best - 1)], z_um_[size_t(best)], z_um_[size_t(best + 1)],
-                                            rows[size_t(best - 1)][c], f_max, rows[size_t(best + 1)][c]);
-      out[c] = float(z);
+      out[c] = float(DefocusParabolaPeakZ(z_um_[size_t(best - 1)], z_um_[size_t(best)], z_um_[size_t(best + 1)],
+                                          focus_[size_t(best - 1)].at<float>(r, c), max_row[c],
+                                          focus_[size_t(best + 1)].at<float>(r, c)));
     }
   }
   RejectInconsistentPeaks(options_.consistency_radius, std::abs(z_um_[1] - z_um_[0]), &e.peak_z_um);

@@ -118,6 +118,10 @@ class FocusRangeAccumulator {
   int bit_depth_ = 8;
   std::vector<double> z_um_;
   std::vector<cv::Mat> saturated_;  // CV_32FC1 share of saturated pixels in each window
+  // Whether reduced pixel (r, c)'s maximum so far is a focus peak: out of its floor, sharp,
+  // unclipped (Finish and SettledPercent).
+  bool PeakIsFocus(int r, int c) const;
+
   std::vector<cv::Mat> focus_;      // CV_32FC1 reduced focus measure per frame
   cv::Mat max_, min_;               // CV_32FC1 running maximum / minimum of each pixel's curve
   cv::Mat argmax_;                  // CV_32SC1 frame of the maximum (the first, on ties)
