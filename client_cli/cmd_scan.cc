@@ -129,7 +129,7 @@ void RegisterScanCommand(CLI::App& app, CliContext& context) {
       });
   cmd->add_option("--coarse-step", f->coarse_step_um, "--auto-range: coarse sweep step, um (unset: the rig's, from its optics)")
       ->needs(auto_range);
-  cmd->add_option("--margin", f->margin_um, "--auto-range: margin added each side, um (unset: 1.5 z steps, >= 1/4 coarse step)")
+  cmd->add_option("--margin", f->margin_um, "--auto-range: margin added each side, um (unset: 1.5 z steps, >= 1/8 coarse step)")
       ->needs(auto_range);
   cmd->add_option("--illumination", f->illumination,
                   "std | hdr | adapt-it | adapt | texture | hf+adapt | adapted-hf | auto (unset: server default)")

@@ -124,11 +124,12 @@ void PrintDepthSummary(const v1::DepthSummary& d) {
     const v1::ZRangeSearchResult& z = d.z_range_search();
     std::cout << Format(
         "z range: automatic, %.2f .. %.2f um (focus found at %.2f .. %.2f um, margin %.2f um); "
-        "%d coarse frames over %.2f .. %.2f um at %.2f um%s, %.2f s\n",
+        "%d coarse frames over %.2f .. %.2f um at %.2f um%s%s, %.2f s\n",
         z.z_start_um(), z.z_end_um(), z.focus_low_um(), z.focus_high_um(), z.margin_um(), z.coarse_frame_count(),
         z.window_start_um(), z.window_end_um(), z.coarse_step_um(),
         z.stopped_early() ? Format(" (stopped early: %.1f %% of the field past focus)", z.settled_percent()).c_str()
                           : "",
+        z.refine_frame_count() > 0 ? Format(", %d refining its ends", z.refine_frame_count()).c_str() : "",
         z.search_seconds());
   }
   if (d.method() != v1::RECONSTRUCTION_METHOD_UNSPECIFIED && d.method() != v1::RECONSTRUCTION_METHOD_SFF) {

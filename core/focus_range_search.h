@@ -57,9 +57,10 @@ struct FocusRangeSearchOptions {
   // is not resolved: a clipped area is flat at focus and its "peak" is the edge of a defocused
   // highlight passing by (polished lands, mirror-like fields).
   double max_saturated_share = 0.2;
-  // The range is taken over the clusters of peak heights, not single peaks: peaks binned at the
-  // coarse step, a cluster is a run of bins each holding >= min_bin_percent of the resolved
-  // peaks plus the sparser bin on either side (the partial bin at a surface's end). Clusters
+  // The range is taken over the clusters of peak heights, not single peaks: peaks binned at a
+  // quarter of the coarse step, a cluster is a run of bins each holding >= min_bin_percent / 4
+  // of the resolved peaks (min_bin_percent per coarse step of height) plus the sparser bin on
+  // either side (the partial bin at a surface's end). Clusters
   // holding >= min_cluster_percent are kept, and the largest always: a part's surfaces (also
   // plateaus far apart) are each a large cluster; spurious peaks far from focus (halos of
   // defocused highlights) are sparse and apart from them.
@@ -112,6 +113,28 @@ class FocusRangeAccumulator {
   // pixels resolve a peak (the message gives the share and the likely causes).
   StatusOr<FocusRangeEstimate> Finish() const;
 
+  // Refining the range's ends. A focus curve narrower than the coarse step (a polished field
+  // under the search pattern) has its two neighbour samples on its tails, where a floor of
+  // halos and noise holds them up and the parabola's vertex is drawn towards the frame of the
+  // maximum: up to half a coarse step (the coin's field, 10 um low at 20 um steps). The fine
+  // scan needs the range's ends, so after the sweep, frames half-way between the coarse frame
+  // nearest each end of a first estimate and its two neighbours sample the curves there at
+  // twice the density: 2 frames for a flat part (both ends at one frame), at most 4. Returns
+  // the positions to capture, inside the sweep, ascending, and remembers the coarse frames they
+  // are centred on. Call once, after the sweep.
+  std::vector<double> PlanRefinement(const FocusRangeEstimate& first);
+  static constexpr int kMaxRefinementFrames = 4;
+  // A frame at one of PlanRefinement's positions, each once (FAILED_PRECONDITION before the
+  // plan, INVALID_ARGUMENT at another z or a second time). In Finish, a resolved pixel whose coarse maximum is on a frame the
+  // refinement is centred on takes its vertex from the largest of its samples there (the three
+  // coarse ones and the refinement frames between them) and that sample's neighbours; it is
+  // dropped when those samples do not fall away from the largest (a halo over the surface: two
+  // sources of focus energy within one coarse step) or the largest is clipped. Pixels whose
+  // maximum is on another frame keep their coarse vertex: a refinement frame on one side only
+  // would skew it.
+  Status PushRefinementFrame(const cv::Mat& frame, double z_um);
+  int refinement_frames() const { return int(refine_z_um_.size()); }
+
  private:
   FocusRangeSearchOptions options_;
   cv::Size frame_size_;
@@ -121,10 +144,22 @@ class FocusRangeAccumulator {
   // Whether reduced pixel (r, c)'s maximum so far is a focus peak: out of its floor, sharp,
   // unclipped (Finish and SettledPercent).
   bool PeakIsFocus(int r, int c) const;
+  // The frame's reduced focus measure and saturated share (CV_32FC1), for PushFrame and
+  // PushRefinementFrame; `name` for the errors.
+  Status Reduce(const cv::Mat& frame, double z_um, const std::string& name, cv::Mat* energy,
+                cv::Mat* saturated) const;
+  // Pixel (r, c)'s peak position; NaN when its refined samples reject it. best: coarse frame of
+  // the maximum, 0 < best < frames() - 1.
+  float PeakZ(int r, int c, int best) const;
 
   std::vector<cv::Mat> focus_;      // CV_32FC1 reduced focus measure per frame
   cv::Mat max_, min_;               // CV_32FC1 running maximum / minimum of each pixel's curve
   cv::Mat argmax_;                  // CV_32SC1 frame of the maximum (the first, on ties)
+  // Refinement frames, in the order pushed, and the coarse frames they are centred on
+  // (PlanRefinement).
+  std::vector<int> refine_centres_;
+  std::vector<double> refine_planned_z_um_, refine_z_um_;
+  std::vector<cv::Mat> refine_focus_, refine_saturated_;
 };
 
 // The coarse z positions covering [window low, window high] at coarse_step_um, including both

@@ -162,10 +162,13 @@ Status WriteStackManifest(const fs::path& dir, const StackManifest& m) {
                {"z_start_um", r->z_start_um},
                {"z_end_um", r->z_end_um},
                {"search_seconds", r->search_seconds},
-               {"coarse_frames", json::array()}};
-    for (const auto& f : r->coarse_frames) {
-      jr["coarse_frames"].push_back(
-          {{"file", f.file}, {"z_um", f.z_um}, {"exposure_us", f.exposure_us}, {"pattern", f.pattern}});
+               {"coarse_frames", json::array()},
+               {"refine_frames", json::array()}};
+    for (const auto* list : {&r->coarse_frames, &r->refine_frames}) {
+      json& out = jr[list == &r->coarse_frames ? "coarse_frames" : "refine_frames"];
+      for (const auto& f : *list) {
+        out.push_back({{"file", f.file}, {"z_um", f.z_um}, {"exposure_us", f.exposure_us}, {"pattern", f.pattern}});
+      }
     }
     j["z_range_search"] = std::move(jr);
   }

@@ -296,6 +296,9 @@ std::string ScanMetadataTable(const v1::DepthSummary& d, const cv::Mat& depth_um
                     FormatFixed(z.coarse_step_um(), 1) + " µm" +
                     (z.stopped_early() ? ", stopped early: " + FormatFixed(z.settled_percent(), 1) + " % past focus"
                                        : std::string()) +
+                    (z.refine_frame_count() > 0
+                         ? ", " + std::to_string(z.refine_frame_count()) + " refining the ends"
+                         : std::string()) +
                     "), focus " + FormatFixed(z.focus_low_um(), 1) + " … " + FormatFixed(z.focus_high_um(), 1) +
                     " µm, scanned " + FormatFixed(z.z_start_um(), 1) + " … " + FormatFixed(z.z_end_um(), 1) + " µm");
   }

@@ -245,6 +245,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
     z->set_window_end_um(r->window_end_um);
     z->set_coarse_step_um(r->coarse_step_um);
     z->set_coarse_frame_count(int(r->coarse_frames.size()));
+    z->set_refine_frame_count(int(r->refine_frames.size()));
     z->set_focus_low_um(r->focus_low_um);
     z->set_focus_high_um(r->focus_high_um);
     z->set_resolved_percent(r->resolved_percent);

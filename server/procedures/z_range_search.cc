@@ -31,7 +31,7 @@ StatusOr<ZRangeSearchSettings> ResolveZRangeSearch(const ZRangeSearchSettings& r
   }
   if (!(s.margin_um >= 0.0) || !std::isfinite(s.margin_um)) {
     return Status::InvalidArgument(
-        "z_range_search.margin_um must be >= 0 (0 = the default: 1.5 fine steps, at least a quarter of the coarse "
+        "z_range_search.margin_um must be >= 0 (0 = the default: 1.5 fine steps, at least an eighth of the coarse "
         "step)");
   }
   // The window and step checks, with the fields' names.
@@ -46,6 +46,7 @@ namespace {
 struct CoarseSweep {
   std::vector<double> z_um;
   std::vector<StackFrame> frames;
+  std::vector<StackFrame> refine_frames;  // after the sweep, at the found range's ends
   FocusRangeEstimate estimate;
   double settled_percent = 0.0;  // when the sweep ended
   bool stopped_early = false;    // before the window's end: the field had settled
@@ -75,30 +76,27 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
   const double exposure_us = std::max(1.0, std::round(0.5 * plan.exposure_us));
   if (camera.exposure_us() != exposure_us) INSPECT_RETURN_IF_ERROR(camera.SetExposure(exposure_us));
   const int n = int(sweep.z_um.size());
-  for (int i = 0; i < n; ++i) {
-    if (cancel.load()) {
-      return Status::Cancelled("scan cancelled in the z range search at coarse frame " + std::to_string(i) + " of " +
-                               std::to_string(n));
-    }
-    INSPECT_RETURN_IF_ERROR(
-        stage.MoveTo(sweep.z_um[size_t(i)]).WithContext("coarse frame " + std::to_string(i) + ": stage"));
+  // Progress counts the sweep and the refinement frames it may add.
+  const int planned = n + FocusRangeAccumulator::kMaxRefinementFrames;
+  // One capture of the search: stage, frame, raw/ file, statistics, progress event.
+  auto capture = [&](int i, double z_um, const char* what, std::vector<StackFrame>* record) -> StatusOr<cv::Mat> {
+    const std::string name = std::string(what) + " frame " + std::to_string(i);
+    if (cancel.load()) return Status::Cancelled("scan cancelled in the z range search at " + name);
+    INSPECT_RETURN_IF_ERROR(stage.MoveTo(z_um).WithContext(name + ": stage"));
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, camera.Capture());
-    if (frame.size() != camera.frame_size()) {
-      return Status::Internal("coarse frame " + std::to_string(i) + ": camera delivered an unexpected size");
-    }
-    const std::string file = "raw/" + RawFrameName(i, "coarse", 0);
+    if (frame.size() != camera.frame_size()) return Status::Internal(name + ": camera delivered an unexpected size");
+    const std::string file = "raw/" + RawFrameName(i, what, 0);
     if (!cv::imwrite((stack_dir / file).string(), frame, {cv::IMWRITE_PNG_COMPRESSION, 1})) {
       return Status::Internal("cannot write " + file);
     }
-    INSPECT_RETURN_IF_ERROR(acc.PushFrame(frame, sweep.z_um[size_t(i)]));
-    sweep.frames.push_back({file, sweep.z_um[size_t(i)], camera.exposure_us(), pattern_name});
+    record->push_back({file, z_um, camera.exposure_us(), pattern_name});
     const FrameStatistics st = ComputeFrameStatistics(frame, camera.bit_depth());
     stats.capture_statistics.push_back(st);
     stats.capture_is_stack_frame.push_back(false);
     if (on_frame) {
       ScanFrameEvent ev;
       ev.index = i;
-      ev.count = n;
+      ev.count = planned;
       INSPECT_ASSIGN_OR_RETURN(ev.z_um, stage.position_um());
       ev.exposure_us = camera.exposure_us();
       ev.statistics = st;
@@ -107,6 +105,11 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
       ev.z_range_search = true;
       on_frame(ev);
     }
+    return frame;
+  };
+  for (int i = 0; i < n; ++i) {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, capture(i, sweep.z_um[size_t(i)], "coarse", &sweep.frames));
+    INSPECT_RETURN_IF_ERROR(acc.PushFrame(frame, sweep.z_um[size_t(i)]));
     // The rest of the window can hold no more focus than the few unsettled pixels'
     // (FocusRangeSearchOptions::stop_settled_percent): skip it.
     if (search_options.stop_settled_percent > 0.0 && i + 1 < n) {
@@ -118,7 +121,18 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
     }
   }
   if (!sweep.stopped_early) sweep.settled_percent = acc.SettledPercent();
-  INSPECT_ASSIGN_OR_RETURN(sweep.estimate, acc.Finish());
+  INSPECT_ASSIGN_OR_RETURN(const FocusRangeEstimate first, acc.Finish());
+  // The range's ends resampled at twice the density (FocusRangeAccumulator::PlanRefinement).
+  const std::vector<double> refine_z = acc.PlanRefinement(first);
+  for (size_t j = 0; j < refine_z.size(); ++j) {
+    const int i = int(sweep.frames.size() + j);
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, capture(i, refine_z[j], "refine", &sweep.refine_frames));
+    INSPECT_RETURN_IF_ERROR(acc.PushRefinementFrame(frame, refine_z[j]));
+  }
+  // The refined samples drop the pixels they show to be halos; should that leave too few
+  // peaks, the sweep's own estimate stands.
+  StatusOr<FocusRangeEstimate> refined = acc.Finish();
+  sweep.estimate = refined.ok() ? *std::move(refined) : first;
   return sweep;
 }
 
@@ -156,6 +170,7 @@ StatusOr<ScanOutcome> RunScanWithZRangeSearch(Rig& rig, const ScanPlan& plan, co
   r.coarse_step_um = s.coarse_step_um;
   r.margin_um = s.margin_um;
   r.coarse_frames = std::move(sweep.frames);
+  r.refine_frames = std::move(sweep.refine_frames);
   r.focus_low_um = sweep.estimate.z_low_um;
   r.focus_high_um = sweep.estimate.z_high_um;
   r.resolved_percent = sweep.estimate.resolved_percent;

@@ -5,8 +5,9 @@
 // Columns: the truth's range of 99 % of the pixels (P0.5 .. P99.5 of GroundTruthDepthUm), the
 // chosen fine range, the margins below / above that truth range in fine steps (negative: the
 // range cuts into it), coverage (% of all pixels whose true height lies in the chosen range),
-// the share of the field with a resolved coarse peak, coarse / fine frames and the search's
-// wall time over the fine scan's acquisition time (same run, same rig).
+// the share of the field with a resolved coarse peak, the sweep's frames, the frames refining
+// the range's ends, (sweep + refinement) / fine frames and the search's wall time over the fine
+// scan's acquisition time (same run, same rig).
 //
 // Usage: autorange-evaluate [--seeds 5,11,23] [--specimens all|a,b,...] [--camera WxH]
 //                           [--window A:B] [--fine-step UM] [--coarse-step UM] [--margin UM]
@@ -39,7 +40,7 @@ struct Row {
   uint64_t seed = 0;
   double offset_um = 0, true_lo = 0, true_hi = 0, chosen_lo = 0, chosen_hi = 0;
   double margin_lo_steps = 0, margin_hi_steps = 0, coverage = 0, resolved = 0, time_ratio = 0, valid = 0;
-  int coarse = 0, fine = 0;
+  int coarse = 0, refine = 0, fine = 0;
   std::string error;
 };
 
@@ -118,6 +119,7 @@ Row RunOne(const std::string& specimen, uint64_t seed, cv::Size camera, double w
   row.coverage = 100.0 * double(inside) / double(heights.size());
   row.resolved = r.resolved_percent;
   row.coarse = int(r.coarse_frames.size());
+  row.refine = int(r.refine_frames.size());
   row.valid = 100.0 * out->depth.valid_fraction;
   row.fine = int(out->manifest.frames.size());
   // The fine scan's acquisition includes its reconstruction setup; both sides are wall time.
@@ -164,11 +166,12 @@ int Main(int argc, char** argv) {
       keep_dir.empty() ? fs::temp_directory_path() / ("autorange-evaluate-" + std::to_string(::getpid())) : keep_dir;
   std::printf("automatic z range: window %.1f .. %.1f um, fine step %.2f um, camera %dx%d\n", w0, w1, fine_step,
               camera.width, camera.height);
-  std::printf("%-8s %4s %7s | %-17s | %-17s | %6s %6s | %7s %7s | %6s %4s %5s | %5s | %6s\n", "specimen", "seed",
-              "offset", "true P0.5..P99.5", "chosen", "m_lo", "m_hi", "cover%", "resolv%", "coarse", "fine", "c/f",
-              "t s/f", "valid%");
+  std::printf("%-8s %4s %7s | %-17s | %-17s | %6s %6s | %7s %7s | %6s %3s %4s %5s | %5s | %6s\n", "specimen", "seed",
+              "offset", "true P0.5..P99.5", "chosen", "m_lo", "m_hi", "cover%", "resolv%", "coarse", "ref", "fine",
+              "c/f", "t s/f", "valid%");
   int failures = 0, rows = 0;
   double worst_cover = 100.0, worst_margin = -1e9, worst_inner = 1e9, max_cf = 0.0, sum_t = 0.0;
+  long sum_search = 0, sum_fine = 0;
   for (const auto& specimen : specimens) {
     for (uint64_t seed : seeds) {
       const Row r = RunOne(specimen, seed, camera, w0, w1, fine_step, coarse_step, margin, work, !keep_dir.empty());
@@ -179,12 +182,15 @@ int Main(int argc, char** argv) {
         continue;
       }
       ++rows;
-      const double cf = double(r.coarse) / double(r.fine);
+      const double cf = double(r.coarse + r.refine) / double(r.fine);
+      sum_search += r.coarse + r.refine;
+      sum_fine += r.fine;
       std::printf(
-          "%-8s %4llu %7.1f | %7.1f .. %7.1f | %7.1f .. %7.1f | %6.2f %6.2f | %7.2f %7.1f | %6d %4d %5.2f | %5.2f | "
+          "%-8s %4llu %7.1f | %7.1f .. %7.1f | %7.1f .. %7.1f | %6.2f %6.2f | %7.2f %7.1f | %6d %3d %4d %5.2f | %5.2f | "
           "%6.1f\n",
           r.specimen.c_str(), (unsigned long long)r.seed, r.offset_um, r.true_lo, r.true_hi, r.chosen_lo, r.chosen_hi,
-          r.margin_lo_steps, r.margin_hi_steps, r.coverage, r.resolved, r.coarse, r.fine, cf, r.time_ratio, r.valid);
+          r.margin_lo_steps, r.margin_hi_steps, r.coverage, r.resolved, r.coarse, r.refine, r.fine, cf, r.time_ratio,
+          r.valid);
       worst_cover = std::min(worst_cover, r.coverage);
       worst_margin = std::max({worst_margin, r.margin_lo_steps, r.margin_hi_steps});
       worst_inner = std::min({worst_inner, r.margin_lo_steps, r.margin_hi_steps});
@@ -193,9 +199,10 @@ int Main(int argc, char** argv) {
     }
   }
   std::printf(
-      "rows %d, failed %d; worst coverage %.2f %%, margins %.2f .. %.2f steps, coarse/fine <= %.2f, "
-      "search time / fine scan time mean %.2f\n",
-      rows, failures, worst_cover, worst_inner, worst_margin, max_cf, rows ? sum_t / rows : 0.0);
+      "rows %d, failed %d; worst coverage %.2f %%, margins %.2f .. %.2f steps, (coarse + ref) / fine <= %.2f "
+      "(summed: %.2f), search time / fine scan time mean %.2f\n",
+      rows, failures, worst_cover, worst_inner, worst_margin, max_cf,
+      sum_fine ? double(sum_search) / double(sum_fine) : 0.0, rows ? sum_t / rows : 0.0);
   std::error_code ec;
   if (keep_dir.empty()) fs::remove_all(work, ec);
   return failures == 0 ? 0 : 1;

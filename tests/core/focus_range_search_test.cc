@@ -14,14 +14,15 @@ namespace {
 
 // A 256x192 frame of two halves at heights h_left / h_right seen with the stage at z: random
 // texture, Gaussian blur of sigma 0.6 + 0.4 |h - z| px, read noise 1 grey level.
-cv::Mat Frame(double h_left, double h_right, double z, uint64_t seed, bool textured = true) {
+cv::Mat Frame(double h_left, double h_right, double z, uint64_t seed, bool textured = true,
+              double blur_px_per_um = 0.4) {
   cv::Mat texture(192, 256, CV_32F);
   cv::RNG tex(12345);
   tex.fill(texture, cv::RNG::NORMAL, 128.0, textured ? 40.0 : 0.0);
   cv::Mat out(texture.size(), CV_32F);
   const int half = texture.cols / 2;
   for (int side = 0; side < 2; ++side) {
-    const double sigma = 0.6 + 0.4 * std::abs((side == 0 ? h_left : h_right) - z);
+    const double sigma = 0.6 + blur_px_per_um * std::abs((side == 0 ? h_left : h_right) - z);
     cv::Mat blurred;
     cv::GaussianBlur(texture, blurred, cv::Size(0, 0), sigma, sigma, cv::BORDER_REFLECT);
     const cv::Rect roi(side * half, 0, half, texture.rows);
@@ -180,6 +181,103 @@ TEST(FocusRangeSearchTest, FieldSettlesTwoFramesPastEachLevelsFocus) {
       EXPECT_NEAR(*std::max_element(settled.begin(), settled.end()), settled[9], 1e-9);
     }
   }
+}
+
+// A sweep of 100 .. 400 um at 20 um with the refinement PlanRefinement asks for; the estimate
+// before (*coarse) and after it.
+StatusOr<FocusRangeEstimate> RefinedSweep(double h_left, double h_right, double blur_px_per_um,
+                                          FocusRangeEstimate* coarse, std::vector<double>* refine_z) {
+  INSPECT_ASSIGN_OR_RETURN(FocusRangeAccumulator acc,
+                           FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8));
+  uint64_t seed = 1;
+  for (double z = 100.0; z <= 400.0 + 1e-9; z += 20.0) {
+    INSPECT_RETURN_IF_ERROR(acc.PushFrame(Frame(h_left, h_right, z, seed++, true, blur_px_per_um), z));
+  }
+  INSPECT_ASSIGN_OR_RETURN(*coarse, acc.Finish());
+  *refine_z = acc.PlanRefinement(*coarse);
+  for (double z : *refine_z) {
+    INSPECT_RETURN_IF_ERROR(acc.PushRefinementFrame(Frame(h_left, h_right, z, seed++, true, blur_px_per_um), z));
+  }
+  return acc.Finish();
+}
+
+// A flat part between two coarse frames with a focus curve about as wide as the coarse step
+// (blur 0.8 px per um): the three coarse samples around the maximum place its vertex up to 7 um
+// off, as the coin's field was (its neighbours sit on the curve's tails). Two frames half a
+// step either side of the frame nearest the found range bring both ends within 2.5 um.
+TEST(FocusRangeSearchTest, RefinementFramesBringAFlatPartsEndsToItsHeight) {
+  double worst_coarse = 0.0;
+  for (double h : {243.0, 247.0, 251.0, 255.0}) {
+    FocusRangeEstimate coarse;
+    std::vector<double> refine_z;
+    auto e = RefinedSweep(h, h, 0.8, &coarse, &refine_z);
+    ASSERT_TRUE(e.ok()) << e.status().ToString();
+    worst_coarse = std::max({worst_coarse, std::abs(coarse.z_low_um - h), std::abs(coarse.z_high_um - h)});
+    EXPECT_NEAR(e->z_low_um, h, 2.5) << h;
+    EXPECT_NEAR(e->z_high_um, h, 2.5) << h;
+    EXPECT_LT(e->z_high_um - e->z_low_um, 3.5) << h;
+    // Midpoints between coarse frames, 2 or 3 (the two ends nearest different frames).
+    ASSERT_GE(refine_z.size(), 2u) << h;
+    ASSERT_LE(refine_z.size(), 3u) << h;
+    EXPECT_TRUE(std::is_sorted(refine_z.begin(), refine_z.end()));
+    for (double z : refine_z) EXPECT_NEAR(std::fmod(z - 100.0, 20.0), 10.0, 1e-9) << h;
+    EXPECT_GE(refine_z.front(), h - 30.0) << h;
+    EXPECT_LE(refine_z.back(), h + 30.0) << h;
+  }
+  EXPECT_GT(worst_coarse, 5.0) << "the coarse samples alone place this part well";
+}
+
+TEST(FocusRangeSearchTest, RefinementOfATwoLevelPartSamplesBothEnds) {
+  FocusRangeEstimate coarse;
+  std::vector<double> refine_z;
+  auto e = RefinedSweep(233.0, 271.0, 0.4, &coarse, &refine_z);
+  ASSERT_TRUE(e.ok()) << e.status().ToString();
+  // The ends are nearest the frames at 240 and 280 um.
+  EXPECT_EQ(refine_z, (std::vector<double>{230.0, 250.0, 270.0, 290.0}));
+  EXPECT_NEAR(e->z_low_um, 233.0, 2.5);
+  EXPECT_NEAR(e->z_high_um, 271.0, 2.5);
+  EXPECT_NEAR(e->resolved_percent, coarse.resolved_percent, 1.0);
+}
+
+// A refined curve that falls away from its largest sample and rises again by more than 1/e^2
+// of it holds two sources of focus energy within one coarse step (a halo beside a surface):
+// the pixel is dropped. Here the refinement frame at 250 um shows no texture while the part at
+// 248 um is sharpest at 240 and still textured at 260.
+TEST(FocusRangeSearchTest, RefinedSamplesThatDipAndRiseAgainAreDropped) {
+  auto acc = FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8);
+  ASSERT_TRUE(acc.ok());
+  uint64_t seed = 1;
+  for (double z = 100.0; z <= 400.0 + 1e-9; z += 20.0) ASSERT_TRUE(acc->PushFrame(Frame(248, 248, z, seed++), z).ok());
+  auto coarse = acc->Finish();
+  ASSERT_TRUE(coarse.ok());
+  EXPECT_GT(coarse->resolved_percent, 90.0);
+  EXPECT_EQ(acc->PlanRefinement(*coarse), (std::vector<double>{230.0, 250.0}));  // around 240
+  ASSERT_TRUE(acc->PushRefinementFrame(cv::Mat(192, 256, CV_8UC1, cv::Scalar(128)), 250.0).ok());
+  auto refined = acc->Finish();
+  ASSERT_FALSE(refined.ok());  // every pixel's samples dip at 250 and rise at 260
+  EXPECT_EQ(refined.status().code(), StatusCode::kFailedPrecondition);
+}
+
+TEST(FocusRangeSearchTest, RefinementFramesAreCheckedAndEndTheSweep) {
+  auto acc = FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8);
+  ASSERT_TRUE(acc.ok());
+  EXPECT_EQ(acc->PushRefinementFrame(Frame(0, 0, 0, 1), 10.0).code(), StatusCode::kFailedPrecondition);
+  for (double z : {0.0, 20.0, 40.0}) ASSERT_TRUE(acc->PushFrame(Frame(20, 20, z, 1), z).ok());
+  EXPECT_EQ(acc->PushRefinementFrame(Frame(20, 20, 10, 3), 10.0).code(), StatusCode::kFailedPrecondition);
+  FocusRangeEstimate flat;
+  flat.z_low_um = flat.z_high_um = 20.0;
+  EXPECT_EQ(acc->PlanRefinement(flat), (std::vector<double>{10.0, 30.0}));
+  EXPECT_EQ(acc->PushRefinementFrame(cv::Mat(10, 10, CV_8UC1), 10.0).code(), StatusCode::kInvalidArgument);
+  for (double z : {-5.0, 0.0, 20.0, 25.0, 45.0}) {
+    const Status s = acc->PushRefinementFrame(Frame(20, 20, z, 2), z);
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument) << z;
+    EXPECT_NE(s.message().find("refinement frame 0"), std::string::npos) << s.message();
+  }
+  ASSERT_TRUE(acc->PushRefinementFrame(Frame(20, 20, 10, 3), 10.0).ok());
+  EXPECT_EQ(acc->refinement_frames(), 1);
+  EXPECT_EQ(acc->PushRefinementFrame(Frame(20, 20, 10, 3), 10.0).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(acc->PushFrame(Frame(20, 20, 60, 4), 60.0).code(), StatusCode::kFailedPrecondition);
+  EXPECT_EQ(acc->frames(), 3);
 }
 
 TEST(SearchPatternCoarseStepTest, FollowsTheOpticsRoundedDown) {

@@ -10,7 +10,8 @@ TEST_F(CliTest, AutoRangeShowsTheSearchPhaseAndTheChosenRange) {
   StartServer();
   const fs::path out = work_ / "auto";
   // skew5 at 320x240: true heights 200 .. ~221 um; window 150 .. 330 um at 20 um: 10 frames
-  // planned; the field settles two frames past its top's focus, so the sweep stops there.
+  // and up to 4 refinement frames planned; the field settles two frames past its top's focus,
+  // so the sweep stops there, and 2-4 frames refine the range's ends.
   CliResult r = Run({"scan", "--out", out.string(), "--auto-range", "--search-window", "150:330", "--coarse-step", "20",
                      "--z-step", "5"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -22,14 +23,18 @@ TEST_F(CliTest, AutoRangeShowsTheSearchPhaseAndTheChosenRange) {
   EXPECT_GE(z.coarse_frame_count(), 6);  // frames at 150 .. 250 um: 230 holds the top, 2 past it
   EXPECT_LE(z.z_start_um(), 200.0);
   EXPECT_GE(z.z_end_um(), 220.0);
-  EXPECT_NE(r.out.find("FOCUS_SEARCH 1/10 z=15"), std::string::npos) << r.out;
-  const std::string last = "(capture " + std::to_string(z.coarse_frame_count()) + ", not kept)";
+  EXPECT_NE(r.out.find("FOCUS_SEARCH 1/14 z=15"), std::string::npos) << r.out;
+  EXPECT_GE(z.refine_frame_count(), 2);
+  const std::string last =
+      "(capture " + std::to_string(z.coarse_frame_count() + z.refine_frame_count()) + ", not kept)";
   EXPECT_NE(r.out.find(last), std::string::npos) << r.out;
   char line[256];
   std::snprintf(line, sizeof line, "z range: automatic, %.2f .. %.2f um", z.z_start_um(), z.z_end_um());
   EXPECT_NE(r.out.find(line), std::string::npos) << r.out;
-  std::snprintf(line, sizeof line, "%d coarse frames over 150.00 .. 330.00 um at 20.00 um (stopped early: %.1f %% ",
-                z.coarse_frame_count(), z.settled_percent());
+  std::snprintf(line, sizeof line,
+                "%d coarse frames over 150.00 .. 330.00 um at 20.00 um (stopped early: %.1f %% of the field past "
+                "focus), %d refining its ends",
+                z.coarse_frame_count(), z.settled_percent(), z.refine_frame_count());
   EXPECT_NE(r.out.find(line), std::string::npos) << r.out;
   EXPECT_TRUE(fs::exists(out / "depth.tiff"));
 }

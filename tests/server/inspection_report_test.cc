@@ -345,6 +345,11 @@ TEST(InspectionReport, AutomaticZRangeRowSaysHowTheSearchEnded) {
   z->set_coarse_frame_count(26);
   html = Render(in);
   EXPECT_NE(html.find("searched 100.0 … 600.0 µm (26 coarse frames at 20.0 µm), focus"), std::string::npos);
+  z->set_refine_frame_count(3);
+  html = Render(in);
+  EXPECT_NE(html.find("searched 100.0 … 600.0 µm (26 coarse frames at 20.0 µm, 3 refining the ends), focus"),
+            std::string::npos)
+      << html;
 }
 
 TEST(InspectionReport, BadMapsAreInvalidArgument) {

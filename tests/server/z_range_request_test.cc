@@ -112,10 +112,14 @@ TEST_F(ZRangeRequestTest, SearchFindsAMovedSpecimenAndReportsBothPhases) {
   ASSERT_TRUE(s.ok()) << s.error_message();
   ASSERT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED) << job.error_message();
   const v1::ZRangeSearchResult& res = job.result().depth().z_range_search();
-  // 100 .. 500 um at the rig's 20 um search step: 21 coarse frames planned. The textured part
-  // settles the field two frames past its top's focus (~357 um), so the sweep stops there.
-  const int planned = 21;
+  // 100 .. 500 um at the rig's 20 um search step: 21 coarse frames and up to 4 refinement
+  // frames planned. The textured part settles the field two frames past its top's focus
+  // (~357 um), so the sweep stops there; then 2-4 frames refine the range's ends.
+  const int planned = 21 + 4;
   const int coarse = res.coarse_frame_count();
+  const int refine = res.refine_frame_count();
+  EXPECT_GE(refine, 2);
+  EXPECT_LE(refine, 4);
   EXPECT_DOUBLE_EQ(res.coarse_step_um(), 20.0);
   EXPECT_TRUE(res.stopped_early());
   EXPECT_GE(res.settled_percent(), 98.0);
@@ -132,15 +136,16 @@ TEST_F(ZRangeRequestTest, SearchFindsAMovedSpecimenAndReportsBothPhases) {
   EXPECT_GE(fine, kMinFineFrames);
   EXPECT_NEAR(0.5 * (res.z_start_um() + res.z_end_um()), 0.5 * (true_lo + true_hi), 5.0);
 
-  // Events: the sweep (FOCUS_SEARCH, not stack frames, counted within the sweep), then the scan.
-  ASSERT_EQ(int(frames.size()), coarse + fine);
+  // Events: the search (FOCUS_SEARCH, not stack frames, counted within the search: sweep, then
+  // refinement), then the scan.
+  ASSERT_EQ(int(frames.size()), coarse + refine + fine);
   double last_progress = 0.0;
   for (int k = 0; k < int(frames.size()); ++k) {
     const v1::JobEvent& e = frames[size_t(k)];
-    const bool search = k < coarse;
+    const bool search = k < coarse + refine;
     EXPECT_EQ(e.phase(), search ? v1::JOB_PHASE_FOCUS_SEARCH : v1::JOB_PHASE_ACQUIRING) << k;
     EXPECT_EQ(e.frame().stack_frame(), !search) << k;
-    EXPECT_EQ(e.frame().frame_index(), search ? k : k - coarse) << k;
+    EXPECT_EQ(e.frame().frame_index(), search ? k : k - coarse - refine) << k;
     EXPECT_EQ(e.frame().frame_count(), search ? planned : fine) << k;
     EXPECT_EQ(e.frame().acquisition_index(), k);
     EXPECT_GE(e.progress(), last_progress) << "progress never goes back (event " << k << ")";
@@ -157,6 +162,12 @@ TEST_F(ZRangeRequestTest, SearchFindsAMovedSpecimenAndReportsBothPhases) {
   ASSERT_TRUE(m.contains("z_range_search"));
   const auto& js = m["z_range_search"];
   EXPECT_EQ(int(js["coarse_frames"].size()), coarse);
+  ASSERT_EQ(int(js["refine_frames"].size()), refine);
+  for (const auto& f : js["refine_frames"]) {
+    // Half-way between two coarse frames of the 20 um grid from 100 um.
+    EXPECT_NEAR(std::fmod(f["z_um"].get<double>() - 100.0, 20.0), 10.0, 1e-6);
+    EXPECT_TRUE(std::filesystem::exists(stack / f["file"].get<std::string>()));
+  }
   EXPECT_TRUE(js["stopped_early"].get<bool>());
   EXPECT_DOUBLE_EQ(js["settled_percent"].get<double>(), res.settled_percent());
   EXPECT_DOUBLE_EQ(js["z_start_um"].get<double>(), res.z_start_um());
