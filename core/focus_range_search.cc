@@ -85,7 +85,7 @@ Status FocusRangeAccumulator::Reduce(const cv::Mat& frame, double z_um, const st
 
 Status FocusRangeAccumulator::PushFrame(const cv::Mat& frame, double z_um) {
   const std::string name = "coarse frame " + std::to_string(z_um_.size());
-  if (!refine_z_um_.empty()) return Status::FailedPrecondition(name + ": the sweep is being refined already");
+  if (!refine_centres_.empty()) return Status::FailedPrecondition(name + ": the sweep's refinement is planned already");
   cv::Mat energy, saturated;
   INSPECT_RETURN_IF_ERROR(Reduce(frame, z_um, name, &energy, &saturated));
   if (z_um_.size() >= 2 && (z_um - z_um_.back()) * (z_um_[1] - z_um_[0]) <= 0.0) {

@@ -132,7 +132,7 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
   // The refined samples drop the pixels they show to be halos; should that leave too few
   // peaks, the sweep's own estimate stands.
   StatusOr<FocusRangeEstimate> refined = acc.Finish();
-  sweep.estimate = refined.ok() ? *std::move(refined) : first;
+  sweep.estimate = refined.ok() ? std::move(refined).value() : first;
   return sweep;
 }
 

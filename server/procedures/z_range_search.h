@@ -1,7 +1,9 @@
 // Automatic z range (issue 18): a coarse sweep over the search window finds where the specimen's
 // focus lies (core/focus_range_search.h), then the normal scan (scan_procedure.h) runs over that
-// range plus the margin at the requested step. Coarse frames are stored under raw/ of the stack
-// ("frame_<i>_coarse0.png") and recorded in stack.json's "z_range_search".
+// range plus the margin at the requested step. After the sweep, 2-4 frames refine the found
+// range's ends (FocusRangeAccumulator::PlanRefinement). The search's frames are stored under
+// raw/ of the stack ("frame_<i>_coarse0.png", "frame_<i>_refine0.png") and recorded in
+// stack.json's "z_range_search" ("coarse_frames", "refine_frames").
 //
 // The coarse frames are captured under a projected checkerboard (cells of kSearchCellProjectorPx
 // projector pixels, 0/255, the STD exposure) instead of STD's uniform grey: through the shared
@@ -59,10 +61,12 @@ inline constexpr double kDefaultMarginCoarseSteps = 0.125;
 StatusOr<ZRangeSearchSettings> ResolveZRangeSearch(const ZRangeSearchSettings& requested, double fine_step_um,
                                                    const ScanDefaults& defaults, const Stage& stage);
 
-// Runs the coarse sweep, chooses the range and runs RunScan over it. plan.z_range_search must be
-// set and plan.z_step_um > 0 (plan.z_um is replaced). on_frame sees the coarse frames with
-// z_range_search = true first, then the scan's frames. The outcome's manifest carries the record
-// (also written to stack.json); images_acquired and capture_statistics include the coarse frames.
+// Runs the coarse sweep and its refinement, chooses the range and runs RunScan over it.
+// plan.z_range_search must be set and plan.z_step_um > 0 (plan.z_um is replaced). on_frame sees
+// the search's frames with z_range_search = true first (index 0.. over the sweep, then the
+// refinement; count = the window's coarse frames + kMaxRefinementFrames), then the scan's
+// frames. The outcome's manifest carries the record (also written to stack.json);
+// images_acquired and capture_statistics include the search's frames.
 // FAILED_PRECONDITION when the sweep finds no focus (core/focus_range_search.h).
 StatusOr<ScanOutcome> RunScanWithZRangeSearch(Rig& rig, const ScanPlan& plan, const std::filesystem::path& stack_dir,
                                               const std::function<void(const ScanFrameEvent&)>& on_frame,
