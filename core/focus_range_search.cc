@@ -178,9 +178,8 @@ std::vector<double> FocusRangeAccumulator::PlanRefinement(const FocusRangeEstima
     }
     return k;
   };
-  auto taken = [&](double z) {
-    auto near = [z](double t) { return std::abs(t - z) < 1e-6; };
-    return std::any_of(out.begin(), out.end(), near) || std::any_of(refine_z_um_.begin(), refine_z_um_.end(), near);
+  auto taken = [&](double z) {  // both ends may share a coarse frame or a neighbour
+    return std::any_of(out.begin(), out.end(), [z](double t) { return std::abs(t - z) < 1e-6; });
   };
   for (double end : {first.z_low_um, first.z_high_um}) {
     const int k = nearest(end);

@@ -161,15 +161,16 @@ Status WriteStackManifest(const fs::path& dir, const StackManifest& m) {
                {"stopped_early", r->stopped_early},
                {"z_start_um", r->z_start_um},
                {"z_end_um", r->z_end_um},
-               {"search_seconds", r->search_seconds},
-               {"coarse_frames", json::array()},
-               {"refine_frames", json::array()}};
-    for (const auto* list : {&r->coarse_frames, &r->refine_frames}) {
-      json& out = jr[list == &r->coarse_frames ? "coarse_frames" : "refine_frames"];
-      for (const auto& f : *list) {
-        out.push_back({{"file", f.file}, {"z_um", f.z_um}, {"exposure_us", f.exposure_us}, {"pattern", f.pattern}});
+               {"search_seconds", r->search_seconds}};
+    auto search_frames = [](const std::vector<StackFrame>& frames) {
+      json list = json::array();
+      for (const auto& f : frames) {
+        list.push_back({{"file", f.file}, {"z_um", f.z_um}, {"exposure_us", f.exposure_us}, {"pattern", f.pattern}});
       }
-    }
+      return list;
+    };
+    jr["coarse_frames"] = search_frames(r->coarse_frames);
+    jr["refine_frames"] = search_frames(r->refine_frames);
     j["z_range_search"] = std::move(jr);
   }
   const fs::path tmp = dir / (std::string(kStackManifestName) + ".tmp");
