@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# inspectd's configuration through the real binary (server/main.cc wiring of server_config):
+# inspectd's configuration through the real binary (server/app/main.cc wiring of server_config):
 # flags > INSPECTD_* environment > --config / INSPECTD_CONFIG file > defaults, unknown keys and
 # bad values exit 2 with one line naming them, --print-config reads back as a config file.
 #   deploy/inspectd_config_test.sh [INSPECTD]     (default build/bin/inspectd)

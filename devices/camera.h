@@ -5,7 +5,7 @@
 #include <opencv2/core.hpp>
 #include <string>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace inspection {
 

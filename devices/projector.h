@@ -4,7 +4,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "devices/camera.h"
 
 namespace inspection {

@@ -45,7 +45,7 @@ struct ScanDefaults {
   double z_step_um = 5.0;  // thesis rig: 5.059 µm
   double exposure_us = 10000.0;
   // Coarse step of the automatic z range's sweep, set by the optics
-  // (core/focus_range_search.h SearchPatternCoarseStepUm); 0 = unknown (4 z steps are used).
+  // (core/sff/focus_range_search.h SearchPatternCoarseStepUm); 0 = unknown (4 z steps are used).
   double focus_search_step_um = 0.0;
 };
 

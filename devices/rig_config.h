@@ -14,7 +14,7 @@
 #include <memory>
 #include <string>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "devices/drivers/apt_stage.h"
 #include "devices/drivers/aravis_camera.h"
 #include "devices/drivers/framebuffer_projector.h"

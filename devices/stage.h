@@ -1,7 +1,7 @@
 // Stage: moves the specimen along the optical axis (z) through the focus plane.
 #pragma once
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "devices/camera.h"
 
 namespace inspection {
@@ -21,7 +21,7 @@ class Stage {
   // Position as last reported by the device (simulated: includes repeatability error).
   virtual StatusOr<double> position_um() = 0;
   // +- bound of the uniform error of one move (datasheet or measured), for measurement
-  // uncertainty (core/depth_noise_model.h); 0 = not characterised.
+  // uncertainty (core/metrology/depth_noise_model.h); 0 = not characterised.
   virtual double repeatability_um() const { return 0.0; }
 };
 

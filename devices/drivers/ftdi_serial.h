@@ -8,7 +8,7 @@
 #include <deque>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "devices/drivers/usb_transport.h"
 
 namespace inspection {

@@ -9,7 +9,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace inspection {
 

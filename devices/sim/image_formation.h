@@ -12,8 +12,8 @@
 #include <memory>
 #include <opencv2/core.hpp>
 
-#include "core/stack_alignment.h"
-#include "core/status.h"
+#include "core/registration/stack_alignment.h"
+#include "core/util/status.h"
 #include "devices/sim/defocus.h"
 #include "devices/sim/projector_camera_geometry.h"
 #include "devices/sim/radiometry.h"
@@ -24,7 +24,7 @@ namespace inspection {
 // Lateral optics through focus (issue 18): a non-telecentric objective's magnification changes
 // with the stage z ("focus breathing") and the stage drifts laterally. The camera grid at z is
 // the specimen grid (the grid of the specimen maps and of the ground truth) transformed by
-// FocusBreathingModel::At(z) (core/stack_alignment.h: scale about the image centre, then shift);
+// FocusBreathingModel::At(z) (core/registration/stack_alignment.h: scale about the image centre, then shift);
 // at reference_z_um it is the specimen grid. All zero = frames registered pixel for pixel.
 struct LateralOptics {
   double breathing_percent_per_100um = 0.0;  // magnification change, % per 100 um of z

@@ -6,7 +6,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace inspection {
 

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <opencv2/core.hpp>
 
-#include "core/status.h"
+#include "core/util/status.h"
 
 namespace inspection {
 

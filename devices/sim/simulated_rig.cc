@@ -8,7 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
-#include "core/focus_range_search.h"
+#include "core/sff/focus_range_search.h"
 #include "devices/sim/image_formation.h"
 #include "devices/sim/specimen.h"
 

@@ -14,7 +14,7 @@
 #include <memory>
 #include <string>
 
-#include "core/status.h"
+#include "core/util/status.h"
 #include "devices/rig.h"
 #include "devices/sim/image_formation.h"
 

@@ -14,11 +14,11 @@
 #include <string>
 
 #include "inspection/v1/inspection.pb.h"
-#include "server/calibration_store.h"
-#include "server/data_store.h"
+#include "server/storage/calibration_store.h"
+#include "server/storage/data_store.h"
 #include "server/http/http_endpoint.h"
-#include "server/job_manager.h"
-#include "server/rig_controller.h"
+#include "server/jobs/job_manager.h"
+#include "server/jobs/rig_controller.h"
 
 namespace inspection {
 

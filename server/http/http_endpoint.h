@@ -18,8 +18,8 @@
 #include <string>
 #include <thread>
 
-#include "core/status.h"
-#include "server/access_control.h"
+#include "core/util/status.h"
+#include "server/security/access_control.h"
 
 namespace httplib {
 class Server;

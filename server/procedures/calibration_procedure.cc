@@ -14,12 +14,12 @@
 #include <random>
 #include <set>
 
-#include "core/camera_response.h"
-#include "core/geometric_calibration.h"
-#include "core/projector_response.h"
-#include "core/psf_calibration.h"
-#include "core/scatter_matrix.h"
-#include "core/stack_alignment.h"
+#include "core/calibration/camera_response.h"
+#include "core/calibration/geometric_calibration.h"
+#include "core/calibration/projector_response.h"
+#include "core/calibration/psf_calibration.h"
+#include "core/calibration/scatter_matrix.h"
+#include "core/registration/stack_alignment.h"
 #include "server/procedures/z_linearity_calibration.h"
 
 namespace inspection {
@@ -511,7 +511,7 @@ Status RunIntegralPsf(Session& s, Targeting& t, const CalibrationOptions& o, Cal
 }
 
 // Focus breathing (issue 18): the textured target scanned through z around its focus; the
-// frames' neighbour registrations give the model scans align with (core/stack_alignment.h).
+// frames' neighbour registrations give the model scans align with (core/registration/stack_alignment.h).
 Status RunFocusBreathing(Session& s, Targeting& t, const CalibrationOptions& o, CalibrationBundle& b,
                          CalibrationStepReport& rep) {
   INSPECT_ASSIGN_OR_RETURN(const double z_focus, t.Use(o.simulated_target));

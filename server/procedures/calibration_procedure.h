@@ -16,9 +16,9 @@
 #include <string>
 #include <vector>
 
-#include "core/calibration_bundle.h"
-#include "core/integral_psf.h"
-#include "core/status.h"
+#include "core/calibration/calibration_bundle.h"
+#include "core/calibration/integral_psf.h"
+#include "core/util/status.h"
 #include "devices/rig.h"
 
 namespace inspection {

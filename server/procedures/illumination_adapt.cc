@@ -1,8 +1,8 @@
 // ADAPT, predictive adaptive illumination (thesis 5.1.3): two initialisation frames at the first
 // z, then per z one capture under the predicted pattern (eq. 5.12) and one correction (eq. 5.5,
 // 5.6, 5.11). Also the compensation loop the ADAPT family shares, and the uniform target.
-#include "core/projector_response.h"
-#include "core/texture_pattern.h"
+#include "core/calibration/projector_response.h"
+#include "core/illumination/texture_pattern.h"
 #include "server/procedures/illumination_families.h"
 
 namespace inspection {

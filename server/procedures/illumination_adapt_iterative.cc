@@ -4,7 +4,7 @@
 // capture is the stack frame; every iteration is kept under raw/.
 #include <limits>
 
-#include "core/projector_response.h"
+#include "core/calibration/projector_response.h"
 #include "server/procedures/illumination_families.h"
 
 namespace inspection {

@@ -3,7 +3,7 @@
 
 #include <cstdio>
 
-#include "core/texture_pattern.h"
+#include "core/illumination/texture_pattern.h"
 
 namespace inspection {
 

@@ -6,9 +6,9 @@
 
 #include <string>
 
-#include "core/calibration_bundle.h"
-#include "core/frame_statistics.h"
-#include "core/status.h"
+#include "core/calibration/calibration_bundle.h"
+#include "core/io/frame_statistics.h"
+#include "core/util/status.h"
 #include "server/procedures/illumination_strategy.h"
 #include "server/procedures/scan_procedure.h"
 

@@ -7,7 +7,7 @@
 #include <memory>
 #include <opencv2/core.hpp>
 
-#include "core/compensation.h"
+#include "core/illumination/compensation.h"
 #include "server/procedures/illumination_strategy.h"
 
 namespace inspection {
@@ -58,7 +58,7 @@ class AdaptiveCompensation {
   StatusOr<cv::Mat> Shown(const cv::Mat& irradiance) const;
   // Eq. 5.5, 5.6, 5.11 on `frame`, captured while `pattern` was shown at exposure_us; the solve
   // starts from warm_start (the adapted irradiance without any added checkerboard). shown_at:
-  // where the correction will be shown (core/compensation.h).
+  // where the correction will be shown (core/illumination/compensation.h).
   StatusOr<CompensationStep> Correct(const cv::Mat& pattern, const cv::Mat& frame, double exposure_us,
                                      const cv::Mat& warm_start, ShownAt shown_at) const;
   const ProjectorResponseFunction& prf() const { return *prf_; }

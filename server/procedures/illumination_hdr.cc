@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "core/camera_response.h"
+#include "core/calibration/camera_response.h"
 #include "server/procedures/illumination_families.h"
 
 namespace inspection {

@@ -9,8 +9,8 @@
 #include <opencv2/core.hpp>
 #include <string>
 
-#include "core/calibration_bundle.h"
-#include "core/status.h"
+#include "core/calibration/calibration_bundle.h"
+#include "core/util/status.h"
 #include "server/procedures/scan_procedure.h"
 
 namespace inspection {

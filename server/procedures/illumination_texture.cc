@@ -4,7 +4,7 @@
 // ADAPTED-HF compensates towards a checkerboard camera image (5.3.2).
 #include <string>
 
-#include "core/texture_pattern.h"
+#include "core/illumination/texture_pattern.h"
 #include "server/procedures/illumination_families.h"
 
 namespace inspection {
@@ -67,7 +67,7 @@ CompensationTargetFactory HfAdaptTarget(const ScanPlan& plan, const CalibrationB
     INSPECT_ASSIGN_OR_RETURN(TexturePeriod period, PlanTexturePeriod(plan, bundle));
     CompensationTarget t;
     t.options = plan.params.compensation;
-    // The reflectance estimate averages over one checkerboard period (core/compensation.h).
+    // The reflectance estimate averages over one checkerboard period (core/illumination/compensation.h).
     t.options.texture_period_camera_px = 2.0 * period.half_period_camera_px;
     t.desired_grey = cv::Mat(setup.camera_size, CV_32FC1, cv::Scalar(plan.params.target_grey * LevelScale(setup)));
     t.added_checkerboard = CheckerboardMask(setup.projector_size, period.cell_projector_px);

@@ -4,7 +4,7 @@
 
 #include <opencv2/core.hpp>
 
-#include "core/stack.h"
+#include "core/io/stack.h"
 
 namespace inspection {
 

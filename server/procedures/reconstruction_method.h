@@ -1,16 +1,16 @@
 // Reconstruction methods of a stack (ReconstructionOptions.method): shape from focus (thesis
 // 3.1, the streaming SffEngine) or integral SFF (thesis 5.4, 6.4: ISFF, ISFF-GT, ISFF-FAST over
-// core/integral_sff.h), with what each needs (the calibrated IPSF, uniform illumination, the
+// core/sff/integral_sff.h), with what each needs (the calibrated IPSF, uniform illumination, the
 // simulated rig's ground truth) checked here for both Scan and Reconstruct.
 #pragma once
 
 #include <filesystem>
 #include <string>
 
-#include "core/calibration_bundle.h"
-#include "core/integral_sff.h"
-#include "core/sff_options.h"
-#include "core/status.h"
+#include "core/calibration/calibration_bundle.h"
+#include "core/sff/integral_sff.h"
+#include "core/sff/sff_options.h"
+#include "core/util/status.h"
 
 namespace inspection {
 
@@ -59,7 +59,7 @@ Status CheckIntegralIllumination(const std::string& illumination);
 // need the IPSF in `bundle` (may be null). FAILED_PRECONDITION saying which; OK for SFF.
 Status CheckStackFolderMethod(const ReconstructionMethodSettings& settings, const CalibrationBundle* bundle);
 
-// ISFF or ISFF-FAST over a stack folder (core/stack.h) in the two streaming passes of
+// ISFF or ISFF-FAST over a stack folder (core/io/stack.h) in the two streaming passes of
 // ReconstructIntegralSffStack, with the IPSF of `bundle`; CheckStackFolderMethod and
 // CheckIntegralIllumination first.
 StatusOr<IsffResult> ReconstructStackFolderIntegralSff(const std::filesystem::path& dir,

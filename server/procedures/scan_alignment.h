@@ -1,13 +1,13 @@
 // Lateral alignment during a scan (issue 18): which alignment a scan runs and the aligner that
 // warps each stack frame onto the middle frame's grid before the engine measures its focus, with
-// the calibrated focus-breathing model (core/stack_alignment.h). The stored stack keeps the
+// the calibrated focus-breathing model (core/registration/stack_alignment.h). The stored stack keeps the
 // frames as captured.
 #pragma once
 
 #include <optional>
 
-#include "core/calibration_bundle.h"
-#include "core/stack_alignment.h"
+#include "core/calibration/calibration_bundle.h"
+#include "core/registration/stack_alignment.h"
 #include "server/procedures/scan_procedure.h"
 
 namespace inspection {

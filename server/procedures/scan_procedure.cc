@@ -7,8 +7,9 @@
 #include <cstdio>
 #include <opencv2/imgcodecs.hpp>
 
-#include "core/depth_export.h"
+#include "core/io/depth_export.h"
 #include "devices/sim/simulated_rig.h"
+#include "core/sff/stack_reconstruct.h"
 #include "server/procedures/illumination_auto.h"
 #include "server/procedures/illumination_strategy.h"
 #include "server/procedures/scan_alignment.h"
@@ -345,7 +346,7 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
     out.isff.frame_noise_sigma = 0.0;  // ISFF-GT's template is noise-free; nothing is estimated
     out.isff.frames_searched_fraction = cv::mean(engine.ncc->frames_searched())[0] / double(count);
   } else {
-    // ISFF, ISFF-FAST: the restored template needs the whole stack (core/integral_sff.h).
+    // ISFF, ISFF-FAST: the restored template needs the whole stack (core/sff/integral_sff.h).
     INSPECT_RETURN_IF_ERROR(recorder.CheckCancel(count));
     INSPECT_ASSIGN_OR_RETURN(IsffResult isff,
                              ReconstructStackFolderIntegralSff(stack_dir, plan.reconstruction, plan.sff, bundle));
@@ -353,7 +354,7 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
     out.isff = FiguresOf(isff);
   }
   if (aligner) {
-    aligner->MaskUnseen(&out.depth);
+    MaskUnseenPixels(*aligner, &out.depth);
     out.alignment = aligner->figures();
   }
   out.engine_finish_seconds = std::chrono::duration<double>(Clock::now() - t1).count();

@@ -15,15 +15,15 @@
 #include <string>
 #include <vector>
 
-#include "core/calibration_bundle.h"
-#include "core/compensation.h"
-#include "core/depth_postprocess.h"
-#include "core/focus_range_search.h"
-#include "core/frame_statistics.h"
-#include "core/sff_engine.h"
-#include "core/stack.h"
-#include "core/stack_alignment.h"
-#include "core/status.h"
+#include "core/calibration/calibration_bundle.h"
+#include "core/illumination/compensation.h"
+#include "core/sff/depth_postprocess.h"
+#include "core/sff/focus_range_search.h"
+#include "core/io/frame_statistics.h"
+#include "core/sff/sff_engine.h"
+#include "core/io/stack.h"
+#include "core/registration/stack_alignment.h"
+#include "core/util/status.h"
 #include "devices/rig.h"
 #include "server/procedures/reconstruction_method.h"
 
@@ -84,7 +84,7 @@ struct ScanPlan {
   // Lateral alignment (scan_alignment.h): kNone or kCalibrated; nullopt = kCalibrated when the
   // bundle holds the focus_breathing model, else kNone.
   std::optional<FrameAlignment> alignment;
-  // SFF: the engine runs with min_confidence 0 and this makes the map (core/depth_postprocess.h),
+  // SFF: the engine runs with min_confidence 0 and this makes the map (core/sff/depth_postprocess.h),
   // thresholding at sff.min_confidence (postprocess.min_confidence is not used).
   DepthPostProcessOptions postprocess;
 };

@@ -3,7 +3,7 @@
 
 #include <cmath>
 
-#include "core/sff_engine.h"
+#include "core/sff/sff_engine.h"
 
 namespace inspection {
 

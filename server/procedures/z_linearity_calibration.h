@@ -1,7 +1,7 @@
-// The z-linearity calibration step (issue 13; core/z_linearity.h): a smooth tilted flat scanned
+// The z-linearity calibration step (issue 13; core/metrology/z_linearity.h): a smooth tilted flat scanned
 // through z at the step scans use, reconstructed with the default SFF options, and the depth's
 // periodic error between frames tabulated. Measurement uncertainties then use this table
-// instead of the +-1/2 step peak-locking bound (core/depth_noise_model.h), which is safe but
+// instead of the +-1/2 step peak-locking bound (core/metrology/depth_noise_model.h), which is safe but
 // 2-20x too wide.
 #pragma once
 
@@ -10,9 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "core/sff_options.h"
-#include "core/status.h"
-#include "core/z_linearity.h"
+#include "core/sff/sff_options.h"
+#include "core/util/status.h"
+#include "core/metrology/z_linearity.h"
 
 namespace inspection {
 

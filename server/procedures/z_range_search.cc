@@ -1,5 +1,5 @@
 // Automatic z range: the coarse sweep on the rig, the range it finds and the fine scan over it
-// (z_range_search.h; core/focus_range_search.h for the maths).
+// (z_range_search.h; core/sff/focus_range_search.h for the maths).
 #include "server/procedures/z_range_search.h"
 
 #include <algorithm>
@@ -7,8 +7,8 @@
 #include <cmath>
 #include <opencv2/imgcodecs.hpp>
 
-#include "core/frame_statistics.h"
-#include "core/texture_pattern.h"
+#include "core/io/frame_statistics.h"
+#include "core/illumination/texture_pattern.h"
 #include "server/procedures/illumination_strategy.h"
 
 namespace inspection {

@@ -1,5 +1,5 @@
 // Automatic z range (issue 18): a coarse sweep over the search window finds where the specimen's
-// focus lies (core/focus_range_search.h), then the normal scan (scan_procedure.h) runs over that
+// focus lies (core/sff/focus_range_search.h), then the normal scan (scan_procedure.h) runs over that
 // range plus the margin at the requested step. After the sweep, 2-4 frames refine the found
 // range's ends (FocusRangeAccumulator::PlanRefinement). The search's frames are stored under
 // raw/ of the stack ("frame_<i>_coarse0.png", "frame_<i>_refine0.png") and recorded in
@@ -16,15 +16,15 @@
 #include <filesystem>
 #include <functional>
 
-#include "core/calibration_bundle.h"
-#include "core/focus_range_search.h"
-#include "core/status.h"
+#include "core/calibration/calibration_bundle.h"
+#include "core/sff/focus_range_search.h"
+#include "core/util/status.h"
 #include "devices/rig.h"
 #include "server/procedures/scan_procedure.h"
 
 namespace inspection {
 
-// The pattern's cell is kSearchCellProjectorPx (core/focus_range_search.h): 3.4 camera pixels
+// The pattern's cell is kSearchCellProjectorPx (core/sff/focus_range_search.h): 3.4 camera pixels
 // per projector pixel on the thesis rig, a period of ~14 camera pixels, resolved by the focus
 // measure at 1/4 scale.
 // Most coarse frames one search may take (a window / step needing more is INVALID_ARGUMENT).
@@ -32,7 +32,7 @@ inline constexpr int kMaxCoarseFrames = 200;
 inline constexpr double kDefaultCoarseSteps = 4.0;
 // The fine scan takes at least this many frames, whatever the part's height: a flat part gets
 // its focus frame and 3 steps on each side (the issue's largest margin). The SFF engine's
-// confidence (core/depth_interpolation.h FocusConfidence) estimates each curve's noise from its
+// confidence (core/sff/depth_interpolation.h FocusConfidence) estimates each curve's noise from its
 // second differences away from the peak; on short stacks most of those hold the peak's own
 // flanks, which it weights down (FocusCurveSummary::flank_terms). Measured at 5 um steps
 // (autorange-evaluate, 3 seeds, 512x384, STD): plane and step1um at 7 frames 91-100 % valid
@@ -67,7 +67,7 @@ StatusOr<ZRangeSearchSettings> ResolveZRangeSearch(const ZRangeSearchSettings& r
 // refinement; count = the window's coarse frames + kMaxRefinementFrames), then the scan's
 // frames. The outcome's manifest carries the record (also written to stack.json);
 // images_acquired and capture_statistics include the search's frames.
-// FAILED_PRECONDITION when the sweep finds no focus (core/focus_range_search.h).
+// FAILED_PRECONDITION when the sweep finds no focus (core/sff/focus_range_search.h).
 StatusOr<ScanOutcome> RunScanWithZRangeSearch(Rig& rig, const ScanPlan& plan, const std::filesystem::path& stack_dir,
                                               const std::function<void(const ScanFrameEvent&)>& on_frame,
                                               const std::atomic<bool>& cancel, const CalibrationBundle* bundle);

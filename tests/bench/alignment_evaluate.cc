@@ -20,9 +20,9 @@
 #include <string>
 #include <vector>
 
-#include "core/depth_metrics.h"
-#include "core/stack_reconstruct.h"
-#include "core/depth_postprocess.h"
+#include "core/metrology/depth_metrics.h"
+#include "core/sff/stack_reconstruct.h"
+#include "core/sff/depth_postprocess.h"
 #include "devices/sim/natural_scene.h"
 #include "devices/sim/simulated_rig.h"
 #include "server/procedures/calibration_procedure.h"
@@ -182,7 +182,7 @@ Row NaturalRow(const Perturbation& p, cv::Size size) {
   cv::warpAffine(truth_um, truth_ref, truth.FrameFromReference(z[size_t((n - 1) / 2)], 0.0), size, cv::INTER_NEAREST,
                  cv::BORDER_REFLECT_101);
   // The product's output: the engine without a threshold, then the default post-processing
-  // (confidence, depth consistency: core/depth_postprocess.h), as a reconstruction does.
+  // (confidence, depth consistency: core/sff/depth_postprocess.h), as a reconstruction does.
   SffOptions so;
   so.min_confidence = 0.0;
   auto post = [&](const DepthResult& raw) { return Must(PostProcessDepth(raw, z, so.window_px, {}), "post"); };
@@ -202,7 +202,7 @@ Row NaturalRow(const Perturbation& p, cv::Size size) {
     if (Status s = engine->PushFrame(w, z[size_t(k)]); !s.ok()) Die(s, "push");
   }
   DepthResult aligned = post(Must(engine->Finish(), "finish"));
-  aligner.MaskUnseen(&aligned);
+  MaskUnseenPixels(aligner, &aligned);
   const double s_est = Seconds(t0);
   row.estimated = CompareDepth(aligned.depth_um, truth_ref, 1e9, kBorderPx);
   row.seen_percent = aligner.figures().seen_by_every_frame_percent;

@@ -9,8 +9,8 @@
 #include <Eigen/SparseCore>
 #include <opencv2/imgproc.hpp>
 
-#include "core/geometric_calibration.h"
-#include "core/scatter_matrix.h"
+#include "core/calibration/geometric_calibration.h"
+#include "core/calibration/scatter_matrix.h"
 
 namespace inspection {
 namespace {

@@ -9,7 +9,7 @@
 #include <cmath>
 #include <vector>
 
-#include "core/compensation.h"
+#include "core/illumination/compensation.h"
 
 namespace inspection {
 namespace {

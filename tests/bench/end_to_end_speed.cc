@@ -41,7 +41,7 @@
 #include <vector>
 
 #include "client_cli/inspection_client.h"
-#include "server/inspection_server.h"
+#include "server/app/inspection_server.h"
 #include "tests/bench/process_memory.h"
 
 namespace fs = std::filesystem;

@@ -20,9 +20,9 @@
 #include <string>
 #include <vector>
 
-#include "core/depth_export.h"
-#include "core/sff_engine.h"
-#include "core/stack.h"
+#include "core/io/depth_export.h"
+#include "core/sff/sff_engine.h"
+#include "core/io/stack.h"
 #include "tests/bench/process_memory.h"
 
 namespace fs = std::filesystem;

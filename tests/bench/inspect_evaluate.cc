@@ -20,7 +20,7 @@
 // --bias-only prints only the bias table; --specimens / --modes restrict it (for quick checks).
 // --isff-only prints only the integral SFF part (--camera and --seed apply to it when given),
 // --no-isff leaves it out. --no-consistency turns the depth consistency check of the post-processing
-// off (core/depth_postprocess.h), for comparing the default with and without it. Exit status 3
+// off (core/sff/depth_postprocess.h), for comparing the default with and without it. Exit status 3
 // when a mode exceeds the bias bound, 1 on a failure.
 #include <unistd.h>
 
@@ -34,7 +34,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "core/depth_metrics.h"
+#include "core/metrology/depth_metrics.h"
 #include "devices/sim/simulated_rig.h"
 #include "devices/sim/specimen.h"
 #include "server/procedures/calibration_procedure.h"

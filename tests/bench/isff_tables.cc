@@ -25,10 +25,10 @@
 #include <random>
 #include <string>
 
-#include "core/depth_metrics.h"
-#include "core/integral_sff.h"
-#include "core/sff_engine.h"
-#include "core/stack.h"
+#include "core/metrology/depth_metrics.h"
+#include "core/sff/integral_sff.h"
+#include "core/sff/sff_engine.h"
+#include "core/io/stack.h"
 #include "devices/sim/defocus.h"
 #include "devices/sim/simulated_rig.h"
 #include "server/procedures/calibration_procedure.h"

@@ -1,10 +1,10 @@
 // Shape from focus on natural-looking focal stacks with ground truth (devices/sim/natural_scene.h):
 // focus measures x windows, interpolations, confidence thresholds, multi-window / measure fusion
-// (core/depth_fusion.h), guided refinement (core/depth_refinement.h) and fill (core/depth_fill.h),
+// (core/sff/depth_fusion.h), guided refinement (core/sff/depth_refinement.h) and fill (core/sff/depth_fill.h),
 // each scored against the truth (RMSE, bias, Pearson correlation, coverage, outliers), and
 // focus-stack's depth map on the same stacks (written as PNG files) when the tool is found.
 // Depth is in frame units (z = frame index). Frames are written as a stack folder and read back
-// through core/stack.h (colour PNG -> BT.709 luminance for focus, colour kept for the guide).
+// through core/io/stack.h (colour PNG -> BT.709 luminance for focus, colour kept for the guide).
 //
 // Usage: natural-evaluate (or inspect-evaluate --natural) [--scenes N] [--size WxH] [--seed S] [--focus-stack PATH|none]
 //                         [--keep DIR] [--timing]
@@ -27,14 +27,14 @@
 #include <tuple>
 #include <vector>
 
-#include "core/depth_consistency.h"
-#include "core/depth_export.h"
-#include "core/depth_fill.h"
-#include "core/depth_fusion.h"
-#include "core/depth_postprocess.h"
-#include "core/depth_refinement.h"
-#include "core/sff_engine.h"
-#include "core/stack.h"
+#include "core/sff/depth_consistency.h"
+#include "core/io/depth_export.h"
+#include "core/sff/depth_fill.h"
+#include "core/sff/depth_fusion.h"
+#include "core/sff/depth_postprocess.h"
+#include "core/sff/depth_refinement.h"
+#include "core/sff/sff_engine.h"
+#include "core/io/stack.h"
 #include "devices/sim/natural_scene.h"
 
 namespace inspection {
@@ -77,7 +77,7 @@ struct Candidate {
   std::vector<EngineKey> engines;  // > 1: fused
   DepthFusionRule fusion = DepthFusionRule::kMostConfident;
   double min_confidence = 0.4;
-  bool consistency = false;  // core/depth_consistency.h on the first engine's unthresholded depth
+  bool consistency = false;  // core/sff/depth_consistency.h on the first engine's unthresholded depth
   DepthConsistencyOptions consistency_options;
   DepthRefinementOptions refine{DepthRefinement::kNone};
   bool fill = false;
@@ -197,7 +197,7 @@ Metrics Evaluate(const Scene& s, const Candidate& c, Cache* cache) {
     conf = f->confidence;
   }
   // The engine's grey all-in-focus image guides refinement and fill (every stack has it; the
-  // colour one of core/all_in_focus.h separated nothing more here).
+  // colour one of core/sff/all_in_focus.h separated nothing more here).
   const auto t0 = Clock::now();
   if (c.consistency) {
     const DepthResult& raw = Run(s, c.engines[0], cache);
@@ -410,7 +410,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
 
   const EngineKey current{FocusMeasure::kTenengrad, 7, kDefaultInterpolation};
   // The product's default: the default engine options plus the post-processing's defaults
-  // (core/depth_postprocess.h: the consistency step; README "Depth post-processing").
+  // (core/sff/depth_postprocess.h: the consistency step; README "Depth post-processing").
   const EngineKey recommended_key = current;
   auto Single = [](const EngineKey& k, std::string name = "") {
     Candidate c;
@@ -427,7 +427,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
     std::snprintf(buf, sizeof buf, " + consistency r%d %.2g", radius > 0 ? radius : DefaultConsistencyRadius(k.window),
                   steps);
     c.name += buf;
-    // (the window-mixing check, core/depth_consistency.h, runs at its default with it)
+    // (the window-mixing check, core/sff/depth_consistency.h, runs at its default with it)
     return c;
   };
   const DepthPostProcessOptions product_defaults;
@@ -476,7 +476,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
     }
   }
 
-  // Table 4: local depth consistency (core/depth_consistency.h) per measure and window.
+  // Table 4: local depth consistency (core/sff/depth_consistency.h) per measure and window.
   PrintHeader(
       "Table 4: local depth consistency (residual about a local plane of the unthresholded depth, "
       "in z steps; radius focus window / 2 + 1 unless given), min confidence 0.4");

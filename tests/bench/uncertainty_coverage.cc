@@ -1,7 +1,7 @@
 // Uncertainty coverage on the simulated rig (issue 13): does the expanded uncertainty (k = 2) of
 // every measurement cover >= 95 % of its deviations from the truth over repeated scans?
 // Scans each specimen with different seeds (texture, camera noise, stage errors differ), measures
-// it through core/measurement.h with the error model of core/depth_noise_model.h, and compares
+// it through core/metrology/measurement.h with the error model of core/metrology/depth_noise_model.h, and compares
 // with the same measurement on the ground-truth depth map. The rig's z linearity is characterised
 // first, once, on a scan of the SKEW10 plane with a seed no test scan uses (as a real rig would be
 // on a tilted optical flat). Prints per specimen and measurement: bias and sigma of the
@@ -23,8 +23,8 @@
 #include <string>
 #include <vector>
 
-#include "core/measurement.h"
-#include "core/z_linearity.h"
+#include "core/metrology/measurement.h"
+#include "core/metrology/z_linearity.h"
 #include "devices/sim/simulated_rig.h"
 #include "server/procedures/scan_procedure.h"
 #include "tests/lib/user_scene.h"

@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "core/stack.h"
+#include "core/io/stack.h"
 
 namespace inspection::testing {
 

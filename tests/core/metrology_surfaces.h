@@ -1,6 +1,6 @@
 // Analytic surfaces with known parameters for the metrology tests (form removal, ISO 25178
 // parameters, filters, step heights, uncertainty): height maps in µm on a pixel grid whose pixel
-// (col, row) has its centre at ((col + 0.5) p, (row + 0.5) p) µm (core/surface_roi.h), plus
+// (col, row) has its centre at ((col + 0.5) p, (row + 0.5) p) µm (core/metrology/surface_roi.h), plus
 // noise with the SFF error model's structure (box-correlated) and NaN holes.
 #pragma once
 
@@ -26,7 +26,7 @@ inline cv::Mat SampleSurface(cv::Size size, double pixel_size_um, const std::fun
 }
 
 // Box-correlated Gaussian noise of standard deviation sigma_um: white noise summed over a
-// window x window box and normalised, the structure core/depth_noise_model.h assumes.
+// window x window box and normalised, the structure core/metrology/depth_noise_model.h assumes.
 inline cv::Mat CorrelatedNoise(cv::Size size, double sigma_um, int window_px, unsigned seed) {
   const int r = window_px / 2;
   cv::Mat white(size.height + 2 * r, size.width + 2 * r, CV_32FC1);

@@ -23,7 +23,7 @@
 #include <string>
 #include <vector>
 
-#include "core/sff_engine.h"
+#include "core/sff/sff_engine.h"
 #include "devices/rig_config.h"
 #include "devices/sim/simulated_rig.h"
 

@@ -6,7 +6,7 @@
 
 #include <cmath>
 
-#include "core/frame_registration.h"
+#include "core/registration/frame_registration.h"
 #include "devices/rig_config.h"
 #include "devices/sim/simulated_rig.h"
 

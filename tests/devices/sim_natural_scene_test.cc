@@ -7,8 +7,8 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
-#include "core/colour.h"
-#include "core/focus_measure.h"
+#include "core/io/colour.h"
+#include "core/sff/focus_measure.h"
 #include "devices/sim/natural_scene.h"
 
 namespace inspection {

@@ -8,7 +8,7 @@
 #include <cstdio>
 #include <opencv2/imgproc.hpp>
 
-#include "core/sff_engine.h"
+#include "core/sff/sff_engine.h"
 #include "devices/sim/simulated_rig.h"
 
 namespace inspection {

@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "core/sff_engine.h"
+#include "core/sff/sff_engine.h"
 #include "devices/sim/simulated_rig.h"
 
 namespace inspection {

@@ -4,7 +4,7 @@
 #include <cstdint>
 #include <string>
 
-#include "server/access_control.h"
+#include "server/security/access_control.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string in(reinterpret_cast<const char*>(data), size);

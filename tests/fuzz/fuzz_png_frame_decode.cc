@@ -1,5 +1,5 @@
 // libFuzzer target: a stack frame's file bytes as a client uploads them, through the plain-PNG
-// fast path (core/png_frame_decode.h), which parses chunks and unfilters rows itself. Whatever it
+// fast path (core/io/png_frame_decode.h), which parses chunks and unfilters rows itself. Whatever it
 // accepts must be OpenCV's (libpng's) decoding of the same bytes, pixel for pixel, whenever
 // OpenCV decodes them too.
 #include <cstddef>
@@ -8,7 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <string_view>
 
-#include "core/png_frame_decode.h"
+#include "core/io/png_frame_decode.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const cv::Mat fast = inspection::DecodePlainPng(std::string_view(reinterpret_cast<const char*>(data), size));

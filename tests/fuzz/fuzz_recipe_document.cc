@@ -1,6 +1,6 @@
 // libFuzzer target: recipe documents (issue 13/14) as `inspectctl recipe create` and an MES send
 // them: JSON text in protobuf's JSON mapping, or the binary message; then the server's full
-// check (server/recipe_mapping.h) against a 320 x 240 px image of 0.74 um pixels, and for a
+// check (server/results/recipe_mapping.h) against a 320 x 240 px image of 0.74 um pixels, and for a
 // valid recipe the mapping to core/ measurement specs. Each step must answer, never crash.
 #include <google/protobuf/util/json_util.h>
 
@@ -8,8 +8,8 @@
 #include <cstdint>
 #include <string>
 
-#include "server/recipe_mapping.h"
-#include "server/request_mapping.h"
+#include "server/results/recipe_mapping.h"
+#include "server/api/request_mapping.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size < 1) return 0;

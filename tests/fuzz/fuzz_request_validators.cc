@@ -5,7 +5,7 @@
 #include <cstdint>
 #include <string>
 
-#include "server/request_mapping.h"
+#include "server/api/request_mapping.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size < 1) return 0;

@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <string>
 
-#include "core/stack.h"
+#include "core/io/stack.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   auto m = inspection::ParseStackManifest(std::string(reinterpret_cast<const char*>(data), size));

@@ -1,4 +1,4 @@
-// Writes a sample inspection report (server/inspection_report.h) for the browser test: a
+// Writes a sample inspection report (server/results/inspection_report.h) for the browser test: a
 // synthetic step gauge (tilted plane, 25 um step, a rough patch, a hole without depth), measured
 // by core/ as a scan's result would be (step height and Sa with their uncertainties, ISO 14253-1
 // verdicts, a line profile across the step and the hole), so the page shows real figures.
@@ -17,11 +17,11 @@
 #include <opencv2/core.hpp>
 #include <string>
 
-#include "core/line_profile.h"
-#include "core/measurement.h"
-#include "core/verdict.h"
-#include "server/inspection_report.h"
-#include "server/inspection_result.h"
+#include "core/metrology/line_profile.h"
+#include "core/metrology/measurement.h"
+#include "core/metrology/verdict.h"
+#include "server/results/inspection_report.h"
+#include "server/results/inspection_result.h"
 
 namespace inspection {
 namespace {

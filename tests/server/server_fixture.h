@@ -10,8 +10,8 @@
 #include <vector>
 
 #include "client_cli/inspection_client.h"
-#include "server/artifact_files.h"
-#include "server/inspection_server.h"
+#include "server/storage/artifact_files.h"
+#include "server/app/inspection_server.h"
 #include "tests/server/test_rig.h"
 
 namespace inspection::testing {
@@ -51,7 +51,7 @@ inline std::filesystem::path ExtractStoredStack(const std::filesystem::path& dat
   return dest;
 }
 
-// The integral SFF tests' rig (tests/procedures/isff_rig_test.cc): 256 x 192 camera, a projector
+// The integral SFF tests' rig (tests/server/procedures/isff_rig_test.cc): 256 x 192 camera, a projector
 // that lights the whole field, seed 5; SKEW5.
 inline SimulatedRigOptions IsffRig() {
   SimulatedRigOptions o;

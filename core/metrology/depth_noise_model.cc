@@ -1,0 +1,224 @@
+// SFF depth error model: local random sigma from lagged second differences, box-correlated noise,
+// z-linearity table with unknown phase, per-frame stage error; and Monte Carlo draws of it.
+#include "core/metrology/depth_noise_model.h"
+
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <random>
+
+namespace inspection {
+namespace {
+
+uint64_t SplitMix(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
+// Squared lagged second differences / 6 along one axis where all three samples are usable:
+// value and 0/1 count images (CV_64F).
+void SecondDifferences(const cv::Mat& depth, const cv::Mat& usable, int lag, bool along_x, cv::Mat* value,
+                       cv::Mat* count) {
+  *value = cv::Mat::zeros(depth.size(), CV_64F);
+  *count = cv::Mat::zeros(depth.size(), CV_64F);
+  const int dx = along_x ? lag : 0, dy = along_x ? 0 : lag;
+  for (int row = dy; row < depth.rows - dy; ++row) {
+    const float* z0 = depth.ptr<float>(row - dy);
+    const float* z1 = depth.ptr<float>(row);
+    const float* z2 = depth.ptr<float>(row + dy);
+    const uint8_t* u0 = usable.ptr<uint8_t>(row - dy);
+    const uint8_t* u1 = usable.ptr<uint8_t>(row);
+    const uint8_t* u2 = usable.ptr<uint8_t>(row + dy);
+    double* v = value->ptr<double>(row);
+    double* c = count->ptr<double>(row);
+    for (int col = dx; col < depth.cols - dx; ++col) {
+      if (!u0[col - dx] || !u1[col] || !u2[col + dx]) continue;
+      const double d2 = double(z0[col - dx]) - 2.0 * double(z1[col]) + double(z2[col + dx]);
+      v[col] = d2 * d2 / 6.0;
+      c[col] = 1.0;
+    }
+  }
+}
+
+}  // namespace
+
+Status DepthNoiseOptions::Validate() const {
+  if (window_px < 1 || window_px > 63) {
+    return Status::InvalidArgument("window_px must be in 1..63, got " + std::to_string(window_px));
+  }
+  if (z_positions_um.size() < 2) {
+    return Status::InvalidArgument("z_positions_um: the stack's z positions are needed (>= 2), got " +
+                                   std::to_string(z_positions_um.size()));
+  }
+  if (!(stage_repeatability_um >= 0.0) || !std::isfinite(stage_repeatability_um)) {
+    return Status::InvalidArgument("stage_repeatability_um must be >= 0");
+  }
+  if (neighbourhood_px < 0 || neighbourhood_px > 4001) {
+    return Status::InvalidArgument("neighbourhood_px must be in 0..4001 (0 = 8 windows)");
+  }
+  if (linearity.bias_of_step.size() < 2) {
+    return Status::InvalidArgument("linearity.bias_of_step needs >= 2 entries");
+  }
+  for (double v : linearity.bias_of_step) {
+    if (!std::isfinite(v) || std::abs(v) > 1.0) {
+      return Status::InvalidArgument("linearity.bias_of_step: values must be finite fractions of a step (|v| <= 1)");
+    }
+  }
+  if (!(linearity_step_tolerance >= 0.0)) return Status::InvalidArgument("linearity_step_tolerance must be >= 0");
+  return Status::Ok();
+}
+
+StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::Mat& mask,
+                                             const DepthNoiseOptions& options) {
+  INSPECT_RETURN_IF_ERROR(options.Validate());
+  if (depth_um.empty() || depth_um.type() != CV_32FC1) {
+    return Status::InvalidArgument("depth map must be a non-empty CV_32FC1 image");
+  }
+  if (!mask.empty() && (mask.type() != CV_8UC1 || mask.size() != depth_um.size())) {
+    return Status::InvalidArgument("mask must be empty or CV_8UC1 of the depth map's size");
+  }
+  DepthNoiseModel model;
+  INSPECT_ASSIGN_OR_RETURN(model.grid, ZGrid::Create(options.z_positions_um));
+  model.correlation_px = options.window_px;
+  model.stage_u_um = options.stage_repeatability_um / std::sqrt(3.0);
+  model.linearity = options.linearity;
+  if (model.linearity.characterised_step_um > 0.0) {
+    const double step = model.grid.median_step_um();
+    if (std::abs(step - model.linearity.characterised_step_um) >
+        options.linearity_step_tolerance * model.linearity.characterised_step_um) {
+      const std::string was = model.linearity.source;
+      model.linearity = ZLinearity::Uncharacterised();
+      model.linearity.source +=
+          "; the characterisation (" + was + ") does not apply at " + std::to_string(step) + " um steps";
+    }
+  }
+
+  const cv::Mat finite = depth_um == depth_um;
+  const int lag = options.window_px + 1;
+  const double min_independent = 8.0;  // window areas needed for a usable estimate
+  const double min_count = min_independent * options.window_px * options.window_px;
+
+  // Estimate over `usable`; fills `var_x/var_y` (local, CV_64F, NaN where too few samples) and
+  // returns the global per-direction variances (NaN when none).
+  const int nb = options.neighbourhood_px > 0 ? (options.neighbourhood_px | 1) : (8 * options.window_px + 1);
+  auto estimate = [&](const cv::Mat& usable, cv::Mat* local_var, double* global_var, double* extreme) {
+    cv::Mat vx, cx, vy, cy;
+    SecondDifferences(depth_um, usable, lag, true, &vx, &cx);
+    SecondDifferences(depth_um, usable, lag, false, &vy, &cy);
+    const double nx = cv::sum(cx)[0], ny = cv::sum(cy)[0];
+    const double gx = nx >= min_count ? cv::sum(vx)[0] / nx : std::nan("");
+    const double gy = ny >= min_count ? cv::sum(vy)[0] / ny : std::nan("");
+    // A lay (structure along one axis) raises one direction's second differences: then use the
+    // other only. Otherwise pool both (the minimum of two noisy estimates would be biased low).
+    bool use_x = std::isfinite(gx), use_y = std::isfinite(gy);
+    if (use_x && use_y) {
+      if (gx > 1.5 * gy)
+        use_x = false;
+      else if (gy > 1.5 * gx)
+        use_y = false;
+    }
+    if (!use_x && !use_y) {
+      *global_var = std::nan("");
+      return;
+    }
+    cv::Mat v = cv::Mat::zeros(depth_um.size(), CV_64F), c = cv::Mat::zeros(depth_um.size(), CV_64F);
+    if (use_x) {
+      v += vx;
+      c += cx;
+    }
+    if (use_y) {
+      v += vy;
+      c += cy;
+    }
+    *global_var = cv::sum(v)[0] / cv::sum(c)[0];
+    double max_x = 0.0, max_y = 0.0;  // of d2^2 / 6 (0 where no sample)
+    if (use_x) cv::minMaxLoc(vx, nullptr, &max_x);
+    if (use_y) cv::minMaxLoc(vy, nullptr, &max_y);
+    *extreme = std::sqrt(6.0 * std::max(max_x, max_y)) / 2.0;
+    cv::Mat sv, sc;
+    cv::boxFilter(v, sv, CV_64F, cv::Size(nb, nb), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    cv::boxFilter(c, sc, CV_64F, cv::Size(nb, nb), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    *local_var = cv::Mat(depth_um.size(), CV_64F, cv::Scalar(std::nan("")));
+    for (int row = 0; row < depth_um.rows; ++row) {
+      const double* a = sv.ptr<double>(row);
+      const double* b = sc.ptr<double>(row);
+      double* o = local_var->ptr<double>(row);
+      for (int col = 0; col < depth_um.cols; ++col) {
+        if (b[col] >= min_count) o[col] = a[col] / b[col];
+      }
+    }
+  };
+
+  const cv::Mat region = mask.empty() ? finite : (finite & mask);
+  cv::Mat local_var;
+  double global_var = std::nan(""), extreme = 0.0;
+  estimate(region, &local_var, &global_var, &extreme);
+  if (!std::isfinite(global_var) && !mask.empty()) {
+    // Too small a region for its own estimate: the whole map's noise level stands in.
+    estimate(finite, &local_var, &global_var, &extreme);
+    local_var.setTo(std::nan(""));
+  }
+  if (!std::isfinite(global_var)) {
+    return Status::FailedPrecondition("depth noise: too few measured pixels to estimate the noise (needs runs of " +
+                                      std::to_string(2 * lag + 1) + " measured pixels in x or y)");
+  }
+  model.global_sigma_um = std::sqrt(global_var);
+  model.extreme_error_um = extreme;
+  model.sigma_um = cv::Mat(depth_um.size(), CV_32FC1, cv::Scalar(std::nanf("")));
+  for (int row = 0; row < depth_um.rows; ++row) {
+    const uint8_t* r = region.ptr<uint8_t>(row);
+    const double* lv = local_var.ptr<double>(row);
+    float* s = model.sigma_um.ptr<float>(row);
+    for (int col = 0; col < depth_um.cols; ++col) {
+      if (r[col]) s[col] = float(std::sqrt(std::isfinite(lv[col]) ? lv[col] : global_var));
+    }
+  }
+  return model;
+}
+
+cv::Mat DepthNoiseModel::SamplePerturbation(const cv::Mat& depth_um, uint64_t seed, int k, int count) const {
+  const uint64_t stream = SplitMix(seed ^ SplitMix(uint64_t(k) + 0x1234567ull));
+  const int r = correlation_px / 2;
+  cv::Mat out(depth_um.size(), CV_32FC1, cv::Scalar(0.f));
+  // Only the pixels with a sigma are perturbed: noise is drawn over their bounding box, on a
+  // canvas padded by the box radius so every pixel's box is full.
+  const cv::Rect box = cv::boundingRect(sigma_um == sigma_um);
+  if (box.empty()) return out;
+  cv::Mat white(box.height + 2 * r, box.width + 2 * r, CV_32FC1);
+  cv::RNG rng(stream | 1u);
+  rng.fill(white, cv::RNG::NORMAL, 0.0, 1.0);
+  cv::Mat boxed;
+  cv::boxFilter(white, boxed, CV_32F, cv::Size(correlation_px, correlation_px), cv::Point(-1, -1), false,
+                cv::BORDER_CONSTANT);
+  const cv::Mat correlated = boxed(cv::Rect(r, r, box.width, box.height));
+  const float unit = 1.0f / float(correlation_px);  // box of w^2 unit variances: sum has variance w^2
+
+  std::mt19937_64 gen(stream ^ 0xA5A5A5A5u);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  // One random phase offset per set (from the seed alone), then evenly spaced phases.
+  std::mt19937_64 set_gen(SplitMix(seed));
+  const double offset = uniform(set_gen);
+  const double phase = offset + (k + 0.5) / double(std::max(count, 1));
+  const int frames = int(grid.positions_um().size());
+  std::vector<double> frame_error(frames, 0.0);
+  const double half_width = stage_u_um * std::sqrt(3.0);
+  for (double& e : frame_error) e = (2.0 * uniform(gen) - 1.0) * half_width;
+
+  for (int row = box.y; row < box.y + box.height; ++row) {
+    const float* z = depth_um.ptr<float>(row);
+    const float* s = sigma_um.ptr<float>(row);
+    const float* n = correlated.ptr<float>(row - box.y);
+    float* o = out.ptr<float>(row);
+    for (int col = box.x; col < box.x + box.width; ++col) {
+      if (!std::isfinite(z[col]) || !std::isfinite(s[col])) continue;
+      const ZGrid::Position p = grid.Locate(z[col]);
+      o[col] = float(double(s[col]) * n[col - box.x] * unit + linearity.At(p.fraction + phase) * p.step_um +
+                     frame_error[p.nearest]);
+    }
+  }
+  return out;
+}
+
+}  // namespace inspection

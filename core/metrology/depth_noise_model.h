@@ -1,0 +1,87 @@
+// Error model of an SFF depth map, for the uncertainty of every measurement
+// (core/metrology/measurement_uncertainty.h). Three components, each from what the scan itself provides:
+//
+// 1. Random depth noise, per pixel, correlated over the focus window. The focus value of a
+//    pixel is summed over the window U of eq. 3.12/3.14, so neighbouring depths share most of
+//    their data: the error field is modelled as e(p) = sigma(p) (B * w)(p), w white unit noise,
+//    B a window_px x window_px box normalised to unit energy; its autocorrelation is the
+//    triangle (1 - |dx| / w)(1 - |dy| / w), which is what the simulated rig's depth errors show
+//    (lags 1..8 at w = 7: 0.88 0.72 0.57 0.43 0.29 0.15 0.03 0.00; box: 0.86 0.71 0.57 0.43 0.29 0.14 0 0).
+//    sigma(p) is estimated from the depth map itself: second differences at a lag L = window + 1
+//    (beyond the correlation, so the three samples are independent and var = 6 sigma^2, while a
+//    plane, and nearly any form at that scale, cancels), averaged over a neighbourhood, taking
+//    the smaller of the x and y directions (a surface lay raises only one of them).
+//    Why not the engine's confidence (core/sff/depth_interpolation.h, the focus peak's SNR against
+//    its curve's second differences): on the simulated rig the depth error of confidently
+//    measured pixels does not follow it (rms error 0.058 / 0.055 / 0.055 / 0.064 um for
+//    confidence 0.4-0.5 / 0.6-0.7 / 0.7-0.8 / 0.8-0.9 on PLANE-NORM), because the curve's
+//    second differences are dominated by its shape, not by noise; only its low range flags
+//    outliers, and those raise the local second differences as well. Surfaces with genuine
+//    structure at 1-3 windows in both directions make sigma conservative (too large).
+// 2. z linearity (core/metrology/z_linearity.h): a bias b(f) * step that depends on each height's
+//    fractional position f in the z grid. It is known in shape but its phase relative to a
+//    given specimen's heights is treated as unknown: the model draws the table shifted by a
+//    uniform phase. For a region at one height it is a common offset (it cancels in form and
+//    roughness), for two heights (a step) it is not.
+// 3. Stage repeatability: each frame's z is off by a uniform +-r (devices: stage
+//    repeatability), shifting the depths whose peak is at that frame alike; modelled as one
+//    error per frame applied to the pixels nearest to it in z.
+#pragma once
+
+#include <cstdint>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "core/util/status.h"
+#include "core/metrology/z_linearity.h"
+
+namespace inspection {
+
+struct DepthNoiseOptions {
+  int window_px = 7;                   // SffOptions::window_px of the reconstruction (1..63)
+  std::vector<double> z_positions_um;  // the stack's frame positions (stack.json frames[].z_um), >= 2
+  ZLinearity linearity = ZLinearity::Uncharacterised();
+  double stage_repeatability_um = 0.0;  // +- bound of the uniform per-move error (simulated rig: 0.1)
+  // Side of the neighbourhood the local sigma averages over; 0 = 8 windows (~64 independent
+  // samples per direction, so sigma is known to ~10 %).
+  int neighbourhood_px = 0;
+  // A characterised linearity applies only at its own step (the bias scales with sigma_F / step):
+  // when the scan's median step differs by more than this share, the uncharacterised bound is used.
+  double linearity_step_tolerance = 0.05;
+  // INVALID_ARGUMENT naming the field.
+  Status Validate() const;
+};
+
+struct DepthNoiseModel {
+  cv::Mat sigma_um;              // CV_32FC1: random standard uncertainty of each measured pixel; NaN elsewhere
+  double global_sigma_um = 0.0;  // the same over the whole mask (used where a neighbourhood has too few samples)
+  // Largest single-pixel error the map plausibly holds: max |second difference| / 2 over the
+  // mask (same directions as sigma). A lone spike of height A gives a second difference of -2A
+  // at its centre, so this is A; for Gaussian noise it is ~1.2x the largest error (sqrt(6) / 2).
+  // SFF depth errors have heavier tails than Gaussian (wrong-peak clusters), which a Gaussian
+  // Monte Carlo misses: extremes (Sp, Sv, Sz, flatness) use this bound instead.
+  double extreme_error_um = 0.0;
+  int correlation_px = 1;  // side of the box B
+  ZGrid grid;
+  ZLinearity linearity;     // the table in use (maybe the uncharacterised bound, see its source)
+  double stage_u_um = 0.0;  // standard uncertainty of one frame's z: r / sqrt 3
+
+  // Perturbation k (0-based) of a Monte Carlo set of `count` drawn with `seed`: one realisation
+  // of all three components on the pixels with depth and a sigma (CV_32FC1, 0 elsewhere). The
+  // linearity phases are stratified over the set ((k + 0.5) / count plus one random offset), so
+  // the set averages the table over its phase as the analytic propagation does. The same
+  // (seed, k, count) always gives the same field.
+  cv::Mat SamplePerturbation(const cv::Mat& depth_um, uint64_t seed, int k, int count) const;
+};
+
+// Estimates the model for depth_um (CV_32FC1, NaN = no depth) from the pixels where mask
+// (CV_8UC1, empty = all) is non-zero: second differences are taken only where all three
+// samples are in the mask, so a region's sigma is its own. When the mask holds fewer than ~8
+// independent samples (8 window areas) the whole map's estimate is used instead.
+// FAILED_PRECONDITION when no second difference can be formed anywhere (map too small or too
+// sparse).
+StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::Mat& mask,
+                                             const DepthNoiseOptions& options);
+
+}  // namespace inspection

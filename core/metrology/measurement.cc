@@ -1,0 +1,344 @@
+// Recipe measurements: spec validation, region rasterisation, error model per region set,
+// dispatch to the measures and their uncertainty methods.
+#include "core/metrology/measurement.h"
+
+#include <array>
+#include <functional>
+#include <map>
+#include <sstream>
+
+namespace inspection {
+namespace {
+
+bool IsHeightParameter(MeasurementKind k) { return int(k) <= int(MeasurementKind::kSku); }
+
+HeightParameter ToHeightParameter(MeasurementKind k) { return HeightParameter(int(k)); }
+
+// All seven height parameters of one region with their budgets.
+struct ArealGroupResult {
+  ArealHeightParameters values;
+  std::array<UncertaintyBudget, 7> budgets;
+};
+
+StatusOr<ArealGroupResult> EvaluateArealGroup(const cv::Mat& depth_um, const cv::Mat& mask, double pixel_size_um,
+                                              const ArealOptions& options, const DepthNoiseModel* noise,
+                                              const MonteCarloOptions& monte_carlo) {
+  ArealGroupResult r;
+  INSPECT_ASSIGN_OR_RETURN(ArealEvaluator evaluator, ArealEvaluator::Create(depth_um, mask, pixel_size_um, options));
+  INSPECT_ASSIGN_OR_RETURN(ArealEvaluation e, evaluator.Evaluate(depth_um));
+  r.values = e.parameters;
+  if (noise == nullptr) return r;
+  // Mean-type parameters by Monte Carlo; extremes by the bound (core/metrology/measurement_uncertainty.h).
+  const std::vector<double> moments = {r.values.Sa_um, r.values.Sq_um, r.values.Ssk, r.values.Sku};
+  auto measure = [&](const cv::Mat& z) -> StatusOr<std::vector<double>> {
+    INSPECT_ASSIGN_OR_RETURN(ArealEvaluation p, evaluator.Evaluate(z));
+    return std::vector<double>{p.parameters.Sa_um, p.parameters.Sq_um, p.parameters.Ssk, p.parameters.Sku};
+  };
+  INSPECT_ASSIGN_OR_RETURN(std::vector<MonteCarloEstimate> mc,
+                           MonteCarloUncertainty(depth_um, moments, measure, *noise, monte_carlo));
+  r.budgets[int(HeightParameter::kSa)] = MonteCarloBudget(mc[0]);
+  r.budgets[int(HeightParameter::kSq)] = MonteCarloBudget(mc[1]);
+  r.budgets[int(HeightParameter::kSsk)] = MonteCarloBudget(mc[2]);
+  r.budgets[int(HeightParameter::kSku)] = MonteCarloBudget(mc[3]);
+  const double range = LinearityRangeUm(depth_um, mask, *noise);
+  // Shape parameters: the worst case of a height-dependent error (core/metrology/measurement_uncertainty.h).
+  const double delta_um = HeightDependentErrorBoundUm(depth_um, mask, *noise, range);
+  for (const HeightParameter shape : {HeightParameter::kSsk, HeightParameter::kSku}) {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat sign, ShapeParameterSensitivitySign(e.surface_um, shape));
+    const size_t out = shape == HeightParameter::kSsk ? 2 : 3;
+    double bound = 0.0;
+    for (const double direction : {1.0, -1.0}) {
+      cv::Mat shifted = depth_um + sign * (direction * delta_um);
+      StatusOr<std::vector<double>> v = measure(shifted);
+      if (v.ok() && std::isfinite((*v)[out])) bound = std::max(bound, std::abs((*v)[out] - moments[out]));
+    }
+    AddHeightDependentBound(r.budgets[int(shape)], bound);
+  }
+  r.budgets[int(HeightParameter::kSp)] = ExtremeValueBudget(1, range, *noise);
+  r.budgets[int(HeightParameter::kSv)] = ExtremeValueBudget(1, range, *noise);
+  r.budgets[int(HeightParameter::kSz)] = ExtremeValueBudget(2, range, *noise);
+  return r;
+}
+
+std::string RoiKey(const RegionOfInterest& roi) {
+  std::ostringstream s;
+  s.precision(17);
+  s << int(roi.shape) << ' ' << int(roi.unit) << ' ' << roi.x << ' ' << roi.y << ' ' << roi.width << ' ' << roi.height;
+  for (const RoiPoint& p : roi.polygon) s << ' ' << p.x << ',' << p.y;
+  return s.str();
+}
+
+std::string ArealKey(const MeasurementSpec& spec) {
+  std::ostringstream s;
+  s.precision(17);
+  s << RoiKey(spec.roi) << '|' << int(spec.areal.form.model) << ' ' << spec.areal.form.polynomial_order << ' '
+    << spec.areal.form.max_iterations << ' ' << spec.areal.s_filter_cutoff_um << ' ' << spec.areal.l_filter_cutoff_um;
+  return s.str();
+}
+
+// Rasterised regions of a spec and the error model over them.
+struct Regions {
+  RoiMask roi;
+  std::optional<RoiMask> reference;
+  std::optional<DepthNoiseModel> noise;
+  double coverage_percent() const {
+    double c = roi.coverage_percent();
+    if (reference) c = std::min(c, reference->coverage_percent());
+    return c;
+  }
+};
+
+StatusOr<Regions> PrepareRegions(const MeasurementSpec& spec, const MeasurementContext& ctx, const std::string& field) {
+  INSPECT_RETURN_IF_ERROR(spec.Validate(ctx.depth_um.size(), ctx.pixel_size_um, field));
+  Regions r;
+  INSPECT_ASSIGN_OR_RETURN(r.roi, RasteriseRoi(spec.roi, ctx.depth_um, ctx.pixel_size_um, field + ".roi"));
+  if (spec.reference_roi) {
+    INSPECT_ASSIGN_OR_RETURN(
+        r.reference, RasteriseRoi(*spec.reference_roi, ctx.depth_um, ctx.pixel_size_um, field + ".reference_roi"));
+  }
+  if (r.roi.measured_pixels == 0) return Status::FailedPrecondition(field + ".roi: no pixel of the region has depth");
+  if (r.reference && r.reference->measured_pixels == 0) {
+    return Status::FailedPrecondition(field + ".reference_roi: no pixel of the region has depth");
+  }
+  if (ctx.with_uncertainty) {
+    const cv::Mat mask = r.reference ? (r.roi.measured | r.reference->measured) : r.roi.measured;
+    StatusOr<DepthNoiseModel> m = EstimateDepthNoise(ctx.depth_um, mask, ctx.noise);
+    if (!m.ok()) return m.status().WithContext(field);
+    r.noise = std::move(m).value();
+  }
+  return r;
+}
+
+MeasuredValue Base(const MeasurementSpec& spec, const Regions& r) {
+  MeasuredValue v;
+  v.kind = spec.kind;
+  v.unit = spec.unit();
+  v.coverage_percent = r.coverage_percent();
+  v.region_pixels = r.roi.region_pixels;
+  v.measured_pixels = r.roi.measured_pixels;
+  return v;
+}
+
+StatusOr<MeasuredValue> MeasureNonAreal(const MeasurementSpec& spec, const MeasurementContext& ctx, const Regions& r,
+                                        const std::string& field) {
+  const DepthNoiseModel* noise = r.noise ? &*r.noise : nullptr;
+  MeasuredValue v = Base(spec, r);
+  switch (spec.kind) {
+    case MeasurementKind::kStepHeight: {
+      StatusOr<StepHeightResult> s =
+          MeasureStepHeight(ctx.depth_um, r.reference->measured, r.roi.measured, ctx.pixel_size_um, spec.step, noise);
+      if (!s.ok()) return s.status().WithContext(field);
+      v.value = s->height_um;
+      v.uncertainty = s->uncertainty;
+      return v;
+    }
+    case MeasurementKind::kFlatness: {
+      StatusOr<FlatnessResult> f = MeasureFlatness(ctx.depth_um, r.roi.measured, ctx.pixel_size_um, noise);
+      if (!f.ok()) return f.status().WithContext(field);
+      v.value = f->flatness_um;
+      v.uncertainty = f->uncertainty;
+      return v;
+    }
+    case MeasurementKind::kTilt: {
+      StatusOr<TiltResult> t = MeasureTilt(ctx.depth_um, r.roi.measured, ctx.pixel_size_um, noise);
+      if (!t.ok()) return t.status().WithContext(field);
+      v.value = t->tilt_deg;
+      v.uncertainty = t->uncertainty;
+      return v;
+    }
+    case MeasurementKind::kVolumeAbove:
+    case MeasurementKind::kVolumeBelow: {
+      const cv::Mat reference = r.reference ? r.reference->measured : cv::Mat();
+      StatusOr<VolumeResult> vol =
+          MeasureVolume(ctx.depth_um, r.roi.region, reference, ctx.pixel_size_um, spec.volume, noise, ctx.monte_carlo);
+      if (!vol.ok()) return vol.status().WithContext(field);
+      const bool above = spec.kind == MeasurementKind::kVolumeAbove;
+      const double scale = spec.volume_unit == VolumeUnit::kCubicMillimetre ? 1e-9 : 1.0;
+      v.value = (above ? vol->above_um3 : vol->below_um3) * scale;
+      v.uncertainty = above ? vol->above_uncertainty : vol->below_uncertainty;
+      for (double* d : {&v.uncertainty.standard_uncertainty, &v.uncertainty.monte_carlo_spread,
+                        &v.uncertainty.noise_bias, &v.uncertainty.other}) {
+        *d *= scale;
+      }
+      return v;
+    }
+    case MeasurementKind::kRadius: {
+      StatusOr<FormFit> f = FitForm(ctx.depth_um, r.roi.measured, ctx.pixel_size_um, spec.form);
+      if (!f.ok()) return f.status().WithContext(field);
+      const int k = f->ParameterIndex("radius_um");
+      v.value = f->parameters[k];
+      if (noise) {
+        StatusOr<FunctionalCovariance> cov =
+            FormFitCovariance(*f, ctx.depth_um, r.roi.measured, ctx.pixel_size_um, *noise);
+        if (!cov.ok()) return cov.status().WithContext(field);
+        Eigen::VectorXd c = Eigen::VectorXd::Zero(f->parameters.size());
+        c[k] = 1.0;
+        v.uncertainty = AnalyticBudget(*cov, c);
+      }
+      return v;
+    }
+    default:
+      break;
+  }
+  return Status::Internal(field + ": unhandled measurement kind");
+}
+
+}  // namespace
+
+const char* MeasurementKindName(MeasurementKind kind) {
+  if (IsHeightParameter(kind)) return HeightParameterName(ToHeightParameter(kind));
+  switch (kind) {
+    case MeasurementKind::kStepHeight:
+      return "step_height";
+    case MeasurementKind::kFlatness:
+      return "flatness";
+    case MeasurementKind::kTilt:
+      return "tilt";
+    case MeasurementKind::kVolumeAbove:
+      return "volume_above";
+    case MeasurementKind::kVolumeBelow:
+      return "volume_below";
+    case MeasurementKind::kRadius:
+      return "radius";
+    default:
+      break;
+  }
+  return "unknown";
+}
+
+std::vector<MeasurementKind> AllMeasurementKinds() {
+  std::vector<MeasurementKind> all;
+  for (int k = 0; k <= int(MeasurementKind::kRadius); ++k) all.push_back(MeasurementKind(k));
+  return all;
+}
+
+StatusOr<MeasurementKind> ParseMeasurementKind(const std::string& name) {
+  std::string known;
+  for (MeasurementKind k : AllMeasurementKinds()) {
+    if (name == MeasurementKindName(k)) return k;
+    known += (known.empty() ? "" : ", ") + std::string(MeasurementKindName(k));
+  }
+  return Status::InvalidArgument("unknown measurement parameter '" + name + "' (" + known + ")");
+}
+
+std::string MeasurementSpec::unit() const {
+  if (IsHeightParameter(kind)) return HeightParameterUnit(ToHeightParameter(kind));
+  switch (kind) {
+    case MeasurementKind::kTilt:
+      return "deg";
+    case MeasurementKind::kVolumeAbove:
+    case MeasurementKind::kVolumeBelow:
+      return volume_unit == VolumeUnit::kCubicMillimetre ? "mm3" : "um3";
+    default:
+      return "um";
+  }
+}
+
+Status MeasurementSpec::Validate(cv::Size image_size, double pixel_size_um, const std::string& field) const {
+  if (!(pixel_size_um > 0.0) || !std::isfinite(pixel_size_um)) {
+    return Status::InvalidArgument(field + ": the depth map needs a pixel size > 0");
+  }
+  INSPECT_RETURN_IF_ERROR(ValidateRoi(roi, image_size, pixel_size_um, field + ".roi"));
+  const bool wants_reference = kind == MeasurementKind::kStepHeight;
+  const bool takes_reference =
+      wants_reference || ((kind == MeasurementKind::kVolumeAbove || kind == MeasurementKind::kVolumeBelow) &&
+                          volume.reference == VolumeReference::kRegionPlane);
+  if (wants_reference && !reference_roi) {
+    return Status::InvalidArgument(field + ".reference_roi is required for " + MeasurementKindName(kind));
+  }
+  if (reference_roi && !takes_reference) {
+    return Status::InvalidArgument(field + ".reference_roi is not used by " + std::string(MeasurementKindName(kind)) +
+                                   (kind == MeasurementKind::kVolumeAbove || kind == MeasurementKind::kVolumeBelow
+                                        ? " with reference height"
+                                        : ""));
+  }
+  if (reference_roi)
+    INSPECT_RETURN_IF_ERROR(ValidateRoi(*reference_roi, image_size, pixel_size_um, field + ".reference_roi"));
+  if (IsHeightParameter(kind)) {
+    const Status s = areal.Validate();
+    if (!s.ok()) return s.WithContext(field + ".areal");
+  }
+  if (kind == MeasurementKind::kRadius) {
+    if (form.model != FormModel::kSphere && form.model != FormModel::kCylinder) {
+      return Status::InvalidArgument(field + ".form.model must be sphere or cylinder for radius");
+    }
+    const Status s = form.Validate();
+    if (!s.ok()) return s.WithContext(field + ".form");
+  }
+  if ((kind == MeasurementKind::kVolumeAbove || kind == MeasurementKind::kVolumeBelow) &&
+      volume.reference == VolumeReference::kHeight && !std::isfinite(volume.reference_height_um)) {
+    return Status::InvalidArgument(field + ".volume.reference_height_um is not a finite number");
+  }
+  return Status::Ok();
+}
+
+namespace {
+
+std::vector<StatusOr<MeasuredValue>> MeasureSpecs(const std::vector<const MeasurementSpec*>& specs,
+                                                  const MeasurementContext& context,
+                                                  const std::function<std::string(size_t)>& field_of) {
+  std::vector<StatusOr<MeasuredValue>> out;
+  std::map<std::string, StatusOr<ArealGroupResult>> areal_cache;
+  std::map<std::string, Regions> region_cache;
+  for (size_t i = 0; i < specs.size(); ++i) {
+    const MeasurementSpec& spec = *specs[i];
+    const std::string field = field_of(i);
+    if (context.depth_um.empty() || context.depth_um.type() != CV_32FC1) {
+      out.push_back(Status::InvalidArgument(field + ": the depth map must be a non-empty CV_32FC1 image"));
+      continue;
+    }
+    // Specs on the same region(s) share the rasterisation and the error model.
+    const std::string regions_key = RoiKey(spec.roi) + "|" + (spec.reference_roi ? RoiKey(*spec.reference_roi) : "-");
+    auto cached = region_cache.find(regions_key);
+    StatusOr<Regions> regions = Status::Internal("unset");
+    if (cached != region_cache.end()) {
+      const Status valid = spec.Validate(context.depth_um.size(), context.pixel_size_um, field);
+      regions = valid.ok() ? StatusOr<Regions>(cached->second) : StatusOr<Regions>(valid);
+    } else {
+      regions = PrepareRegions(spec, context, field);
+      if (regions.ok()) region_cache.emplace(regions_key, *regions);
+    }
+    if (!regions.ok()) {
+      out.push_back(regions.status());
+      continue;
+    }
+    if (!IsHeightParameter(spec.kind)) {
+      out.push_back(MeasureNonAreal(spec, context, *regions, field));
+      continue;
+    }
+    const std::string key = ArealKey(spec);
+    auto it = areal_cache.find(key);
+    if (it == areal_cache.end()) {
+      it = areal_cache
+               .emplace(key,
+                        EvaluateArealGroup(context.depth_um, regions->roi.measured, context.pixel_size_um, spec.areal,
+                                           regions->noise ? &*regions->noise : nullptr, context.monte_carlo))
+               .first;
+    }
+    if (!it->second.ok()) {
+      out.push_back(it->second.status().WithContext(field));
+      continue;
+    }
+    MeasuredValue v = Base(spec, *regions);
+    v.value = HeightParameterValue(it->second->values, ToHeightParameter(spec.kind));
+    v.uncertainty = it->second->budgets[int(ToHeightParameter(spec.kind))];
+    out.push_back(std::move(v));
+  }
+  return out;
+}
+
+}  // namespace
+
+StatusOr<MeasuredValue> Measure(const MeasurementSpec& spec, const MeasurementContext& context,
+                                const std::string& field) {
+  return std::move(MeasureSpecs({&spec}, context, [&](size_t) { return field; }).front());
+}
+
+std::vector<StatusOr<MeasuredValue>> MeasureAll(const std::vector<MeasurementSpec>& specs,
+                                                const MeasurementContext& context, const std::string& field_prefix) {
+  std::vector<const MeasurementSpec*> ptrs;
+  for (const MeasurementSpec& s : specs) ptrs.push_back(&s);
+  return MeasureSpecs(ptrs, context, [&](size_t i) { return field_prefix + "[" + std::to_string(i) + "]"; });
+}
+
+}  // namespace inspection

@@ -1,0 +1,150 @@
+// Standard uncertainty of measurements on an SFF depth map (GUM, JCGM 100): the depth error model
+// of core/metrology/depth_noise_model.h propagated
+//  - exactly through linear functionals of the depth map (least-squares fits, step heights,
+//    mean heights): L = sum_p a(p) z(p), var L from the correlated noise, the z-linearity table
+//    averaged over its unknown phase, and the per-frame stage error;
+//  - by Monte Carlo (JCGM 101 style, fixed sample count and seed, so results are repeatable) for
+//    non-linear values (Sa..Sku, flatness, volumes): each sample re-runs the whole measurement on
+//    depth + one draw of the error model.
+// Extremes (Sp, Sv, Sz, flatness) and norms (Sa, Sq) of a noisy surface are biased upwards by the
+// noise itself, and that bias, not the spread, dominates when the surface is smooth: the reported
+// value is not corrected (ISO 25178 values are reported as measured), and the bias estimate
+// enters the uncertainty (u^2 = spread^2 + bias^2). The bias is estimated by noise doubling:
+// adding a second draw e_k shifts the value by d = mean_k f(z + e_k) - f(z); for a surface made
+// of noise only (value proportional to the noise level) the first draw's shift is
+// d / (sqrt 2 - 1), and for a surface well above the noise it is smaller than that, so
+// d / (sqrt 2 - 1) is used: exact in the worst case, conservative otherwise.
+#pragma once
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "core/metrology/areal_parameters.h"
+#include "core/metrology/depth_noise_model.h"
+#include "core/metrology/form_removal.h"
+#include "core/util/status.h"
+
+namespace inspection {
+
+// The standard uncertainty (k = 1) of one measured value and where it comes from. Fields that a
+// method does not produce stay NaN.
+struct UncertaintyBudget {
+  double standard_uncertainty = std::nan("");  // combined u
+  // Analytic (linear functionals): components, u^2 = random^2 + linearity^2 + stage^2 (+ other).
+  double random = std::nan("");
+  double linearity = std::nan("");
+  double stage = std::nan("");
+  double other = std::nan("");  // e.g. volume: pixels without depth filled by the region's mean
+  // Monte Carlo: spread of the perturbed values and the noise-bias estimate.
+  double monte_carlo_spread = std::nan("");
+  double noise_bias = std::nan("");
+  int monte_carlo_samples = 0;
+  // Height-dependent systematic error (HeightDependentErrorBoundUm), worst case over its shape.
+  double height_dependent = std::nan("");
+  std::string method;  // "analytic" or "monte-carlo"; empty without a noise model
+};
+
+// Extremes (Sp, Sv, Sz, flatness): heavy-tailed SFF errors make a Gaussian Monte Carlo
+// overconfident, so their expanded uncertainty (k = 2) is a documented bound on how far the
+// error field can move an extreme: U = extremes * E + R, with E = model.extreme_error_um (the
+// largest plausible single-pixel error) and R the largest range of the z-linearity error over the
+// region's pixels for any phase of the table (0 for a region at one height, where it is a common
+// offset that the form removal takes out). extremes = 1 for Sp and Sv (one extreme moves),
+// 2 for Sz and flatness (peak and valley can move apart). The budget's standard uncertainty is U / 2.
+UncertaintyBudget ExtremeValueBudget(int extremes, double linearity_range_um, const DepthNoiseModel& model);
+// R of ExtremeValueBudget over the pixels where mask is non-zero and depth finite.
+double LinearityRangeUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model);
+
+// Covariance of linear functionals, by error component (add them for the total).
+struct FunctionalCovariance {
+  Eigen::MatrixXd random;     // correlated per-pixel noise
+  Eigen::MatrixXd linearity;  // z-linearity table, mean over its phase
+  Eigen::MatrixXd stage;      // per-frame stage error
+  Eigen::MatrixXd Total() const { return random + linearity + stage; }
+};
+
+// Budget of the functional c^T L (c over the functionals of cov).
+UncertaintyBudget AnalyticBudget(const FunctionalCovariance& cov, const Eigen::VectorXd& c);
+
+// L_i = sum_p weights[i](p) z(p). weights: CV_64FC1 images of depth_um's size, zero where a
+// functional does not use a pixel (it must be zero wherever the model's sigma is NaN).
+StatusOr<FunctionalCovariance> LinearFunctionalCovariance(const std::vector<cv::Mat>& weights, const cv::Mat& depth_um,
+                                                          const DepthNoiseModel& model);
+
+// The weights of a least-squares fit's parameters: row j of (J^T J)^-1 J^T as an image over the
+// fitted pixels (mask and finite depth), i.e. d(parameter j) / d(z(p)) (linearised at the
+// solution for sphere/cylinder).
+std::vector<cv::Mat> FormFitWeights(const FormFit& fit, const cv::Mat& depth_um, const cv::Mat& mask,
+                                    double pixel_size_um);
+
+// Covariance of a fit's parameters under the model: (J^T J)^-1 J^T Sigma J (J^T J)^-1.
+StatusOr<FunctionalCovariance> FormFitCovariance(const FormFit& fit, const cv::Mat& depth_um, const cv::Mat& mask,
+                                                 double pixel_size_um, const DepthNoiseModel& model);
+
+struct MonteCarloOptions {
+  int samples = 32;          // 8..10000; 32 gives the spread to ~13 % (1 / sqrt(2 (n - 1)))
+  uint64_t seed = 0x25178u;  // fixed: the same map and measurement give the same uncertainty
+  Status Validate() const;
+};
+
+struct MonteCarloEstimate {
+  double spread = 0.0;                // standard deviation of f(z + e_k) over the samples
+  double bias = 0.0;                  // noise-bias estimate (mean_k f(z + e_k) - f(z)) / (sqrt 2 - 1), signed
+  double standard_uncertainty = 0.0;  // sqrt(spread^2 + bias^2)
+  int samples = 0;                    // samples that gave a finite value
+};
+
+// Budget of a Monte Carlo estimate.
+UncertaintyBudget MonteCarloBudget(const MonteCarloEstimate& e);
+
+// values = measure(depth_um); measure is re-run on depth_um + model.SamplePerturbation(k, samples).
+// Samples where measure fails or gives NaN are left out; FAILED_PRECONDITION when fewer than
+// half of them remain for any output.
+using DepthMeasureFunction = std::function<StatusOr<std::vector<double>>(const cv::Mat& depth_um)>;
+StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& depth_um,
+                                                                const std::vector<double>& values,
+                                                                const DepthMeasureFunction& measure,
+                                                                const DepthNoiseModel& model,
+                                                                const MonteCarloOptions& options);
+
+// Height-dependent systematic error of shape parameters (Ssk, Sku). The SFF error of a pixel
+// depends on its height: where it falls between frames (z linearity) and, on a curved surface,
+// the focus window's averaging (WindowAveragingError). The Monte Carlo draws the z-linearity
+// table characterised on a tilted flat, at random phase; on a curved surface the error's shape
+// over the heights differs from that table (on a 2 um cosine between two frames: valleys
+// raised by ~0.03 um against the peaks, Ssk +0.057 against a truth of 0, which the Monte Carlo
+// gave +-0.02 for). Its size is known, its shape is not, so shape parameters take the worst
+// case of an error g(height) with |g| <= delta: g = +-delta sign(df/dz) (df/dz from the moments
+// of the levelled surface, a function of height alone), delta = half the range the table takes
+// over the region's heights (LinearityRangeUm / 2: ~0 for a region at one height) plus the
+// 99th percentile of |WindowAveragingError| over the region. B = the larger change of the value,
+// taken as a uniform bound: standard uncertainty B / sqrt 3 (component height_dependent).
+// Sa and Sq are left to the Monte Carlo: their deviations stayed within its U (coverage 100 %
+// in tests/bench/uncertainty_coverage.cc), and a worst case would only inflate them.
+
+// The focus window's flattening of a curved surface: the focus measure sums over the window U
+// (eq. 3.12/3.14, plus the Sobel operator's support), so to second order the depth is the
+// window's mean height z + (s2 / 2) lap z, s2 = (w^2 - 1) / 12 + 1/2 px^2 per axis. Estimated
+// from the measured map (NaN-aware Gaussian of sigma w / 2 against noise). CV_32FC1, um, 0 where
+// depth_um is NaN. window_px >= 1.
+cv::Mat WindowAveragingError(const cv::Mat& depth_um, int window_px);
+
+// delta of the comment above, for the pixels where mask is non-zero and depth finite;
+// linearity_range_um is LinearityRangeUm over the same pixels (the caller has it already).
+double HeightDependentErrorBoundUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model,
+                                   double linearity_range_um);
+
+// sign(d Ssk / d z_p) or sign(d Sku / d z_p) (+1 / -1 as CV_32FC1, 0 where surface_um is NaN)
+// for the levelled surface of core/metrology/areal_parameters.h. parameter: kSsk or kSku, else
+// INVALID_ARGUMENT.
+StatusOr<cv::Mat> ShapeParameterSensitivitySign(const cv::Mat& surface_um, HeightParameter parameter);
+
+// Adds a uniform bound B: component height_dependent = B / sqrt 3, combined in quadrature.
+void AddHeightDependentBound(UncertaintyBudget& budget, double bound);
+
+}  // namespace inspection

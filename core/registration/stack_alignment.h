@@ -1,0 +1,147 @@
+// Lateral alignment of a focus stack (issue 18): the focus measure of thesis 3.1.3 compares a
+// pixel across frames, which assumes frames registered pixel for pixel. Non-telecentric optics
+// change the magnification through focus ("focus breathing") and stages drift laterally, so each
+// frame is warped onto the grid of a reference frame before it is measured. The transform is a
+// per-stack model of z (FocusBreathingModel): estimated from the stack itself (imported stacks)
+// or calibrated once on the rig (scans), so frames can be warped as they arrive.
+#pragma once
+
+#include <functional>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "core/registration/frame_registration.h"
+#include "core/util/status.h"
+
+namespace inspection {
+
+// What aligns a stack's frames. "none", "estimate", "calibrated".
+enum class FrameAlignment {
+  kNone,        // frames taken as registered pixel for pixel
+  kEstimate,    // model estimated from the stack's frames (EstimateFocusBreathing)
+  kCalibrated,  // model from the calibration bundle (calibration step focus_breathing)
+};
+const char* FrameAlignmentName(FrameAlignment a);
+StatusOr<FrameAlignment> ParseFrameAlignment(const std::string& name);
+
+// The camera grid at stage z relative to the grid at reference_z_um (where it is the identity):
+//   p_z = c + s(z) R(theta(z)) (p_ref - c) + d(z),
+//   s(z) = 1 + scale_change_per_100um * (z - z_ref) / 100, theta(z) = rotation_rad_per_100um *
+//   (z - z_ref) / 100, d(z) = shift_px_per_100um * (z - z_ref) / 100,
+// c the image centre. Linear in z: the magnification of a non-telecentric objective changes
+// with the working distance at first order, and a stage's lateral run-out over a few hundred um
+// is a straight-line error at first order.
+struct FocusBreathingModel {
+  double reference_z_um = 0.0;
+  cv::Size frame_size;                  // the camera grid the model was measured on
+  double scale_change_per_100um = 0.0;  // relative magnification change, e.g. 0.02 = 2 %
+  double rotation_rad_per_100um = 0.0;
+  double shift_x_px_per_100um = 0.0;
+  double shift_y_px_per_100um = 0.0;
+  // How well the model explains the measurements: RMS over the agreeing neighbour pairs of the
+  // (measured - model) pair transform at the frame corners, px; and the frames it came from.
+  double fit_rms_px = 0.0;
+  int frames = 0;
+
+  cv::Point2d centre_px() const { return {(frame_size.width - 1) * 0.5, (frame_size.height - 1) * 0.5}; }
+  SimilarityTransform At(double z_um) const;  // grid at z relative to the reference grid
+  // Pixels of the grid at reference_frame_z_um -> pixels of the frame at z_um.
+  cv::Matx23d FrameFromReference(double z_um, double reference_frame_z_um) const;
+  Status Validate() const;  // INVALID_ARGUMENT naming the field
+};
+
+struct StackAlignmentOptions {
+  FrameRegistrationOptions registration;
+  // Pairs of neighbours that fail to register are left out of the fit; when more than this share
+  // fails (or fewer than 2 pairs remain) the estimate fails.
+  double max_failed_pair_share = 0.4;
+  // A pair whose registration differs from the model's transform for that pair by more than this
+  // (RMS at the frame corners, px) disagrees with the model. Failed and disagreeing pairs together
+  // may be at most max_failed_pair_share of the pairs: else the stack does not follow one model,
+  // aligning with it would smear the depth map, and the estimate fails instead.
+  double max_pair_residual_px = 1.0;
+  // Neighbour pairs registered at once. 1: one pair after another, two frames in memory (load is
+  // called once per frame, in order). Otherwise (0 = all hardware threads) pairs register
+  // concurrently: load must be thread-safe and is called for both frames of each pair (so use it
+  // on frames held in memory, e.g. a StackFrameDecoder's); the model is the same bit for bit.
+  int threads = 1;
+  // At most this many pairs are registered (0 = every neighbour pair). A longer stack registers
+  // frames `stride` = ceil((n - 1) / max_pairs) apart (and its last frame to the last one taken):
+  // the chain still spans every step, so a jump anywhere shows in one pair, at a fraction of the
+  // cost. What it no longer sees is one frame out of line between two in line. 30 pairs are
+  // plenty for the medians; frames two or three steps apart share most of their defocus.
+  int max_pairs = 30;
+  // Most stacks do not move (a telecentric objective, a good stage): the same estimate at half
+  // the working size (max_side_px / 2, one pyramid level fewer; about a quarter of the cost)
+  // runs first, and when its model moves no frame corner by kNegligibleAlignmentPx that model is
+  // the answer (the aligner then leaves the frames as they are). Its own noise is about twice
+  // the full estimate's (a still 60 x 1600x1200 stack: 0.36 px against 0.20 px), so a stack
+  // moving by ~0.5-0.8 px may be left unaligned where the full estimate would warp it; that is
+  // the size of motion the aligner already treats as negligible. Otherwise, or when it fails,
+  // the full estimate runs as if it had not.
+  bool coarse_first = true;
+  Status Validate() const;
+};
+
+// Estimates the model from a stack: each frame is registered to its neighbour (neighbours share
+// most of their defocus, so their structure is alike; a frame far from the reference may share
+// none with it) and the per-pair changes of scale, rotation and shift per um are combined by their
+// median (robust to a pair that registered wrongly); each pair is then checked against the model.
+// load(i) returns frame i (CV_8UC1 or CV_16UC1); only two frames are held at a time.
+// reference_z_um of the result: z_um.front(). Errors: INVALID_ARGUMENT for fewer than 3 frames
+// or frames smaller than 32x32 px ("alignment needs ..."), FAILED_PRECONDITION naming the frame
+// pairs when registration fails or the model does not fit.
+StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusOr<cv::Mat>(int)>& load,
+                                                     const std::vector<double>& z_um,
+                                                     const StackAlignmentOptions& options);
+
+// Largest displacement (px) of a frame corner over the frames at z_um under the model, relative
+// to the middle frame.
+double MaxCornerDisplacementPx(const FocusBreathingModel& model, const std::vector<double>& z_um);
+// Below this largest corner displacement a stack is taken as registered and left as it is:
+// warping would only resample (smooth) the frames, and an estimate on frames that do not move is
+// itself off by about this much (neighbour registrations of one texture at different defocus err
+// by ~5e-5 in scale per pair, and those errors are correlated).
+inline constexpr double kNegligibleAlignmentPx = 0.5;
+
+// The alignment of one stack: every frame's transform to the reference frame, set up before the
+// first frame arrives; Warp resamples each frame as it comes.
+struct AlignmentFigures {
+  FrameAlignment alignment = FrameAlignment::kNone;
+  int reference_frame = 0;
+  double max_scale_change_percent = 0.0;  // max |s - 1| over the frames, relative to the reference
+  double max_shift_px = 0.0;              // max shift of the image centre
+  double seen_by_every_frame_percent = 100.0;
+};
+
+class StackAligner {
+ public:
+  // The reference frame is the middle one (index (n - 1) / 2): the largest transform to any
+  // frame is then about half of the stack's, which keeps the most pixels seen by every frame.
+  // z_um: the stack's frame positions; the model must match frame_size.
+  static StatusOr<StackAligner> Create(const FocusBreathingModel& model, FrameAlignment alignment,
+                                       const std::vector<double>& z_um, cv::Size frame_size);
+
+  // Frame `index` resampled onto the reference grid (bilinear; outside the frame the border is
+  // replicated so no false edge enters the focus measure; those pixels are masked at Finish). A
+  // new Mat of the frame's type (the engine may keep it); the frame itself when !warps().
+  StatusOr<cv::Mat> Warp(const cv::Mat& frame, int index) const;
+  // False when the model moves no frame corner by kNegligibleAlignmentPx: frames stay as they
+  // are, every pixel counts as seen (seen_by_every_frame_percent 100) and results are exactly
+  // those without alignment.
+  bool warps() const { return warps_; }
+
+  const cv::Mat& seen_by_every_frame() const { return seen_; }  // CV_8UC1, 255 = seen
+  const AlignmentFigures& figures() const { return figures_; }
+  const cv::Matx23d& frame_from_reference(int index) const { return maps_[size_t(index)]; }
+
+ private:
+  cv::Size size_;
+  std::vector<cv::Matx23d> maps_;
+  cv::Mat seen_;
+  AlignmentFigures figures_;
+  bool warps_ = true;
+};
+
+}  // namespace inspection

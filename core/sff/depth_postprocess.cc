@@ -1,0 +1,84 @@
+// Threshold, consistency, refinement, fill in one pass over the options (core/sff/depth_postprocess.h).
+#include "core/sff/depth_postprocess.h"
+
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <opencv2/core/utility.hpp>
+
+namespace inspection {
+
+Status DepthPostProcessOptions::Validate() const {
+  if (!(min_confidence >= 0.0 && min_confidence <= 1.0)) {
+    return Status::InvalidArgument("min_confidence must be between 0 and 1");
+  }
+  if (consistency) INSPECT_RETURN_IF_ERROR(consistency_options.Validate());
+  INSPECT_RETURN_IF_ERROR(refinement.Validate());
+  if (fill_low_confidence) INSPECT_RETURN_IF_ERROR(fill_options.Validate());
+  return Status::Ok();
+}
+
+StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector<double>& z_um, int focus_window_px,
+                                       const DepthPostProcessOptions& o, DepthPostProcessFigures* figures) {
+  INSPECT_RETURN_IF_ERROR(o.Validate());
+  if (raw.depth_um.empty() || raw.depth_um.type() != CV_32FC1 || raw.confidence.type() != CV_32FC1 ||
+      raw.confidence.size() != raw.depth_um.size()) {
+    return Status::InvalidArgument("depth result must carry CV_32FC1 depth and confidence of one size");
+  }
+  DepthResult out = raw;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  // The threshold as cv::compare of the CV_32F confidence with a scalar does it (the scalar
+  // rounded to float), in one parallel pass instead of a clone, a mask and a masked set.
+  const float min_confidence = float(o.min_confidence);
+  out.depth_um = cv::Mat(raw.depth_um.size(), CV_32FC1);  // a new buffer: out's header shares raw's pixels
+  out.confidence = raw.confidence.clone();
+  cv::parallel_for_(cv::Range(0, raw.depth_um.rows), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      const float* d = raw.depth_um.ptr<float>(y);
+      const float* c = raw.confidence.ptr<float>(y);
+      float* t = out.depth_um.ptr<float>(y);
+      for (int x = 0; x < raw.depth_um.cols; ++x) t[x] = c[x] < min_confidence ? nan : d[x];
+    }
+  });
+  if (o.consistency) {
+    const double z_step = MedianZStep(z_um);
+    if (!(z_step > 0.0)) return Status::InvalidArgument("z_um must hold at least two distinct positions");
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat kept, RejectInconsistentDepth(out.depth_um, raw.depth_um, z_step, focus_window_px,
+                                                                   o.consistency_options, raw.all_in_focus));
+    // Rejected here (finite before, NaN now): not measured, whatever the curve's own confidence.
+    std::atomic<int64_t> rejected{0};
+    cv::parallel_for_(cv::Range(0, kept.rows), [&](const cv::Range& rows) {
+      int64_t count = 0;
+      for (int y = rows.start; y < rows.end; ++y) {
+        const float* before = out.depth_um.ptr<float>(y);
+        const float* after = kept.ptr<float>(y);
+        float* c = out.confidence.ptr<float>(y);
+        for (int x = 0; x < kept.cols; ++x) {
+          if (before[x] == before[x] && !(after[x] == after[x])) {
+            c[x] = 0.f;
+            ++count;
+          }
+        }
+      }
+      rejected += count;
+    });
+    if (figures) figures->consistency_rejected_fraction = double(rejected.load()) / double(kept.total());
+    out.depth_um = kept;
+  }
+  if (o.refinement.method != DepthRefinement::kNone) {
+    INSPECT_ASSIGN_OR_RETURN(out.depth_um, RefineDepth(out.depth_um, out.confidence, raw.all_in_focus, o.refinement));
+  }
+  if (o.fill_low_confidence) {
+    const int before = cv::countNonZero(out.depth_um == out.depth_um);
+    INSPECT_ASSIGN_OR_RETURN(out.depth_um, FillDepth(out.depth_um, out.confidence, raw.all_in_focus, o.fill_options));
+    if (figures) {
+      figures->filled_fraction =
+          double(cv::countNonZero(out.depth_um == out.depth_um) - before) / double(out.depth_um.total());
+    }
+  }
+  out.valid_fraction = double(cv::countNonZero(out.depth_um == out.depth_um)) / double(out.depth_um.total());
+  return out;
+}
+
+}  // namespace inspection

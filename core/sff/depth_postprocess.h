@@ -1,0 +1,50 @@
+// The post-processing of one SFF depth map, in order: confidence threshold (thesis 3.1.4's
+// depth is kept where core/sff/depth_interpolation.h's confidence allows), local depth consistency
+// (core/sff/depth_consistency.h), optional guided refinement (core/sff/depth_refinement.h) and optional
+// fill of the pixels left without depth (core/sff/depth_fill.h). One options struct, so the server,
+// the CLI and the evaluations run the same steps with the same defaults.
+#pragma once
+
+#include <vector>
+
+#include "core/sff/depth_consistency.h"
+#include "core/sff/depth_fill.h"
+#include "core/sff/depth_refinement.h"
+#include "core/sff/sff_engine.h"
+#include "core/util/status.h"
+
+namespace inspection {
+
+struct DepthPostProcessOptions {
+  // As SffOptions::min_confidence; the engine itself runs with 0 so that every pixel has the
+  // unthresholded depth the consistency step needs.
+  double min_confidence = 0.4;
+  // Local depth consistency; max_residual_z_steps 1 and the focus window + 1 px were chosen on
+  // the natural focal stacks without changing the microscope specimens' sigma (README).
+  bool consistency = true;
+  DepthConsistencyOptions consistency_options;
+  // Guided refinement: off by default (it moved the natural-scene RMSE by < 10 % after the
+  // consistency step, at several times the engine's cost).
+  DepthRefinementOptions refinement{DepthRefinement::kNone};
+  // Fill pixels without depth from measured neighbours: off by default (metrology reports NaN
+  // where nothing was measured; a filled value is an interpolation).
+  bool fill_low_confidence = false;
+  DepthFillOptions fill_options;
+
+  Status Validate() const;  // INVALID_ARGUMENT naming the field
+};
+
+// raw: the engine's result with SffOptions::min_confidence = 0 (finite depth everywhere). z_um:
+// the stack's stage positions (z step for the consistency limit); focus_window_px: the engine's
+// window. Returns raw with depth_um post-processed, valid_fraction recounted (filled pixels
+// count as valid), and confidence set to 0 where the consistency step rejected a pixel, so that
+// "confidence >= min_confidence" still means "measured". all_in_focus is kept (the guide).
+struct DepthPostProcessFigures {
+  double consistency_rejected_fraction = 0.0;  // of all pixels: above the threshold, rejected by consistency
+  double filled_fraction = 0.0;                // of all pixels: depth filled, not measured
+};
+StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector<double>& z_um, int focus_window_px,
+                                       const DepthPostProcessOptions& options,
+                                       DepthPostProcessFigures* figures = nullptr);
+
+}  // namespace inspection

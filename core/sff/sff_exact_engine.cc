@@ -1,0 +1,106 @@
+// Streaming SFF engine with exact 32-bit per-pixel state (thesis 3.1; layout StatePlanes in
+// core/sff/sff_state.h): the line fit (eq. 3.25-3.29) and every focus measure of 3.1.3 but 8-bit
+// Tenengrad with maximum / Gaussian interpolation (that case: sff_compact_engine.cc).
+// Per frame: the fused Tenengrad kernel over tiles (8-bit Tenengrad, line fit), or the whole
+// focus map of core/sff/focus_measure.h (normalised by the light with illumination_invariant) and the
+// same state update over row bands (all others).
+#include <algorithm>
+#include <atomic>
+#include <string>
+#include <type_traits>
+
+#include "core/sff/focus_measure.h"
+#include "core/util/parallel_for.h"
+#include "core/sff/internal/sff_engine_internal.h"
+#include "core/sff/internal/tenengrad_kernel.h"
+
+namespace inspection::sff_internal {
+namespace {
+
+// T: focus value type (int32_t: the fused 8-bit Tenengrad; float: a focus map of another
+// measure or of 16-bit frames). P: pixel type of the frames.
+template <typename T, typename P>
+class ExactEngine final : public SffEngine {
+ public:
+  static constexpr bool kFused = std::is_same_v<T, int32_t>;
+
+  ExactEngine(const SffOptions& o, cv::Size size, int type) : options_(o), size_(size), type_(type) {
+    const int j = o.interpolation == DepthInterpolation::kLineFit ? o.linefit_half_width : 1;
+    state_.Allocate(size.width, size.height, j, o.use_simd);
+    threads_ = ResolveThreads(o.threads);
+    if constexpr (kFused) {
+      scratch_.resize(size_t(threads_));
+      for (auto& s : scratch_) s.Reserve(o.window_px);
+    }
+  }
+
+  Status PushFrame(const cv::Mat& frame, double z_um) override {
+    const int k = int(z_.size());
+    INSPECT_RETURN_IF_ERROR(CheckPush(frame, z_um, z_, finished_, size_, type_));
+    if constexpr (kFused) {
+      const int tiles_x = (size_.width + kTileW - 1) / kTileW, tiles_y = (size_.height + kTileH - 1) / kTileH;
+      ParallelFor(tiles_x * tiles_y, threads_, [&](int t, int worker) {
+        const int x0 = (t % tiles_x) * kTileW, y0 = (t / tiles_x) * kTileH;
+        const int tw = std::min(kTileW, size_.width - x0), th = std::min(kTileH, size_.height - y0);
+        FusedTileFrame(frame, k, x0, y0, tw, th, options_.window_px, scratch_[size_t(worker)], state_, x0, y0);
+      });
+    } else {
+      cv::Mat focus;
+      INSPECT_RETURN_IF_ERROR(ComputeFocusMeasure(frame, options_.focus_measure, options_.window_px, &focus)
+                                  .WithContext("frame " + std::to_string(k)));
+      if (options_.illumination_invariant) {
+        INSPECT_RETURN_IF_ERROR(
+            NormaliseFocusByIllumination(frame, options_.focus_measure, options_.window_px, &focus)
+                .WithContext("frame " + std::to_string(k)));
+      }
+      const int bands = std::min(size_.height, threads_ * 4);
+      ParallelFor(bands, threads_, [&](int b, int) {
+        const int y_begin = size_.height * b / bands, y_end = size_.height * (b + 1) / bands;
+        UpdateExactRowsFromFocus(state_, k, focus, frame, y_begin, y_end);
+      });
+    }
+    z_.push_back(z_um);
+    return Status::Ok();
+  }
+
+  StatusOr<DepthResult> Finish() override {
+    const int n = int(z_.size());
+    INSPECT_RETURN_IF_ERROR(CheckFinish(finished_, n));
+    finished_ = true;
+    DepthOutputs out;
+    out.depth.create(size_, CV_32F);
+    out.confidence.create(size_, CV_32F);
+    out.aif.create(size_, type_);
+    std::atomic<size_t> valid{0};
+    ParallelFor(size_.height, threads_, [&](int y, int) {
+      valid += FinishExactSpan(state_, size_t(y) * size_.width, size_.width, z_, options_, out, 0, y);
+    });
+    state_ = {};  // release the O(pixels) state
+    return MakeDepthResult(out.depth, out.confidence, out.aif, n, valid.load());
+  }
+
+  int frames_pushed() const override { return int(z_.size()); }
+  size_t state_bytes() const override { return state_.Bytes(); }
+
+ private:
+  SffOptions options_;
+  cv::Size size_;
+  int type_;
+  int threads_ = 1;
+  bool finished_ = false;
+  std::vector<double> z_;
+  StatePlanes<T, P> state_;
+  std::vector<TenengradScratch> scratch_;
+};
+
+}  // namespace
+
+std::unique_ptr<SffEngine> NewExactEngine(const SffOptions& options, cv::Size frame_size, int frame_type) {
+  if (UseFused(options, frame_type)) {
+    return std::make_unique<ExactEngine<int32_t, uint8_t>>(options, frame_size, frame_type);
+  }
+  if (frame_type == CV_8UC1) return std::make_unique<ExactEngine<float, uint8_t>>(options, frame_size, frame_type);
+  return std::make_unique<ExactEngine<float, uint16_t>>(options, frame_size, frame_type);
+}
+
+}  // namespace inspection::sff_internal

@@ -1,0 +1,153 @@
+// The stack folder -> SFF engine loop (core/sff/stack_reconstruct.h): decode, push, report, per frame.
+#include "core/sff/stack_reconstruct.h"
+
+#include <limits>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "core/sff/all_in_focus.h"
+#include "core/io/colour.h"
+
+namespace inspection {
+
+StatusOr<cv::Mat> StackFrameSource::grey(int index) const {
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat image, frame(index));
+  if (image.channels() == 1) return image;
+  return LuminanceOf(image);
+}
+
+namespace {
+
+// The aligner for the folder's frames, or nullopt when the frames are used as they are.
+StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& source, const StackManifest& manifest,
+                                                       const StackFolderAlignment& a, const std::atomic<bool>& cancel,
+                                                       AlignmentFigures* figures) {
+  if (figures) *figures = AlignmentFigures{};
+  std::vector<double> z_um;
+  for (const StackFrame& f : manifest.frames) z_um.push_back(f.z_um);
+  FocusBreathingModel model;
+  switch (a.alignment) {
+    case FrameAlignment::kNone:
+      return std::optional<StackAligner>();
+    case FrameAlignment::kCalibrated:
+      if (a.calibrated == nullptr) {
+        return Status::FailedPrecondition(
+            "alignment CALIBRATED needs the focus_breathing calibration step (missing in the active calibration)");
+      }
+      model = *a.calibrated;
+      break;
+    case FrameAlignment::kEstimate: {
+      auto load = [&](int i) -> StatusOr<cv::Mat> {
+        if (cancel.load())
+          return Status::Cancelled("reconstruction cancelled while aligning frame " + std::to_string(i));
+        return source.grey(i);  // errors name the frame
+      };
+      StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
+      if (!estimate.ok()) {
+        const StatusCode code = estimate.status().code();
+        if (a.fall_back_to_none && (code == StatusCode::kFailedPrecondition || code == StatusCode::kInvalidArgument)) {
+          return std::optional<StackAligner>();
+        }
+        return estimate.status();
+      }
+      model = *estimate;
+      break;
+    }
+  }
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat first, source.grey(0));
+  INSPECT_ASSIGN_OR_RETURN(StackAligner aligner, StackAligner::Create(model, a.alignment, z_um, first.size()));
+  if (figures) *figures = aligner.figures();
+  return std::optional<StackAligner>(std::move(aligner));
+}
+
+}  // namespace
+
+StatusOr<DepthResult> ReconstructStackFolder(const std::filesystem::path& dir, const StackManifest& manifest,
+                                             const SffOptions& options, const StackFrameCallback& on_frame,
+                                             const std::atomic<bool>& cancel, const StackFolderAlignment& alignment,
+                                             AlignmentFigures* figures) {
+  StackFrameSource source;
+  source.frame = [&](int i) { return DecodeStackFrame(dir, manifest, size_t(i)); };
+  return ReconstructStackFrames(manifest, source, options, on_frame, cancel, alignment, figures);
+}
+
+StatusOr<DepthResult> ReconstructStackFrames(const StackManifest& manifest, const StackFrameSource& source,
+                                             const SffOptions& options, const StackFrameCallback& on_frame,
+                                             const std::atomic<bool>& cancel, const StackFolderAlignment& alignment,
+                                             AlignmentFigures* figures) {
+  INSPECT_ASSIGN_OR_RETURN(std::optional<StackAligner> aligner,
+                           PrepareAlignment(source, manifest, alignment, cancel, figures));
+  std::unique_ptr<SffEngine> engine;
+  // Colour stacks: the engine measures focus on the luminance, and the composer keeps, per pixel,
+  // the colour of the frame the engine picks (same scores, same tie rule), O(pixels) state.
+  std::optional<AllInFocusComposer> colour;
+  const int count = int(manifest.frames.size());
+  for (int i = 0; i < count; ++i) {
+    if (cancel.load()) return Status::Cancelled("reconstruction cancelled at frame " + std::to_string(i));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat decoded, source.frame(i));
+    StackFrameImage image;  // as LoadStackFrameImage: the colour frame, or the grey frame as stored
+    if (decoded.channels() == 3) {
+      image.colour = decoded;  // its luminance is taken below, after the warp
+    } else {
+      image.grey = decoded;
+    }
+    const std::string name = "frame " + std::to_string(i) + " (" + manifest.frames[i].file + ")";
+    if (i > 0 && image.is_colour() != colour.has_value()) {
+      return Status::InvalidArgument(name + ": " + (image.is_colour() ? "colour (3 channels)" : "grey") +
+                                     " differs from frame 0 (" + (colour ? "colour (3 channels)" : "grey") + ")");
+    }
+    if (!engine) {
+      INSPECT_ASSIGN_OR_RETURN(engine, SffEngine::Create(options, decoded.size(), CV_MAKETYPE(decoded.depth(), 1)));
+      if (image.is_colour()) {
+        INSPECT_ASSIGN_OR_RETURN(AllInFocusComposer c,
+                                 AllInFocusComposer::Create(image.colour.size(), image.colour.type()));
+        colour.emplace(std::move(c));
+      }
+    }
+    cv::Mat frame = image.grey;
+    if (colour) {
+      // Warp the colour frame and measure on its luminance, so that the kept colour's luminance
+      // is exactly the engine's grey all-in-focus value, aligned or not.
+      cv::Mat c = image.colour;
+      if (aligner) {
+        INSPECT_ASSIGN_OR_RETURN(c, aligner->Warp(c, i));
+      }
+      INSPECT_ASSIGN_OR_RETURN(frame, LuminanceOf(c));
+      cv::Mat score;
+      INSPECT_RETURN_IF_ERROR(FocusScore(frame, options.focus_measure, options.window_px, &score).WithContext(name));
+      INSPECT_RETURN_IF_ERROR(colour->PushFrame(c, score).WithContext(name));
+    } else if (aligner) {
+      INSPECT_ASSIGN_OR_RETURN(frame, aligner->Warp(frame, i));
+    }
+    INSPECT_RETURN_IF_ERROR(engine->PushFrame(frame, manifest.frames[i].z_um).WithContext(name));
+    if (source.release) source.release(i);
+    if (on_frame) {
+      // Frames as stored (grey, not warped): the source may know their statistics already.
+      std::optional<FrameStatistics> statistics;
+      if (!colour && !(aligner && aligner->warps()) && source.statistics) statistics = source.statistics(i);
+      if (!statistics) statistics = ComputeFrameStatistics(frame, manifest.bit_depth);
+      on_frame(i, count, manifest.frames[i].z_um, *statistics);
+    }
+  }
+  if (!engine) return Status::InvalidArgument("stack has no frames");
+  INSPECT_ASSIGN_OR_RETURN(DepthResult result, engine->Finish());
+  if (colour) result.all_in_focus = colour->all_in_focus();
+  if (aligner) MaskUnseenPixels(*aligner, &result);
+  return result;
+}
+
+void MaskUnseenPixels(const StackAligner& aligner, DepthResult* r) {
+  const cv::Mat& seen = aligner.seen_by_every_frame();
+  const cv::Size size = seen.size();
+  if (!aligner.warps() || r->depth_um.size() != size) return;
+  const cv::Mat unseen = seen == 0;
+  r->depth_um.setTo(std::numeric_limits<float>::quiet_NaN(), unseen);
+  if (r->confidence.size() == size) r->confidence.setTo(0.0f, unseen);
+  if (r->all_in_focus.size() == size) r->all_in_focus.setTo(0, unseen);
+  const cv::Mat finite = r->depth_um == r->depth_um;  // NaN != NaN
+  r->valid_fraction = double(cv::countNonZero(finite)) / double(size.area());
+}
+
+
+}  // namespace inspection

@@ -1,0 +1,20 @@
+// The one place where core's Status becomes a gRPC status (and back, for tests).
+#pragma once
+
+#include <grpcpp/support/status.h>
+
+#include "core/util/status.h"
+
+namespace inspection {
+
+inline grpc::Status ToGrpcStatus(const Status& s) {
+  if (s.ok()) return grpc::Status::OK;
+  return grpc::Status(static_cast<grpc::StatusCode>(static_cast<int>(s.code())), s.message());
+}
+
+inline Status FromGrpcStatus(const grpc::Status& s) {
+  if (s.ok()) return Status::Ok();
+  return Status(static_cast<StatusCode>(static_cast<int>(s.error_code())), s.error_message());
+}
+
+}  // namespace inspection

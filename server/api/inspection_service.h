@@ -1,0 +1,106 @@
+// gRPC handlers of inspection.v1.InspectionService and SimulationService. Thin: requests go
+// through the request mapping (request_mapping.h, which validates and names the field), work
+// goes to the JobManager, and a JobRecord's events are streamed back. Every error leaves as a
+// gRPC status built by ToGrpcStatus (grpc_status.h); no exception crosses this boundary.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <string_view>
+
+#include "inspection/v1/inspection.grpc.pb.h"
+#include "server/security/access_control.h"
+#include "server/storage/calibration_store.h"
+#include "server/storage/data_store.h"
+#include "server/jobs/job_manager.h"
+#include "server/results/result_feed.h"
+#include "server/jobs/retention_sweeper.h"
+#include "server/jobs/rig_controller.h"
+
+namespace inspection {
+
+struct ServiceOptions {
+  std::string server_version;
+  // Who may call what (access_control.h); nullptr = no authentication: every caller is
+  // "anonymous" with every role.
+  const AccessControl* access = nullptr;
+  int64_t max_upload_bytes = int64_t(2) << 30;
+  // User scenes of the simulated rig: SetSpecimen takes a scene by NAME from this folder
+  // (<name>.json); empty = built-in specimens only. Paths ("file:...") are always refused.
+  std::filesystem::path scene_dir;
+  // Deletion, pins (retention_sweeper.h); must outlive the service.
+  DataJanitor* janitor = nullptr;
+  // New scans and uploads are refused with RESOURCE_EXHAUSTED while the data disk has less free
+  // space than this (0 = no reserve).
+  int64_t min_free_bytes = 0;
+  // The inspection result feed (ListResults reads the store directly); must outlive the service.
+  ResultFeed* results = nullptr;
+  // Frames decode while an upload arrives (server/jobs/job_work.h).
+  ReconstructPipelineOptions reconstruct;
+};
+
+// Authenticates the caller and checks the role `method` needs: UNAUTHENTICATED without or with
+// unknown credentials, PERMISSION_DENIED naming the missing role. Shared by every service.
+StatusOr<Identity> AuthorizeCall(grpc::ServerContext* ctx, const AccessControl* access, std::string_view method);
+
+class InspectionServiceImpl final : public v1::InspectionService::Service {
+ public:
+  InspectionServiceImpl(const ServiceOptions& options, DataStore* store, JobManager* jobs, RigController* rig,
+                        CalibrationStore* calibrations)
+      : options_(options), store_(store), jobs_(jobs), rig_(rig), calibrations_(calibrations) {}
+
+  grpc::Status GetRigStatus(grpc::ServerContext*, const v1::GetRigStatusRequest*, v1::RigStatus*) override;
+  grpc::Status Calibrate(grpc::ServerContext*, const v1::CalibrateRequest*, grpc::ServerWriter<v1::JobEvent>*) override;
+  grpc::Status Scan(grpc::ServerContext*, const v1::ScanRequest*, grpc::ServerWriter<v1::JobEvent>*) override;
+  grpc::Status Reconstruct(grpc::ServerContext*,
+                           grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructRequest>*) override;
+  grpc::Status WatchJob(grpc::ServerContext*, const v1::WatchJobRequest*, grpc::ServerWriter<v1::JobEvent>*) override;
+  grpc::Status GetJob(grpc::ServerContext*, const v1::GetJobRequest*, v1::Job*) override;
+  grpc::Status ListJobs(grpc::ServerContext*, const v1::ListJobsRequest*, v1::ListJobsResponse*) override;
+  grpc::Status CancelJob(grpc::ServerContext*, const v1::CancelJobRequest*, v1::Job*) override;
+  grpc::Status DownloadArtifact(grpc::ServerContext*, const v1::DownloadArtifactRequest*,
+                                grpc::ServerWriter<v1::ArtifactChunk>*) override;
+  grpc::Status ResetRig(grpc::ServerContext*, const v1::ResetRigRequest*, v1::RigStatus*) override;
+  grpc::Status GetCalibration(grpc::ServerContext*, const v1::GetCalibrationRequest*, v1::Calibration*) override;
+  grpc::Status ListCalibrations(grpc::ServerContext*, const v1::ListCalibrationsRequest*,
+                                v1::ListCalibrationsResponse*) override;
+  grpc::Status DeleteJob(grpc::ServerContext*, const v1::DeleteJobRequest*, v1::DeleteResponse*) override;
+  grpc::Status DeleteScan(grpc::ServerContext*, const v1::DeleteScanRequest*, v1::DeleteResponse*) override;
+  grpc::Status PinJob(grpc::ServerContext*, const v1::PinJobRequest*, v1::PinJobResponse*) override;
+  // Recipes (inspection_service_recipes.cc).
+  grpc::Status CreateRecipe(grpc::ServerContext*, const v1::CreateRecipeRequest*, v1::Recipe*) override;
+  grpc::Status UpdateRecipe(grpc::ServerContext*, const v1::UpdateRecipeRequest*, v1::Recipe*) override;
+  grpc::Status GetRecipe(grpc::ServerContext*, const v1::GetRecipeRequest*, v1::Recipe*) override;
+  grpc::Status ListRecipes(grpc::ServerContext*, const v1::ListRecipesRequest*, v1::ListRecipesResponse*) override;
+  grpc::Status DeleteRecipe(grpc::ServerContext*, const v1::DeleteRecipeRequest*, v1::DeleteResponse*) override;
+  // Inspection results (inspection_service_results.cc).
+  grpc::Status ListResults(grpc::ServerContext*, const v1::ListResultsRequest*, v1::ListResultsResponse*) override;
+  grpc::Status WatchResults(grpc::ServerContext*, const v1::WatchResultsRequest*,
+                            grpc::ServerWriter<v1::InspectionResult>*) override;
+
+ private:
+  StatusOr<Identity> CheckAuth(grpc::ServerContext* ctx, std::string_view method) const {
+    return AuthorizeCall(ctx, options_.access, method);
+  }
+  void FillRigStatus(v1::RigStatus* status);
+
+  ServiceOptions options_;
+  DataStore* store_;
+  JobManager* jobs_;
+  RigController* rig_;
+  CalibrationStore* calibrations_;
+};
+
+class SimulationServiceImpl final : public v1::SimulationService::Service {
+ public:
+  SimulationServiceImpl(const ServiceOptions& options, RigController* rig) : options_(options), rig_(rig) {}
+  grpc::Status ListSpecimens(grpc::ServerContext*, const v1::ListSpecimensRequest*,
+                             v1::ListSpecimensResponse*) override;
+  grpc::Status SetSpecimen(grpc::ServerContext*, const v1::SetSpecimenRequest*, v1::ListSpecimensResponse*) override;
+
+ private:
+  ServiceOptions options_;
+  RigController* rig_;
+};
+
+}  // namespace inspection

@@ -1,0 +1,88 @@
+// JobWork: what one job does, as validated domain values (no proto beyond the job kind). The
+// request mapping (request_mapping.h) builds it from a request, the JobManager queues it, and a
+// JobRunner (job_runner.h) runs it. One alternative per job kind.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "core/sff/depth_postprocess.h"
+#include "core/sff/sff_engine.h"
+#include "core/io/stack_frame_decoder.h"
+#include "core/registration/stack_alignment.h"
+#include "inspection/v1/inspection.pb.h"
+#include "server/results/inspection_result.h"
+#include "server/storage/owned_folder.h"
+#include "server/procedures/calibration_procedure.h"
+#include "server/results/depth_artifacts.h"
+#include "server/procedures/scan_procedure.h"
+
+namespace inspection {
+
+// Acquire a stack through focus on the rig and reconstruct it (thesis 3.1.2, 5, 6.2).
+struct ScanWork {
+  ScanPlan plan;  // calibration_id is filled in when the scan starts (the bundle active then)
+  std::vector<DepthExportKind> extra_exports;
+  std::string part_id;  // the MES context of the request (ScanRequest.part_id, station)
+  std::string station;
+  // Set when the request named a recipe (server/api/recipe_scan.h): measured and judged on the depth
+  // map (server/results/inspection_result.h).
+  std::shared_ptr<const RecipeRun> recipe;
+};
+
+// Run calibration steps on the rig (thesis 4.3, 5.4.1).
+struct CalibrateWork {
+  CalibrationOptions options;
+};
+
+// How a reconstruction reads its frames and writes its artifacts (issue 16 item 4).
+struct ReconstructPipelineOptions {
+  // Frames decode on this many threads while the upload arrives (or the stored scan is read);
+  // 0 = all hardware threads.
+  int decode_threads = 0;
+  // Decoded frames kept per reconstruction for the engine; beyond it the job decodes again.
+  int64_t max_decoded_bytes = StackFrameDecoderOptions{}.max_kept_bytes;
+  int artifact_threads = 0;  // artifact files written (and hashed) at once; 0 = all hardware threads
+  // The path before issue 16, for the end-to-end benchmark's baseline: every frame decoded after
+  // the upload to check it and again in the job, one after another; artifacts one at a time.
+  bool sequential = false;
+};
+
+// Reconstruct a stack (core/io/stack.h format) that has already been validated.
+struct ReconstructWork {
+  std::filesystem::path stack_dir;
+  std::string source_scan_id;  // the stored scan read; empty for an upload
+  // Set for an uploaded stack or a stored scan's private folder (server/storage/stored_stack.h): the
+  // folder goes when the last copy of the work does (the job ended, was cancelled while queued,
+  // or never got queued).
+  std::shared_ptr<const OwnedFolder> upload;
+  // The stack's frames, decoded (and checked) while the request was received, from stack_dir or
+  // from a stored scan's archive (then stack_dir holds no frames); null = the job decodes them
+  // from stack_dir (the sequential path). Declared after `upload`: destroyed (its threads
+  // joined) before the folder goes.
+  std::shared_ptr<StackFrameDecoder> decoded;
+  SffOptions sff;
+  ReconstructionMethodSettings method;  // SFF with sff, or an integral method (thesis 5.4, 6.4)
+  std::vector<DepthExportKind> extra_exports;
+  // Lateral alignment (core/registration/stack_alignment.h); nullopt = ESTIMATE, unaligned when the frames do
+  // not register.
+  std::optional<FrameAlignment> alignment;
+  DepthPostProcessOptions postprocess;  // SFF only
+};
+
+using JobWork = std::variant<ScanWork, CalibrateWork, ReconstructWork>;
+
+v1::JobKind KindOf(const JobWork& work);
+
+// What a job shows while it waits, beyond its kind and ids: a reconstruction of a stored scan
+// names that scan in its result from the start.
+void FillQueuedJob(const JobWork& work, v1::Job* job);
+
+// One line for the log, e.g. "scan of 41 frames, z 0..200 um, HF+ADAPT".
+std::string DescribeWork(const JobWork& work);
+
+}  // namespace inspection

@@ -1,0 +1,45 @@
+// ProcedureRunner: the server's JobRunner. Runs a job's work through server/procedures and
+// publishes what it produced:
+//  - scan: holds the rig, RunScan with the active calibration (thesis 3.1.2, 5, 6.2), stores
+//    the stack as stack.zip and publishes the depth artifacts and ground truth; a scan that ran
+//    a recipe also measures, judges, writes the HTML report and appends to the result feed;
+//  - calibrate: holds the rig, RunCalibration carrying over the active bundle's other models
+//    (thesis 4.3, 5.4.1), saves the new bundle and activates it;
+//  - reconstruct: no rig; replays a stack folder through the SFF engine and publishes.
+// Rig jobs move the rig Busy while they run and report their status to the RigController
+// (device errors put it into Error). Called by the JobManager's workers; the JobManager runs
+// one rig job at a time.
+#pragma once
+
+#include "server/storage/calibration_store.h"
+#include "server/storage/data_store.h"
+#include "server/jobs/job_runner.h"
+#include "server/results/result_feed.h"
+#include "server/jobs/rig_controller.h"
+
+namespace inspection {
+
+class ProcedureRunner final : public JobRunner {
+ public:
+  // `results` receives the inspection result of every scan that ran a recipe.
+  // pipeline: how reconstructions write their artifacts (artifact_threads, sequential).
+  ProcedureRunner(DataStore* store, RigController* rig, CalibrationStore* calibrations, ResultFeed* results,
+                  const ReconstructPipelineOptions& pipeline = {})
+      : store_(store), rig_(rig), calibrations_(calibrations), results_(results), pipeline_(pipeline) {}
+
+  StatusOr<v1::JobResult> Run(const JobWork& work, const JobContext& context) override;
+
+ private:
+  StatusOr<v1::JobResult> RunScan(const ScanWork& work, const JobContext& context);
+  StatusOr<v1::JobResult> RunCalibrate(const CalibrateWork& work, const JobContext& context);
+  StatusOr<v1::JobResult> RunReconstruct(const ReconstructWork& work, const JobContext& context);
+
+  DataStore* store_;
+  RigController* rig_;
+  CalibrationStore* calibrations_;
+  ResultFeed* results_;
+  ReconstructPipelineOptions pipeline_;
+  int artifact_threads() const { return pipeline_.sequential ? 1 : pipeline_.artifact_threads; }
+};
+
+}  // namespace inspection

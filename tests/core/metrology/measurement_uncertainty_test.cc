@@ -1,0 +1,182 @@
+// The depth error model and its propagation, checked against simulation: the noise estimate
+// recovers a known sigma (also with a lay and per region), the analytic covariance of a fit
+// matches the spread over many noise realisations, the z-linearity and stage terms match their
+// closed forms, and the Monte Carlo noise-bias estimate covers the bias of Sq on pure noise.
+#include "core/metrology/measurement_uncertainty.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/metrology/areal_parameters.h"
+#include "tests/core/metrology_surfaces.h"
+
+namespace inspection {
+namespace {
+
+using testing::kPi;
+
+constexpr double kPx = 0.74;
+
+DepthNoiseOptions Options(int window = 7) {
+  DepthNoiseOptions o;
+  o.window_px = window;
+  for (int k = 0; k < 40; ++k) o.z_positions_um.push_back(150.0 + 5.0 * k);
+  o.linearity.bias_of_step = {0.0, 0.0};  // no z-linearity unless a test sets one
+  return o;
+}
+
+cv::Mat All(cv::Size s) { return cv::Mat(s, CV_8UC1, cv::Scalar(255)); }
+
+TEST(MeasurementUncertaintyTest, NoiseEstimateRecoversSigmaOnPlaneAndOnALaidSurface) {
+  const cv::Size size(300, 200);
+  const double sigma = 0.05;
+  // Tilted plane: second differences cancel it. ~60000 samples / 49 px per correlation area:
+  // the estimate is good to ~5 %.
+  cv::Mat plane = testing::SampleSurface(size, kPx, [](double x, double y) { return 200.0 + 0.1 * x + 0.05 * y; });
+  const cv::Mat noise = testing::CorrelatedNoise(size, sigma, 7, 21);
+  plane += noise;
+  auto m = EstimateDepthNoise(plane, cv::Mat(), Options());
+  ASSERT_TRUE(m.ok()) << m.status().ToString();
+  EXPECT_NEAR(m->global_sigma_um, sigma, 0.1 * sigma);
+  EXPECT_NEAR(m->sigma_um.at<float>(100, 150), sigma, 0.25 * sigma);  // local: ~64 areas, ~13 %
+  // The extreme bound holds the realisation's largest error (~1.2x it for Gaussian noise).
+  double lo, hi;
+  cv::minMaxLoc(noise, &lo, &hi);
+  EXPECT_GE(m->extreme_error_um, std::max(hi, -lo));
+  EXPECT_LE(m->extreme_error_um, 2.0 * std::max(hi, -lo));
+  // A 2 um cosine lay along x would swamp x's second differences; y's still see the noise only.
+  cv::Mat laid =
+      testing::SampleSurface(size, kPx, [](double x, double) { return 200.0 + 2.0 * std::cos(2 * kPi * x / 30.0); });
+  laid += noise;
+  auto ml = EstimateDepthNoise(laid, cv::Mat(), Options());
+  ASSERT_TRUE(ml.ok());
+  EXPECT_NEAR(ml->global_sigma_um, sigma, 0.15 * sigma);
+}
+
+TEST(MeasurementUncertaintyTest, NoiseEstimateFollowsRegionsAndFallsBackForTinyOnes) {
+  const cv::Size size(300, 120);
+  // Left half noise 0.02 um, right half 0.1 um.
+  cv::Mat z = 200.0f + testing::CorrelatedNoise(size, 0.02, 7, 1);
+  const cv::Mat rz = 200.0f + testing::CorrelatedNoise(size, 0.1, 7, 2);
+  rz(cv::Rect(150, 0, 150, 120)).copyTo(z(cv::Rect(150, 0, 150, 120)));
+  cv::Mat lmask(size, CV_8UC1, cv::Scalar(0)), rmask = lmask.clone();
+  lmask(cv::Rect(0, 0, 150, 120)).setTo(255);
+  rmask(cv::Rect(150, 0, 150, 120)).setTo(255);
+  auto ml = EstimateDepthNoise(z, lmask, Options()), mr = EstimateDepthNoise(z, rmask, Options());
+  ASSERT_TRUE(ml.ok() && mr.ok());
+  EXPECT_NEAR(ml->global_sigma_um, 0.02, 0.003);
+  EXPECT_NEAR(mr->global_sigma_um, 0.1, 0.015);
+  EXPECT_TRUE(std::isnan(ml->sigma_um.at<float>(60, 200)));  // outside its region
+  // A 10 x 10 region has no second difference at lag 8 of its own: the map's level stands in.
+  cv::Mat tiny(size, CV_8UC1, cv::Scalar(0));
+  tiny(cv::Rect(20, 20, 10, 10)).setTo(255);
+  auto mt = EstimateDepthNoise(z, tiny, Options());
+  ASSERT_TRUE(mt.ok()) << mt.status().ToString();
+  EXPECT_GT(mt->global_sigma_um, 0.02);
+  EXPECT_TRUE(std::isfinite(mt->sigma_um.at<float>(25, 25)));
+}
+
+// Model with exactly the generator's sigma and window.
+DepthNoiseModel Known(const cv::Mat& depth, double sigma, int window, const DepthNoiseOptions& o) {
+  DepthNoiseModel m;
+  m.sigma_um = cv::Mat(depth.size(), CV_32FC1, cv::Scalar(float(sigma)));
+  m.global_sigma_um = sigma;
+  m.correlation_px = window;
+  m.grid = *ZGrid::Create(o.z_positions_um);
+  m.linearity = o.linearity;
+  m.stage_u_um = o.stage_repeatability_um / std::sqrt(3.0);
+  return m;
+}
+
+TEST(MeasurementUncertaintyTest, FitCovarianceMatchesTheSpreadOverRealisations) {
+  // 400 noise realisations (sigma 0.05 um, 7 x 7 correlated) on a 90 x 60 px plane: the sample
+  // variance of each parameter is known to sqrt(2 / 400) = 7 %; the bound is 3 of those (21 %).
+  const cv::Size size(90, 60);
+  const cv::Mat base =
+      testing::SampleSurface(size, kPx, [](double x, double y) { return 210.0 + 0.02 * x - 0.01 * y; });
+  auto fit0 = FitForm(base, All(size), kPx, FormOptions{});
+  ASSERT_TRUE(fit0.ok());
+  auto cov = FormFitCovariance(*fit0, base, All(size), kPx, Known(base, 0.05, 7, Options()));
+  ASSERT_TRUE(cov.ok()) << cov.status().ToString();
+  const int n = 400;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero(), sum2 = Eigen::Vector3d::Zero();
+  for (int k = 0; k < n; ++k) {
+    const cv::Mat z = base + testing::CorrelatedNoise(size, 0.05, 7, 1000 + k);
+    auto f = FitForm(z, All(size), kPx, FormOptions{});
+    ASSERT_TRUE(f.ok());
+    const Eigen::Vector3d d = f->parameters - fit0->parameters;
+    sum += d;
+    sum2 += d.cwiseProduct(d);
+  }
+  for (int j = 0; j < 3; ++j) {
+    const double var = sum2[j] / n - (sum[j] / n) * (sum[j] / n);
+    std::printf("%s: empirical sd %.3e, predicted %.3e (independent-noise formula %.3e)\n",
+                fit0->parameter_names[j].c_str(), std::sqrt(var), std::sqrt(cov->random(j, j)),
+                0.05 * std::sqrt(fit0->normal_inverse(j, j)));
+    EXPECT_NEAR(var / cov->random(j, j), 1.0, 0.21) << fit0->parameter_names[j];
+  }
+  EXPECT_DOUBLE_EQ(cov->linearity.norm(), 0.0);
+  EXPECT_DOUBLE_EQ(cov->stage.norm(), 0.0);
+}
+
+TEST(MeasurementUncertaintyTest, LinearityAndStageTermsMatchTheirClosedForms) {
+  // Two flat regions 1 um apart with a first-harmonic linearity a sin(2 pi f) (a = 0.04 of a
+  // 5 um step). Over its unknown phase the step functional's variance is
+  // (a step)^2 (1 - cos(2 pi df)) with df = 1 um / 5 um.
+  const cv::Size size(100, 40);
+  cv::Mat z(size, CV_32FC1, cv::Scalar(200.0f));
+  z(cv::Rect(50, 0, 50, 40)).setTo(201.0f);
+  DepthNoiseOptions o = Options();
+  o.linearity.bias_of_step.clear();
+  for (int i = 0; i < 100; ++i) o.linearity.bias_of_step.push_back(0.04 * std::sin(2 * kPi * i / 100.0));
+  o.stage_repeatability_um = 0.1;
+  const DepthNoiseModel m = Known(z, 0.0, 7, o);
+  cv::Mat w = cv::Mat::zeros(size, CV_64F);
+  w(cv::Rect(50, 0, 50, 40)).setTo(1.0 / 2000);
+  w(cv::Rect(0, 0, 50, 40)).setTo(-1.0 / 2000);
+  auto cov = LinearFunctionalCovariance({w}, z, m);
+  ASSERT_TRUE(cov.ok()) << cov.status().ToString();
+  const double expected = std::pow(0.04 * 5.0, 2) * (1.0 - std::cos(2 * kPi * 0.2));
+  EXPECT_NEAR(cov->linearity(0, 0), expected, 0.01 * expected);  // piecewise-linear table, 64 phases
+  // Both heights are nearest to the frame at 200 um: the stage error cancels.
+  EXPECT_NEAR(cov->stage(0, 0), 0.0, 1e-15);
+  EXPECT_NEAR(cov->random(0, 0), 0.0, 1e-15);
+  // Heights 5 um apart use different frames: var = 2 (0.1 / sqrt 3)^2; the linearity is common.
+  z(cv::Rect(50, 0, 50, 40)).setTo(205.0f);
+  auto cov2 = LinearFunctionalCovariance({w}, z, m);
+  ASSERT_TRUE(cov2.ok());
+  EXPECT_NEAR(cov2->stage(0, 0), 2.0 * 0.01 / 3.0, 1e-12);
+  EXPECT_NEAR(cov2->linearity(0, 0), 0.0, 1e-12);
+}
+
+TEST(MeasurementUncertaintyTest, MonteCarloIsRepeatableAndItsBiasCoversNoiseOnlySq) {
+  // A flat of pure noise: Sq measures the noise (truth 0). The doubling estimate of the noise
+  // bias is exact in this worst case up to Monte Carlo scatter (64 samples: ~5 %).
+  const cv::Size size(160, 120);
+  const cv::Mat z = 200.0f + testing::CorrelatedNoise(size, 0.05, 7, 77);
+  const DepthNoiseModel m = Known(z, 0.05, 7, Options());
+  auto measure = [&](const cv::Mat& d) -> StatusOr<std::vector<double>> {
+    INSPECT_ASSIGN_OR_RETURN(ArealEvaluation e, EvaluateArealSurface(d, All(size), kPx, ArealOptions{}));
+    return std::vector<double>{e.parameters.Sq_um, e.parameters.Sa_um};
+  };
+  auto v = measure(z);
+  ASSERT_TRUE(v.ok());
+  MonteCarloOptions mc;
+  mc.samples = 64;
+  auto a = MonteCarloUncertainty(z, *v, measure, m, mc);
+  auto b = MonteCarloUncertainty(z, *v, measure, m, mc);
+  ASSERT_TRUE(a.ok() && b.ok()) << a.status().ToString();
+  EXPECT_EQ((*a)[0].standard_uncertainty, (*b)[0].standard_uncertainty);  // same seed, same answer
+  for (int i = 0; i < 2; ++i) {
+    std::printf("%s of noise: %.4f um, MC bias %.4f spread %.4f\n", i ? "Sa" : "Sq", (*v)[i], (*a)[i].bias,
+                (*a)[i].spread);
+    EXPECT_NEAR((*a)[i].bias, (*v)[i], 0.15 * (*v)[i]);
+    EXPECT_GE(2.0 * (*a)[i].standard_uncertainty, (*v)[i]);  // U covers the deviation from 0
+  }
+  EXPECT_EQ(MonteCarloUncertainty(z, *v, measure, m, MonteCarloOptions{4}).status().code(),
+            StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace inspection
