@@ -13,6 +13,8 @@
 #include <optional>
 #include <vector>
 
+#include <spdlog/spdlog.h>
+
 #include "server/storage/internal/schema.h"
 
 namespace inspection {
@@ -97,6 +99,14 @@ const char* const kPostgresMigrations[] = {
     )sql",
 };
 static_assert(std::size(kPostgresMigrations) == kStoreSchemaVersion, "one migration per schema version");
+
+// libpq's messages end in a newline and continue on tab-indented lines: one line for logs.
+std::string OneLine(std::string m) {
+  while (!m.empty() && (m.back() == '\n' || m.back() == ' ')) m.pop_back();
+  for (size_t i = m.find("\n"); i != std::string::npos; i = m.find("\n", i)) m.replace(i, 1, "; ");
+  for (size_t i = m.find("\t"); i != std::string::npos; i = m.find("\t", i)) m.erase(i, 1);
+  return m;
+}
 
 int64_t CreateNs(const v1::Job& job) { return job.create_time().seconds() * 1000000000LL + job.create_time().nanos(); }
 
@@ -194,11 +204,11 @@ Result PostgresDataStore::Run(const char* sql, const std::vector<Param>& params,
       }
       in_transaction_ = false;
       *error = Status::Unavailable(std::string("database: connection lost during ") + what + ": " +
-                                   PQerrorMessage(conn_));
+                                   OneLine(PQerrorMessage(conn_)));
       return Result();
     }
     const char* state = r.get() ? r.SqlState() : nullptr;
-    const std::string message = r.get() ? PQresultErrorMessage(r.get()) : PQerrorMessage(conn_);
+    const std::string message = OneLine(r.get() ? PQresultErrorMessage(r.get()) : PQerrorMessage(conn_));
     *error = (state && std::strcmp(state, kUniqueViolation) == 0)
                  ? Status::AlreadyExists(std::string("database: ") + what + ": " + message)
                  : Status::Internal(std::string("database: ") + what + ": " + message);
@@ -618,11 +628,14 @@ StatusOr<std::unique_ptr<DataStore>> OpenPostgresStore(const fs::path& data_dir,
   PGconn* conn = PQconnectdbParams(keys.data(), values.data(), /*expand_dbname=*/1);
   if (conn == nullptr) return Status::Unavailable("database: out of memory connecting");
   if (PQstatus(conn) != CONNECTION_OK) {
-    std::string message = PQerrorMessage(conn);
+    std::string message = OneLine(PQerrorMessage(conn));
     PQfinish(conn);
-    while (!message.empty() && (message.back() == '\n' || message.back() == ' ')) message.pop_back();
     return Status::Unavailable("database: cannot connect to " + RedactDatabaseUrl(conninfo) + ": " + message);
   }
+  // Server notices ("relation already exists, skipping") are the migration's expected chatter:
+  // they would go to stderr unformatted. Logs stay quiet by default.
+  PQsetNoticeProcessor(conn, [](void*, const char* message) { spdlog::debug("database: {}", OneLine(message)); },
+                       nullptr);
   auto store = std::make_unique<PostgresDataStore>(data_dir, conn);
   INSPECT_RETURN_IF_ERROR(store->Migrate());
   return std::unique_ptr<DataStore>(std::move(store));
