@@ -29,6 +29,7 @@ packages=(
   python3 python3-yaml  # deploy/validate_manifests.sh, tests/fault/kill9_test.sh (Debian's /usr/bin/python3)
   python3-grpcio python3-protobuf  # examples/python: the MES client (tests/mes)
   libcpp-httplib-dev  # inspectd's HTTP port: /metrics and the dashboard
+  postgresql libpq-dev  # server/storage: the PostgreSQL backend (pool, site) and its tests' private server
   prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
 )

@@ -83,7 +83,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   INSPECT_ASSIGN_OR_RETURN(s->audit_, AuditLog::Open(audit));
 
   s->ops_ = std::make_unique<OperationsHttp>(INSPECT_VERSION);
-  INSPECT_ASSIGN_OR_RETURN(s->store_, DataStore::Open(options.data_dir));
+  INSPECT_ASSIGN_OR_RETURN(s->store_, DataStore::Open(options.data_dir, options.database));
   if (options.no_rig) {
     if (rig) return Status::InvalidArgument("a rig was given to a server started with no_rig");
   } else {

@@ -31,6 +31,8 @@ namespace inspection {
 struct ServerOptions {
   std::string listen_address = "127.0.0.1:50051";  // port 0 picks a free port (see port())
   std::filesystem::path data_dir = "./inspection-data";
+  // Where the job database lives (default: SQLite in data_dir; server/storage/data_store.h).
+  DatabaseOptions database;
   int rig_queue_capacity = 4;
   // gRPC server reflection; unset = on without authentication, off when any is configured
   // (reflection hands an unauthenticated scanner the whole API).

@@ -14,6 +14,7 @@
 #include "server/app/inspection_server.h"
 #include "server/logging/log_format.h"
 #include "server/app/server_config.h"
+#include "server/storage/data_store.h"
 
 using namespace inspection;
 
@@ -129,6 +130,17 @@ int main(int argc, char** argv) {
     rig = std::move(*created);
     rig_startup = rig->CheckDevices();
     if (!rig_startup.ok()) spdlog::warn("rig started degraded: {}", rig_startup.message());
+  }
+  // A database server that is not up yet (a pool starting beside its PostgreSQL, a site store
+  // restarting) is waited for with backoff, not a crash loop; SIGTERM / SIGINT end the wait.
+  for (int wait_s = 1;; wait_s = std::min(2 * wait_s, 30)) {
+    auto probe = DataStore::Open(opt.data_dir, opt.database);
+    if (probe.ok() || probe.status().code() != StatusCode::kUnavailable) break;  // Start reports other errors
+    spdlog::warn("{}; retrying in {} s", probe.status().message(), wait_s);
+    const timespec timeout{wait_s, 0};
+    siginfo_t info;
+    const int sig = sigtimedwait(&signals, &info, &timeout);
+    if (sig == SIGTERM || sig == SIGINT) return 0;
   }
   auto server = InspectionServer::Start(opt, std::move(rig), rig_startup);
   if (!server.ok()) {

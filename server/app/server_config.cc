@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "server/storage/data_store.h"
 #include "server/http/http_endpoint.h"
 #include "server/logging/log_format.h"
 
@@ -146,6 +147,11 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
   static const std::vector<ConfigKey> keys = {
       {"listen", &C::listen, "host:port to listen on (port 0 = any free port)"},
       {"data_dir", &C::data_dir, "where scans, artifacts, calibrations and the job database live"},
+      {"database", &C::database,
+       "where the job database lives: empty or 'sqlite' = <data_dir>/inspection.db; postgresql://user@host:port/db "
+       "= a PostgreSQL server shared by a pool or a site (no password in it: use database_password_file)"},
+      {"database_password_file", &C::database_password_file,
+       "file whose first line is the PostgreSQL password (never logged)"},
       {"queue_capacity", &C::queue_capacity, "rig jobs that may wait behind the running one"},
       {"reflection", &C::reflection,
        "gRPC server reflection (by default off when authentication is configured, else on)"},
@@ -312,6 +318,7 @@ Status ValidateConfig(const InspectdConfig& c) {
   };
   if (c.listen.empty()) return Status::InvalidArgument("listen must not be empty (host:port)");
   if (c.data_dir.empty()) return Status::InvalidArgument("data_dir must not be empty");
+  INSPECT_RETURN_IF_ERROR(ValidateDatabaseOptions({c.database, c.database_password_file}));
   if (c.queue_capacity < 0) return bad("queue_capacity", std::to_string(c.queue_capacity), "must be >= 0");
   cv::Size size;
   if (!ParseCameraSize(c.camera_size, &size)) {
@@ -364,6 +371,7 @@ std::string ConfigToJson(const InspectdConfig& config) {
   for (const auto& key : InspectdConfigKeys()) {
     std::visit([&](auto InspectdConfig::*f) { doc[std::string(key.name)] = config.*f; }, key.field);
   }
+  doc["database"] = RedactDatabaseUrl(config.database);  // a password in the URL is never printed
   return doc.dump(2) + "\n";
 }
 
@@ -372,6 +380,7 @@ StatusOr<ServerOptions> ToServerOptions(const InspectdConfig& c) {
   ServerOptions o;
   o.listen_address = c.listen;
   o.data_dir = c.data_dir;
+  o.database = {c.database, c.database_password_file};
   o.rig_queue_capacity = c.queue_capacity;
   o.reflection = c.reflection;
   o.tls_cert_file = c.tls_cert;

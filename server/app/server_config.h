@@ -21,6 +21,8 @@ namespace inspection {
 struct InspectdConfig {
   std::string listen = ServerOptions{}.listen_address;
   std::string data_dir = ServerOptions{}.data_dir.string();
+  std::string database;                // "" = SQLite in data_dir; postgresql://... for a pool or a site
+  std::string database_password_file;  // PostgreSQL password (first line); never logged
   int queue_capacity = ServerOptions{}.rig_queue_capacity;
   bool reflection = true;  // as a default: on unless authentication is configured (main.cc)
   std::string tls_cert;

@@ -1,56 +1,17 @@
+// DataStore::Open: the data directory's folders, and the metadata backend the options name.
 #include "server/storage/data_store.h"
 
-#include <sqlite3.h>
+#include <libpq-fe.h>
 
-#include <algorithm>
+#include <fstream>
 #include <random>
+#include <regex>
+
+#include "server/storage/internal/postgres_store.h"
+#include "server/storage/internal/sqlite_store.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
-
-namespace {
-
-// RAII statement with the few binding helpers this store needs.
-class Stmt {
- public:
-  Stmt(sqlite3* db, const char* sql) { rc_ = sqlite3_prepare_v2(db, sql, -1, &stmt_, nullptr); }
-  ~Stmt() { sqlite3_finalize(stmt_); }
-  bool ok() const { return rc_ == SQLITE_OK; }
-  Stmt& Text(int i, const std::string& s) {
-    sqlite3_bind_text(stmt_, i, s.data(), int(s.size()), SQLITE_TRANSIENT);
-    return *this;
-  }
-  Stmt& Blob(int i, const std::string& s) {
-    sqlite3_bind_blob(stmt_, i, s.data(), int(s.size()), SQLITE_TRANSIENT);
-    return *this;
-  }
-  Stmt& Int(int i, int64_t v) {
-    sqlite3_bind_int64(stmt_, i, v);
-    return *this;
-  }
-  int Step() { return sqlite3_step(stmt_); }
-  sqlite3_stmt* stmt() { return stmt_; }
-  std::string ColumnBlob(int i) {
-    const void* p = sqlite3_column_blob(stmt_, i);
-    return p ? std::string(static_cast<const char*>(p), size_t(sqlite3_column_bytes(stmt_, i))) : std::string();
-  }
-  std::string ColumnText(int i) {
-    const unsigned char* p = sqlite3_column_text(stmt_, i);
-    return p ? std::string(reinterpret_cast<const char*>(p)) : std::string();
-  }
-
- private:
-  sqlite3_stmt* stmt_ = nullptr;
-  int rc_ = SQLITE_ERROR;
-};
-
-Status DbError(sqlite3* db, const std::string& what) {
-  return Status::Internal("database: " + what + ": " + sqlite3_errmsg(db));
-}
-
-int64_t CreateNs(const v1::Job& job) { return job.create_time().seconds() * 1000000000LL + job.create_time().nanos(); }
-
-}  // namespace
 
 std::string NewId(const std::string& prefix) {
   static thread_local std::mt19937_64 rng{std::random_device{}()};
@@ -59,451 +20,110 @@ std::string NewId(const std::string& prefix) {
   return prefix + "-" + buf;
 }
 
-StatusOr<std::unique_ptr<DataStore>> DataStore::Open(const fs::path& data_dir) {
-  std::unique_ptr<DataStore> store(new DataStore(data_dir));
+std::string RedactDatabaseUrl(const std::string& url) {
+  // URL form: scheme://user:password@host -> scheme://user:***@host; key=value form: password=***.
+  static const std::regex url_password(R"(^([a-z]+://[^:/@?]*):[^@/?]*@)");
+  static const std::regex kv_password(R"((^|\s)password\s*=\s*('[^']*'|\S+))");
+  static const std::regex query_password(R"(([?&]password=)[^&]*)");
+  std::string out = std::regex_replace(url, url_password, "$1:***@");
+  out = std::regex_replace(out, kv_password, "$1password=***");
+  return std::regex_replace(out, query_password, "$1***");
+}
+
+Status DataStore::PrepareFolders(bool empty_work_areas) {
   std::error_code ec;
-  for (const fs::path& d : {data_dir, store->scans_dir(), store->artifacts_dir(), store->calibrations_dir(),
-                            store->uploads_dir(), store->tmp_dir()}) {
+  for (const fs::path& d : {data_dir_, scans_dir(), artifacts_dir(), calibrations_dir(), uploads_dir(), tmp_dir()}) {
     fs::create_directories(d, ec);
     if (ec) return Status::FailedPrecondition("data dir: cannot create " + d.string() + ": " + ec.message());
   }
   // Work areas hold only unfinished writes: whatever is there is from a previous run that stopped.
-  for (const fs::path& d : {store->uploads_dir(), store->tmp_dir()}) {
+  // Not where several replicas share the folder (PostgreSQL): the others' uploads are there.
+  if (!empty_work_areas) return Status::Ok();
+  for (const fs::path& d : {uploads_dir(), tmp_dir()}) {
     for (const auto& entry : fs::directory_iterator(d, ec)) fs::remove_all(entry.path(), ec);
   }
-  const fs::path db_path = data_dir / "inspection.db";
-  if (sqlite3_open_v2(db_path.c_str(), &store->db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX,
-                      nullptr) != SQLITE_OK) {
-    return Status::FailedPrecondition("data dir: cannot open " + db_path.string() + ": " +
-                                      (store->db_ ? sqlite3_errmsg(store->db_) : "out of memory"));
-  }
-  sqlite3_busy_timeout(store->db_, 5000);
-  INSPECT_RETURN_IF_ERROR(store->Exec("PRAGMA journal_mode=WAL"));
-  INSPECT_RETURN_IF_ERROR(store->Exec("PRAGMA synchronous=NORMAL"));
-  INSPECT_RETURN_IF_ERROR(store->Exec(R"sql(
-    CREATE TABLE IF NOT EXISTS jobs (
-      job_id TEXT PRIMARY KEY, kind INTEGER NOT NULL, state INTEGER NOT NULL, request_id TEXT NOT NULL,
-      create_ns INTEGER NOT NULL, calibration_id TEXT NOT NULL DEFAULT '', job BLOB NOT NULL);
-    CREATE INDEX IF NOT EXISTS jobs_by_time ON jobs(create_ns);
-    CREATE INDEX IF NOT EXISTS jobs_by_request ON jobs(kind, request_id);
-    CREATE TABLE IF NOT EXISTS events (
-      job_id TEXT NOT NULL, sequence INTEGER NOT NULL, event BLOB NOT NULL, PRIMARY KEY(job_id, sequence));
-    CREATE TABLE IF NOT EXISTS artifacts (
-      artifact_id TEXT PRIMARY KEY, job_id TEXT NOT NULL, path TEXT NOT NULL, artifact BLOB NOT NULL);
-    CREATE TABLE IF NOT EXISTS calibrations (
-      calibration_id TEXT PRIMARY KEY, create_ns INTEGER NOT NULL, calibration BLOB NOT NULL);
-    CREATE TABLE IF NOT EXISTS settings (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-    CREATE TABLE IF NOT EXISTS pins (job_id TEXT PRIMARY KEY);
-    CREATE TABLE IF NOT EXISTS recipes (
-      recipe_id TEXT NOT NULL, version INTEGER NOT NULL, deleted INTEGER NOT NULL DEFAULT 0,
-      recipe BLOB NOT NULL, PRIMARY KEY(recipe_id, version));
-    CREATE INDEX IF NOT EXISTS artifacts_by_job ON artifacts(job_id);
-    CREATE TABLE IF NOT EXISTS results (
-      sequence INTEGER PRIMARY KEY AUTOINCREMENT, job_id TEXT NOT NULL UNIQUE, part_id TEXT NOT NULL,
-      recipe_id TEXT NOT NULL, verdict INTEGER NOT NULL, finish_ns INTEGER NOT NULL, result BLOB NOT NULL);
-    CREATE INDEX IF NOT EXISTS results_by_part ON results(part_id, sequence);
-    CREATE INDEX IF NOT EXISTS results_by_recipe ON results(recipe_id, sequence);
-  )sql"));
-  return store;
-}
-
-DataStore::~DataStore() {
-  if (db_) sqlite3_close(db_);
-}
-
-Status DataStore::Exec(const char* sql) {
-  char* err = nullptr;
-  if (sqlite3_exec(db_, sql, nullptr, nullptr, &err) != SQLITE_OK) {
-    Status s = Status::Internal(std::string("database: ") + (err ? err : "error"));
-    sqlite3_free(err);
-    return s;
-  }
   return Status::Ok();
-}
-
-Status DataStore::PutJob(const v1::Job& job) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_,
-          "INSERT OR REPLACE INTO jobs(job_id, kind, state, request_id, create_ns, calibration_id, job) "
-          "VALUES(?,?,?,?,?,?,?)");
-  if (!st.ok()) return DbError(db_, "prepare PutJob");
-  st.Text(1, job.job_id()).Int(2, job.kind()).Int(3, job.state()).Text(4, job.request_id()).Int(5, CreateNs(job));
-  st.Text(6, job.kind() == v1::JOB_KIND_SCAN ? job.result().calibration_id() : std::string());
-  st.Blob(7, job.SerializeAsString());
-  if (st.Step() != SQLITE_DONE) return DbError(db_, "PutJob");
-  return Status::Ok();
-}
-
-StatusOr<v1::Job> DataStore::GetJob(const std::string& job_id) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT job FROM jobs WHERE job_id = ?");
-  st.Text(1, job_id);
-  if (st.Step() != SQLITE_ROW) return Status::NotFound("job_id '" + job_id + "' not found");
-  v1::Job job;
-  if (!job.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("job " + job_id + " record is corrupt");
-  return job;
-}
-
-std::optional<std::string> DataStore::FindJobByRequestId(v1::JobKind kind, const std::string& request_id) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT job_id FROM jobs WHERE kind = ? AND request_id = ? ORDER BY create_ns LIMIT 1");
-  st.Int(1, kind).Text(2, request_id);
-  if (st.Step() != SQLITE_ROW) return std::nullopt;
-  return st.ColumnText(0);
-}
-
-StatusOr<std::vector<v1::Job>> DataStore::ListJobs(v1::JobKind kind, v1::JobState state, int limit,
-                                                   int64_t before_create_ns) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_,
-          "SELECT job FROM jobs WHERE (?1 = 0 OR kind = ?1) AND (?2 = 0 OR state = ?2) AND (?3 = 0 OR create_ns < ?3) "
-          "ORDER BY create_ns DESC LIMIT ?4");
-  st.Int(1, kind).Int(2, state).Int(3, before_create_ns).Int(4, limit);
-  std::vector<v1::Job> jobs;
-  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
-    v1::Job job;
-    if (job.ParseFromString(st.ColumnBlob(0))) jobs.push_back(std::move(job));
-  }
-  return jobs;
-}
-
-StatusOr<std::vector<v1::Job>> DataStore::UnfinishedJobs() {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT job FROM jobs WHERE state IN (?, ?)");
-  st.Int(1, v1::JOB_STATE_QUEUED).Int(2, v1::JOB_STATE_RUNNING);
-  std::vector<v1::Job> jobs;
-  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
-    v1::Job job;
-    if (job.ParseFromString(st.ColumnBlob(0))) jobs.push_back(std::move(job));
-  }
-  return jobs;
-}
-
-Status DataStore::AppendEvent(const v1::JobEvent& event) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "INSERT OR REPLACE INTO events(job_id, sequence, event) VALUES(?,?,?)");
-  st.Text(1, event.job_id()).Int(2, int64_t(event.sequence())).Blob(3, event.SerializeAsString());
-  if (st.Step() != SQLITE_DONE) return DbError(db_, "AppendEvent");
-  return Status::Ok();
-}
-
-StatusOr<std::vector<v1::JobEvent>> DataStore::Events(const std::string& job_id) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT event FROM events WHERE job_id = ? ORDER BY sequence");
-  st.Text(1, job_id);
-  std::vector<v1::JobEvent> events;
-  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
-    v1::JobEvent e;
-    if (e.ParseFromString(st.ColumnBlob(0))) events.push_back(std::move(e));
-  }
-  return events;
-}
-
-Status DataStore::PutArtifact(const StoredArtifact& a) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "INSERT OR REPLACE INTO artifacts(artifact_id, job_id, path, artifact) VALUES(?,?,?,?)");
-  st.Text(1, a.artifact.artifact_id())
-      .Text(2, a.job_id)
-      .Text(3, a.path.string())
-      .Blob(4, a.artifact.SerializeAsString());
-  if (st.Step() != SQLITE_DONE) return DbError(db_, "PutArtifact");
-  return Status::Ok();
-}
-
-StatusOr<StoredArtifact> DataStore::GetArtifact(const std::string& artifact_id) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT job_id, path, artifact FROM artifacts WHERE artifact_id = ?");
-  st.Text(1, artifact_id);
-  if (st.Step() != SQLITE_ROW) return Status::NotFound("artifact_id '" + artifact_id + "' not found");
-  StoredArtifact a;
-  a.job_id = st.ColumnText(0);
-  a.path = st.ColumnText(1);
-  if (!a.artifact.ParseFromString(st.ColumnBlob(2))) return Status::DataLoss("artifact record is corrupt");
-  return a;
-}
-
-Status DataStore::PutCalibration(const v1::Calibration& c) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "INSERT OR REPLACE INTO calibrations(calibration_id, create_ns, calibration) VALUES(?,?,?)");
-  st.Text(1, c.calibration_id())
-      .Int(2, c.create_time().seconds() * 1000000000LL + c.create_time().nanos())
-      .Blob(3, c.SerializeAsString());
-  if (st.Step() != SQLITE_DONE) return DbError(db_, "PutCalibration");
-  return Status::Ok();
-}
-
-StatusOr<v1::Calibration> DataStore::GetCalibration(const std::string& id) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT calibration FROM calibrations WHERE calibration_id = ?");
-  st.Text(1, id);
-  if (st.Step() != SQLITE_ROW) return Status::NotFound("calibration_id '" + id + "' not found");
-  v1::Calibration c;
-  if (!c.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("calibration record is corrupt");
-  return c;
-}
-
-StatusOr<std::vector<v1::Calibration>> DataStore::ListCalibrations() {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT calibration FROM calibrations ORDER BY create_ns DESC");
-  std::vector<v1::Calibration> out;
-  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
-    v1::Calibration c;
-    if (c.ParseFromString(st.ColumnBlob(0))) out.push_back(std::move(c));
-  }
-  return out;
-}
-
-bool DataStore::CalibrationInUse(const std::string& id) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT 1 FROM jobs WHERE calibration_id = ? LIMIT 1");
-  st.Text(1, id);
-  return st.Step() == SQLITE_ROW;
-}
-
-Status DataStore::SetPinned(const std::string& job_id, bool pinned) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, pinned ? "INSERT OR IGNORE INTO pins(job_id) VALUES(?)" : "DELETE FROM pins WHERE job_id = ?");
-  st.Text(1, job_id);
-  if (st.Step() != SQLITE_DONE) return DbError(db_, "SetPinned");
-  return Status::Ok();
-}
-
-StatusOr<std::vector<std::string>> DataStore::PinnedJobs() {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT job_id FROM pins");
-  std::vector<std::string> ids;
-  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) ids.push_back(st.ColumnText(0));
-  return ids;
-}
-
-StatusOr<std::vector<v1::Job>> DataStore::FinishedJobs() {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT job FROM jobs WHERE state IN (?, ?, ?)");
-  st.Int(1, v1::JOB_STATE_SUCCEEDED).Int(2, v1::JOB_STATE_FAILED).Int(3, v1::JOB_STATE_CANCELLED);
-  std::vector<v1::Job> jobs;
-  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
-    v1::Job job;
-    if (job.ParseFromString(st.ColumnBlob(0))) jobs.push_back(std::move(job));
-  }
-  return jobs;
-}
-
-Status DataStore::DeleteJobRecords(const std::string& job_id) {
-  std::lock_guard<std::mutex> lock(mu_);
-  INSPECT_RETURN_IF_ERROR(Exec("BEGIN IMMEDIATE"));
-  for (const char* sql : {"DELETE FROM artifacts WHERE job_id = ?", "DELETE FROM events WHERE job_id = ?",
-                          "DELETE FROM pins WHERE job_id = ?", "DELETE FROM jobs WHERE job_id = ?"}) {
-    Stmt st(db_, sql);
-    st.Text(1, job_id);
-    if (st.Step() != SQLITE_DONE) {
-      Status s = DbError(db_, "DeleteJobRecords");
-      Exec("ROLLBACK").IgnoreError();
-      return s;
-    }
-  }
-  return Exec("COMMIT");
-}
-
-StatusOr<std::vector<StoredArtifact>> DataStore::DeleteArtifactsOfKind(const std::string& job_id,
-                                                                       v1::ArtifactKind kind) {
-  std::lock_guard<std::mutex> lock(mu_);
-  std::vector<StoredArtifact> removed;
-  {
-    Stmt st(db_, "SELECT path, artifact FROM artifacts WHERE job_id = ?");
-    st.Text(1, job_id);
-    for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
-      StoredArtifact a;
-      a.job_id = job_id;
-      a.path = st.ColumnText(0);
-      if (a.artifact.ParseFromString(st.ColumnBlob(1)) && a.artifact.kind() == kind) removed.push_back(std::move(a));
-    }
-  }
-  v1::Job job;
-  {
-    Stmt st(db_, "SELECT job FROM jobs WHERE job_id = ?");
-    st.Text(1, job_id);
-    if (st.Step() != SQLITE_ROW) return Status::NotFound("job_id '" + job_id + "' not found");
-    if (!job.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("job " + job_id + " record is corrupt");
-  }
-  auto* artifacts = job.mutable_result()->mutable_artifacts();
-  artifacts->erase(
-      std::remove_if(artifacts->begin(), artifacts->end(), [&](const v1::Artifact& a) { return a.kind() == kind; }),
-      artifacts->end());
-  INSPECT_RETURN_IF_ERROR(Exec("BEGIN IMMEDIATE"));
-  bool ok = true;
-  for (const StoredArtifact& a : removed) {
-    Stmt st(db_, "DELETE FROM artifacts WHERE artifact_id = ?");
-    st.Text(1, a.artifact.artifact_id());
-    ok = ok && st.Step() == SQLITE_DONE;
-  }
-  {
-    Stmt st(db_, "UPDATE jobs SET job = ? WHERE job_id = ?");
-    st.Blob(1, job.SerializeAsString()).Text(2, job_id);
-    ok = ok && st.Step() == SQLITE_DONE;
-  }
-  if (!ok) {
-    Status s = DbError(db_, "DeleteArtifactsOfKind");
-    Exec("ROLLBACK").IgnoreError();
-    return s;
-  }
-  INSPECT_RETURN_IF_ERROR(Exec("COMMIT"));
-  return removed;
-}
-
-StatusOr<v1::Recipe> DataStore::StoreRecipe(v1::Recipe recipe, bool create, int expected_version) {
-  std::lock_guard<std::mutex> lock(mu_);
-  const std::string& id = recipe.recipe_id();
-  Stmt q(db_, "SELECT MAX(version), MAX(CASE WHEN deleted = 0 THEN version END) FROM recipes WHERE recipe_id = ?");
-  q.Text(1, id);
-  if (q.Step() != SQLITE_ROW) return DbError(db_, "StoreRecipe");
-  const int64_t highest = sqlite3_column_int64(q.stmt(), 0);  // NULL reads as 0
-  const bool in_use = sqlite3_column_type(q.stmt(), 1) != SQLITE_NULL;
-  const int64_t current = in_use ? sqlite3_column_int64(q.stmt(), 1) : 0;
-  if (create && in_use) {
-    return Status(StatusCode::kAlreadyExists, "recipe_id '" + id + "' exists (version " + std::to_string(current) +
-                                                  "); UpdateRecipe makes a new version");
-  }
-  if (!create && !in_use) return Status::NotFound("recipe_id '" + id + "' not found");
-  if (!create && expected_version > 0 && expected_version != current) {
-    return Status::Aborted("recipe '" + id + "' is at version " + std::to_string(current) + ", not expected_version " +
-                           std::to_string(expected_version) + " (updated meanwhile)");
-  }
-  recipe.set_version(int32_t(highest + 1));
-  Stmt st(db_, "INSERT INTO recipes(recipe_id, version, deleted, recipe) VALUES(?,?,0,?)");
-  st.Text(1, id).Int(2, recipe.version()).Blob(3, recipe.SerializeAsString());
-  if (st.Step() != SQLITE_DONE) return DbError(db_, "StoreRecipe");
-  return recipe;
-}
-
-StatusOr<v1::Recipe> DataStore::GetRecipe(const std::string& recipe_id, int version) {
-  std::lock_guard<std::mutex> lock(mu_);
-  // A hidden recipe's versions stay readable by version for the results that ran them.
-  Stmt st(db_, version > 0 ? "SELECT recipe FROM recipes WHERE recipe_id = ?1 AND version = ?2"
-                           : "SELECT recipe FROM recipes WHERE recipe_id = ?1 AND deleted = 0 "
-                             "ORDER BY version DESC LIMIT 1");
-  st.Text(1, recipe_id);
-  if (version > 0) st.Int(2, version);
-  if (st.Step() != SQLITE_ROW) {
-    return Status::NotFound("recipe_id '" + recipe_id + "'" +
-                            (version > 0 ? " version " + std::to_string(version) : std::string()) + " not found");
-  }
-  v1::Recipe recipe;
-  if (!recipe.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("recipe " + recipe_id + " record is corrupt");
-  return recipe;
-}
-
-StatusOr<std::vector<v1::Recipe>> DataStore::ListRecipes() {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_,
-          "SELECT recipe FROM recipes r WHERE deleted = 0 AND version = "
-          "(SELECT MAX(version) FROM recipes WHERE recipe_id = r.recipe_id) ORDER BY recipe_id");
-  std::vector<v1::Recipe> out;
-  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
-    v1::Recipe recipe;
-    if (recipe.ParseFromString(st.ColumnBlob(0))) out.push_back(std::move(recipe));
-  }
-  return out;
-}
-
-StatusOr<int> DataStore::DeleteRecipe(const std::string& recipe_id) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "UPDATE recipes SET deleted = 1 WHERE recipe_id = ? AND deleted = 0");
-  st.Text(1, recipe_id);
-  if (st.Step() != SQLITE_DONE) return DbError(db_, "DeleteRecipe");
-  const int n = sqlite3_changes(db_);
-  if (n == 0) return Status::NotFound("recipe_id '" + recipe_id + "' not found");
-  return n;
-}
-
-StatusOr<v1::InspectionResult> DataStore::AppendResult(v1::InspectionResult result) {
-  std::lock_guard<std::mutex> lock(mu_);
-  const auto& t = result.finish_time();
-  // AUTOINCREMENT: a deleted row's number is never handed out again, so a feed client's "last
-  // sequence seen" stays meaningful. The blob carries its own number, set in the same transaction.
-  INSPECT_RETURN_IF_ERROR(Exec("BEGIN IMMEDIATE"));
-  Stmt st(db_, "INSERT INTO results(job_id, part_id, recipe_id, verdict, finish_ns, result) VALUES(?,?,?,?,?,x'')");
-  st.Text(1, result.job_id())
-      .Text(2, result.part_id())
-      .Text(3, result.recipe_id())
-      .Int(4, result.verdict())
-      .Int(5, t.seconds() * 1000000000LL + t.nanos());
-  if (st.Step() != SQLITE_DONE) {
-    const bool duplicate = sqlite3_extended_errcode(db_) == SQLITE_CONSTRAINT_UNIQUE;
-    Status error = duplicate ? Status::AlreadyExists("job " + result.job_id() + " already has a result")
-                             : DbError(db_, "AppendResult");
-    (void)Exec("ROLLBACK");
-    return error;
-  }
-  result.set_sequence(sqlite3_last_insert_rowid(db_));
-  Stmt update(db_, "UPDATE results SET result = ? WHERE sequence = ?");
-  update.Blob(1, result.SerializeAsString()).Int(2, result.sequence());
-  if (update.Step() != SQLITE_DONE) {
-    Status error = DbError(db_, "AppendResult");
-    (void)Exec("ROLLBACK");
-    return error;
-  }
-  INSPECT_RETURN_IF_ERROR(Exec("COMMIT"));
-  return result;
 }
 
 namespace {
-StatusOr<std::vector<v1::InspectionResult>> ReadResults(Stmt& st) {
-  std::vector<v1::InspectionResult> out;
-  int rc = st.Step();
-  for (; rc == SQLITE_ROW; rc = st.Step()) {
-    v1::InspectionResult r;
-    if (!r.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("an inspection result record is corrupt");
-    out.push_back(std::move(r));
+
+bool IsPostgresUrl(const std::string& url) {
+  return url.rfind("postgresql://", 0) == 0 || url.rfind("postgres://", 0) == 0 || url.rfind("host=", 0) == 0 ||
+         url.rfind("dbname=", 0) == 0;
+}
+
+// libpq's own parser decides what a valid connection string is; its message names the problem.
+Status ValidateConninfo(const std::string& url) {
+  char* error = nullptr;
+  PQconninfoOption* options = PQconninfoParse(url.c_str(), &error);
+  if (options == nullptr) {
+    std::string message = error ? error : "out of memory";
+    PQfreemem(error);
+    while (!message.empty() && (message.back() == '\n' || message.back() == ' ')) message.pop_back();
+    return Status::InvalidArgument("database: '" + RedactDatabaseUrl(url) + "' is not a PostgreSQL URL: " + message);
   }
-  if (rc != SQLITE_DONE)
-    return Status::Internal("reading inspection results failed (sqlite " + std::to_string(rc) + ")");
-  return out;
-}
-}  // namespace
-
-StatusOr<std::vector<v1::InspectionResult>> DataStore::ListResults(const ResultQuery& q) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_,
-          "SELECT result FROM results WHERE (?1 = '' OR part_id = ?1) AND (?2 = '' OR recipe_id = ?2) "
-          "AND (?3 = 0 OR verdict = ?3) AND (?4 = 0 OR finish_ns >= ?4) AND (?5 = 0 OR finish_ns < ?5) "
-          "AND (?6 = 0 OR sequence < ?6) ORDER BY sequence DESC LIMIT ?7");
-  st.Text(1, q.part_id)
-      .Text(2, q.recipe_id)
-      .Int(3, q.verdict)
-      .Int(4, q.finished_from_ns)
-      .Int(5, q.finished_before_ns)
-      .Int(6, q.before_sequence)
-      .Int(7, q.limit);
-  return ReadResults(st);
-}
-
-StatusOr<std::vector<v1::InspectionResult>> DataStore::ResultsAfter(int64_t after_sequence, int limit) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT result FROM results WHERE sequence > ? ORDER BY sequence LIMIT ?");
-  st.Int(1, after_sequence).Int(2, limit);
-  return ReadResults(st);
-}
-
-StatusOr<int64_t> DataStore::LastResultSequence() {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT COALESCE(MAX(sequence), 0) FROM results");
-  if (st.Step() != SQLITE_ROW) return DbError(db_, "LastResultSequence");
-  return int64_t(sqlite3_column_int64(st.stmt(), 0));
-}
-
-Status DataStore::SetSetting(const std::string& key, const std::string& value) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "INSERT OR REPLACE INTO settings(key, value) VALUES(?,?)");
-  st.Text(1, key).Text(2, value);
-  if (st.Step() != SQLITE_DONE) return DbError(db_, "SetSetting");
+  // libpq checks the port only when it connects; a typo there is a configuration error, not an
+  // unreachable server.
+  std::string bad_port;
+  for (PQconninfoOption* o = options; o->keyword != nullptr; ++o) {
+    if (std::string(o->keyword) == "port" && o->val != nullptr) {
+      const std::string port = o->val;
+      if (port.empty() || port.find_first_not_of("0123456789,") != std::string::npos) bad_port = port;
+    }
+  }
+  PQconninfoFree(options);
+  if (!bad_port.empty()) {
+    return Status::InvalidArgument("database: '" + RedactDatabaseUrl(url) + "' has port '" + bad_port +
+                                   "', not a number");
+  }
   return Status::Ok();
 }
 
-std::string DataStore::GetSetting(const std::string& key) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT value FROM settings WHERE key = ?");
-  st.Text(1, key);
-  return st.Step() == SQLITE_ROW ? st.ColumnText(0) : std::string();
+StatusOr<std::string> ReadPassword(const fs::path& file) {
+  std::ifstream in(file);
+  if (!in) return Status::InvalidArgument("database_password_file: cannot read " + file.string());
+  std::string line;
+  std::getline(in, line);
+  while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+  if (line.empty()) return Status::InvalidArgument("database_password_file: " + file.string() + " is empty");
+  return line;
+}
+
+}  // namespace
+
+Status ValidateDatabaseOptions(const DatabaseOptions& database) {
+  const std::string& url = database.url;
+  const bool postgres = IsPostgresUrl(url);
+  if (!postgres && !url.empty() && url != "sqlite") {
+    return Status::InvalidArgument("database: '" + RedactDatabaseUrl(url) +
+                                   "' is neither \"sqlite\" nor a postgresql:// URL");
+  }
+  if (!postgres && !database.password_file.empty()) {
+    return Status::InvalidArgument("database_password_file: set, but the database is SQLite");
+  }
+  if (postgres) INSPECT_RETURN_IF_ERROR(ValidateConninfo(url));
+  return Status::Ok();
+}
+
+StatusOr<std::unique_ptr<DataStore>> DataStore::Open(const fs::path& data_dir, const DatabaseOptions& database) {
+  INSPECT_RETURN_IF_ERROR(ValidateDatabaseOptions(database));
+  const std::string& url = database.url;
+  const bool postgres = IsPostgresUrl(url);
+  std::string password;
+  if (postgres && !database.password_file.empty()) {
+    INSPECT_ASSIGN_OR_RETURN(password, ReadPassword(database.password_file));
+  }
+  std::error_code ec;
+  fs::create_directories(data_dir, ec);
+  if (ec) return Status::FailedPrecondition("data dir: cannot create " + data_dir.string() + ": " + ec.message());
+  std::unique_ptr<DataStore> store;
+  if (postgres) {
+    INSPECT_ASSIGN_OR_RETURN(store, OpenPostgresStore(data_dir, url, password));
+  } else {
+    INSPECT_ASSIGN_OR_RETURN(store, OpenSqliteStore(data_dir));
+  }
+  INSPECT_RETURN_IF_ERROR(store->PrepareFolders(/*empty_work_areas=*/!postgres));
+  return store;
 }
 
 }  // namespace inspection

@@ -1,10 +1,16 @@
-// DataStore: the server's durable state under --data-dir, so scans, jobs and their results
-// survive a restart. Metadata lives in SQLite (inspection.db, WAL); bulk data in folders:
+// DataStore: the server's durable state, so scans, jobs and their results survive a restart.
+// Metadata (jobs, events, artifacts' records, calibrations' records, recipes, results, settings)
+// lives in a database behind this interface: SQLite in <data dir>/inspection.db (WAL) for one rig,
+// the default, or PostgreSQL for a pool or a site (DatabaseOptions.url "postgresql://...";
+// server/storage/postgres_store.cc). Both keep a versioned schema (storage/schema.h) and refuse a
+// database whose schema is newer than this binary knows. Bulk data lives in folders of the data
+// directory (for a pool: a folder every replica mounts):
 //   artifacts/<job_id>/      result files of a succeeded job; a scan's stack only as stack.zip
 //   scans/<scan_id>/         stack folders of the earlier layout (read in place, deleted)
 //   calibrations/<id>/       calibration bundles
 //   uploads/, tmp/           work areas, emptied at start-up
-// Thread-safe: one connection guarded by a mutex (writes are small; bulk I/O is outside).
+// Thread-safe: each backend keeps one connection guarded by a mutex (writes are small; bulk I/O
+// is outside).
 #pragma once
 
 #include <filesystem>
@@ -16,8 +22,6 @@
 
 #include "core/util/status.h"
 #include "inspection/v1/inspection.pb.h"
-
-struct sqlite3;
 
 namespace inspection {
 
@@ -40,10 +44,34 @@ struct ResultQuery {
   int limit = 50;
 };
 
+// Where the metadata lives. Validated by DataStore::Open (INVALID_ARGUMENT naming `database`).
+struct DatabaseOptions {
+  // "" or "sqlite": <data dir>/inspection.db. "postgresql://user@host:port/db?..." (or
+  // "postgres://", or a libpq key=value string starting with "host=" / "dbname="): PostgreSQL.
+  std::string url;
+  // A file whose first line is the password (PostgreSQL only); never logged. Empty: none, or
+  // the one in the URL / ~/.pgpass.
+  std::filesystem::path password_file;
+};
+
+// The URL without its password, for logs and errors.
+std::string RedactDatabaseUrl(const std::string& url);
+// INVALID_ARGUMENT naming `database` (or `database_password_file`) when Open would refuse them;
+// connects to nothing.
+Status ValidateDatabaseOptions(const DatabaseOptions& database);
+
 class DataStore {
  public:
-  static StatusOr<std::unique_ptr<DataStore>> Open(const std::filesystem::path& data_dir);
-  ~DataStore();
+  // Opens the store of `data_dir` with its metadata where `database` says (SQLite by default),
+  // creating the folders and migrating the schema to this binary's version.
+  // INVALID_ARGUMENT naming `database` for a malformed URL; UNAVAILABLE when the database server
+  // cannot be reached (the caller may retry); FAILED_PRECONDITION when the stored schema is newer
+  // than this binary knows (naming both versions) or the folders cannot be made.
+  static StatusOr<std::unique_ptr<DataStore>> Open(const std::filesystem::path& data_dir,
+                                                   const DatabaseOptions& database = {});
+  virtual ~DataStore() = default;
+  // "sqlite" or "postgresql": what the metadata lives in.
+  virtual const char* backend() const = 0;
 
   const std::filesystem::path& data_dir() const { return data_dir_; }
   std::filesystem::path scans_dir() const { return data_dir_ / "scans"; }
@@ -53,38 +81,36 @@ class DataStore {
   std::filesystem::path tmp_dir() const { return data_dir_ / "tmp"; }
 
   // Inserts or replaces the job row (the Job message is the whole record).
-  Status PutJob(const v1::Job& job);
-  StatusOr<v1::Job> GetJob(const std::string& job_id);
+  virtual Status PutJob(const v1::Job& job) = 0;
+  virtual StatusOr<v1::Job> GetJob(const std::string& job_id) = 0;
   // Job id of an earlier job of this kind with this request id, if any.
-  std::optional<std::string> FindJobByRequestId(v1::JobKind kind, const std::string& request_id);
+  virtual std::optional<std::string> FindJobByRequestId(v1::JobKind kind, const std::string& request_id) = 0;
   // Newest first; kind/state UNSPECIFIED = any. `before_ns` pages (0 = from newest).
-  StatusOr<std::vector<v1::Job>> ListJobs(v1::JobKind kind, v1::JobState state, int limit, int64_t before_create_ns);
+  virtual StatusOr<std::vector<v1::Job>> ListJobs(v1::JobKind kind, v1::JobState state, int limit, int64_t before_create_ns) = 0;
   // Jobs that were queued or running when the server stopped.
-  StatusOr<std::vector<v1::Job>> UnfinishedJobs();
+  virtual StatusOr<std::vector<v1::Job>> UnfinishedJobs() = 0;
 
-  Status AppendEvent(const v1::JobEvent& event);
-  StatusOr<std::vector<v1::JobEvent>> Events(const std::string& job_id);
+  virtual Status AppendEvent(const v1::JobEvent& event) = 0;
+  virtual StatusOr<std::vector<v1::JobEvent>> Events(const std::string& job_id) = 0;
 
-  Status PutArtifact(const StoredArtifact& artifact);
-  StatusOr<StoredArtifact> GetArtifact(const std::string& artifact_id);
+  virtual Status PutArtifact(const StoredArtifact& artifact) = 0;
+  virtual StatusOr<StoredArtifact> GetArtifact(const std::string& artifact_id) = 0;
 
-  Status PutCalibration(const v1::Calibration& calibration);
-  StatusOr<v1::Calibration> GetCalibration(const std::string& calibration_id);
-  StatusOr<std::vector<v1::Calibration>> ListCalibrations();
-  // True if a stored scan refers to this calibration (then it must never be overwritten).
-  bool CalibrationInUse(const std::string& calibration_id);
+  virtual Status PutCalibration(const v1::Calibration& calibration) = 0;
+  virtual StatusOr<v1::Calibration> GetCalibration(const std::string& calibration_id) = 0;
+  virtual StatusOr<std::vector<v1::Calibration>> ListCalibrations() = 0;
 
   // Data lifecycle. Pinned jobs are kept by the retention sweeper.
-  Status SetPinned(const std::string& job_id, bool pinned);
-  StatusOr<std::vector<std::string>> PinnedJobs();
+  virtual Status SetPinned(const std::string& job_id, bool pinned) = 0;
+  virtual StatusOr<std::vector<std::string>> PinnedJobs() = 0;
   // Jobs that ended (SUCCEEDED, FAILED, CANCELLED), in no particular order.
-  StatusOr<std::vector<v1::Job>> FinishedJobs();
+  virtual StatusOr<std::vector<v1::Job>> FinishedJobs() = 0;
   // Removes a job's rows (job, events, artifacts, pin) in one transaction; its files are the
   // caller's to remove afterwards (nothing is served from files without a row).
-  Status DeleteJobRecords(const std::string& job_id);
+  virtual Status DeleteJobRecords(const std::string& job_id) = 0;
   // Removes the job's artifacts of `kind`: their rows and their entries in the stored
   // Job.result, in one transaction. Returns the removed artifacts (paths for the caller).
-  StatusOr<std::vector<StoredArtifact>> DeleteArtifactsOfKind(const std::string& job_id, v1::ArtifactKind kind);
+  virtual StatusOr<std::vector<StoredArtifact>> DeleteArtifactsOfKind(const std::string& job_id, v1::ArtifactKind kind) = 0;
 
   // Recipes. Every version is kept (results name the version they ran); deleting a recipe hides
   // all its versions, and a recipe created again under the same id continues the numbering, so a
@@ -92,35 +118,36 @@ class DataStore {
   // create: the id must not be in use (ALREADY_EXISTS); the stored version is 1 + the highest
   // ever stored. update: the id must be in use (NOT_FOUND); expected_version > 0 must be the
   // current version (ABORTED otherwise: someone else updated it first). Returns the stored recipe.
-  StatusOr<v1::Recipe> StoreRecipe(v1::Recipe recipe, bool create, int expected_version);
+  virtual StatusOr<v1::Recipe> StoreRecipe(v1::Recipe recipe, bool create, int expected_version) = 0;
   // version 0 = the current one. NOT_FOUND naming the id (and version).
-  StatusOr<v1::Recipe> GetRecipe(const std::string& recipe_id, int version);
+  virtual StatusOr<v1::Recipe> GetRecipe(const std::string& recipe_id, int version) = 0;
   // The current version of every recipe in use, by id.
-  StatusOr<std::vector<v1::Recipe>> ListRecipes();
+  virtual StatusOr<std::vector<v1::Recipe>> ListRecipes() = 0;
   // Hides every version; NOT_FOUND when the id is not in use. Returns the versions hidden.
-  StatusOr<int> DeleteRecipe(const std::string& recipe_id);
+  virtual StatusOr<int> DeleteRecipe(const std::string& recipe_id) = 0;
 
   // Inspection results (the result feed). Stores `result` under the next sequence number
   // (increasing, never reused, also after deletions) and returns it with the number set.
   // ALREADY_EXISTS when the job already has a result.
-  StatusOr<v1::InspectionResult> AppendResult(v1::InspectionResult result);
+  virtual StatusOr<v1::InspectionResult> AppendResult(v1::InspectionResult result) = 0;
   // Newest first, matching `query`; at most query.limit.
-  StatusOr<std::vector<v1::InspectionResult>> ListResults(const ResultQuery& query);
+  virtual StatusOr<std::vector<v1::InspectionResult>> ListResults(const ResultQuery& query) = 0;
   // Oldest first: the results with a sequence number > after_sequence, at most `limit`.
-  StatusOr<std::vector<v1::InspectionResult>> ResultsAfter(int64_t after_sequence, int limit);
+  virtual StatusOr<std::vector<v1::InspectionResult>> ResultsAfter(int64_t after_sequence, int limit) = 0;
   // The highest sequence number stored (0 = none).
-  StatusOr<int64_t> LastResultSequence();
+  virtual StatusOr<int64_t> LastResultSequence() = 0;
 
-  Status SetSetting(const std::string& key, const std::string& value);
-  std::string GetSetting(const std::string& key);
+  virtual Status SetSetting(const std::string& key, const std::string& value) = 0;
+  virtual std::string GetSetting(const std::string& key) = 0;
+
+ protected:
+  explicit DataStore(std::filesystem::path dir) : data_dir_(std::move(dir)) {}
+  // Creates the data directory's folders and, when this server is their only user, empties
+  // its work areas (uploads/, tmp/).
+  Status PrepareFolders(bool empty_work_areas);
 
  private:
-  explicit DataStore(std::filesystem::path dir) : data_dir_(std::move(dir)) {}
-  Status Exec(const char* sql);
-
   std::filesystem::path data_dir_;
-  std::mutex mu_;
-  sqlite3* db_ = nullptr;
 };
 
 // Random id with a readable prefix, e.g. "job-5f3a9c0e1b2d4e6f".

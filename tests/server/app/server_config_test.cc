@@ -55,7 +55,33 @@ TEST(ServerConfig, NamesDerivedFromTheKey) {
   EXPECT_EQ(key->FlagName(), "--auth-token-file");
   EXPECT_EQ(key->EnvironmentName(), "INSPECTD_AUTH_TOKEN_FILE");
   EXPECT_EQ(FindConfigKey("auth-token-file"), nullptr);  // file keys use '_' only
-  EXPECT_EQ(InspectdConfigKeys().size(), 30u);           // every inspectd flag before --config
+  EXPECT_EQ(InspectdConfigKeys().size(), 32u);           // every inspectd flag before --config
+}
+
+TEST(ServerConfig, DatabaseSettingsAreCheckedRedactedAndReachServerOptions) {
+  ConfigLayers layers;
+  layers.environment = {{"INSPECTD_DATABASE", "postgresql://inspect:pw@db.example:5432/site"},
+                        {"INSPECTD_DATABASE_PASSWORD_FILE", "/run/secrets/db"}};
+  auto r = ResolveInspectdConfig(layers);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  auto o = ToServerOptions(r->config);
+  ASSERT_TRUE(o.ok()) << o.status().ToString();
+  EXPECT_EQ(o->database.url, "postgresql://inspect:pw@db.example:5432/site");
+  EXPECT_EQ(o->database.password_file, "/run/secrets/db");
+  const std::string printed = ConfigToJson(r->config);
+  EXPECT_EQ(printed.find(":pw@"), std::string::npos) << printed;
+  EXPECT_NE(printed.find("postgresql://inspect:***@db.example:5432/site"), std::string::npos) << printed;
+
+  for (const std::string bad : {"mysql://x", "postgresql://h:port/db"}) {
+    layers.flags = {{"database", bad}};
+    auto b = ResolveInspectdConfig(layers);
+    ASSERT_FALSE(b.ok()) << bad;
+    EXPECT_EQ(b.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_EQ(b.status().message().rfind("database: ", 0), 0u) << b.status().message();
+  }
+  layers = {};
+  layers.flags = {{"database_password_file", "/run/secrets/db"}};  // SQLite has no password
+  EXPECT_EQ(ResolveInspectdConfig(layers).status().code(), StatusCode::kInvalidArgument);
 }
 
 TEST(ServerConfig, OperationsSettingsAreCheckedAndReachServerOptions) {

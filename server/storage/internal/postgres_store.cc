@@ -1,0 +1,644 @@
+// The PostgreSQL backend of DataStore (libpq): the metadata of a reconstruct pool or a site,
+// shared by every replica. Records are the same serialised messages the SQLite backend keeps
+// (BYTEA), with the columns queries filter on beside them. Statements use parameters (never
+// string-built SQL); results come back in binary format.
+#include "server/storage/internal/postgres_store.h"
+
+#include <arpa/inet.h>
+#include <libpq-fe.h>
+
+#include <algorithm>
+#include <cstring>
+#include <mutex>
+#include <optional>
+#include <vector>
+
+#include <spdlog/spdlog.h>
+
+#include "server/storage/internal/schema.h"
+
+namespace inspection {
+namespace fs = std::filesystem;
+
+namespace {
+
+// One statement parameter: text (numbers as decimal strings) or binary (BYTEA).
+struct Param {
+  std::string value;
+  bool binary = false;
+};
+Param T(const std::string& s) { return {s, false}; }
+Param I(int64_t v) { return {std::to_string(v), false}; }
+Param B(const std::string& bytes) { return {bytes, true}; }
+
+// Owns a PGresult.
+class Result {
+ public:
+  explicit Result(PGresult* r = nullptr) : r_(r) {}
+  Result(Result&& o) noexcept : r_(o.r_) { o.r_ = nullptr; }
+  Result& operator=(Result&& o) noexcept {
+    std::swap(r_, o.r_);
+    return *this;
+  }
+  ~Result() { PQclear(r_); }
+  int rows() const { return PQntuples(r_); }
+  std::string Bytes(int row, int col) const {
+    return std::string(PQgetvalue(r_, row, col), size_t(PQgetlength(r_, row, col)));
+  }
+  bool IsNull(int row, int col) const { return PQgetisnull(r_, row, col) != 0; }
+  // INTEGER (4 bytes) or BIGINT (8 bytes), network byte order in binary results.
+  int64_t Int(int row, int col) const {
+    const char* p = PQgetvalue(r_, row, col);
+    if (PQgetlength(r_, row, col) == 4) {
+      uint32_t v;
+      std::memcpy(&v, p, 4);
+      return int32_t(ntohl(v));
+    }
+    uint32_t hi, lo;
+    std::memcpy(&hi, p, 4);
+    std::memcpy(&lo, p + 4, 4);
+    return int64_t((uint64_t(ntohl(hi)) << 32) | ntohl(lo));
+  }
+  const char* SqlState() const { return PQresultErrorField(r_, PG_DIAG_SQLSTATE); }
+  PGresult* get() const { return r_; }
+
+ private:
+  PGresult* r_;
+};
+
+constexpr const char* kUniqueViolation = "23505";
+// Serialises schema migrations across replicas starting at once (any constant of ours).
+constexpr int64_t kMigrationLockKey = 0x696e73706563;  // "inspec"
+
+const char* const kPostgresMigrations[] = {
+    R"sql(
+    CREATE TABLE IF NOT EXISTS jobs (
+      job_id TEXT PRIMARY KEY, kind INTEGER NOT NULL, state INTEGER NOT NULL, request_id TEXT NOT NULL,
+      create_ns BIGINT NOT NULL, calibration_id TEXT NOT NULL DEFAULT '', job BYTEA NOT NULL);
+    CREATE INDEX IF NOT EXISTS jobs_by_time ON jobs(create_ns);
+    CREATE INDEX IF NOT EXISTS jobs_by_request ON jobs(kind, request_id);
+    CREATE INDEX IF NOT EXISTS jobs_by_state ON jobs(state);
+    CREATE TABLE IF NOT EXISTS events (
+      job_id TEXT NOT NULL, sequence BIGINT NOT NULL, event BYTEA NOT NULL, PRIMARY KEY(job_id, sequence));
+    CREATE TABLE IF NOT EXISTS artifacts (
+      artifact_id TEXT PRIMARY KEY, job_id TEXT NOT NULL, path TEXT NOT NULL, artifact BYTEA NOT NULL);
+    CREATE INDEX IF NOT EXISTS artifacts_by_job ON artifacts(job_id);
+    CREATE TABLE IF NOT EXISTS calibrations (
+      calibration_id TEXT PRIMARY KEY, create_ns BIGINT NOT NULL, calibration BYTEA NOT NULL);
+    CREATE TABLE IF NOT EXISTS settings (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+    CREATE TABLE IF NOT EXISTS pins (job_id TEXT PRIMARY KEY);
+    CREATE TABLE IF NOT EXISTS recipes (
+      recipe_id TEXT NOT NULL, version INTEGER NOT NULL, deleted INTEGER NOT NULL DEFAULT 0,
+      recipe BYTEA NOT NULL, PRIMARY KEY(recipe_id, version));
+    CREATE TABLE IF NOT EXISTS results (
+      sequence BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY, job_id TEXT NOT NULL UNIQUE,
+      part_id TEXT NOT NULL, recipe_id TEXT NOT NULL, verdict INTEGER NOT NULL, finish_ns BIGINT NOT NULL,
+      result BYTEA NOT NULL);
+    CREATE INDEX IF NOT EXISTS results_by_part ON results(part_id, sequence);
+    CREATE INDEX IF NOT EXISTS results_by_recipe ON results(recipe_id, sequence);
+    )sql",
+};
+static_assert(std::size(kPostgresMigrations) == kStoreSchemaVersion, "one migration per schema version");
+
+// libpq's messages end in a newline and continue on tab-indented lines: one line for logs.
+std::string OneLine(std::string m) {
+  while (!m.empty() && (m.back() == '\n' || m.back() == ' ')) m.pop_back();
+  for (size_t i = m.find("\n"); i != std::string::npos; i = m.find("\n", i)) m.replace(i, 1, "; ");
+  for (size_t i = m.find("\t"); i != std::string::npos; i = m.find("\t", i)) m.erase(i, 1);
+  return m;
+}
+
+int64_t CreateNs(const v1::Job& job) { return job.create_time().seconds() * 1000000000LL + job.create_time().nanos(); }
+
+template <typename M>
+Status ParseRows(const Result& r, int col, std::vector<M>* out, const char* what) {
+  for (int i = 0; i < r.rows(); ++i) {
+    M m;
+    if (!m.ParseFromString(r.Bytes(i, col))) return Status::DataLoss(std::string("a stored ") + what + " is corrupt");
+    out->push_back(std::move(m));
+  }
+  return Status::Ok();
+}
+
+class PostgresDataStore final : public DataStore {
+ public:
+  PostgresDataStore(fs::path dir, PGconn* conn) : DataStore(std::move(dir)), conn_(conn) {}
+  ~PostgresDataStore() override { PQfinish(conn_); }
+  const char* backend() const override { return "postgresql"; }
+  Status Migrate();
+
+  Status PutJob(const v1::Job& job) override;
+  StatusOr<v1::Job> GetJob(const std::string& job_id) override;
+  std::optional<std::string> FindJobByRequestId(v1::JobKind kind, const std::string& request_id) override;
+  StatusOr<std::vector<v1::Job>> ListJobs(v1::JobKind kind, v1::JobState state, int limit,
+                                          int64_t before_create_ns) override;
+  StatusOr<std::vector<v1::Job>> UnfinishedJobs() override;
+  Status AppendEvent(const v1::JobEvent& event) override;
+  StatusOr<std::vector<v1::JobEvent>> Events(const std::string& job_id) override;
+  Status PutArtifact(const StoredArtifact& artifact) override;
+  StatusOr<StoredArtifact> GetArtifact(const std::string& artifact_id) override;
+  Status PutCalibration(const v1::Calibration& calibration) override;
+  StatusOr<v1::Calibration> GetCalibration(const std::string& calibration_id) override;
+  StatusOr<std::vector<v1::Calibration>> ListCalibrations() override;
+  Status SetPinned(const std::string& job_id, bool pinned) override;
+  StatusOr<std::vector<std::string>> PinnedJobs() override;
+  StatusOr<std::vector<v1::Job>> FinishedJobs() override;
+  Status DeleteJobRecords(const std::string& job_id) override;
+  StatusOr<std::vector<StoredArtifact>> DeleteArtifactsOfKind(const std::string& job_id,
+                                                              v1::ArtifactKind kind) override;
+  StatusOr<v1::Recipe> StoreRecipe(v1::Recipe recipe, bool create, int expected_version) override;
+  StatusOr<v1::Recipe> GetRecipe(const std::string& recipe_id, int version) override;
+  StatusOr<std::vector<v1::Recipe>> ListRecipes() override;
+  StatusOr<int> DeleteRecipe(const std::string& recipe_id) override;
+  StatusOr<v1::InspectionResult> AppendResult(v1::InspectionResult result) override;
+  StatusOr<std::vector<v1::InspectionResult>> ListResults(const ResultQuery& query) override;
+  StatusOr<std::vector<v1::InspectionResult>> ResultsAfter(int64_t after_sequence, int limit) override;
+  StatusOr<int64_t> LastResultSequence() override;
+  Status SetSetting(const std::string& key, const std::string& value) override;
+  std::string GetSetting(const std::string& key) override;
+
+ private:
+  // Runs one statement; `error` is set (and the result empty) on failure. A connection found
+  // broken outside a transaction is reset once and the statement retried: the server may have
+  // restarted. Still broken: UNAVAILABLE.
+  Result Run(const char* sql, const std::vector<Param>& params, Status* error, const char* what,
+             bool script = false);
+  // Runs a script of statements without parameters (migrations, BEGIN / COMMIT).
+  Status Exec(const char* sql, const char* what) {
+    Status s;
+    Run(sql, {}, &s, what, /*script=*/true);
+    return s;
+  }
+  // Runs `body` between BEGIN and COMMIT (ROLLBACK when it fails).
+  template <typename F>
+  Status InTransaction(const char* what, F&& body);
+
+  std::mutex mu_;  // guards conn_ and in_transaction_: one connection, one statement at a time
+  PGconn* conn_;
+  bool in_transaction_ = false;
+};
+
+Result PostgresDataStore::Run(const char* sql, const std::vector<Param>& params, Status* error, const char* what,
+                              bool script) {
+  std::vector<const char*> values;
+  std::vector<int> lengths, formats;
+  for (const Param& p : params) {
+    values.push_back(p.value.data());
+    lengths.push_back(int(p.value.size()));
+    formats.push_back(p.binary ? 1 : 0);
+  }
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    // A script may hold several statements, which only PQexec runs (its results are text).
+    Result r(script ? PQexec(conn_, sql)
+                    : PQexecParams(conn_, sql, int(params.size()), nullptr, values.data(), lengths.data(),
+                                   formats.data(), /*resultFormat=*/1));
+    const ExecStatusType st = r.get() ? PQresultStatus(r.get()) : PGRES_FATAL_ERROR;
+    if (st == PGRES_COMMAND_OK || st == PGRES_TUPLES_OK) {
+      *error = Status::Ok();
+      return r;
+    }
+    if (PQstatus(conn_) == CONNECTION_BAD) {
+      if (attempt == 0 && !in_transaction_) {
+        PQreset(conn_);
+        if (PQstatus(conn_) == CONNECTION_OK) continue;
+      }
+      in_transaction_ = false;
+      *error = Status::Unavailable(std::string("database: connection lost during ") + what + ": " +
+                                   OneLine(PQerrorMessage(conn_)));
+      return Result();
+    }
+    const char* state = r.get() ? r.SqlState() : nullptr;
+    const std::string message = OneLine(r.get() ? PQresultErrorMessage(r.get()) : PQerrorMessage(conn_));
+    *error = (state && std::strcmp(state, kUniqueViolation) == 0)
+                 ? Status::AlreadyExists(std::string("database: ") + what + ": " + message)
+                 : Status::Internal(std::string("database: ") + what + ": " + message);
+    return r;  // kept for SqlState()
+  }
+  return Result();
+}
+
+template <typename F>
+Status PostgresDataStore::InTransaction(const char* what, F&& body) {
+  INSPECT_RETURN_IF_ERROR(Exec("BEGIN", what));
+  in_transaction_ = true;
+  Status s = body();
+  if (s.ok()) s = Exec("COMMIT", what);
+  if (!s.ok() && in_transaction_) (void)Exec("ROLLBACK", what);
+  in_transaction_ = false;
+  return s;
+}
+
+Status PostgresDataStore::Migrate() {
+  std::lock_guard<std::mutex> lock(mu_);
+  return InTransaction("schema migration", [&]() -> Status {
+    Status s;
+    Run("SELECT pg_advisory_xact_lock($1)", {I(kMigrationLockKey)}, &s, "schema lock");
+    INSPECT_RETURN_IF_ERROR(s);
+    INSPECT_RETURN_IF_ERROR(
+        Exec("CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL)", "schema_version"));
+    Result r = Run("SELECT COALESCE(MAX(version), 0)::bigint FROM schema_version", {}, &s, "schema version");
+    INSPECT_RETURN_IF_ERROR(s);
+    const int64_t stored = r.Int(0, 0);
+    INSPECT_RETURN_IF_ERROR(CheckSchemaVersion(stored, "(PostgreSQL)"));
+    for (int64_t v = stored; v < kStoreSchemaVersion; ++v) {
+      INSPECT_RETURN_IF_ERROR(Exec(kPostgresMigrations[v], "schema migration"));
+      Run("INSERT INTO schema_version(version) VALUES($1)", {I(v + 1)}, &s, "schema version");
+      INSPECT_RETURN_IF_ERROR(s);
+    }
+    return Status::Ok();
+  });
+}
+
+Status PostgresDataStore::PutJob(const v1::Job& job) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Run("INSERT INTO jobs(job_id, kind, state, request_id, create_ns, calibration_id, job) "
+      "VALUES($1,$2,$3,$4,$5,$6,$7) ON CONFLICT (job_id) DO UPDATE SET kind = EXCLUDED.kind, "
+      "state = EXCLUDED.state, request_id = EXCLUDED.request_id, create_ns = EXCLUDED.create_ns, "
+      "calibration_id = EXCLUDED.calibration_id, job = EXCLUDED.job",
+      {T(job.job_id()), I(job.kind()), I(job.state()), T(job.request_id()), I(CreateNs(job)),
+       T(job.kind() == v1::JOB_KIND_SCAN ? job.result().calibration_id() : std::string()),
+       B(job.SerializeAsString())},
+      &s, "PutJob");
+  return s;
+}
+
+StatusOr<v1::Job> PostgresDataStore::GetJob(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT job FROM jobs WHERE job_id = $1", {T(job_id)}, &s, "GetJob");
+  INSPECT_RETURN_IF_ERROR(s);
+  if (r.rows() == 0) return Status::NotFound("job_id '" + job_id + "' not found");
+  v1::Job job;
+  if (!job.ParseFromString(r.Bytes(0, 0))) return Status::DataLoss("job " + job_id + " record is corrupt");
+  return job;
+}
+
+std::optional<std::string> PostgresDataStore::FindJobByRequestId(v1::JobKind kind, const std::string& request_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT job_id FROM jobs WHERE kind = $1 AND request_id = $2 ORDER BY create_ns LIMIT 1",
+                 {I(kind), T(request_id)}, &s, "FindJobByRequestId");
+  if (!s.ok() || r.rows() == 0) return std::nullopt;
+  return r.Bytes(0, 0);
+}
+
+StatusOr<std::vector<v1::Job>> PostgresDataStore::ListJobs(v1::JobKind kind, v1::JobState state, int limit,
+                                                           int64_t before_create_ns) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT job FROM jobs WHERE ($1 = 0 OR kind = $1) AND ($2 = 0 OR state = $2) AND "
+                 "($3::bigint = 0 OR create_ns < $3::bigint) ORDER BY create_ns DESC LIMIT $4",
+                 {I(kind), I(state), I(before_create_ns), I(limit)}, &s, "ListJobs");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<v1::Job> jobs;
+  INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &jobs, "job"));
+  return jobs;
+}
+
+StatusOr<std::vector<v1::Job>> PostgresDataStore::UnfinishedJobs() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT job FROM jobs WHERE state IN ($1, $2)", {I(v1::JOB_STATE_QUEUED), I(v1::JOB_STATE_RUNNING)},
+                 &s, "UnfinishedJobs");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<v1::Job> jobs;
+  INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &jobs, "job"));
+  return jobs;
+}
+
+Status PostgresDataStore::AppendEvent(const v1::JobEvent& event) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Run("INSERT INTO events(job_id, sequence, event) VALUES($1,$2,$3) "
+      "ON CONFLICT (job_id, sequence) DO UPDATE SET event = EXCLUDED.event",
+      {T(event.job_id()), I(int64_t(event.sequence())), B(event.SerializeAsString())}, &s, "AppendEvent");
+  return s;
+}
+
+StatusOr<std::vector<v1::JobEvent>> PostgresDataStore::Events(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT event FROM events WHERE job_id = $1 ORDER BY sequence", {T(job_id)}, &s, "Events");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<v1::JobEvent> events;
+  INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &events, "job event"));
+  return events;
+}
+
+Status PostgresDataStore::PutArtifact(const StoredArtifact& a) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Run("INSERT INTO artifacts(artifact_id, job_id, path, artifact) VALUES($1,$2,$3,$4) "
+      "ON CONFLICT (artifact_id) DO UPDATE SET job_id = EXCLUDED.job_id, path = EXCLUDED.path, "
+      "artifact = EXCLUDED.artifact",
+      {T(a.artifact.artifact_id()), T(a.job_id), T(a.path.string()), B(a.artifact.SerializeAsString())}, &s,
+      "PutArtifact");
+  return s;
+}
+
+StatusOr<StoredArtifact> PostgresDataStore::GetArtifact(const std::string& artifact_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT job_id, path, artifact FROM artifacts WHERE artifact_id = $1", {T(artifact_id)}, &s,
+                 "GetArtifact");
+  INSPECT_RETURN_IF_ERROR(s);
+  if (r.rows() == 0) return Status::NotFound("artifact_id '" + artifact_id + "' not found");
+  StoredArtifact a;
+  a.job_id = r.Bytes(0, 0);
+  a.path = r.Bytes(0, 1);
+  if (!a.artifact.ParseFromString(r.Bytes(0, 2))) return Status::DataLoss("artifact record is corrupt");
+  return a;
+}
+
+Status PostgresDataStore::PutCalibration(const v1::Calibration& c) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Run("INSERT INTO calibrations(calibration_id, create_ns, calibration) VALUES($1,$2,$3) "
+      "ON CONFLICT (calibration_id) DO UPDATE SET create_ns = EXCLUDED.create_ns, calibration = EXCLUDED.calibration",
+      {T(c.calibration_id()), I(c.create_time().seconds() * 1000000000LL + c.create_time().nanos()),
+       B(c.SerializeAsString())},
+      &s, "PutCalibration");
+  return s;
+}
+
+StatusOr<v1::Calibration> PostgresDataStore::GetCalibration(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT calibration FROM calibrations WHERE calibration_id = $1", {T(id)}, &s, "GetCalibration");
+  INSPECT_RETURN_IF_ERROR(s);
+  if (r.rows() == 0) return Status::NotFound("calibration_id '" + id + "' not found");
+  v1::Calibration c;
+  if (!c.ParseFromString(r.Bytes(0, 0))) return Status::DataLoss("calibration record is corrupt");
+  return c;
+}
+
+StatusOr<std::vector<v1::Calibration>> PostgresDataStore::ListCalibrations() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT calibration FROM calibrations ORDER BY create_ns DESC", {}, &s, "ListCalibrations");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<v1::Calibration> out;
+  INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &out, "calibration"));
+  return out;
+}
+
+Status PostgresDataStore::SetPinned(const std::string& job_id, bool pinned) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Run(pinned ? "INSERT INTO pins(job_id) VALUES($1) ON CONFLICT DO NOTHING" : "DELETE FROM pins WHERE job_id = $1",
+      {T(job_id)}, &s, "SetPinned");
+  return s;
+}
+
+StatusOr<std::vector<std::string>> PostgresDataStore::PinnedJobs() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT job_id FROM pins", {}, &s, "PinnedJobs");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<std::string> ids;
+  for (int i = 0; i < r.rows(); ++i) ids.push_back(r.Bytes(i, 0));
+  return ids;
+}
+
+StatusOr<std::vector<v1::Job>> PostgresDataStore::FinishedJobs() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT job FROM jobs WHERE state IN ($1, $2, $3)",
+                 {I(v1::JOB_STATE_SUCCEEDED), I(v1::JOB_STATE_FAILED), I(v1::JOB_STATE_CANCELLED)}, &s,
+                 "FinishedJobs");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<v1::Job> jobs;
+  INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &jobs, "job"));
+  return jobs;
+}
+
+Status PostgresDataStore::DeleteJobRecords(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  return InTransaction("DeleteJobRecords", [&]() -> Status {
+    for (const char* sql : {"DELETE FROM artifacts WHERE job_id = $1", "DELETE FROM events WHERE job_id = $1",
+                            "DELETE FROM pins WHERE job_id = $1", "DELETE FROM jobs WHERE job_id = $1"}) {
+      Status s;
+      Run(sql, {T(job_id)}, &s, "DeleteJobRecords");
+      INSPECT_RETURN_IF_ERROR(s);
+    }
+    return Status::Ok();
+  });
+}
+
+StatusOr<std::vector<StoredArtifact>> PostgresDataStore::DeleteArtifactsOfKind(const std::string& job_id,
+                                                                               v1::ArtifactKind kind) {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::vector<StoredArtifact> removed;
+  Status status = InTransaction("DeleteArtifactsOfKind", [&]() -> Status {
+    Status s;
+    // FOR UPDATE: another replica rewriting the job between read and write would lose an edit.
+    Result jr = Run("SELECT job FROM jobs WHERE job_id = $1 FOR UPDATE", {T(job_id)}, &s, "DeleteArtifactsOfKind");
+    INSPECT_RETURN_IF_ERROR(s);
+    if (jr.rows() == 0) return Status::NotFound("job_id '" + job_id + "' not found");
+    v1::Job job;
+    if (!job.ParseFromString(jr.Bytes(0, 0))) return Status::DataLoss("job " + job_id + " record is corrupt");
+    Result ar = Run("SELECT path, artifact FROM artifacts WHERE job_id = $1", {T(job_id)}, &s, "DeleteArtifactsOfKind");
+    INSPECT_RETURN_IF_ERROR(s);
+    for (int i = 0; i < ar.rows(); ++i) {
+      StoredArtifact a;
+      a.job_id = job_id;
+      a.path = ar.Bytes(i, 0);
+      if (a.artifact.ParseFromString(ar.Bytes(i, 1)) && a.artifact.kind() == kind) removed.push_back(std::move(a));
+    }
+    auto* artifacts = job.mutable_result()->mutable_artifacts();
+    artifacts->erase(std::remove_if(artifacts->begin(), artifacts->end(),
+                                    [&](const v1::Artifact& a) { return a.kind() == kind; }),
+                     artifacts->end());
+    for (const StoredArtifact& a : removed) {
+      Run("DELETE FROM artifacts WHERE artifact_id = $1", {T(a.artifact.artifact_id())}, &s, "DeleteArtifactsOfKind");
+      INSPECT_RETURN_IF_ERROR(s);
+    }
+    Run("UPDATE jobs SET job = $1 WHERE job_id = $2", {B(job.SerializeAsString()), T(job_id)}, &s,
+        "DeleteArtifactsOfKind");
+    return s;
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return removed;
+}
+
+StatusOr<v1::Recipe> PostgresDataStore::StoreRecipe(v1::Recipe recipe, bool create, int expected_version) {
+  std::lock_guard<std::mutex> lock(mu_);
+  const std::string id = recipe.recipe_id();
+  Status status = InTransaction("StoreRecipe", [&]() -> Status {
+    Status s;
+    // One writer per recipe id across replicas: the transaction-scoped lock on the id's hash.
+    Run("SELECT pg_advisory_xact_lock(hashtextextended($1, 0))", {T(id)}, &s, "StoreRecipe");
+    INSPECT_RETURN_IF_ERROR(s);
+    Result q = Run("SELECT COALESCE(MAX(version), 0)::bigint, MAX(CASE WHEN deleted = 0 THEN version END)::bigint "
+                   "FROM recipes WHERE recipe_id = $1",
+                   {T(id)}, &s, "StoreRecipe");
+    INSPECT_RETURN_IF_ERROR(s);
+    const int64_t highest = q.Int(0, 0);
+    const bool in_use = !q.IsNull(0, 1);
+    const int64_t current = in_use ? q.Int(0, 1) : 0;
+    if (create && in_use) {
+      return Status(StatusCode::kAlreadyExists, "recipe_id '" + id + "' exists (version " + std::to_string(current) +
+                                                    "); UpdateRecipe makes a new version");
+    }
+    if (!create && !in_use) return Status::NotFound("recipe_id '" + id + "' not found");
+    if (!create && expected_version > 0 && expected_version != current) {
+      return Status::Aborted("recipe '" + id + "' is at version " + std::to_string(current) +
+                             ", not expected_version " + std::to_string(expected_version) + " (updated meanwhile)");
+    }
+    recipe.set_version(int32_t(highest + 1));
+    Run("INSERT INTO recipes(recipe_id, version, deleted, recipe) VALUES($1,$2,0,$3)",
+        {T(id), I(recipe.version()), B(recipe.SerializeAsString())}, &s, "StoreRecipe");
+    return s;
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return recipe;
+}
+
+StatusOr<v1::Recipe> PostgresDataStore::GetRecipe(const std::string& recipe_id, int version) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  // A hidden recipe's versions stay readable by version for the results that ran them.
+  Result r = version > 0 ? Run("SELECT recipe FROM recipes WHERE recipe_id = $1 AND version = $2",
+                               {T(recipe_id), I(version)}, &s, "GetRecipe")
+                         : Run("SELECT recipe FROM recipes WHERE recipe_id = $1 AND deleted = 0 "
+                               "ORDER BY version DESC LIMIT 1",
+                               {T(recipe_id)}, &s, "GetRecipe");
+  INSPECT_RETURN_IF_ERROR(s);
+  if (r.rows() == 0) {
+    return Status::NotFound("recipe_id '" + recipe_id + "'" +
+                            (version > 0 ? " version " + std::to_string(version) : std::string()) + " not found");
+  }
+  v1::Recipe recipe;
+  if (!recipe.ParseFromString(r.Bytes(0, 0))) return Status::DataLoss("recipe " + recipe_id + " record is corrupt");
+  return recipe;
+}
+
+StatusOr<std::vector<v1::Recipe>> PostgresDataStore::ListRecipes() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT recipe FROM recipes r WHERE deleted = 0 AND version = "
+                 "(SELECT MAX(version) FROM recipes WHERE recipe_id = r.recipe_id) ORDER BY recipe_id",
+                 {}, &s, "ListRecipes");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<v1::Recipe> out;
+  INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &out, "recipe"));
+  return out;
+}
+
+StatusOr<int> PostgresDataStore::DeleteRecipe(const std::string& recipe_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("UPDATE recipes SET deleted = 1 WHERE recipe_id = $1 AND deleted = 0", {T(recipe_id)}, &s,
+                 "DeleteRecipe");
+  INSPECT_RETURN_IF_ERROR(s);
+  const int n = std::atoi(PQcmdTuples(r.get()));
+  if (n == 0) return Status::NotFound("recipe_id '" + recipe_id + "' not found");
+  return n;
+}
+
+StatusOr<v1::InspectionResult> PostgresDataStore::AppendResult(v1::InspectionResult result) {
+  std::lock_guard<std::mutex> lock(mu_);
+  const auto& t = result.finish_time();
+  // An identity column: a deleted row's number is never handed out again. The record carries its
+  // own number, set in the same transaction.
+  Status status = InTransaction("AppendResult", [&]() -> Status {
+    Status s;
+    Result r = Run("INSERT INTO results(job_id, part_id, recipe_id, verdict, finish_ns, result) "
+                   "VALUES($1,$2,$3,$4,$5,'') RETURNING sequence",
+                   {T(result.job_id()), T(result.part_id()), T(result.recipe_id()), I(result.verdict()),
+                    I(t.seconds() * 1000000000LL + t.nanos())},
+                   &s, "AppendResult");
+    if (s.code() == StatusCode::kAlreadyExists) {
+      return Status::AlreadyExists("job " + result.job_id() + " already has a result");
+    }
+    INSPECT_RETURN_IF_ERROR(s);
+    result.set_sequence(r.Int(0, 0));
+    Run("UPDATE results SET result = $1 WHERE sequence = $2", {B(result.SerializeAsString()), I(result.sequence())},
+        &s, "AppendResult");
+    return s;
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return result;
+}
+
+StatusOr<std::vector<v1::InspectionResult>> PostgresDataStore::ListResults(const ResultQuery& q) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT result FROM results WHERE ($1 = '' OR part_id = $1) AND ($2 = '' OR recipe_id = $2) "
+                 "AND ($3 = 0 OR verdict = $3) AND ($4::bigint = 0 OR finish_ns >= $4::bigint) "
+                 "AND ($5::bigint = 0 OR finish_ns < $5::bigint) AND ($6::bigint = 0 OR sequence < $6::bigint) "
+                 "ORDER BY sequence DESC LIMIT $7",
+                 {T(q.part_id), T(q.recipe_id), I(q.verdict), I(q.finished_from_ns), I(q.finished_before_ns),
+                  I(q.before_sequence), I(q.limit)},
+                 &s, "ListResults");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<v1::InspectionResult> out;
+  INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &out, "inspection result"));
+  return out;
+}
+
+StatusOr<std::vector<v1::InspectionResult>> PostgresDataStore::ResultsAfter(int64_t after_sequence, int limit) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT result FROM results WHERE sequence > $1 ORDER BY sequence LIMIT $2", {I(after_sequence), I(limit)},
+                 &s, "ResultsAfter");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<v1::InspectionResult> out;
+  INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &out, "inspection result"));
+  return out;
+}
+
+StatusOr<int64_t> PostgresDataStore::LastResultSequence() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT COALESCE(MAX(sequence), 0)::bigint FROM results", {}, &s, "LastResultSequence");
+  INSPECT_RETURN_IF_ERROR(s);
+  return r.Int(0, 0);
+}
+
+Status PostgresDataStore::SetSetting(const std::string& key, const std::string& value) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Run("INSERT INTO settings(key, value) VALUES($1,$2) ON CONFLICT (key) DO UPDATE SET value = EXCLUDED.value",
+      {T(key), T(value)}, &s, "SetSetting");
+  return s;
+}
+
+std::string PostgresDataStore::GetSetting(const std::string& key) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT value FROM settings WHERE key = $1", {T(key)}, &s, "GetSetting");
+  return s.ok() && r.rows() > 0 ? r.Bytes(0, 0) : std::string();
+}
+
+}  // namespace
+
+StatusOr<std::unique_ptr<DataStore>> OpenPostgresStore(const fs::path& data_dir, const std::string& conninfo,
+                                                       const std::string& password) {
+  // expand_dbname: `conninfo` (a URL or key=value string) supplies every other parameter.
+  std::vector<const char*> keys = {"dbname", "connect_timeout", "application_name"};
+  std::vector<const char*> values = {conninfo.c_str(), "10", "inspectd"};
+  if (!password.empty()) {
+    keys.push_back("password");
+    values.push_back(password.c_str());
+  }
+  keys.push_back(nullptr);
+  values.push_back(nullptr);
+  PGconn* conn = PQconnectdbParams(keys.data(), values.data(), /*expand_dbname=*/1);
+  if (conn == nullptr) return Status::Unavailable("database: out of memory connecting");
+  if (PQstatus(conn) != CONNECTION_OK) {
+    std::string message = OneLine(PQerrorMessage(conn));
+    PQfinish(conn);
+    return Status::Unavailable("database: cannot connect to " + RedactDatabaseUrl(conninfo) + ": " + message);
+  }
+  // Server notices ("relation already exists, skipping") are the migration's expected chatter:
+  // they would go to stderr unformatted. Logs stay quiet by default.
+  PQsetNoticeProcessor(conn, [](void*, const char* message) { spdlog::debug("database: {}", OneLine(message)); },
+                       nullptr);
+  auto store = std::make_unique<PostgresDataStore>(data_dir, conn);
+  INSPECT_RETURN_IF_ERROR(store->Migrate());
+  return std::unique_ptr<DataStore>(std::move(store));
+}
+
+}  // namespace inspection
