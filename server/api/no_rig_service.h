@@ -1,7 +1,8 @@
 // The gRPC services of `inspectd --no-rig`: a reconstruct-only server for the scale-out pool
 // (deploy/k8s/reconstruct). Job, artifact, calibration and Reconstruct calls go to the ordinary
-// handlers; the calls that need a rig (GetRigStatus, Scan, Calibrate, ResetRig, the recipes and
-// the simulation's specimen calls) answer FAILED_PRECONDITION saying why, after the same
+// handlers, and so are the result feed's (a site replica's store holds every rig's results); the
+// calls that need a rig (GetRigStatus, Scan, Calibrate, ResetRig, the recipes and the
+// simulation's specimen calls) answer FAILED_PRECONDITION saying why, after the same
 // authentication as every call.
 #pragma once
 
@@ -20,14 +21,16 @@ std::string NoRigMessage(std::string_view method);
 // InspectionService methods by what --no-rig does with them. Together they are every method of
 // the service (a test checks this against the proto, so a new RPC cannot fall through as
 // UNIMPLEMENTED unnoticed).
-// Recipes live on the rig's server: they are checked against its camera and run by its scans,
-// which are also the only source of inspection results.
-inline constexpr std::array<std::string_view, 11> kRigOnlyMethods = {
-    "GetRigStatus", "Calibrate",   "Scan",         "ResetRig",    "CreateRecipe", "UpdateRecipe",
-    "GetRecipe",    "ListRecipes", "DeleteRecipe", "ListResults", "WatchResults"};
-inline constexpr std::array<std::string_view, 11> kNoRigServedMethods = {
-    "Reconstruct",    "WatchJob",         "GetJob",    "ListJobs",   "CancelJob", "DownloadArtifact",
-    "GetCalibration", "ListCalibrations", "DeleteJob", "DeleteScan", "PinJob"};
+// Recipes live on the rig's server: they are checked against its camera and run by its scans.
+// Inspection results are served: a site replica (--no-rig on the site's PostgreSQL) holds every
+// rig's forwarded results (server/results/result_forwarder.h); a plain pool holds none.
+inline constexpr std::array<std::string_view, 9> kRigOnlyMethods = {
+    "GetRigStatus", "Calibrate", "Scan", "ResetRig", "CreateRecipe", "UpdateRecipe",
+    "GetRecipe",    "ListRecipes", "DeleteRecipe"};
+inline constexpr std::array<std::string_view, 13> kNoRigServedMethods = {
+    "Reconstruct",      "WatchJob",       "GetJob",           "ListJobs",  "CancelJob",
+    "DownloadArtifact", "GetCalibration", "ListCalibrations", "DeleteJob", "DeleteScan",
+    "PinJob",           "ListResults",    "WatchResults"};
 
 class NoRigInspectionService final : public v1::InspectionService::Service {
  public:
@@ -92,12 +95,13 @@ class NoRigInspectionService final : public v1::InspectionService::Service {
   grpc::Status DeleteRecipe(grpc::ServerContext* c, const v1::DeleteRecipeRequest*, v1::DeleteResponse*) override {
     return Refuse(c, "DeleteRecipe");
   }
-  grpc::Status ListResults(grpc::ServerContext* c, const v1::ListResultsRequest*, v1::ListResultsResponse*) override {
-    return Refuse(c, "ListResults");
+  grpc::Status ListResults(grpc::ServerContext* c, const v1::ListResultsRequest* r,
+                           v1::ListResultsResponse* o) override {
+    return served_->ListResults(c, r, o);
   }
-  grpc::Status WatchResults(grpc::ServerContext* c, const v1::WatchResultsRequest*,
-                            grpc::ServerWriter<v1::InspectionResult>*) override {
-    return Refuse(c, "WatchResults");
+  grpc::Status WatchResults(grpc::ServerContext* c, const v1::WatchResultsRequest* r,
+                            grpc::ServerWriter<v1::InspectionResult>* w) override {
+    return served_->WatchResults(c, r, w);
   }
 
  private:

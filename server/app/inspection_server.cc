@@ -95,6 +95,11 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   s->calibrations_ = std::make_unique<CalibrationStore>(s->store_.get());
   s->calibrations_->LoadActive().IgnoreError();  // logged; the server still serves without it
   s->results_ = std::make_unique<ResultFeed>(s->store_.get());
+  if (!options.site_forwarding.site.url.empty()) {
+    INSPECT_RETURN_IF_ERROR(ValidateResultForwardingOptions(options.site_forwarding));
+    s->forwarder_ = std::make_unique<ResultForwarder>(s->store_.get(), options.site_forwarding);
+    s->results_->SetAppendListener([f = s->forwarder_.get()] { f->Notify(); });
+  }
   s->runner_ =
       std::make_unique<ProcedureRunner>(s->store_.get(), s->rig_.get(), s->calibrations_.get(), s->results_.get(),
                                         options.reconstruct);
@@ -203,6 +208,7 @@ void InspectionServer::Shutdown() {
   // Jobs first, so streaming handlers see terminal events and return; then the transport.
   jobs_->Shutdown();
   results_->Shutdown();  // open WatchResults streams end (UNAVAILABLE: resume elsewhere or later)
+  if (forwarder_) forwarder_->Stop();  // what it did not forward stays in the outbox for the next start
   server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
 }
 

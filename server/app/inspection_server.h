@@ -23,6 +23,7 @@
 #include "server/api/no_rig_service.h"
 #include "server/jobs/procedure_runner.h"
 #include "server/results/result_feed.h"
+#include "server/results/result_forwarder.h"
 #include "server/jobs/retention_sweeper.h"
 #include "server/jobs/rig_controller.h"
 
@@ -33,6 +34,9 @@ struct ServerOptions {
   std::filesystem::path data_dir = "./inspection-data";
   // Where the job database lives (default: SQLite in data_dir; server/storage/data_store.h).
   DatabaseOptions database;
+  // Site result feed: this rig's results forwarded to the site's store
+  // (server/results/result_forwarder.h). Off while site.url is empty.
+  ResultForwardingOptions site_forwarding;
   int rig_queue_capacity = 4;
   // gRPC server reflection; unset = on without authentication, off when any is configured
   // (reflection hands an unauthenticated scanner the whole API).
@@ -106,6 +110,7 @@ class InspectionServer {
   std::unique_ptr<RigController> rig_;
   std::unique_ptr<CalibrationStore> calibrations_;
   std::unique_ptr<ResultFeed> results_;  // written by scan jobs, read by WatchResults handlers
+  std::unique_ptr<ResultForwarder> forwarder_;  // reads the store's results; stopped before it closes
   std::unique_ptr<ProcedureRunner> runner_;
   std::unique_ptr<JobManager> jobs_;  // declared after what its jobs use: destroyed (joined) first
   std::unique_ptr<DataJanitor> janitor_;

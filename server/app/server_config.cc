@@ -1,6 +1,8 @@
 // inspectd's configuration layers (server_config.h): JSON file, INSPECTD_* environment, flags.
 #include "server/app/server_config.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cctype>
 #include <charconv>
@@ -152,6 +154,12 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
        "= a PostgreSQL server shared by a pool or a site (no password in it: use database_password_file)"},
       {"database_password_file", &C::database_password_file,
        "file whose first line is the PostgreSQL password (never logged)"},
+      {"rig_id", &C::rig_id, "this rig's name on the site's result feed; empty: the host name"},
+      {"site_database", &C::site_database,
+       "postgresql://... of the site's store: every inspection result is forwarded there (store-and-forward, in "
+       "order, once), so one feed covers every rig; empty: off"},
+      {"site_database_password_file", &C::site_database_password_file,
+       "file whose first line is the site database's password (never logged)"},
       {"queue_capacity", &C::queue_capacity, "rig jobs that may wait behind the running one"},
       {"reflection", &C::reflection,
        "gRPC server reflection (by default off when authentication is configured, else on)"},
@@ -319,6 +327,14 @@ Status ValidateConfig(const InspectdConfig& c) {
   if (c.listen.empty()) return Status::InvalidArgument("listen must not be empty (host:port)");
   if (c.data_dir.empty()) return Status::InvalidArgument("data_dir must not be empty");
   INSPECT_RETURN_IF_ERROR(ValidateDatabaseOptions({c.database, c.database_password_file}));
+  if (!c.site_database.empty()) {
+    ResultForwardingOptions f;
+    f.rig_id = c.rig_id.empty() ? "host" : c.rig_id;  // the host name is filled in by ToServerOptions
+    f.site = {c.site_database, c.site_database_password_file};
+    INSPECT_RETURN_IF_ERROR(ValidateResultForwardingOptions(f));
+  } else if (!c.site_database_password_file.empty()) {
+    return Status::InvalidArgument("site_database_password_file: set, but site_database is not");
+  }
   if (c.queue_capacity < 0) return bad("queue_capacity", std::to_string(c.queue_capacity), "must be >= 0");
   cv::Size size;
   if (!ParseCameraSize(c.camera_size, &size)) {
@@ -371,7 +387,8 @@ std::string ConfigToJson(const InspectdConfig& config) {
   for (const auto& key : InspectdConfigKeys()) {
     std::visit([&](auto InspectdConfig::*f) { doc[std::string(key.name)] = config.*f; }, key.field);
   }
-  doc["database"] = RedactDatabaseUrl(config.database);  // a password in the URL is never printed
+  doc["database"] = RedactDatabaseUrl(config.database);  // a password in a URL is never printed
+  doc["site_database"] = RedactDatabaseUrl(config.site_database);
   return doc.dump(2) + "\n";
 }
 
@@ -381,6 +398,14 @@ StatusOr<ServerOptions> ToServerOptions(const InspectdConfig& c) {
   o.listen_address = c.listen;
   o.data_dir = c.data_dir;
   o.database = {c.database, c.database_password_file};
+  if (!c.site_database.empty()) {
+    o.site_forwarding.site = {c.site_database, c.site_database_password_file};
+    o.site_forwarding.rig_id = c.rig_id;
+    if (o.site_forwarding.rig_id.empty()) {
+      char host[256] = {};
+      if (gethostname(host, sizeof(host) - 1) == 0) o.site_forwarding.rig_id = host;
+    }
+  }
   o.rig_queue_capacity = c.queue_capacity;
   o.reflection = c.reflection;
   o.tls_cert_file = c.tls_cert;

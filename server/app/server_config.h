@@ -23,6 +23,9 @@ struct InspectdConfig {
   std::string data_dir = ServerOptions{}.data_dir.string();
   std::string database;                // "" = SQLite in data_dir; postgresql://... for a pool or a site
   std::string database_password_file;  // PostgreSQL password (first line); never logged
+  std::string rig_id;                       // this rig's name on the site's feed; empty = the host name
+  std::string site_database;                // postgresql://... : forward results to the site; empty = off
+  std::string site_database_password_file;  // its password (first line); never logged
   int queue_capacity = ServerOptions{}.rig_queue_capacity;
   bool reflection = true;  // as a default: on unless authentication is configured (main.cc)
   std::string tls_cert;

@@ -1,6 +1,7 @@
 // ResultFeed (server/results/result_feed.h): stored results plus a wake-up for the watchers.
 #include "server/results/result_feed.h"
 
+#include <algorithm>
 #include <utility>
 
 namespace inspection {
@@ -12,6 +13,7 @@ StatusOr<v1::InspectionResult> ResultFeed::Append(v1::InspectionResult result) {
     ++appended_;
   }
   cv_.notify_all();
+  if (listener_) listener_();
   return stored;
 }
 
@@ -26,10 +28,24 @@ StatusOr<std::vector<v1::InspectionResult>> ResultFeed::Next(int64_t after_seque
   // below returns at once instead of missing it.
   INSPECT_ASSIGN_OR_RETURN(std::vector<v1::InspectionResult> results, store_->ResultsAfter(after_sequence, limit));
   if (!results.empty()) return results;
+  // A shared store (a site's PostgreSQL) also gets results from other processes (the rigs'
+  // forwarders, other replicas), which no Append here announces: look again at least this often.
+  const auto deadline = std::chrono::steady_clock::now() + wait;
+  const std::chrono::milliseconds step = store_->shared() ? kSharedStorePoll : wait;
   std::unique_lock<std::mutex> lock(mu_);
-  if (cv_.wait_for(lock, wait, [&] { return shut_down_ || appended_ != seen; }) && !shut_down_) {
-    lock.unlock();
-    return store_->ResultsAfter(after_sequence, limit);
+  while (!shut_down_) {
+    const auto until = std::min(deadline, std::chrono::steady_clock::now() + step);
+    const bool woken = cv_.wait_until(lock, until, [&] { return shut_down_ || appended_ != seen; });
+    if (shut_down_) break;
+    if (woken || store_->shared()) {
+      seen = appended_;
+      lock.unlock();
+      INSPECT_ASSIGN_OR_RETURN(results, store_->ResultsAfter(after_sequence, limit));
+      if (!results.empty() || std::chrono::steady_clock::now() >= deadline) return results;
+      lock.lock();
+      continue;
+    }
+    if (std::chrono::steady_clock::now() >= deadline) break;
   }
   return results;
 }

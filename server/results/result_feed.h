@@ -31,12 +31,19 @@ class ResultFeed {
   // means "ask again" (the caller checks whether its client is still there).
   StatusOr<std::vector<v1::InspectionResult>> Next(int64_t after_sequence, int limit, std::chrono::milliseconds wait);
 
+  // Called after every Append (e.g. the site forwarder's Notify); set before results arrive.
+  void SetAppendListener(std::function<void()> listener) { listener_ = std::move(listener); }
+
   // Wakes every waiting Next and makes later ones return at once.
   void Shutdown();
   bool shut_down() const;
 
+  // How often Next looks at a shared store (server/storage/data_store.h: shared()) while it waits.
+  static constexpr std::chrono::milliseconds kSharedStorePoll{250};
+
  private:
   DataStore* store_;
+  std::function<void()> listener_;
   mutable std::mutex mu_;
   std::condition_variable cv_;  // signalled on every Append and on Shutdown
   uint64_t appended_ = 0;       // Appends seen, so a waiter notices one that raced its query

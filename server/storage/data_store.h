@@ -72,6 +72,9 @@ class DataStore {
   virtual ~DataStore() = default;
   // "sqlite" or "postgresql": what the metadata lives in.
   virtual const char* backend() const = 0;
+  // True when other processes write to the same database (PostgreSQL: a pool or a site), so
+  // waiting for this process's own writes is not enough to see new rows.
+  virtual bool shared() const = 0;
 
   const std::filesystem::path& data_dir() const { return data_dir_; }
   std::filesystem::path scans_dir() const { return data_dir_ / "scans"; }
@@ -130,6 +133,11 @@ class DataStore {
   // (increasing, never reused, also after deletions) and returns it with the number set.
   // ALREADY_EXISTS when the job already has a result.
   virtual StatusOr<v1::InspectionResult> AppendResult(v1::InspectionResult result) = 0;
+  // A result forwarded by a rig to this (site) store: result.rig_id and result.rig_sequence (the
+  // rig's own number) must be set. Stored under the next site-wide sequence number; a result this
+  // rig forwarded before (same rig_id and rig_sequence: a retry after a lost answer) is not stored
+  // again: the stored one is returned. INVALID_ARGUMENT without rig_id / rig_sequence.
+  virtual StatusOr<v1::InspectionResult> ImportResult(v1::InspectionResult result) = 0;
   // Newest first, matching `query`; at most query.limit.
   virtual StatusOr<std::vector<v1::InspectionResult>> ListResults(const ResultQuery& query) = 0;
   // Oldest first: the results with a sequence number > after_sequence, at most `limit`.

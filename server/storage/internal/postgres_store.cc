@@ -97,6 +97,11 @@ const char* const kPostgresMigrations[] = {
     CREATE INDEX IF NOT EXISTS results_by_part ON results(part_id, sequence);
     CREATE INDEX IF NOT EXISTS results_by_recipe ON results(recipe_id, sequence);
     )sql",
+    R"sql(
+    ALTER TABLE results ADD COLUMN rig_id TEXT NOT NULL DEFAULT '';
+    ALTER TABLE results ADD COLUMN rig_sequence BIGINT NOT NULL DEFAULT 0;
+    CREATE UNIQUE INDEX results_by_rig ON results(rig_id, rig_sequence) WHERE rig_id <> '';
+    )sql",
 };
 static_assert(std::size(kPostgresMigrations) == kStoreSchemaVersion, "one migration per schema version");
 
@@ -125,6 +130,7 @@ class PostgresDataStore final : public DataStore {
   PostgresDataStore(fs::path dir, PGconn* conn) : DataStore(std::move(dir)), conn_(conn) {}
   ~PostgresDataStore() override { PQfinish(conn_); }
   const char* backend() const override { return "postgresql"; }
+  bool shared() const override { return true; }
   Status Migrate();
 
   Status PutJob(const v1::Job& job) override;
@@ -151,6 +157,7 @@ class PostgresDataStore final : public DataStore {
   StatusOr<std::vector<v1::Recipe>> ListRecipes() override;
   StatusOr<int> DeleteRecipe(const std::string& recipe_id) override;
   StatusOr<v1::InspectionResult> AppendResult(v1::InspectionResult result) override;
+  StatusOr<v1::InspectionResult> ImportResult(v1::InspectionResult result) override;
   StatusOr<std::vector<v1::InspectionResult>> ListResults(const ResultQuery& query) override;
   StatusOr<std::vector<v1::InspectionResult>> ResultsAfter(int64_t after_sequence, int limit) override;
   StatusOr<int64_t> LastResultSequence() override;
@@ -559,6 +566,43 @@ StatusOr<v1::InspectionResult> PostgresDataStore::AppendResult(v1::InspectionRes
     return s;
   });
   INSPECT_RETURN_IF_ERROR(status);
+  return result;
+}
+
+StatusOr<v1::InspectionResult> PostgresDataStore::ImportResult(v1::InspectionResult result) {
+  if (result.rig_id().empty() || result.rig_sequence() <= 0) {
+    return Status::InvalidArgument("a forwarded result needs rig_id and rig_sequence");
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  const auto& t = result.finish_time();
+  bool duplicate = false;
+  Status status = InTransaction("ImportResult", [&]() -> Status {
+    Status s;
+    // ON CONFLICT DO NOTHING on the rig's (id, number): a retried forward stores nothing.
+    Result r = Run("INSERT INTO results(job_id, part_id, recipe_id, verdict, finish_ns, result, rig_id, rig_sequence) "
+                   "VALUES($1,$2,$3,$4,$5,'',$6,$7) ON CONFLICT (rig_id, rig_sequence) WHERE rig_id <> '' "
+                   "DO NOTHING RETURNING sequence",
+                   {T(result.job_id()), T(result.part_id()), T(result.recipe_id()), I(result.verdict()),
+                    I(t.seconds() * 1000000000LL + t.nanos()), T(result.rig_id()), I(result.rig_sequence())},
+                   &s, "ImportResult");
+    INSPECT_RETURN_IF_ERROR(s);
+    if (r.rows() == 0) {
+      duplicate = true;
+      Result q = Run("SELECT result FROM results WHERE rig_id = $1 AND rig_sequence = $2",
+                     {T(result.rig_id()), I(result.rig_sequence())}, &s, "ImportResult");
+      INSPECT_RETURN_IF_ERROR(s);
+      if (q.rows() == 0 || !result.ParseFromString(q.Bytes(0, 0))) {
+        return Status::DataLoss("a forwarded inspection result record is corrupt");
+      }
+      return Status::Ok();
+    }
+    result.set_sequence(r.Int(0, 0));
+    Run("UPDATE results SET result = $1 WHERE sequence = $2", {B(result.SerializeAsString()), I(result.sequence())},
+        &s, "ImportResult");
+    return s;
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  (void)duplicate;
   return result;
 }
 

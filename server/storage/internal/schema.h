@@ -12,7 +12,8 @@
 namespace inspection {
 
 // Version 1: jobs, events, artifacts, calibrations, settings, pins, recipes, results.
-inline constexpr int64_t kStoreSchemaVersion = 1;
+// Version 2: results forwarded by rigs to a site store (results.rig_id, results.rig_sequence).
+inline constexpr int64_t kStoreSchemaVersion = 2;
 
 inline Status CheckSchemaVersion(int64_t stored, const std::string& where) {
   if (stored > kStoreSchemaVersion) {

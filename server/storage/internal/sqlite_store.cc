@@ -65,6 +65,7 @@ class SqliteDataStore final : public DataStore {
   ~SqliteDataStore() override;
   Status Connect();
   const char* backend() const override { return "sqlite"; }
+  bool shared() const override { return false; }
 
   Status PutJob(const v1::Job& job) override;
   StatusOr<v1::Job> GetJob(const std::string& job_id) override;
@@ -88,6 +89,7 @@ class SqliteDataStore final : public DataStore {
   StatusOr<std::vector<v1::Recipe>> ListRecipes() override;
   StatusOr<int> DeleteRecipe(const std::string& recipe_id) override;
   StatusOr<v1::InspectionResult> AppendResult(v1::InspectionResult result) override;
+  StatusOr<v1::InspectionResult> ImportResult(v1::InspectionResult result) override;
   StatusOr<std::vector<v1::InspectionResult>> ListResults(const ResultQuery& query) override;
   StatusOr<std::vector<v1::InspectionResult>> ResultsAfter(int64_t after_sequence, int limit) override;
   StatusOr<int64_t> LastResultSequence() override;
@@ -130,6 +132,11 @@ const char* const kSqliteMigrations[] = {
       recipe_id TEXT NOT NULL, verdict INTEGER NOT NULL, finish_ns INTEGER NOT NULL, result BLOB NOT NULL);
     CREATE INDEX IF NOT EXISTS results_by_part ON results(part_id, sequence);
     CREATE INDEX IF NOT EXISTS results_by_recipe ON results(recipe_id, sequence);
+  )sql",
+    R"sql(
+    ALTER TABLE results ADD COLUMN rig_id TEXT NOT NULL DEFAULT '';
+    ALTER TABLE results ADD COLUMN rig_sequence INTEGER NOT NULL DEFAULT 0;
+    CREATE UNIQUE INDEX results_by_rig ON results(rig_id, rig_sequence) WHERE rig_id <> '';
   )sql",
 };
 static_assert(std::size(kSqliteMigrations) == kStoreSchemaVersion, "one migration per schema version");
@@ -506,6 +513,51 @@ StatusOr<v1::InspectionResult> SqliteDataStore::AppendResult(v1::InspectionResul
   update.Blob(1, result.SerializeAsString()).Int(2, result.sequence());
   if (update.Step() != SQLITE_DONE) {
     Status error = DbError(db_, "AppendResult");
+    (void)Exec("ROLLBACK");
+    return error;
+  }
+  INSPECT_RETURN_IF_ERROR(Exec("COMMIT"));
+  return result;
+}
+
+StatusOr<v1::InspectionResult> SqliteDataStore::ImportResult(v1::InspectionResult result) {
+  if (result.rig_id().empty() || result.rig_sequence() <= 0) {
+    return Status::InvalidArgument("a forwarded result needs rig_id and rig_sequence");
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  INSPECT_RETURN_IF_ERROR(Exec("BEGIN IMMEDIATE"));
+  {
+    Stmt q(db_, "SELECT result FROM results WHERE rig_id = ? AND rig_sequence = ?");
+    q.Text(1, result.rig_id()).Int(2, result.rig_sequence());
+    if (q.Step() == SQLITE_ROW) {
+      v1::InspectionResult stored;
+      const bool ok = stored.ParseFromString(q.ColumnBlob(0));
+      (void)Exec("ROLLBACK");
+      if (!ok) return Status::DataLoss("an inspection result record is corrupt");
+      return stored;
+    }
+  }
+  const auto& t = result.finish_time();
+  Stmt st(db_,
+          "INSERT INTO results(job_id, part_id, recipe_id, verdict, finish_ns, result, rig_id, rig_sequence) "
+          "VALUES(?,?,?,?,?,x'',?,?)");
+  st.Text(1, result.job_id())
+      .Text(2, result.part_id())
+      .Text(3, result.recipe_id())
+      .Int(4, result.verdict())
+      .Int(5, t.seconds() * 1000000000LL + t.nanos())
+      .Text(6, result.rig_id())
+      .Int(7, result.rig_sequence());
+  if (st.Step() != SQLITE_DONE) {
+    Status error = DbError(db_, "ImportResult");
+    (void)Exec("ROLLBACK");
+    return error;
+  }
+  result.set_sequence(sqlite3_last_insert_rowid(db_));
+  Stmt update(db_, "UPDATE results SET result = ? WHERE sequence = ?");
+  update.Blob(1, result.SerializeAsString()).Int(2, result.sequence());
+  if (update.Step() != SQLITE_DONE) {
+    Status error = DbError(db_, "ImportResult");
     (void)Exec("ROLLBACK");
     return error;
   }
