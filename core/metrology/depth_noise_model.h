@@ -46,8 +46,9 @@ struct DepthNoiseOptions {
   // Side of the neighbourhood the local sigma averages over; 0 = 8 windows (~64 independent
   // samples per direction, so sigma is known to ~10 %).
   int neighbourhood_px = 0;
-  // A characterised linearity applies only at its own step (the bias scales with sigma_F / step):
-  // when the scan's median step differs by more than this share, the uncharacterised bound is used.
+  // A characterised linearity applies at its own step; at a finer step (by more than this share)
+  // it is transferred keeping its bias in um (the interpolation error does not grow as the focus
+  // curve is sampled more densely); at a coarser one the uncharacterised bound is used.
   double linearity_step_tolerance = 0.05;
   // INVALID_ARGUMENT naming the field.
   Status Validate() const;

@@ -180,3 +180,44 @@ TEST(MeasurementUncertaintyTest, MonteCarloIsRepeatableAndItsBiasCoversNoiseOnly
 
 }  // namespace
 }  // namespace inspection
+
+namespace inspection {
+namespace {
+
+TEST(MeasurementUncertaintyTest, LinearityCharacterisedAtACoarserStepIsKeptInMicrometresAtAFinerOne) {
+  const cv::Size size(120, 80);
+  const cv::Mat plane = testing::SampleSurface(size, kPx, [](double x, double) { return 200.0 + 0.01 * x; }) +
+                        testing::CorrelatedNoise(size, 0.05, 7, 5);
+  DepthNoiseOptions o = Options();
+  o.linearity.bias_of_step = {0.01, -0.02, 0.004, 0.006};
+  o.linearity.characterised_step_um = 5.0;
+  o.linearity.source = "tilted flat";
+  // Scan at 2 um steps: the table becomes 2.5x its fraction of the step, the same in um.
+  o.z_positions_um.clear();
+  for (int k = 0; k < 60; ++k) o.z_positions_um.push_back(150.0 + 2.0 * k);
+  auto fine = EstimateDepthNoise(plane, cv::Mat(), o);
+  ASSERT_TRUE(fine.ok()) << fine.status().ToString();
+  ASSERT_EQ(fine->linearity.bias_of_step.size(), 4u);
+  EXPECT_NEAR(fine->linearity.bias_of_step[1], -0.05, 1e-12);
+  EXPECT_NEAR(fine->linearity.bias_of_step[1] * 2.0, -0.02 * 5.0, 1e-12);
+  EXPECT_NEAR(fine->linearity.characterised_step_um, 2.0, 1e-12);
+  EXPECT_NE(fine->linearity.source.find("transferred from"), std::string::npos) << fine->linearity.source;
+  // Scan at 10 um steps: the error grows with the step by an unknown amount; the sawtooth bound.
+  o.z_positions_um.clear();
+  for (int k = 0; k < 20; ++k) o.z_positions_um.push_back(150.0 + 10.0 * k);
+  auto coarse = EstimateDepthNoise(plane, cv::Mat(), o);
+  ASSERT_TRUE(coarse.ok()) << coarse.status().ToString();
+  EXPECT_NEAR(coarse->linearity.MaxAbs(), ZLinearity::Uncharacterised().MaxAbs(), 1e-12);
+  EXPECT_NE(coarse->linearity.source.find("does not apply"), std::string::npos) << coarse->linearity.source;
+  // A transfer that would need more than half a step of bias falls back as well (0.3 at 5 um
+  // is 0.75 of a 2 um step).
+  o.linearity.bias_of_step = {0.3, -0.3};
+  o.z_positions_um.clear();
+  for (int k = 0; k < 60; ++k) o.z_positions_um.push_back(150.0 + 2.0 * k);
+  auto far = EstimateDepthNoise(plane, cv::Mat(), o);
+  ASSERT_TRUE(far.ok()) << far.status().ToString();
+  EXPECT_NEAR(far->linearity.MaxAbs(), ZLinearity::Uncharacterised().MaxAbs(), 1e-12);
+}
+
+}  // namespace
+}  // namespace inspection
