@@ -31,6 +31,7 @@ packages=(
   libcpp-httplib-dev  # inspectd's HTTP port: /metrics and the dashboard
   prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
+  libopencv-contrib-dev  # core/sff/dense_depth.cc: cv::ximgproc fast global smoother (dense depth)
 )
 
 install_missing() {
