@@ -40,6 +40,16 @@ TEST(DenseDepthTest, FillsEveryPixelAndStopsAtTheGuideEdge) {
   EXPECT_EQ(dense->at<float>(8, 50), 200.f);
 }
 
+// Moderate smoothing (lambda 256, sigma 12): the support stays local, so a hole takes the depths
+// around it. (The default's lambda 4096, tuned on natural scenes where holes are large, spreads
+// far: on this small map it is nearer a global weighted mean.)
+DenseDepthOptions Local() {
+  DenseDepthOptions o;
+  o.lambda = 256.0;
+  o.sigma_color = 12.0;
+  return o;
+}
+
 // A plane with a large unmeasured hole in a uniform guide: the fit interpolates the plane.
 TEST(DenseDepthTest, InterpolatesAPlaneAcrossAHole) {
   const cv::Size size(80, 60);
@@ -48,7 +58,7 @@ TEST(DenseDepthTest, InterpolatesAPlaneAcrossAHole) {
   for (int y = 0; y < size.height; ++y)
     for (int x = 0; x < size.width; ++x) depth.at<float>(y, x) = 50.f + 0.25f * x;
   depth(cv::Rect(30, 20, 20, 20)).setTo(kNan);
-  auto dense = DensifyDepth(depth, confidence, guide, DenseDepthOptions{});
+  auto dense = DensifyDepth(depth, confidence, guide, Local());
   ASSERT_TRUE(dense.ok()) << dense.status().ToString();
   double max_err = 0;
   for (int y = 20; y < 40; ++y)
@@ -91,6 +101,7 @@ TEST(DenseDepthTest, PostProcessDenseMarksInferredByConfidence) {
   DepthPostProcessOptions o;
   o.consistency = false;
   o.dense = true;
+  o.dense_options = Local();
   DepthPostProcessFigures figures;
   auto r = PostProcessDepth(raw, z, 7, o, &figures);
   ASSERT_TRUE(r.ok()) << r.status().ToString();
