@@ -106,6 +106,11 @@ void ReconstructionFlags::Add(CLI::App* cmd) {
   cmd->add_flag("--illumination-invariant", illumination_invariant,
                 "SFF: focus measure divided by the window's mean grey squared, for frames lit differently "
                 "(ADAPT-family scans, flicker); off by default (README)");
+  cmd->add_option("--dense", dense,
+                  "Depth at every pixel (edge-aware fit of the measured depths; inferred pixels keep "
+                  "confidence below the threshold): on | off | auto (default: on for imported stacks, "
+                  "off for rig scans)")
+      ->check(CLI::IsMember({"on", "off", "auto"}));
   cmd->add_flag("--fill", fill,
                 "Fill pixels without depth from measured neighbours (interpolated, not measured; off by default)");
 }
@@ -123,6 +128,8 @@ v1::ReconstructionOptions ReconstructionFlags::ToProto() const {
   if (no_consistency) o.set_depth_consistency(false);
   if (!refinement.empty()) o.set_refinement(Refinements().at(Lower(refinement)));
   if (fill) o.set_fill_low_confidence(true);
+  if (dense == "on") o.set_dense_depth(true);
+  if (dense == "off") o.set_dense_depth(false);
   if (illumination_invariant) o.set_illumination_invariant(true);
   return o;
 }

@@ -28,6 +28,7 @@ struct ReconstructionFlags {
   std::string refinement;                     // none | weighted-median | guided-filter; empty = none
   bool illumination_invariant = false;        // illumination_invariant
   bool fill = false;                          // fill_low_confidence
+  std::string dense = "auto";                 // dense_depth: on | off | auto (unset)
 
   // Adds the options to `cmd`, writing into this object (which must outlive the parse).
   void Add(CLI::App* cmd);

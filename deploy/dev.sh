@@ -32,6 +32,7 @@ packages=(
   postgresql libpq-dev  # server/storage: the PostgreSQL backend (pool, site) and its tests' private server
   prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
+  libopencv-contrib-dev  # core/sff/dense_depth.cc: cv::ximgproc fast global smoother (dense depth)
 )
 
 install_missing() {

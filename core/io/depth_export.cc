@@ -288,8 +288,11 @@ FiniteRange FindFiniteRange(const cv::Mat& m) {
 
 }  // namespace
 
-StatusOr<cv::Mat> RenderDepthPreview(const cv::Mat& depth_um) {
+StatusOr<cv::Mat> RenderDepthPreview(const cv::Mat& depth_um, const cv::Mat& inferred) {
   INSPECT_RETURN_IF_ERROR(CheckFloatMap(depth_um, "depth_um"));
+  if (!inferred.empty() && (inferred.type() != CV_8UC1 || inferred.size() != depth_um.size())) {
+    return Status::InvalidArgument("inferred mask must be CV_8UC1 of the depth map's size");
+  }
   try {
     const FiniteRange fr = FindFiniteRange(depth_um);
     const double lo = fr.lo;
@@ -309,6 +312,18 @@ StatusOr<cv::Mat> RenderDepthPreview(const cv::Mat& depth_um) {
     cv::Mat coloured;
     cv::applyColorMap(index, coloured, cv::COLORMAP_VIRIDIS);
     coloured.setTo(cv::Scalar::all(0), nan_mask);
+    // Inferred depth must not pass for measured depth: dimmed and hatched.
+    const bool any_inferred = !inferred.empty() && cv::countNonZero(inferred) > 0;
+    if (any_inferred) {
+      for (int y = 0; y < coloured.rows; ++y) {
+        const uint8_t* m = inferred.ptr<uint8_t>(y);
+        cv::Vec3b* c = coloured.ptr<cv::Vec3b>(y);
+        for (int x = 0; x < coloured.cols; ++x) {
+          if (!m[x]) continue;
+          c[x] = (x + y) % 4 == 0 ? cv::Vec3b(128, 128, 128) : cv::Vec3b(c[x][0] * 0.55, c[x][1] * 0.55, c[x][2] * 0.55);
+        }
+      }
+    }
 
     // Canvas: the map on the left, a panel with the colour bar and µm labels on the right.
     const int panel_w = kDepthPreviewPanelWidthPx, min_h = kDepthPreviewMinHeightPx;
@@ -332,6 +347,7 @@ StatusOr<cv::Mat> RenderDepthPreview(const cv::Mat& depth_um) {
     const int font = cv::FONT_HERSHEY_SIMPLEX;
     const double font_scale = 0.4;
     cv::putText(canvas, "z [um]", {bar_x - 4, 16}, font, font_scale, white, 1, cv::LINE_AA);
+    if (any_inferred) cv::putText(canvas, "hatched: inferred", {bar_x - 4, 25}, font, 0.3, white, 1, cv::LINE_AA);
     if (fr.count == 0) {
       cv::putText(canvas, "no depth", {bar_x + bar_w + 4, bar_top + bar_h / 2}, font, font_scale, white, 1,
                   cv::LINE_AA);
@@ -351,8 +367,8 @@ StatusOr<cv::Mat> RenderDepthPreview(const cv::Mat& depth_um) {
   }
 }
 
-Status WriteDepthPreviewPng(const fs::path& path, const cv::Mat& depth_um) {
-  StatusOr<cv::Mat> canvas = RenderDepthPreview(depth_um);
+Status WriteDepthPreviewPng(const fs::path& path, const cv::Mat& depth_um, const cv::Mat& inferred) {
+  StatusOr<cv::Mat> canvas = RenderDepthPreview(depth_um, inferred);
   if (!canvas.ok()) return canvas.status();
   std::vector<uchar> png;
   try {

@@ -28,13 +28,17 @@ StatusOr<cv::Mat> ReadDepthTiff(const std::filesystem::path& path, DepthExportMe
 Status WriteConfidenceTiff(const std::filesystem::path& path, const cv::Mat& confidence, const DepthExportMeta& meta);
 // 8-bit colour PNG: depth through a perceptual colour map, NaN in black, with a scale bar
 // labelled in µm along the right edge.
-Status WriteDepthPreviewPng(const std::filesystem::path& path, const cv::Mat& depth_um);
+// inferred: optional CV_8UC1 mask (non-zero = depth inferred by dense depth or fill, not
+// measured) of depth_um's size; those pixels are drawn at 55 % brightness with a grey diagonal
+// hatch every 4 px, and the panel says so.
+Status WriteDepthPreviewPng(const std::filesystem::path& path, const cv::Mat& depth_um,
+                            const cv::Mat& inferred = cv::Mat());
 // The same preview in memory (CV_8UC3, BGR), e.g. for the inspection report: the map at its own
 // size on the left, the colour bar panel (kDepthPreviewPanelWidthPx wide) on the right, at least
 // kDepthPreviewMinHeightPx tall. INVALID_ARGUMENT when depth_um is empty or not CV_32FC1.
 inline constexpr int kDepthPreviewPanelWidthPx = 110;
 inline constexpr int kDepthPreviewMinHeightPx = 200;
-StatusOr<cv::Mat> RenderDepthPreview(const cv::Mat& depth_um);
+StatusOr<cv::Mat> RenderDepthPreview(const cv::Mat& depth_um, const cv::Mat& inferred = cv::Mat());
 // 16-bit PNG: value = round((depth_um - offset_um) / scale_um), 0 reserved for NaN; scale and
 // offset go into a tEXt chunk and a sidecar "<path>.json".
 Status WriteDepthPng16(const std::filesystem::path& path, const cv::Mat& depth_um, const DepthExportMeta& meta);

@@ -16,6 +16,7 @@ Status DepthPostProcessOptions::Validate() const {
   if (consistency) INSPECT_RETURN_IF_ERROR(consistency_options.Validate());
   INSPECT_RETURN_IF_ERROR(refinement.Validate());
   if (fill_low_confidence) INSPECT_RETURN_IF_ERROR(fill_options.Validate());
+  if (dense) INSPECT_RETURN_IF_ERROR(dense_options.Validate());
   return Status::Ok();
 }
 
@@ -69,9 +70,14 @@ StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector
   if (o.refinement.method != DepthRefinement::kNone) {
     INSPECT_ASSIGN_OR_RETURN(out.depth_um, RefineDepth(out.depth_um, out.confidence, raw.all_in_focus, o.refinement));
   }
-  if (o.fill_low_confidence) {
+  if (o.dense || o.fill_low_confidence) {
     const int before = cv::countNonZero(out.depth_um == out.depth_um);
-    INSPECT_ASSIGN_OR_RETURN(out.depth_um, FillDepth(out.depth_um, out.confidence, raw.all_in_focus, o.fill_options));
+    if (o.dense) {
+      INSPECT_ASSIGN_OR_RETURN(out.depth_um,
+                               DensifyDepth(out.depth_um, out.confidence, raw.all_in_focus, o.dense_options));
+    } else {
+      INSPECT_ASSIGN_OR_RETURN(out.depth_um, FillDepth(out.depth_um, out.confidence, raw.all_in_focus, o.fill_options));
+    }
     if (figures) {
       figures->filled_fraction =
           double(cv::countNonZero(out.depth_um == out.depth_um) - before) / double(out.depth_um.total());

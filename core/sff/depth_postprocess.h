@@ -7,6 +7,7 @@
 
 #include <vector>
 
+#include "core/sff/dense_depth.h"
 #include "core/sff/depth_consistency.h"
 #include "core/sff/depth_fill.h"
 #include "core/sff/depth_refinement.h"
@@ -30,6 +31,12 @@ struct DepthPostProcessOptions {
   // where nothing was measured; a filled value is an interpolation).
   bool fill_low_confidence = false;
   DepthFillOptions fill_options;
+  // Dense depth (core/sff/dense_depth.h): an edge-aware confidence-weighted fit gives every pixel
+  // a depth; measured pixels keep theirs, inferred ones keep confidence < min_confidence. Off
+  // here (rig scans: NaN where unmeasured); the server turns it on for imported stacks. Takes
+  // precedence over fill_low_confidence.
+  bool dense = false;
+  DenseDepthOptions dense_options;
 
   Status Validate() const;  // INVALID_ARGUMENT naming the field
 };

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/illumination/texture_pattern.h"
+#include "core/io/stack.h"
 #include "server/procedures/illumination_auto.h"
 #include "server/procedures/z_range_search.h"
 
@@ -204,6 +205,7 @@ StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::Reconstructi
       return Status::InvalidArgument(field + ".refinement: unknown value " + std::to_string(int(o.refinement())));
   }
   post.fill_low_confidence = o.fill_low_confidence();
+  post.dense = o.has_dense_depth() && o.dense_depth();  // the imported-stack default: MapReconstructStart
   if (m.integral()) {
     // The integral methods threshold their own correlation peak; nothing here applies to them.
     post.consistency = false;
@@ -215,6 +217,9 @@ StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::Reconstructi
     }
     if (post.fill_low_confidence) {
       return Status::InvalidArgument(field + ".fill_low_confidence applies to SFF only (method " + method_name + ")");
+    }
+    if (post.dense) {
+      return Status::InvalidArgument(field + ".dense_depth applies to SFF only (method " + method_name + ")");
     }
     if (s.illumination_invariant) {
       return Status::InvalidArgument(field + ".illumination_invariant applies to SFF only (method " + method_name +
@@ -452,6 +457,12 @@ StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start,
   work.extra_exports = std::move(rec.extra_exports);
   work.alignment = rec.alignment;
   work.postprocess = rec.postprocess;
+  // Imported stacks (an upload whose manifest names no rig calibration) get a depth at every
+  // pixel by default, as photographers' tools give; rig scans keep NaN where nothing was measured.
+  if (!start.options().has_dense_depth() && work.upload && !rec.method.integral()) {
+    auto manifest = ReadStackManifest(stack_dir);
+    work.postprocess.dense = !manifest.ok() || manifest->calibration_id.empty();
+  }
   return work;
 }
 

@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <functional>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -27,6 +28,7 @@
 #include <tuple>
 #include <vector>
 
+#include "core/sff/dense_depth.h"
 #include "core/sff/depth_consistency.h"
 #include "core/io/depth_export.h"
 #include "core/sff/depth_fill.h"
@@ -341,6 +343,141 @@ Scene MakeScene(const NaturalSceneOptions& o, const fs::path& dir) {
   return s;
 }
 
+// The held-out evaluation: post-processing candidates for a dense map chosen on the tuning scenes
+// by RMSE at full coverage, then every method reported on the held-out scenes at full coverage,
+// at 50 % coverage (each method's most confident half by its own confidence) and by AUSE.
+struct Sparsification {
+  std::vector<double> rmse, oracle;  // at coverage kSparseSteps[i]
+  double ause = 0;
+};
+constexpr int kSparseSteps = 20;  // coverage 5 %, 10 %, ..., 100 %
+
+// Pixels inside the border ranked by `rank` (descending; empty = no ranking: all pixels equal, so
+// the curve is flat at the full-coverage RMSE); oracle ranks by |error|.
+Sparsification Sparsify(const cv::Mat& depth, const cv::Mat& rank, const NaturalScene& truth) {
+  struct P {
+    float key, e2;
+  };
+  std::vector<P> px;
+  const cv::Mat& t = truth.depth_frames;
+  for (int y = kBorderPx; y < t.rows - kBorderPx; ++y)
+    for (int x = kBorderPx; x < t.cols - kBorderPx; ++x) {
+      const float d = depth.at<float>(y, x);
+      const float e = std::isfinite(d) ? d - t.at<float>(y, x) : 1e3f;  // unmeasured: counted, huge
+      px.push_back({rank.empty() ? 0.f : rank.at<float>(y, x), e * e});
+    }
+  Sparsification out;
+  auto Curve = [&](std::vector<double>* curve) {
+    double sum = 0;
+    size_t next = 0;
+    for (int k = 1; k <= kSparseSteps; ++k) {
+      const size_t n = std::max<size_t>(1, px.size() * k / kSparseSteps);
+      for (; next < n; ++next) sum += px[next].e2;
+      curve->push_back(std::sqrt(sum / double(n)));
+    }
+  };
+  std::stable_sort(px.begin(), px.end(), [](const P& a, const P& b) { return a.key > b.key; });
+  if (rank.empty()) {
+    double sum = 0;
+    for (const P& p : px) sum += p.e2;
+    out.rmse.assign(kSparseSteps, std::sqrt(sum / double(px.size())));
+  } else {
+    Curve(&out.rmse);
+  }
+  std::sort(px.begin(), px.end(), [](const P& a, const P& b) { return a.e2 < b.e2; });
+  Curve(&out.oracle);
+  for (int k = 0; k < kSparseSteps; ++k) out.ause += (out.rmse[k] - out.oracle[k]) / kSparseSteps;
+  return out;
+}
+
+struct DenseCandidate {
+  std::string name;
+  bool dense = true;  // else push-pull fill
+  DenseDepthOptions dense_options;
+};
+
+// The product's default post-processing (threshold, consistency) on the default engine, then
+// `c`; returns depth and confidence (inferred pixels keep confidence < min_confidence).
+DepthResult PostProcessed(const Scene& s, const DenseCandidate& c, Cache* cache) {
+  const SffOptions d;
+  const DepthResult& raw = Run(s, EngineKey{d.focus_measure, d.window_px, d.interpolation}, cache);
+  DepthPostProcessOptions o;
+  o.dense = c.dense;
+  o.dense_options = c.dense_options;
+  o.fill_low_confidence = !c.dense;
+  return PostProcessDepth(raw, s.z, d.window_px, o).value();
+}
+
+int RunHeldOut(std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tuning, bool have_fs) {
+  std::vector<DenseCandidate> cands{{"push-pull fill (--fill)", false, {}}};
+  for (double lambda : {16.0, 64.0, 256.0, 1024.0, 4096.0})
+    for (double sigma : {4.0, 12.0, 32.0}) {
+      DenseCandidate c;
+      c.dense_options.lambda = lambda;
+      c.dense_options.sigma_color = sigma;
+      char name[64];
+      std::snprintf(name, sizeof name, "dense FGS lambda %g sigma %g", lambda, sigma);
+      c.name = name;
+      cands.push_back(c);
+    }
+  std::printf("\nTuning scenes 0..%d: RMSE [frames] at 100 %% coverage (mean over scenes)\n", n_tuning - 1);
+  size_t best = 1;
+  double best_rmse = 1e30;
+  for (size_t i = 0; i < cands.size(); ++i) {
+    double rmse = 0;
+    for (int k = 0; k < n_tuning; ++k) {
+      const DepthResult r = PostProcessed(scenes[k], cands[i], &caches[k]);
+      rmse += Sparsify(r.depth_um, cv::Mat(), scenes[k].truth).rmse.back() / n_tuning;
+    }
+    std::printf("  %-36s %7.3f\n", cands[i].name.c_str(), rmse);
+    if (cands[i].dense && rmse < best_rmse) {
+      best_rmse = rmse;
+      best = i;
+    }
+  }
+  std::printf("chosen on the tuning scenes: %s\n", cands[best].name.c_str());
+
+  const int n_held = int(scenes.size()) - n_tuning;
+  std::printf(
+      "\nHeld-out scenes %d..%zu (not used for any choice above): RMSE [frames] at 100 %% and 50 %% coverage, "
+      "AUSE over 5..100 %%; 50 %% = each method's most confident half by its own confidence; focus-stack has no "
+      "per-pixel confidence, so its 50 %% is on the same pixels as ours (matched pixels)\n",
+      n_tuning, scenes.size() - 1);
+  std::printf("%-36s %8s %8s %8s %8s %8s\n", "method", "RMSE100", "RMSE50", "AUSE", "FS100", "FS50same");
+  DenseCandidate shipped{"dense default (DenseDepthOptions{})", true, {}};
+  for (const DenseCandidate* c : {&cands[best], &shipped, &cands[0]}) {
+    double r100 = 0, r50 = 0, ause = 0, f100 = 0, f50 = 0;
+    std::vector<double> curve(kSparseSteps, 0.0);
+    for (int k = n_tuning; k < int(scenes.size()); ++k) {
+      const Scene& s = scenes[k];
+      const DepthResult r = PostProcessed(s, *c, &caches[k]);
+      const Sparsification sp = Sparsify(r.depth_um, r.confidence, s.truth);
+      r100 += sp.rmse.back() / n_held;
+      r50 += sp.rmse[kSparseSteps / 2 - 1] / n_held;
+      ause += sp.ause / n_held;
+      for (int j = 0; j < kSparseSteps; ++j) curve[j] += sp.rmse[j] / n_held;
+      if (have_fs) {
+        f100 += Sparsify(s.fs_depth, cv::Mat(), s.truth).rmse.back() / n_held;
+        // Our most confident half as a mask, focus-stack scored on it.
+        const cv::Mat& conf = r.confidence;
+        std::vector<float> v;
+        for (int y = kBorderPx; y < conf.rows - kBorderPx; ++y)
+          for (int x = kBorderPx; x < conf.cols - kBorderPx; ++x) v.push_back(conf.at<float>(y, x));
+        std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end(), std::greater<float>());
+        const float cut = v[v.size() / 2];
+        f50 += Score(s.fs_depth, s.truth, cv::Mat(), conf >= cut).rmse / n_held;
+      }
+    }
+    std::printf("%-36s %8.3f %8.3f %8.3f %8.3f %8.3f\n", c->name.c_str(), r100, r50, ause, have_fs ? f100 : NAN,
+                have_fs ? f50 : NAN);
+    std::printf("  sparsification (coverage 10..100 %% step 10):");
+    for (int j = 1; j < kSparseSteps; j += 2) std::printf(" %.3f", curve[j]);
+    std::printf("\n");
+    if (have_fs) std::printf("  ratio to focus-stack: %.2fx at 100 %%, %.2fx at 50 %% (matched pixels)\n", r100 / f100, r50 / f50);
+  }
+  return 0;
+}
+
 }  // namespace
 
 int RunNaturalEvaluation(int argc, char** argv) {
@@ -349,6 +486,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
   uint32_t seed = 1;
   std::string fs_flag, keep;
   bool timing = false;
+  int held_out_tuning = 0;  // > 0: only the held-out evaluation, scenes [0, K) tuning, the rest held out
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const char* v = i + 1 < argc ? argv[i + 1] : nullptr;
@@ -363,10 +501,12 @@ int RunNaturalEvaluation(int argc, char** argv) {
       keep = argv[++i];
     else if (a == "--timing")
       timing = true;
+    else if (a == "--held-out" && v)
+      held_out_tuning = std::atoi(argv[++i]);
     else {
       std::fprintf(stderr,
                    "usage: natural-evaluate [--scenes N] [--size WxH] [--seed S] "
-                   "[--focus-stack PATH|none] [--keep DIR] [--timing]\n");
+                   "[--focus-stack PATH|none] [--keep DIR] [--timing] [--held-out K]\n");
       return 2;
     }
   }
@@ -399,6 +539,18 @@ int RunNaturalEvaluation(int argc, char** argv) {
   std::vector<Cache> caches(scenes.size());
   const bool have_fs =
       !fs_exe.empty() && std::all_of(scenes.begin(), scenes.end(), [](const Scene& s) { return !s.fs_depth.empty(); });
+  if (held_out_tuning > 0) {
+    if (held_out_tuning >= n_scenes) {
+      std::fprintf(stderr, "--held-out K needs K < --scenes\n");
+      return 2;
+    }
+    const int rc = RunHeldOut(scenes, caches, held_out_tuning, have_fs);
+    if (keep.empty()) {
+      std::error_code ec;
+      fs::remove_all(root, ec);
+    }
+    return rc;
+  }
 
   // focus-stack alone (all its pixels).
   if (have_fs) {
