@@ -105,7 +105,7 @@ void ReconstructionFlags::Add(CLI::App* cmd) {
       ->check(CLI::IsMember(Keys(Refinements()), CLI::ignore_case));
   cmd->add_flag("--illumination-invariant", illumination_invariant,
                 "SFF: focus measure divided by the window's mean grey squared, for frames lit differently "
-                "(ADAPT-family scans, flicker); off by default (README)");
+                "(ADAPT-family scans, flicker); off by default (docs/reconstruction.md)");
   cmd->add_flag("--fill", fill,
                 "Fill pixels without depth from measured neighbours (interpolated, not measured; off by default)");
 }
