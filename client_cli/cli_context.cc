@@ -1,5 +1,5 @@
 // Global options of inspectctl, the token file, the connection, and dispatch to the parsed
-// command (USAGE.md "Global options", "Exit codes").
+// command (docs/inspectctl.md "Global options", "Exit codes").
 #include "client_cli/cli_context.h"
 
 #include <unistd.h>

@@ -1,6 +1,6 @@
 // What the commands of inspectctl share: the connection options (--server, --tls-ca,
 // --token-file, --connect-timeout), the output format (--json, --quiet), and the dispatch of
-// the one parsed command once the server is reachable (USAGE.md "Global options").
+// the one parsed command once the server is reachable (docs/inspectctl.md "Global options").
 #pragma once
 
 #include <CLI/CLI.hpp>

@@ -1,5 +1,5 @@
 // inspectctl calibrate / calibration show|list: run the rig's calibration steps (thesis 4.3)
-// and inspect the stored bundles (USAGE.md "calibrate", "calibration show").
+// and inspect the stored bundles (docs/inspectctl.md "calibrate", "calibration show").
 #include <iostream>
 #include <map>
 #include <memory>

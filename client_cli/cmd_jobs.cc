@@ -1,5 +1,5 @@
 // inspectctl jobs / watch / cancel / delete / pin / download: list jobs, re-attach to one, cancel
-// one, delete or pin one (data lifecycle), fetch results or one artifact (USAGE.md).
+// one, delete or pin one (data lifecycle), fetch results or one artifact (docs/inspectctl.md).
 #include <algorithm>
 #include <iostream>
 #include <map>

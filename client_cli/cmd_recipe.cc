@@ -1,5 +1,5 @@
 // inspectctl recipe create|update|get|list|delete: recipes as JSON documents in protobuf's JSON
-// mapping of inspection.v1.Recipe (USAGE.md "Recipes"). Unknown field names in a document are
+// mapping of inspection.v1.Recipe (docs/inspectctl.md "Recipes"). Unknown field names in a document are
 // refused here, before anything reaches the server; the server checks the rest.
 #include <google/protobuf/util/json_util.h>
 

@@ -1,6 +1,6 @@
 // inspectctl reconstruct: a depth map from an uploaded stack folder, a plain folder of images
 // (stack built here, image_folder.h) or a stored scan, followed to its end and downloaded
-// (USAGE.md "reconstruct").
+// (docs/inspectctl.md "reconstruct").
 #include <iostream>
 #include <memory>
 #include <string>

@@ -1,4 +1,4 @@
-// inspectctl results list|watch: the inspection results of recipe scans (USAGE.md "Results").
+// inspectctl results list|watch: the inspection results of recipe scans (docs/inspectctl.md "Results").
 // `list` queries the stored results (filters, newest first, every page unless --limit);
 // `watch` follows the result feed, one line (or JSON object) per finished inspection, and
 // resumes after a reconnect with --after SEQUENCE (the last one printed).

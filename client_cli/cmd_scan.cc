@@ -1,5 +1,5 @@
 // inspectctl scan: acquire a stack through focus with the chosen illumination mode (thesis 5),
-// reconstruct it, follow the job and download the results (USAGE.md "scan").
+// reconstruct it, follow the job and download the results (docs/inspectctl.md "scan").
 #include <map>
 #include <memory>
 #include <optional>

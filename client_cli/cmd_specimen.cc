@@ -1,4 +1,4 @@
-// inspectctl specimen list|set: the specimen under the simulated rig's objective (USAGE.md
+// inspectctl specimen list|set: the specimen under the simulated rig's objective (docs/inspectctl.md
 // "specimen"); a real rig answers FAILED_PRECONDITION.
 #include <iostream>
 #include <memory>

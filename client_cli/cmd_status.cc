@@ -1,5 +1,5 @@
 // inspectctl status / reset: the rig's state, devices, calibration, queue and scan defaults
-// (USAGE.md "status", "reset").
+// (docs/inspectctl.md "status", "reset").
 #include <iostream>
 #include <memory>
 

@@ -1,5 +1,5 @@
 // Following a job to its end: Ctrl-C detaching, the outcome's exit code, results and summary
-// (USAGE.md "Progress display", "Exit codes", "JSON output").
+// (docs/inspectctl.md "Progress display", "Exit codes", "JSON output").
 #include "client_cli/follow.h"
 
 #include <unistd.h>

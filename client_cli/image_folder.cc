@@ -1,5 +1,5 @@
 // A stack from a plain folder of images: natural-sorted file list, z positions from a regular
-// step or a CSV, and the temporary stack folder the upload reads (README "Stack format").
+// step or a CSV, and the temporary stack folder the upload reads (docs/stack-format.md).
 #include "client_cli/image_folder.h"
 
 #include <glob.h>

@@ -1,6 +1,6 @@
 // A stack from a plain folder of images (`reconstruct --images`): lists the images, orders them
 // by natural sort of their names, gives each its z (regular step or a CSV) and writes the stack
-// folder the upload reads (README "Stack format"; thesis 3.2: one frame per z position).
+// folder the upload reads (docs/stack-format.md; thesis 3.2: one frame per z position).
 // Client side only: speaks the stack format, never reads pixels (channels and bit depth are the
 // server's to check).
 #pragma once

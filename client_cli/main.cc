@@ -1,5 +1,5 @@
 // inspectctl: command-line client of the inspection service (inspection.v1). Starts scans,
-// reconstructions and calibrations, follows their progress, fetches results. See USAGE.md.
+// reconstructions and calibrations, follows their progress, fetches results. See docs/inspectctl.md.
 // The commands live in cmd_*.cc (one file per group); this file assembles and runs them.
 #include <CLI/CLI.hpp>
 

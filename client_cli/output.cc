@@ -1,5 +1,5 @@
 // inspectctl output: exit codes, error lines, JSON Lines, summaries and the progress display
-// (USAGE.md "Progress display", "Exit codes", "JSON output").
+// (docs/inspectctl.md "Progress display", "Exit codes", "JSON output").
 #include "client_cli/output.h"
 
 #include <google/protobuf/util/json_util.h>

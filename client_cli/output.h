@@ -1,5 +1,5 @@
 // inspectctl output: exit codes, the one-line error format, plain text lines, JSON Lines and the
-// progress display while following a job (USAGE.md "Progress display", "Exit codes", "JSON output").
+// progress display while following a job (docs/inspectctl.md "Progress display", "Exit codes", "JSON output").
 #pragma once
 
 #include <grpcpp/grpcpp.h>
@@ -15,7 +15,7 @@ namespace inspection::client::cli {
 
 using json = nlohmann::ordered_json;
 
-// Exit codes (USAGE.md "Exit codes").
+// Exit codes (docs/inspectctl.md "Exit codes").
 constexpr int kExitOk = 0;
 constexpr int kExitUsage = 2;
 constexpr int kExitUnreachable = 3;

@@ -105,7 +105,7 @@ void ReconstructionFlags::Add(CLI::App* cmd) {
       ->check(CLI::IsMember(Keys(Refinements()), CLI::ignore_case));
   cmd->add_flag("--illumination-invariant", illumination_invariant,
                 "SFF: focus measure divided by the window's mean grey squared, for frames lit differently "
-                "(ADAPT-family scans, flicker); off by default (README)");
+                "(ADAPT-family scans, flicker); off by default (docs/reconstruction.md)");
   cmd->add_option("--dense", dense,
                   "Depth at every pixel (edge-aware fit of the measured depths; inferred pixels keep "
                   "confidence below the threshold): on | off | auto (default: on for imported stacks, "

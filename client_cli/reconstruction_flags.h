@@ -13,8 +13,8 @@
 
 namespace inspection::client::cli {
 
-// Unset flags stay unset in the proto, so the server's defaults apply (README "Reconstruction
-// options and defaults").
+// Unset flags stay unset in the proto, so the server's defaults apply (docs/reconstruction.md
+// "Reconstruction options and defaults").
 struct ReconstructionFlags {
   std::string focus_measure;
   std::optional<int> window_px;

@@ -8,7 +8,7 @@
                                                 and must be caught: the checks can fail)
 
 k8s: references between the objects (volumes, ConfigMaps, PVCs, Secrets, Service selectors and
-ports) and the rules of deploy/README.md "Kubernetes": a rig is one pod (replicas 1, Recreate) on
+ports) and the rules of docs/operations.md "Kubernetes": a rig is one pod (replicas 1, Recreate) on
 its node (nodeSelector), host network, /dev/bus/usb, a PVC; the reconstruct pool runs --no-rig
 with several replicas; liveness asks the health service "" and readiness
 inspection.v1.InspectionService (kubelet gRPC probe or exec inspect-health-probe). With

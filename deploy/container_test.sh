@@ -14,7 +14,7 @@
 #   JOBS         compile jobs inside the build (default 2)
 #   CCACHE_HOST_DIR  the host's ccache directory, mounted into the build stage so the image reuses
 #                the host's objects (default: `ccache -k cache_dir`; empty = the build's own cache
-#                mount only). deploy/README.md "Building the image fast".
+#                mount only). docs/operations.md "Building the image fast".
 # Podman on these machines needs --runtime runc, explicit ulimits and chroot isolation for builds
 # (../shared/PLATFORM.md "Containers").
 set -euo pipefail

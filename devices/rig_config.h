@@ -1,6 +1,6 @@
 // Rig configuration file: which driver and parameters for camera, stage and projector, and the
 // factory that builds a Rig from it (inspectd --rig-config FILE). Format: JSON, documented in
-// devices/README.md; every error names the key, e.g. "rig config: camera.exposure_us must be > 0".
+// docs/devices.md; every error names the key, e.g. "rig config: camera.exposure_us must be > 0".
 //
 // A config selects either the simulated rig as a whole (every driver "simulated", options under
 // "simulation") or real drivers for all three devices:

@@ -19,7 +19,7 @@
 // each point is from focus; texture peaks that saturate only near focus add jumps. A correction
 // computed at z_i and shown at z_i+1 thus changes the illumination of a point while it passes
 // through focus, one frame late: its focus curve is modulated asymmetrically and its peak moves
-// against or with the scan direction (the predictive ADAPT family's depth bias, README
+// against or with the scan direction (the predictive ADAPT family's depth bias, docs/illumination.md
 // "Illumination modes"). For such corrections eq. 5.5 is taken as a ratio of local means over one
 // period of the finest structure a shown pattern has (two grid cells, or the period of an added
 // checkerboard), which is the same sharp or blurred, and saturated pixels get no extra factor. A
@@ -43,7 +43,7 @@ namespace inspection {
 struct CompensationOptions {
   // Coarse-grid spacing of the low-pass, projector px (1..32). 2 (~7 camera px at 3.4 camera px
   // per projector px) dims glints of a few camera pixels; 4 flattens less texture on specimens
-  // that never saturate but leaves the glints' halos (README, "Illumination modes").
+  // that never saturate but leaves the glints' halos (docs/illumination.md).
   int pattern_cell_px = 2;
   int camera_bin_px = 4;           // camera rows summed in bin x bin blocks (1..16)
   int solver_iterations = 12;      // LSCG iterations per solve (warm-started), 1..1000

@@ -1,5 +1,5 @@
 // The stack folder: the one on-disk form of an SFF image stack, used by scans (the server
-// writes it), Reconstruct (reads it) and the CLI (uploads it). Format (README "Stack format"):
+// writes it), Reconstruct (reads it) and the CLI (uploads it). Format (docs/stack-format.md):
 //
 //   <dir>/stack.json          manifest, see StackManifest
 //   <dir>/<frame files>       8- or 16-bit PNG, TIFF or JPEG, one per z position: grey (1 channel)

@@ -21,7 +21,7 @@
 // from the same local plane and the offset of the energy centroid measured on the all-in-focus
 // image (its squared Sobel gradient, the Tenengrad of the frames at focus). Pixels where that
 // estimate exceeds max_window_mixing_z_steps lose their depth. On a level surface or with the
-// energy centred it is ~0, so textured parts keep their pixels. Measured (README "Depth
+// energy centred it is ~0, so textured parts keep their pixels. Measured (docs/reconstruction.md "Depth
 // post-processing"): on the coin (20 um relief, dark 80 degree flanks) the HF+ADAPT bias went
 // from -0.62 to +0.04 um and its RMSE from 2.79 to 0.80 um at 88 % instead of 97 % valid; the
 // natural scenes' RMSE from 1.70 to 1.49 frames at 37.2 % instead of 37.5 % coverage; on the

@@ -1,6 +1,6 @@
 // Filling pixels without depth (below the confidence threshold, NaN) from measured neighbours:
 // optional post-processing for users who want a complete surface (photography, previews,
-// meshes). Off by default: metrology reports NaN where nothing was measured (README: depth
+// meshes). Off by default: metrology reports NaN where nothing was measured (docs/reconstruction.md: depth
 // convention), and a filled value is an interpolation, not a measurement; the confidence map
 // still tells which pixels were measured.
 //

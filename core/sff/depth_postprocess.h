@@ -21,7 +21,7 @@ struct DepthPostProcessOptions {
   // unthresholded depth the consistency step needs.
   double min_confidence = 0.4;
   // Local depth consistency; max_residual_z_steps 1 and the focus window + 1 px were chosen on
-  // the natural focal stacks without changing the microscope specimens' sigma (README).
+  // the natural focal stacks without changing the microscope specimens' sigma (docs/reconstruction.md).
   bool consistency = true;
   DepthConsistencyOptions consistency_options;
   // Guided refinement: off by default (it moved the natural-scene RMSE by < 10 % after the

@@ -55,7 +55,7 @@ struct SffOptions {
   // family's scans; flicker): every frame's focus map is divided by its window mean to the
   // measure's illumination power (NormaliseFocusByIllumination, core/sff/focus_measure.h), so the
   // change of light from frame to frame does not move the focus curve's peak. Off by default:
-  // on glinting parts the window mean is not the light (README "Bias and the default,
+  // on glinting parts the window mean is not the light (docs/illumination.md "Bias and the default,
   // re-checked"). Runs the whole-frame focus map path (not the fused 8-bit Tenengrad kernel).
   bool illumination_invariant = false;
   // Worker threads for the per-frame pass; 0 = all hardware threads.

@@ -2,7 +2,7 @@
 // focused through a layered scene), for evaluating shape from focus where most users meet it:
 // macro photography, colour microscope cameras, public focal-stack data sets.
 //
-// Model (every number below is drawn from the seed; README text: natural_evaluate):
+// Model (every number below is drawn from the seed; docs/reconstruction.md: natural-evaluate):
 // - Scene: a background layer covering the frame (a tilted, gently undulating surface) and 2..4
 //   object layers in front of it (irregular blobs, ellipses, rounded boxes, poles crossing the
 //   frame), each a complete layer: its colour and depth exist also where a nearer layer hides

@@ -171,7 +171,7 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
       {"auth_token_file", &C::auth_token_file, "file holding a bearer token that every call must present"},
       {"token_file", &C::token_file, "named bearer tokens, one 'identity token' line per identity"},
       {"policy", &C::policy, "JSON access policy: identities -> roles (viewer, operator, engineer, admin)"},
-      {"rig_config", &C::rig_config, "rig configuration file (JSON, devices/README.md); empty: the simulated rig"},
+      {"rig_config", &C::rig_config, "rig configuration file (JSON, docs/devices.md); empty: the simulated rig"},
       {"degraded", &C::degraded, "start even when configured devices are absent (health NOT_SERVING until ResetRig)"},
       {"specimen", &C::specimen, "simulated rig: specimen name or file:/path/scene.json"},
       {"seed", &C::seed, "simulated rig: random seed"},

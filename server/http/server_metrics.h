@@ -1,7 +1,7 @@
 // ServerMetrics: what inspectd tells Prometheus. Job counts, durations and frame figures come
 // from the JobManager's event stream (OnJobEvent), gRPC calls from the server interceptor
 // (OnGrpcCall); rig state, queue and disk space are read at scrape time (ScrapeState).
-// Metric names (all prefixed inspectd_) are listed in deploy/README.md. Thread-safe.
+// Metric names (all prefixed inspectd_) are listed in docs/operations.md. Thread-safe.
 #pragma once
 
 #include <cstdint>

@@ -1,7 +1,7 @@
 // Automatic illumination (ILLUMINATION_MODE_AUTO): one probe capture under STD's uniform
 // pattern in the middle of the scan range decides between STD, TEXTURE, ADAPT and HF+ADAPT from
 // the measured saturation and texture contrast and from which calibration models exist. The
-// rule and its evidence: README "Automatic illumination".
+// rule and its evidence: docs/automatic-scans.md "Automatic illumination".
 #pragma once
 
 #include <string>
@@ -33,7 +33,7 @@ struct IlluminationChoice {
 // Textured parts clip their brightest texture peaks (0.04-0.46 % of the probe on the simulated
 // plane, skew, step and wedge specimens, which STD measures completely); shiny parts clip their
 // glints and lands (cutter 20 %, coin 33 %), which costs STD a quarter of the depth map. The limit
-// sits in that gap with a factor >= 2 to either side (README "Automatic illumination").
+// sits in that gap with a factor >= 2 to either side (docs/automatic-scans.md "Automatic illumination").
 inline constexpr double kAutoSaturatedPercent = 1.0;
 
 // The rule (no device I/O):

@@ -3,7 +3,7 @@
 // depth error against ground truth as sigma (the thesis's figure), bias (mean signed error) and
 // RMSE: Table 6.3 (and #images), Table 6.5 (STD vs TEXTURE on textureless specimens), Table 6.6
 // (outlier %), Fig. 6.3 (image mean / sd of the first frames), and every built-in specimen with
-// every mode at its default scan against the bias bound of README "Illumination modes".
+// every mode at its default scan against the bias bound of docs/illumination.md.
 // Then integral SFF (thesis 6.4, tests/bench/isff_tables.h): Table 6.8, Table 6.9, Fig. 6.17 and
 // the calibration and reconstruction times, on their own rig (default camera 512x384).
 // Usage: inspect-evaluate [--camera WxH] [--projector WxH] [--seed N] [--bias-only] [--specimens a,b]
@@ -106,7 +106,7 @@ std::string ErrorCells(const DepthErrorStats& e) {
   return buf;
 }
 
-// The bias bound of README "Illumination modes": 0.1 um or 0.02 z steps, whichever is larger.
+// The bias bound of docs/illumination.md: 0.1 um or 0.02 z steps, whichever is larger.
 double BiasBoundUm(double z_step_um) { return std::max(0.1, 0.02 * z_step_um); }
 
 // "file:/dir/name.json" -> "name"; built-in ids unchanged.

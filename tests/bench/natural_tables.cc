@@ -562,7 +562,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
 
   const EngineKey current{FocusMeasure::kTenengrad, 7, kDefaultInterpolation};
   // The product's default: the default engine options plus the post-processing's defaults
-  // (core/sff/depth_postprocess.h: the consistency step; README "Depth post-processing").
+  // (core/sff/depth_postprocess.h: the consistency step; docs/reconstruction.md "Depth post-processing").
   const EngineKey recommended_key = current;
   auto Single = [](const EngineKey& k, std::string name = "") {
     Candidate c;

@@ -1,4 +1,4 @@
-// The natural-scene evaluation (README "Natural scenes"): focal stacks rendered with ground truth
+// The natural-scene evaluation (docs/reconstruction.md "Depth post-processing and natural scenes"): focal stacks rendered with ground truth
 // (devices/sim/natural_scene.h), every focus measure, window, interpolation, threshold and
 // post-processing scored against the truth and against focus-stack when it is installed.
 // Printed by natural-evaluate and by inspect-evaluate --natural.

@@ -1,5 +1,5 @@
 // inspectctl as a user runs it: the built binary against the real server on loopback. Checks
-// exit codes (USAGE.md), the one-line error format, result files and the --json output.
+// exit codes (docs/inspectctl.md), the one-line error format, result files and the --json output.
 #include <cmath>
 #include <functional>
 
@@ -77,7 +77,7 @@ TEST_F(CliTest, PostProcessingFlagsReachTheServerAndItsFiguresArePrinted) {
   EXPECT_NE(r.err.find("reconstruction.fill_low_confidence"), std::string::npos) << r.err;
   // --illumination-invariant reaches the engine: under STD the cutter's glints light their
   // defocused halos brighter than the texture beside them; divided by the window's light, the
-  // focus measure follows the texture (README "Bias and the default, re-checked").
+  // focus measure follows the texture (docs/illumination.md "Bias and the default, re-checked").
   r = Run({"scan", "--out", (work_ / "default").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   ASSERT_TRUE(client_->GetJob(NewestJobId(), &job).ok());

@@ -140,7 +140,7 @@ TEST(CompensationTest, IterationReachesTargetOnHighDynamicRangeScene) {
   }
 }
 
-// The root of the ADAPT family's depth bias (README "Illumination modes"): A is the in-focus
+// The root of the ADAPT family's depth bias (docs/illumination.md): A is the in-focus
 // transport, but a defocused frame shows the pattern blurred. Per pixel, the reflectance of a
 // uniform surface under a checkerboard then comes out with the checkerboard inverted (blur(P) / P);
 // over the reflectance window (one pattern period) it is the same sharp or blurred.

@@ -86,7 +86,7 @@ class CalibratedIlluminationTest : public ServerTest {
 // each reported with its grey statistics, and the first frames converge towards the target grey.
 // The default is AUTO: its probe finds no saturation on the textured plane and, without the
 // texture models, runs STD, says so in the result, and its depth has no offset against the truth
-// (README "Illumination modes": |bias| <= max(0.1 um, 0.02 z steps)); TEXTURE names the missing
+// (docs/illumination.md: |bias| <= max(0.1 um, 0.02 z steps)); TEXTURE names the missing
 // psf step.
 TEST_F(CalibratedIlluminationTest, AdaptReportsConvergenceAndAutoChoosesWithoutTextureModels) {
   StartServer();

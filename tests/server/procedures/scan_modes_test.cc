@@ -42,7 +42,7 @@ struct ModeRun {
   StackManifest manifest;                         // read back from the stack folder
 };
 
-// README "Illumination modes": |bias| <= 0.1 um or 0.02 z steps, whichever is larger.
+// docs/illumination.md: |bias| <= 0.1 um or 0.02 z steps, whichever is larger.
 double BiasBoundUm(double z_step_um) { return std::max(0.1, 0.02 * z_step_um); }
 
 // a's depth error on the pixels both a and b measured: a method that leaves the hard pixels
@@ -271,7 +271,7 @@ TEST_F(ScanModesTest, AdaptiveModesMeasureSaturatingCutterWithFewFrames) {
   EXPECT_LT(adapt->error.rmse_um, 0.5 * std_run->error.rmse_um);
   // HF+ADAPT (the default when calibrated) is more accurate than HDR3 over its own pixels and over
   // the pixels both measured. (Plain ADAPT, whose corrections may no longer follow the glints'
-  // focus, is not: 1.1 against 0.85 um, README.)
+  // focus, is not: 1.1 against 0.85 um, docs/illumination.md.)
   EXPECT_LT(hf->error.rmse_um, hdr_run->error.rmse_um);
   const double hf_common = ErrorOnCommonPixels(*hf, *hdr_run).stddev_error_um;
   const double hdr_common = ErrorOnCommonPixels(*hdr_run, *hf).stddev_error_um;
@@ -420,7 +420,7 @@ TEST_F(ScanModesTest, DefaultPostProcessingKeepsTexturedSpecimensAndRemovesWrong
 // The illumination-invariant focus measure (SffOptions::illumination_invariant) removes most of
 // it: 1.36x TEXTURE's RMSE where both measure -> 1.00x with this test's coarser calibration
 // (inspect-evaluate, seed 5: 1.34 -> 1.00). It stays off by default because on
-// glinting parts the window mean is not the light (cutter bias -0.12 um, README).
+// glinting parts the window mean is not the light (cutter bias -0.12 um, docs/illumination.md).
 TEST_F(ScanModesTest, IlluminationInvariantFocusBringsHfAdaptToTextureOnTheCoin) {
   ASSERT_NE(bundle_, nullptr);
   auto texture = Scan("coin", IlluminationMode::kTexture, {}, 9, 0, nullptr, false, true);
