@@ -253,13 +253,6 @@ StatusOr<std::vector<v1::Calibration>> DataStore::ListCalibrations() {
   return out;
 }
 
-bool DataStore::CalibrationInUse(const std::string& id) {
-  std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT 1 FROM jobs WHERE calibration_id = ? LIMIT 1");
-  st.Text(1, id);
-  return st.Step() == SQLITE_ROW;
-}
-
 Status DataStore::SetPinned(const std::string& job_id, bool pinned) {
   std::lock_guard<std::mutex> lock(mu_);
   Stmt st(db_, pinned ? "INSERT OR IGNORE INTO pins(job_id) VALUES(?)" : "DELETE FROM pins WHERE job_id = ?");

@@ -71,8 +71,6 @@ class DataStore {
   Status PutCalibration(const v1::Calibration& calibration);
   StatusOr<v1::Calibration> GetCalibration(const std::string& calibration_id);
   StatusOr<std::vector<v1::Calibration>> ListCalibrations();
-  // True if a stored scan refers to this calibration (then it must never be overwritten).
-  bool CalibrationInUse(const std::string& calibration_id);
 
   // Data lifecycle. Pinned jobs are kept by the retention sweeper.
   Status SetPinned(const std::string& job_id, bool pinned);
