@@ -55,8 +55,14 @@ class AuthorizationInterceptor final : public grpc::experimental::Interceptor {
 
   void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
     using grpc::experimental::InterceptionHookPoints;
+    const std::string_view full = info_->method() ? info_->method() : "";
+    // The inspection API's own services only: gRPC's health checks and reflection carry no
+    // identity (reflection is off whenever authentication is on) and reach no handler of ours.
+    if (full.rfind("/inspection.v1.", 0) != 0) {
+      methods->Proceed();
+      return;
+    }
     if (!recorded_ && methods->QueryInterceptionHookPoint(InterceptionHookPoints::POST_RECV_INITIAL_METADATA)) {
-      const std::string_view full = info_->method() ? info_->method() : "";
       AllVerdicts().Record(info_->server_context(),
                            Verdict{std::string(BareMethodName(full)),
                                    access_->Authorize(CredentialsFromContext(*info_->server_context()), full)});
