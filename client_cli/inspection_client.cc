@@ -2,8 +2,6 @@
 // chunked stack upload and resumable, sha256-verified artifact download for inspection.v1.
 #include "client_cli/inspection_client.h"
 
-#include <openssl/evp.h>
-
 #include <algorithm>
 #include <cctype>
 #include <chrono>
@@ -12,6 +10,10 @@
 #include <sstream>
 #include <system_error>
 #include <thread>
+
+#include "client_cli/channel_credentials.h"
+#include "client_cli/stack_files.h"
+#include "common/sha256_file.h"
 
 namespace inspection::client {
 namespace {
@@ -27,144 +29,18 @@ bool IsTerminal(v1::JobState state) {
   return state == v1::JOB_STATE_SUCCEEDED || state == v1::JOB_STATE_FAILED || state == v1::JOB_STATE_CANCELLED;
 }
 
-bool ReadWholeFile(const fs::path& path, std::string* out) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return false;
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) return false;
-  *out = ss.str();
-  return true;
-}
-
 std::string ToLower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return s;
-}
-
-std::string HexOf(const unsigned char* digest, unsigned int n) {
-  static constexpr char kHex[] = "0123456789abcdef";
-  std::string hex;
-  hex.reserve(2 * n);
-  for (unsigned int i = 0; i < n; ++i) {
-    hex.push_back(kHex[digest[i] >> 4]);
-    hex.push_back(kHex[digest[i] & 0xF]);
-  }
-  return hex;
-}
-
-// One file of an upload: its name as sent (relative to the stack folder) and where it is read.
-struct UploadFile {
-  std::string relative;
-  fs::path path;
-  int64_t size_bytes = 0;
-};
-
-// Lists stack.json, every frame file it names and ground_truth_depth.tiff if present, with sizes. Only reads the
-// manifest's file list; the server validates the rest (z monotonic, image formats).
-grpc::Status ListStackFiles(const fs::path& stack_dir, std::vector<UploadFile>* files) {
-  const fs::path manifest_path = stack_dir / "stack.json";
-  std::string text;
-  if (!ReadWholeFile(manifest_path, &text)) {
-    return {grpc::StatusCode::INVALID_ARGUMENT, "stack.json: cannot read " + manifest_path.string()};
-  }
-  nlohmann::json manifest = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-  if (manifest.is_discarded()) {
-    return {grpc::StatusCode::INVALID_ARGUMENT, "stack.json: not valid JSON (" + manifest_path.string() + ")"};
-  }
-  if (!manifest.is_object() || !manifest.contains("frames") || !manifest["frames"].is_array()) {
-    return {grpc::StatusCode::INVALID_ARGUMENT, "stack.json: frames is missing or not an array"};
-  }
-  files->clear();
-  std::error_code ec;
-  files->push_back({"stack.json", manifest_path, static_cast<int64_t>(fs::file_size(manifest_path, ec))});
-  if (ec) return {grpc::StatusCode::INVALID_ARGUMENT, "stack.json: " + ec.message()};
-  const auto& frames = manifest["frames"];
-  for (size_t i = 0; i < frames.size(); ++i) {
-    const std::string at = "stack.json: frames[" + std::to_string(i) + "].file";
-    if (!frames[i].is_object() || !frames[i].contains("file") || !frames[i]["file"].is_string()) {
-      return {grpc::StatusCode::INVALID_ARGUMENT, at + " is missing or not a string"};
-    }
-    const std::string rel = frames[i]["file"].get<std::string>();
-    const fs::path rel_path(rel);
-    if (rel.empty() || rel_path.is_absolute() ||
-        std::any_of(rel_path.begin(), rel_path.end(), [](const fs::path& p) { return p == ".."; })) {
-      return {grpc::StatusCode::INVALID_ARGUMENT, at + " '" + rel + "' must be a path inside the stack folder"};
-    }
-    const fs::path path = stack_dir / rel_path;
-    const auto size = fs::file_size(path, ec);
-    if (ec) {
-      return {grpc::StatusCode::INVALID_ARGUMENT,
-              "frame " + std::to_string(i) + " (" + rel + "): cannot read " + path.string() + ": " + ec.message()};
-    }
-    files->push_back({rel, path, static_cast<int64_t>(size)});
-  }
-  // The simulated rig's ground truth travels with the stack so the server can report the
-  // reconstruction's error against it; other files in the folder are not part of the stack.
-  const fs::path truth = stack_dir / "ground_truth_depth.tiff";
-  if (fs::is_regular_file(truth, ec)) {
-    const auto size = fs::file_size(truth, ec);
-    if (!ec) files->push_back({"ground_truth_depth.tiff", truth, static_cast<int64_t>(size)});
-  }
-  return grpc::Status::OK;
 }
 
 void SetUnaryDeadline(grpc::ClientContext* ctx) { ctx->set_deadline(std::chrono::system_clock::now() + kUnaryTimeout); }
 
 }  // namespace
 
-std::string Sha256OfFile(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return "";
-  EVP_MD_CTX* md = EVP_MD_CTX_new();
-  if (md == nullptr) return "";
-  std::string result;
-  if (EVP_DigestInit_ex(md, EVP_sha256(), nullptr) == 1) {
-    std::vector<char> buf(kChunkBytes);
-    bool ok = true;
-    while (in) {
-      in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
-      const std::streamsize n = in.gcount();
-      if (n > 0 && EVP_DigestUpdate(md, buf.data(), static_cast<size_t>(n)) != 1) {
-        ok = false;
-        break;
-      }
-    }
-    if (in.bad()) ok = false;
-    unsigned char digest[EVP_MAX_MD_SIZE];
-    unsigned int len = 0;
-    if (ok && EVP_DigestFinal_ex(md, digest, &len) == 1) result = HexOf(digest, len);
-  }
-  EVP_MD_CTX_free(md);
-  return result;
-}
-
 InspectionClient::InspectionClient(const ClientOptions& options) : options_(options) {
   std::shared_ptr<grpc::ChannelCredentials> credentials;
-  if (options_.tls_ca_file.empty()) {
-    credentials = grpc::InsecureChannelCredentials();
-  } else {
-    grpc::SslCredentialsOptions ssl;
-    if (!ReadWholeFile(options_.tls_ca_file, &ssl.pem_root_certs) || ssl.pem_root_certs.empty()) {
-      init_status_ =
-          grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "tls_ca_file: cannot read " + options_.tls_ca_file);
-    }
-    // mTLS: a client certificate and key, both or neither.
-    if (options_.tls_client_cert_file.empty() != options_.tls_client_key_file.empty()) {
-      init_status_ =
-          grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "tls_client_cert_file and tls_client_key_file go together");
-    } else if (!options_.tls_client_cert_file.empty()) {
-      if (!ReadWholeFile(options_.tls_client_cert_file, &ssl.pem_cert_chain) || ssl.pem_cert_chain.empty()) {
-        init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                                    "tls_client_cert_file: cannot read " + options_.tls_client_cert_file);
-      }
-      if (!ReadWholeFile(options_.tls_client_key_file, &ssl.pem_private_key) || ssl.pem_private_key.empty()) {
-        init_status_ = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                                    "tls_client_key_file: cannot read " + options_.tls_client_key_file);
-      }
-    }
-    credentials = grpc::SslCredentials(ssl);
-  }
+  init_status_ = ChannelCredentialsFor(options_, &credentials);
   grpc::ChannelArguments args;
   // Chunks are at most 1 MiB; leave room for the envelope and a large terminal event.
   args.SetMaxReceiveMessageSize(16 << 20);
@@ -200,19 +76,11 @@ grpc::Status InspectionClient::FollowStream(grpc::ClientReaderInterface<v1::JobE
 }
 
 grpc::Status InspectionClient::GetRigStatus(v1::RigStatus* status) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
-  return stub_->GetRigStatus(&ctx, v1::GetRigStatusRequest(), status);
+  return Unary(&v1::InspectionService::Stub::GetRigStatus, v1::GetRigStatusRequest(), status);
 }
 
 grpc::Status InspectionClient::ResetRig(v1::RigStatus* status) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
-  return stub_->ResetRig(&ctx, v1::ResetRigRequest(), status);
+  return Unary(&v1::InspectionService::Stub::ResetRig, v1::ResetRigRequest(), status);
 }
 
 grpc::Status InspectionClient::Scan(const v1::ScanRequest& request, const EventCallback& on_event, v1::Job* job) {
@@ -350,62 +218,38 @@ grpc::Status InspectionClient::Watch(const std::string& job_id, const EventCallb
 }
 
 grpc::Status InspectionClient::GetJob(const std::string& job_id, v1::Job* job) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
   v1::GetJobRequest request;
   request.set_job_id(job_id);
-  return stub_->GetJob(&ctx, request, job);
+  return Unary(&v1::InspectionService::Stub::GetJob, request, job);
 }
 
 grpc::Status InspectionClient::ListJobs(const v1::ListJobsRequest& request, v1::ListJobsResponse* response) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
-  return stub_->ListJobs(&ctx, request, response);
+  return Unary(&v1::InspectionService::Stub::ListJobs, request, response);
 }
 
 grpc::Status InspectionClient::CancelJob(const std::string& job_id, v1::Job* job) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
   v1::CancelJobRequest request;
   request.set_job_id(job_id);
-  return stub_->CancelJob(&ctx, request, job);
+  return Unary(&v1::InspectionService::Stub::CancelJob, request, job);
 }
 
 grpc::Status InspectionClient::DeleteJob(const std::string& job_id, v1::DeleteResponse* response) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
   v1::DeleteJobRequest request;
   request.set_job_id(job_id);
-  return stub_->DeleteJob(&ctx, request, response);
+  return Unary(&v1::InspectionService::Stub::DeleteJob, request, response);
 }
 
 grpc::Status InspectionClient::DeleteScan(const std::string& scan_id, v1::DeleteResponse* response) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
   v1::DeleteScanRequest request;
   request.set_scan_id(scan_id);
-  return stub_->DeleteScan(&ctx, request, response);
+  return Unary(&v1::InspectionService::Stub::DeleteScan, request, response);
 }
 
 grpc::Status InspectionClient::PinJob(const std::string& job_id, bool pinned, v1::PinJobResponse* response) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
   v1::PinJobRequest request;
   request.set_job_id(job_id);
   request.set_pinned(pinned);
-  return stub_->PinJob(&ctx, request, response);
+  return Unary(&v1::InspectionService::Stub::PinJob, request, response);
 }
 
 grpc::Status InspectionClient::DownloadRange(const std::string& artifact_id, int64_t offset, int64_t limit,
@@ -514,8 +358,10 @@ grpc::Status InspectionClient::DownloadArtifact(const std::string& artifact_id, 
     }
   }
   const int64_t part_size = static_cast<int64_t>(fs::file_size(part, ec));
-  const std::string actual = Sha256OfFile(part);
-  if (ec || (total_size >= 0 && part_size != total_size) || actual != ToLower(sha256_expected)) {
+  std::string hash_error;
+  const std::optional<std::string> hashed = Sha256FileHex(part, &hash_error);
+  const std::string actual = hashed ? *hashed : "unknown (" + hash_error + ")";
+  if (ec || !hashed || (total_size >= 0 && part_size != total_size) || actual != ToLower(sha256_expected)) {
     fs::remove(part, ec);
     std::ostringstream msg;
     msg << "artifact " << artifact_id << ": integrity check failed (" << part_size << " of " << total_size
@@ -556,39 +402,23 @@ grpc::Status InspectionClient::DownloadResults(const v1::Job& job, const std::fi
 }
 
 grpc::Status InspectionClient::GetCalibration(const std::string& calibration_id, v1::Calibration* calibration) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
   v1::GetCalibrationRequest request;
   request.set_calibration_id(calibration_id);
-  return stub_->GetCalibration(&ctx, request, calibration);
+  return Unary(&v1::InspectionService::Stub::GetCalibration, request, calibration);
 }
 
 grpc::Status InspectionClient::ListCalibrations(v1::ListCalibrationsResponse* response) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
-  return stub_->ListCalibrations(&ctx, v1::ListCalibrationsRequest(), response);
+  return Unary(&v1::InspectionService::Stub::ListCalibrations, v1::ListCalibrationsRequest(), response);
 }
 
 grpc::Status InspectionClient::ListSpecimens(v1::ListSpecimensResponse* response) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
-  return sim_stub_->ListSpecimens(&ctx, v1::ListSpecimensRequest(), response);
+  return Unary(&v1::SimulationService::Stub::ListSpecimens, v1::ListSpecimensRequest(), response);
 }
 
 grpc::Status InspectionClient::SetSpecimen(const std::string& specimen, v1::ListSpecimensResponse* response) {
-  if (!init_status_.ok()) return init_status_;
-  grpc::ClientContext ctx;
-  Prepare(&ctx);
-  SetUnaryDeadline(&ctx);
   v1::SetSpecimenRequest request;
   request.set_specimen(specimen);
-  return sim_stub_->SetSpecimen(&ctx, request, response);
+  return Unary(&v1::SimulationService::Stub::SetSpecimen, request, response);
 }
 
 void InspectionClient::PrepareUnary(grpc::ClientContext* ctx) const {

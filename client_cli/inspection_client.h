@@ -11,6 +11,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "inspection/v1/inspection.grpc.pb.h"
@@ -109,6 +110,22 @@ class InspectionClient {
   void Prepare(grpc::ClientContext* ctx) const;
   // Credentials and the unary deadline: every unary call's context.
   void PrepareUnary(grpc::ClientContext* ctx) const;
+  // One unary call of either service: the options' error if they are unusable, else the call
+  // with PrepareUnary's context.
+  template <typename Stub, typename Request, typename Response>
+  grpc::Status Unary(grpc::Status (Stub::*call)(grpc::ClientContext*, const Request&, Response*),
+                     const Request& request, Response* response) {
+    if (!init_status_.ok()) return init_status_;
+    grpc::ClientContext ctx;
+    PrepareUnary(&ctx);
+    Stub* stub;
+    if constexpr (std::is_same_v<Stub, v1::SimulationService::Stub>) {
+      stub = sim_stub_.get();
+    } else {
+      stub = stub_.get();
+    }
+    return (stub->*call)(&ctx, request, response);
+  }
   grpc::Status FollowStream(grpc::ClientReaderInterface<v1::JobEvent>* reader, const EventCallback& on_event,
                             v1::Job* job);
 
@@ -119,8 +136,5 @@ class InspectionClient {
   std::unique_ptr<v1::InspectionService::Stub> stub_;
   std::unique_ptr<v1::SimulationService::Stub> sim_stub_;
 };
-
-// Lowercase hex sha256 of a file; empty on read error.
-std::string Sha256OfFile(const std::filesystem::path& path);
 
 }  // namespace inspection::client

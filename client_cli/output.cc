@@ -110,8 +110,11 @@ json ProtoJson(const google::protobuf::Message& message) {
 void PrintJsonLine(const json& j) { std::cout << j.dump() << '\n' << std::flush; }
 
 void PrintDepthSummary(const v1::DepthSummary& d) {
-  std::cout << Format("depth: %dx%d px (%.3f um/px), %d frames, valid %.1f %%, z %.2f .. %.2f um", d.width(),
-                      d.height(), d.pixel_size_um(), d.frame_count(), d.valid_percent(), d.z_min_um(), d.z_max_um());
+  // pixel_size_um 0: the stack had no scale (an image folder without --pixel-size).
+  const std::string scale =
+      d.pixel_size_um() > 0.0 ? Format("%.3f um/px", d.pixel_size_um()) : std::string("lateral scale unknown");
+  std::cout << Format("depth: %dx%d px (%s), %d frames, valid %.1f %%, z %.2f .. %.2f um", d.width(), d.height(),
+                      scale.c_str(), d.frame_count(), d.valid_percent(), d.z_min_um(), d.z_max_um());
   if (d.engine_seconds() > 0.0) std::cout << Format(", engine %.3f s", d.engine_seconds());
   std::cout << '\n';
   // Scans: the mode that ran and, for AUTO, why; the integral methods with their figures.

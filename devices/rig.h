@@ -26,6 +26,10 @@ class SimulationControl {
   // Height map (CV_32FC1, µm) in the depth convention: the stage z at which each camera pixel
   // is in focus.
   virtual cv::Mat GroundTruthDepthUm() const = 0;
+  // The same height map in the camera grid with the stage at z_um: moved by the lateral optics
+  // (nearest neighbour, so a step edge keeps its two heights); a depth map aligned onto the frame
+  // at z compares against it. Without lateral optics, GroundTruthDepthUm().
+  virtual cv::Mat GroundTruthInCameraGridUm(double z_um) const = 0;
   // The ground-truth texture (ISFF-GT's template, thesis 6.4.3): the specimen rendered with every
   // point in focus and without noise, under `pattern` (CV_8UC1 of the projector size) at
   // exposure_us and the camera's gain; the frames' type. INVALID_ARGUMENT for a bad pattern.
@@ -45,7 +49,7 @@ struct ScanDefaults {
   double z_step_um = 5.0;  // thesis rig: 5.059 µm
   double exposure_us = 10000.0;
   // Coarse step of the automatic z range's sweep, set by the optics
-  // (core/sff/focus_range_search.h SearchPatternCoarseStepUm); 0 = unknown (4 z steps are used).
+  // (core/sff/z_range_search.h SearchPatternCoarseStepUm); 0 = unknown (4 z steps are used).
   double focus_search_step_um = 0.0;
 };
 

@@ -67,35 +67,6 @@ double PsfSigmaPx(const cv::Mat& psf) {
   return sigma;
 }
 
-double PsfInfluenceRadiusPx(const cv::Mat& psf, double fraction) {
-  const int r = psf.rows / 2;
-  const double bin = 0.25;
-  const int nbins = static_cast<int>(r / bin) + 2;
-  std::vector<double> sum(nbins, 0.0), cnt(nbins, 0.0);
-  for (int y = 0; y < psf.rows; ++y)
-    for (int x = 0; x < psf.cols; ++x) {
-      const double d = std::hypot(x - r, y - r);
-      const int b = static_cast<int>(d / bin);
-      if (b >= nbins) continue;
-      sum[b] += psf.at<float>(y, x);
-      cnt[b] += 1;
-    }
-  std::vector<std::pair<double, double>> prof;  // (radius, mean)
-  for (int b = 0; b < nbins; ++b)
-    if (cnt[b] > 0) prof.emplace_back((b + 0.5) * bin, sum[b] / cnt[b]);
-  if (prof.empty()) return 0.0;
-  prof.front().first = 0.0;  // the centre pixel alone
-  const double limit = fraction * prof.front().second;
-  for (size_t i = 1; i < prof.size(); ++i) {
-    if (prof[i].second <= limit) {
-      const auto [r0, v0] = prof[i - 1];
-      const auto [r1, v1] = prof[i];
-      return v0 > v1 ? r0 + (r1 - r0) * (v0 - limit) / (v0 - v1) : r1;
-    }
-  }
-  return prof.back().first;
-}
-
 StatusOr<PsfCalibration> EstimatePsf(const std::vector<PsfCapture>& captures, const PsfOptions& options) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
   if (captures.empty()) return Status::InvalidArgument("psf: no captures");

@@ -49,8 +49,5 @@ StatusOr<PsfCalibration> EstimatePsf(const std::vector<PsfCapture>& captures, co
 
 // Second-moment Gaussian sigma of a centred PSF (iteratively windowed to 4 sigma).
 double PsfSigmaPx(const cv::Mat& psf);
-// Radius (camera px) where the azimuthal mean profile of a centred PSF falls to fraction of
-// its centre value (linear interpolation between 0.25 px bins).
-double PsfInfluenceRadiusPx(const cv::Mat& psf, double fraction);
 
 }  // namespace inspection

@@ -42,14 +42,14 @@ struct ZRangeSearchRecord {
   double coarse_step_um = 0.0;
   double margin_um = 0.0;
   std::vector<StackFrame> coarse_frames;  // raw/ files of the coarse sweep, in acquisition order
-  // raw/ files of the frames refining the range's ends after the sweep (FocusRangeAccumulator::
+  // raw/ files of the frames refining the range's ends after the sweep (ZRangeAccumulator::
   // PlanRefinement: 0, 2, 3 or 4), in acquisition order.
   std::vector<StackFrame> refine_frames;
   double focus_low_um = 0.0;              // where the sweep found focus (percentiles of the peaks)
   double focus_high_um = 0.0;
   double resolved_percent = 0.0;  // share of the field with a resolved focus peak
   // Share of the field whose focus the sweep had passed when it ended; stopped_early: it ended
-  // before the window's end because that share was reached (core/sff/focus_range_search.h).
+  // before the window's end because that share was reached (core/sff/z_range_search.h).
   double settled_percent = 0.0;
   bool stopped_early = false;
   double z_start_um = 0.0;        // the range chosen for the stack (frames above)

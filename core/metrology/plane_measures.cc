@@ -72,10 +72,6 @@ StatusOr<FlatnessResult> MeasureFlatness(const cv::Mat& depth_um, const cv::Mat&
   return res;
 }
 
-const char* VolumeReferenceName(VolumeReference r) {
-  return r == VolumeReference::kRegionPlane ? "region_plane" : "height";
-}
-
 StatusOr<VolumeReference> ParseVolumeReference(const std::string& name) {
   if (name == "region_plane") return VolumeReference::kRegionPlane;
   if (name == "height") return VolumeReference::kHeight;

@@ -45,7 +45,6 @@ enum class VolumeReference {
   kRegionPlane,  // least-squares plane of a reference region (or of the measured region itself)
   kHeight,       // the plane z = reference_height_um
 };
-const char* VolumeReferenceName(VolumeReference r);  // "region_plane", "height"
 StatusOr<VolumeReference> ParseVolumeReference(const std::string& name);
 
 struct VolumeOptions {

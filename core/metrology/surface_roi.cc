@@ -198,8 +198,6 @@ StatusOr<RoiShape> ParseRoiShape(const std::string& name) {
   return Status::InvalidArgument("unknown ROI shape '" + name + "' (whole_field, rectangle, polygon)");
 }
 
-const char* RoiUnitName(RoiUnit unit) { return UnitSuffix(unit); }
-
 StatusOr<RoiUnit> ParseRoiUnit(const std::string& name) {
   if (name == "px") return RoiUnit::kPixel;
   if (name == "um") return RoiUnit::kMicrometre;

@@ -30,7 +30,6 @@ enum class RoiUnit {
 
 const char* RoiShapeName(RoiShape shape);  // "whole_field", "rectangle", "polygon"
 StatusOr<RoiShape> ParseRoiShape(const std::string& name);
-const char* RoiUnitName(RoiUnit unit);  // "px", "um"
 StatusOr<RoiUnit> ParseRoiUnit(const std::string& name);
 
 struct RoiPoint {

@@ -202,7 +202,6 @@ double IntegralImageAccumulator::FrameNoiseSigma() const {
   return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + half));
 }
 
-const char* IpsfRestorationName(IpsfRestoration r) { return r == IpsfRestoration::kPlain ? "plain" : "noise_adaptive"; }
 
 Status IpsfRestorationOptions::Validate() const {
   if (!std::isnan(frame_noise_sigma) && !(frame_noise_sigma >= 0.0 && std::isfinite(frame_noise_sigma))) {

@@ -59,7 +59,6 @@ enum class IpsfRestoration {
   kPlain,          // eq. 5.23 alone: I_int * ipsf
   kNoiseAdaptive,  // eq. 5.23, then a Wiener shrinkage weighted by the stack's noise (default)
 };
-const char* IpsfRestorationName(IpsfRestoration r);  // "plain", "noise_adaptive"
 
 struct IpsfRestorationOptions {
   IpsfRestoration method = IpsfRestoration::kNoiseAdaptive;

@@ -56,8 +56,6 @@ class FtdiSerial {
   Status Write(const std::vector<uint8_t>& bytes, int timeout_ms);
   // Exactly n payload bytes or DEADLINE_EXCEEDED at the deadline (buffered bytes stay buffered).
   StatusOr<std::vector<uint8_t>> Read(size_t n, std::chrono::steady_clock::time_point deadline);
-  // Drops buffered payload bytes (after a purge).
-  void DiscardBuffered() { rx_.clear(); }
 
  private:
   UsbTransport* transport_;

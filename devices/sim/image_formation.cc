@@ -116,12 +116,6 @@ void ImageFormation::ProjectorIrradianceInto(const cv::Mat& pattern, cv::Mat* on
             cv::Scalar(0));
 }
 
-cv::Mat ImageFormation::DefocusSigmaPx(double z_um) const {
-  cv::Mat sigma;
-  DefocusSigmaInto(z_um, &sigma);
-  return sigma;
-}
-
 void ImageFormation::DefocusSigmaInto(double z_um, cv::Mat* sigma_out) const {
   sigma_out->create(options_.camera_size, CV_32FC1);
   cv::Mat& sigma = *sigma_out;

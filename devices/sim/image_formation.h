@@ -71,8 +71,6 @@ class ImageFormation {
   // INVALID_ARGUMENT for a pattern that is not CV_8UC1 of the projector size):
   // E_p on the camera grid (prf + mapping), no defocus.
   StatusOr<cv::Mat> ProjectorIrradianceOnCamera(const cv::Mat& pattern) const;
-  // PSF sigma (camera px) of every pixel with the stage at z_um.
-  cv::Mat DefocusSigmaPx(double z_um) const;
   // Specimen-grid pixels -> camera pixels with the stage at z_um (identity without lateral optics).
   cv::Matx23d CameraFromSpecimen(double z_um) const;
   // E_c: irradiance reaching the sensor (both defocus passes, then the lateral optics), relative

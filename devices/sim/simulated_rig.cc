@@ -8,7 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
-#include "core/sff/focus_range_search.h"
+#include "core/sff/z_range_search.h"
 #include "devices/sim/image_formation.h"
 #include "devices/sim/specimen.h"
 
@@ -344,7 +344,7 @@ class SimulatedRig : public Rig, public SimulationControl {
                              ImageFormation::Create(options, std::move(flat)));
     return renderer->Render(pattern, 0.0, exposure_us, gain_db, 1);
   }
-  cv::Mat GroundTruthInCameraGrid(double z_um) const {
+  cv::Mat GroundTruthInCameraGridUm(double z_um) const override {
     std::lock_guard<std::mutex> lock(s_->mu);
     const cv::Mat& h = s_->renderer->specimen().height_um;
     if (!s_->renderer->options().lateral.active()) return h.clone();
@@ -379,9 +379,7 @@ Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults) {
 cv::Mat GroundTruthInCameraGrid(Rig& rig, double z_um) {
   // Through simulation(): a rig wrapping the simulated one (the server's) forwards it.
   SimulationControl* control = rig.simulation();
-  if (control == nullptr) return {};
-  auto* sim = dynamic_cast<SimulatedRig*>(control);
-  return sim != nullptr ? sim->GroundTruthInCameraGrid(z_um) : control->GroundTruthDepthUm();
+  return control != nullptr ? control->GroundTruthInCameraGridUm(z_um) : cv::Mat();
 }
 
 StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& options) {
@@ -395,7 +393,7 @@ StatusOr<std::unique_ptr<Rig>> CreateSimulatedRig(const SimulatedRigOptions& opt
     state->focus_search_step_um =
         SearchPatternCoarseStepUm(f.defocus.blur_radius_px_per_um, f.geometry.camera_px_per_projector_px);
   }
-  INSPECT_RETURN_IF_ERROR(state->LoadSpecimen(options.specimen).WithContext("specimen: "));
+  INSPECT_RETURN_IF_ERROR(state->LoadSpecimen(options.specimen).WithContext("specimen"));
   return std::unique_ptr<Rig>(new SimulatedRig(std::move(state)));
 }
 

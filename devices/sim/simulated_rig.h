@@ -63,11 +63,8 @@ struct SimulatedFaults {
 // INVALID_ARGUMENT when rig is not a simulated rig.
 Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults);
 
-// The ground truth height map (um) in the camera grid with the stage at z_um: what
-// SimulationControl::GroundTruthDepthUm() gives (the specimen grid) moved by the lateral optics
-// (nearest neighbour, so a step edge keeps its two heights). A depth map aligned onto a
-// reference frame at z compares against GroundTruthInCameraGrid(rig, z). Without lateral optics,
-// or on a rig that is not simulated, the specimen-grid map unchanged (empty when not simulated).
+// SimulationControl::GroundTruthInCameraGridUm of a rig (devices/rig.h); empty when the rig is
+// not simulated.
 cv::Mat GroundTruthInCameraGrid(Rig& rig, double z_um);
 
 // The renderer settings the simulated rig uses for these options (for serving the same frames

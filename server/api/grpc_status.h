@@ -1,4 +1,4 @@
-// The one place where core's Status becomes a gRPC status (and back, for tests).
+// The one place where core's Status becomes a gRPC status.
 #pragma once
 
 #include <grpcpp/support/status.h>
@@ -10,11 +10,6 @@ namespace inspection {
 inline grpc::Status ToGrpcStatus(const Status& s) {
   if (s.ok()) return grpc::Status::OK;
   return grpc::Status(static_cast<grpc::StatusCode>(static_cast<int>(s.code())), s.message());
-}
-
-inline Status FromGrpcStatus(const grpc::Status& s) {
-  if (s.ok()) return Status::Ok();
-  return Status(static_cast<StatusCode>(static_cast<int>(s.error_code())), s.error_message());
 }
 
 }  // namespace inspection

@@ -5,18 +5,17 @@
 
 #include <algorithm>
 #include <cctype>
-#include <cerrno>
-#include <fstream>
-#include <map>
 #include <optional>
 #include <set>
 
 #include "core/io/stack.h"
-#include "server/security/audit_interceptor.h"
-#include "server/storage/data_lifecycle.h"
 #include "server/api/grpc_status.h"
 #include "server/api/recipe_scan.h"
 #include "server/api/request_mapping.h"
+#include "server/api/stack_transfer.h"
+#include "server/security/audit_interceptor.h"
+#include "server/security/call_authorization.h"
+#include "server/storage/data_lifecycle.h"
 #include "server/storage/stored_stack.h"
 
 namespace inspection {
@@ -39,6 +38,15 @@ Status JobOutcome(const v1::Job& job) {
   }
 }
 
+// What a deletion freed, as DeleteJob and DeleteScan answer it.
+grpc::Status Deleted(const StatusOr<DeleteOutcome>& deleted, v1::DeleteResponse* out) {
+  if (!deleted.ok()) return Grpc(deleted.status());
+  out->set_id(deleted->id);
+  out->set_bytes_freed(deleted->bytes_freed);
+  out->set_artifacts_deleted(deleted->artifacts_deleted);
+  return grpc::Status::OK;
+}
+
 // Replays a job's events from the first and follows it to its terminal event. Returns when the
 // job ended or the client went away; the job itself keeps running either way.
 template <typename Writer>
@@ -57,108 +65,7 @@ grpc::Status StreamJob(grpc::ServerContext* ctx, const std::shared_ptr<JobRecord
   return Grpc(JobOutcome(r->Snapshot()));
 }
 
-// Starts decoding an upload's frames as their files complete (core/io/stack_frame_decoder.h). The
-// decoder exists once stack.json is complete and parses; files completed before that are
-// submitted then. A stack.json that does not parse leaves the decoder null: the manifest check
-// after the upload names the fault, as before.
-class UploadDecoding {
- public:
-  UploadDecoding(const fs::path& dir, const ReconstructPipelineOptions& options) : dir_(dir), options_(options) {}
-
-  void FileComplete(const std::string& path) {
-    if (options_.sequential) return;
-    if (decoder_) {
-      decoder_->SubmitFile(path);
-      return;
-    }
-    if (path != kStackManifestName) {
-      completed_.push_back(path);
-      return;
-    }
-    std::ifstream in(dir_ / path, std::ios::binary);
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    auto manifest = ParseStackManifest(text);
-    if (!manifest.ok()) return;
-    StackFrameDecoderOptions o;
-    o.threads = options_.decode_threads;
-    o.max_kept_bytes = options_.max_decoded_bytes;
-    decoder_ = std::make_shared<StackFrameDecoder>(dir_, std::move(manifest).value(), o);
-    for (const std::string& f : completed_) decoder_->SubmitFile(f);
-    completed_.clear();
-  }
-
-  std::shared_ptr<StackFrameDecoder> Take() { return std::move(decoder_); }
-
- private:
-  fs::path dir_;
-  ReconstructPipelineOptions options_;
-  std::vector<std::string> completed_;  // before stack.json
-  std::shared_ptr<StackFrameDecoder> decoder_;
-};
-
-// Receives an uploaded stack folder into `dir`, handing each complete file to `decoding`. Errors
-// name the file and field at fault.
-Status ReceiveUpload(grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructRequest>* stream,
-                     const ReconstructSource& upload, const fs::path& dir, int64_t max_bytes,
-                     UploadDecoding* decoding) {
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec) return Status::Internal("cannot create upload folder: " + ec.message());
-  std::map<std::string, int64_t> sizes;
-  std::map<std::string, bool> complete;
-  int64_t total = 0;
-  v1::ReconstructRequest msg;
-  while (stream->Read(&msg)) {
-    if (!msg.has_file_chunk()) return Status::InvalidArgument("after start, only file_chunk messages may follow");
-    const v1::StackFileChunk& c = msg.file_chunk();
-    INSPECT_RETURN_IF_ERROR(CheckUploadChunk(c));
-    INSPECT_RETURN_IF_ERROR(CheckRequestTextLimits(msg));
-    if (complete[c.path()]) return Status::InvalidArgument("file '" + c.path() + "' was already completed");
-    if (c.offset() != sizes[c.path()]) {
-      return Status::InvalidArgument("file_chunk.offset " + std::to_string(c.offset()) + " of '" + c.path() +
-                                     "' does not continue the file at " + std::to_string(sizes[c.path()]));
-    }
-    total += int64_t(c.data().size());
-    if (total > max_bytes || (upload.upload_total_bytes > 0 && total > upload.upload_total_bytes)) {
-      return Status::InvalidArgument("upload exceeds start.upload.total_bytes");
-    }
-    const fs::path target = dir / c.path();
-    fs::create_directories(target.parent_path(), ec);
-    std::ofstream out(target, std::ios::binary | (c.offset() == 0 ? std::ios::trunc : std::ios::app));
-    errno = 0;
-    if (!out.write(c.data().data(), std::streamsize(c.data().size())) || !out.flush()) {
-      // ENOSPC: RESOURCE_EXHAUSTED "data disk full"; the upload folder goes with the request.
-      return WriteFailure(errno ? errno : EIO, "cannot write uploaded file '" + c.path() + "'");
-    }
-    out.close();  // on disk before a decode thread opens it
-    sizes[c.path()] += int64_t(c.data().size());
-    if (c.last()) {
-      complete[c.path()] = true;
-      decoding->FileComplete(c.path());
-    }
-  }
-  for (const auto& [path, size] : sizes) {
-    if (!complete[path]) return Status::InvalidArgument("file '" + path + "' ended without a chunk marked last");
-  }
-  if (upload.upload_file_count > 0 && int(sizes.size()) != upload.upload_file_count) {
-    return Status::InvalidArgument("received " + std::to_string(sizes.size()) +
-                                   " files but start.upload.file_count is " + std::to_string(upload.upload_file_count));
-  }
-  return Status::Ok();
-}
-
 }  // namespace
-
-StatusOr<Identity> AuthorizeCall(grpc::ServerContext* ctx, const AccessControl* access, std::string_view method) {
-  if (!access) {
-    Identity anonymous;
-    anonymous.name = "anonymous";
-    anonymous.role = Role::kAdmin;
-    anonymous.peer = ctx->peer();
-    return anonymous;
-  }
-  return access->Authorize(CredentialsFromContext(*ctx), method);
-}
 
 void InspectionServiceImpl::FillRigStatus(v1::RigStatus* st) {
   rig_->FillStatus(st);
@@ -171,14 +78,14 @@ void InspectionServiceImpl::FillRigStatus(v1::RigStatus* st) {
 
 grpc::Status InspectionServiceImpl::GetRigStatus(grpc::ServerContext* ctx, const v1::GetRigStatusRequest*,
                                                  v1::RigStatus* out) {
-  auto who = CheckAuth(ctx, "GetRigStatus");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   FillRigStatus(out);
   return grpc::Status::OK;
 }
 
 grpc::Status InspectionServiceImpl::ResetRig(grpc::ServerContext* ctx, const v1::ResetRigRequest*, v1::RigStatus* out) {
-  auto who = CheckAuth(ctx, "ResetRig");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   auto lock = rig_->TryAcquire();
   if (!lock.owns_lock()) {
@@ -193,7 +100,7 @@ grpc::Status InspectionServiceImpl::ResetRig(grpc::ServerContext* ctx, const v1:
 
 grpc::Status InspectionServiceImpl::Scan(grpc::ServerContext* ctx, const v1::ScanRequest* req,
                                          grpc::ServerWriter<v1::JobEvent>* writer) {
-  auto who = CheckAuth(ctx, "Scan");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   // Refused before the rig moves: a scan that cannot be stored is not worth taking.
@@ -221,7 +128,7 @@ grpc::Status InspectionServiceImpl::Scan(grpc::ServerContext* ctx, const v1::Sca
 
 grpc::Status InspectionServiceImpl::Calibrate(grpc::ServerContext* ctx, const v1::CalibrateRequest* req,
                                               grpc::ServerWriter<v1::JobEvent>* writer) {
-  auto who = CheckAuth(ctx, "Calibrate");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   auto r = jobs_->Submit(
@@ -239,7 +146,7 @@ grpc::Status InspectionServiceImpl::Calibrate(grpc::ServerContext* ctx, const v1
 
 grpc::Status InspectionServiceImpl::Reconstruct(
     grpc::ServerContext* ctx, grpc::ServerReaderWriter<v1::JobEvent, v1::ReconstructRequest>* stream) {
-  auto who = CheckAuth(ctx, "Reconstruct");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   v1::ReconstructRequest first;
   if (!stream->Read(&first) || !first.has_start()) {
@@ -274,23 +181,9 @@ grpc::Status InspectionServiceImpl::Reconstruct(
     stored_manifest = std::move(stored->manifest);
     decode_stored = std::move(stored->decode);
   }
-  // Validate the whole stack before a job exists: bad input never becomes a failed job. The
-  // frames were decoding while they arrived; the rest decode now, in parallel (a stored scan's
-  // all of them, from its archive), and the job's engine takes them from memory in z order.
-  // Sequential: the path before issue 16 (decoded here to check them, and again by the job).
-  auto manifest = stored_manifest ? StatusOr<StackManifest>(*stored_manifest) : ReadStackManifest(dir);
-  if (!manifest.ok()) return Grpc(manifest.status());
-  if (options_.reconstruct.sequential) {
-    decoded.reset();
-    if (Status s = ValidateStackFrames(dir, *manifest); !s.ok()) return Grpc(s);
-  } else {
-    if (!decoded) {
-      StackFrameDecoderOptions o;
-      o.threads = options_.reconstruct.decode_threads;
-      o.max_kept_bytes = options_.reconstruct.max_decoded_bytes;
-      decoded = std::make_shared<StackFrameDecoder>(dir, *manifest, o, decode_stored);
-    }
-    if (Status s = decoded->Finish(); !s.ok()) return Grpc(s);
+  // Validate the whole stack before a job exists: bad input never becomes a failed job.
+  if (Status s = CheckStackFrames(dir, stored_manifest, options_.reconstruct, decode_stored, &decoded); !s.ok()) {
+    return Grpc(s);
   }
   // The upload moves into the job's work: it goes when the job ends, or with the request when
   // no job is queued (invalid options, a duplicate request id, a full queue).
@@ -309,7 +202,7 @@ grpc::Status InspectionServiceImpl::Reconstruct(
 
 grpc::Status InspectionServiceImpl::WatchJob(grpc::ServerContext* ctx, const v1::WatchJobRequest* req,
                                              grpc::ServerWriter<v1::JobEvent>* writer) {
-  auto who = CheckAuth(ctx, "WatchJob");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
@@ -319,7 +212,7 @@ grpc::Status InspectionServiceImpl::WatchJob(grpc::ServerContext* ctx, const v1:
 }
 
 grpc::Status InspectionServiceImpl::GetJob(grpc::ServerContext* ctx, const v1::GetJobRequest* req, v1::Job* out) {
-  auto who = CheckAuth(ctx, "GetJob");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
@@ -334,7 +227,7 @@ grpc::Status InspectionServiceImpl::GetJob(grpc::ServerContext* ctx, const v1::G
 
 grpc::Status InspectionServiceImpl::ListJobs(grpc::ServerContext* ctx, const v1::ListJobsRequest* req,
                                              v1::ListJobsResponse* out) {
-  auto who = CheckAuth(ctx, "ListJobs");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   auto query = MapListJobsRequest(*req);
@@ -357,7 +250,7 @@ grpc::Status InspectionServiceImpl::ListJobs(grpc::ServerContext* ctx, const v1:
 }
 
 grpc::Status InspectionServiceImpl::CancelJob(grpc::ServerContext* ctx, const v1::CancelJobRequest* req, v1::Job* out) {
-  auto who = CheckAuth(ctx, "CancelJob");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
@@ -378,45 +271,19 @@ grpc::Status InspectionServiceImpl::CancelJob(grpc::ServerContext* ctx, const v1
 
 grpc::Status InspectionServiceImpl::DownloadArtifact(grpc::ServerContext* ctx, const v1::DownloadArtifactRequest* req,
                                                      grpc::ServerWriter<v1::ArtifactChunk>* writer) {
-  auto who = CheckAuth(ctx, "DownloadArtifact");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   auto range = MapDownloadRequest(*req);
   if (!range.ok()) return Grpc(range.status());
   auto a = store_->GetArtifact(range->artifact_id);
   if (!a.ok()) return Grpc(a.status());
-  const int64_t size = a->artifact.size_bytes();
-  if (range->offset > size) {
-    return Grpc(Status::OutOfRange("offset " + std::to_string(range->offset) + " is beyond the artifact's size " +
-                                   std::to_string(size)));
-  }
-  std::ifstream in(a->path, std::ios::binary);
-  if (!in) return Grpc(Status::DataLoss("artifact file of " + range->artifact_id + " is missing on the server"));
-  in.seekg(range->offset);
-  const int64_t end = range->limit == 0 ? size : std::min(size, range->offset + range->limit);
-  int64_t pos = range->offset;
-  std::string buf;
-  do {
-    const int64_t n = std::min(kMaxChunkBytes, end - pos);
-    buf.resize(size_t(n));
-    if (n > 0 && !in.read(buf.data(), std::streamsize(n))) {
-      return Grpc(Status::DataLoss("artifact file of " + range->artifact_id + " is shorter than recorded"));
-    }
-    v1::ArtifactChunk chunk;
-    chunk.set_artifact_id(range->artifact_id);
-    chunk.set_offset(pos);
-    chunk.set_data(buf);
-    chunk.set_total_size(size);
-    chunk.set_sha256(a->artifact.sha256());
-    if (!writer->Write(chunk)) return grpc::Status(grpc::StatusCode::CANCELLED, "client stopped reading");
-    pos += n;
-  } while (pos < end);
-  return grpc::Status::OK;
+  return Grpc(SendArtifactFile(*a, *range, [writer](const v1::ArtifactChunk& chunk) { return writer->Write(chunk); }));
 }
 
 grpc::Status InspectionServiceImpl::GetCalibration(grpc::ServerContext* ctx, const v1::GetCalibrationRequest* req,
                                                    v1::Calibration* out) {
-  auto who = CheckAuth(ctx, "GetCalibration");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   auto c = calibrations_->Get(req->calibration_id());
@@ -427,7 +294,7 @@ grpc::Status InspectionServiceImpl::GetCalibration(grpc::ServerContext* ctx, con
 
 grpc::Status InspectionServiceImpl::ListCalibrations(grpc::ServerContext* ctx, const v1::ListCalibrationsRequest*,
                                                      v1::ListCalibrationsResponse* out) {
-  auto who = CheckAuth(ctx, "ListCalibrations");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   auto list = calibrations_->List();
   if (!list.ok()) return Grpc(list.status());
@@ -437,35 +304,25 @@ grpc::Status InspectionServiceImpl::ListCalibrations(grpc::ServerContext* ctx, c
 
 grpc::Status InspectionServiceImpl::DeleteJob(grpc::ServerContext* ctx, const v1::DeleteJobRequest* req,
                                               v1::DeleteResponse* out) {
-  auto who = CheckAuth(ctx, "DeleteJob");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
-  auto deleted = options_.janitor->DeleteJob(req->job_id());
-  if (!deleted.ok()) return Grpc(deleted.status());
-  out->set_id(deleted->id);
-  out->set_bytes_freed(deleted->bytes_freed);
-  out->set_artifacts_deleted(deleted->artifacts_deleted);
-  return grpc::Status::OK;
+  return Deleted(options_.janitor->DeleteJob(req->job_id()), out);
 }
 
 grpc::Status InspectionServiceImpl::DeleteScan(grpc::ServerContext* ctx, const v1::DeleteScanRequest* req,
                                                v1::DeleteResponse* out) {
-  auto who = CheckAuth(ctx, "DeleteScan");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   if (req->scan_id().empty()) return Grpc(Status::InvalidArgument("scan_id is empty"));
-  auto deleted = options_.janitor->DeleteScan(req->scan_id());
-  if (!deleted.ok()) return Grpc(deleted.status());
-  out->set_id(deleted->id);
-  out->set_bytes_freed(deleted->bytes_freed);
-  out->set_artifacts_deleted(deleted->artifacts_deleted);
-  return grpc::Status::OK;
+  return Deleted(options_.janitor->DeleteScan(req->scan_id()), out);
 }
 
 grpc::Status InspectionServiceImpl::PinJob(grpc::ServerContext* ctx, const v1::PinJobRequest* req,
                                            v1::PinJobResponse* out) {
-  auto who = CheckAuth(ctx, "PinJob");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   if (Status s = CheckJobId(req->job_id()); !s.ok()) return Grpc(s);
@@ -538,7 +395,7 @@ void FillSpecimens(SimulationControl* sim, const fs::path& scene_dir, v1::ListSp
 
 grpc::Status SimulationServiceImpl::ListSpecimens(grpc::ServerContext* ctx, const v1::ListSpecimensRequest*,
                                                   v1::ListSpecimensResponse* out) {
-  auto who = AuthorizeCall(ctx, options_.access, "ListSpecimens");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   SimulationControl* sim = rig_->rig().simulation();
   if (!sim) return Grpc(Status::FailedPrecondition("the rig is not simulated"));
@@ -548,7 +405,7 @@ grpc::Status SimulationServiceImpl::ListSpecimens(grpc::ServerContext* ctx, cons
 
 grpc::Status SimulationServiceImpl::SetSpecimen(grpc::ServerContext* ctx, const v1::SetSpecimenRequest* req,
                                                 v1::ListSpecimensResponse* out) {
-  auto who = AuthorizeCall(ctx, options_.access, "SetSpecimen");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   SimulationControl* sim = rig_->rig().simulation();

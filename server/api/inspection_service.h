@@ -1,4 +1,6 @@
-// gRPC handlers of inspection.v1.InspectionService and SimulationService. Thin: requests go
+// gRPC handlers of inspection.v1.InspectionService and SimulationService. Who may call what is
+// decided before a handler runs (server/security/call_authorization.h); a handler takes the
+// verdict with CallerOf and names no method and no role. Thin: requests go
 // through the request mapping (request_mapping.h, which validates and names the field), work
 // goes to the JobManager, and a JobRecord's events are streamed back. Every error leaves as a
 // gRPC status built by ToGrpcStatus (grpc_status.h); no exception crosses this boundary.
@@ -9,21 +11,18 @@
 #include <string_view>
 
 #include "inspection/v1/inspection.grpc.pb.h"
+#include "server/jobs/job_manager.h"
+#include "server/jobs/retention_sweeper.h"
+#include "server/jobs/rig_controller.h"
+#include "server/results/result_feed.h"
 #include "server/security/access_control.h"
 #include "server/storage/calibration_store.h"
 #include "server/storage/data_store.h"
-#include "server/jobs/job_manager.h"
-#include "server/results/result_feed.h"
-#include "server/jobs/retention_sweeper.h"
-#include "server/jobs/rig_controller.h"
 
 namespace inspection {
 
 struct ServiceOptions {
   std::string server_version;
-  // Who may call what (access_control.h); nullptr = no authentication: every caller is
-  // "anonymous" with every role.
-  const AccessControl* access = nullptr;
   int64_t max_upload_bytes = int64_t(2) << 30;
   // User scenes of the simulated rig: SetSpecimen takes a scene by NAME from this folder
   // (<name>.json); empty = built-in specimens only. Paths ("file:...") are always refused.
@@ -38,10 +37,6 @@ struct ServiceOptions {
   // Frames decode while an upload arrives (server/jobs/job_work.h).
   ReconstructPipelineOptions reconstruct;
 };
-
-// Authenticates the caller and checks the role `method` needs: UNAUTHENTICATED without or with
-// unknown credentials, PERMISSION_DENIED naming the missing role. Shared by every service.
-StatusOr<Identity> AuthorizeCall(grpc::ServerContext* ctx, const AccessControl* access, std::string_view method);
 
 class InspectionServiceImpl final : public v1::InspectionService::Service {
  public:
@@ -79,9 +74,6 @@ class InspectionServiceImpl final : public v1::InspectionService::Service {
                             grpc::ServerWriter<v1::InspectionResult>*) override;
 
  private:
-  StatusOr<Identity> CheckAuth(grpc::ServerContext* ctx, std::string_view method) const {
-    return AuthorizeCall(ctx, options_.access, method);
-  }
   void FillRigStatus(v1::RigStatus* status);
 
   ServiceOptions options_;

@@ -6,6 +6,7 @@
 #include "server/security/audit_interceptor.h"
 #include "server/api/grpc_status.h"
 #include "server/api/inspection_service.h"
+#include "server/security/call_authorization.h"
 #include "server/results/recipe_mapping.h"
 #include "server/api/request_mapping.h"
 
@@ -46,7 +47,7 @@ StatusOr<v1::Recipe> StoreRecipeVersion(v1::Recipe recipe, const Identity& who, 
 
 grpc::Status InspectionServiceImpl::CreateRecipe(grpc::ServerContext* ctx, const v1::CreateRecipeRequest* req,
                                                  v1::Recipe* out) {
-  auto who = CheckAuth(ctx, "CreateRecipe");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return ToGrpcStatus(s);
   if (!req->has_recipe()) return ToGrpcStatus(Status::InvalidArgument("recipe is required"));
@@ -62,7 +63,7 @@ grpc::Status InspectionServiceImpl::CreateRecipe(grpc::ServerContext* ctx, const
 
 grpc::Status InspectionServiceImpl::UpdateRecipe(grpc::ServerContext* ctx, const v1::UpdateRecipeRequest* req,
                                                  v1::Recipe* out) {
-  auto who = CheckAuth(ctx, "UpdateRecipe");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return ToGrpcStatus(s);
   if (!req->has_recipe()) return ToGrpcStatus(Status::InvalidArgument("recipe is required"));
@@ -77,7 +78,7 @@ grpc::Status InspectionServiceImpl::UpdateRecipe(grpc::ServerContext* ctx, const
 
 grpc::Status InspectionServiceImpl::GetRecipe(grpc::ServerContext* ctx, const v1::GetRecipeRequest* req,
                                               v1::Recipe* out) {
-  auto who = CheckAuth(ctx, "GetRecipe");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return ToGrpcStatus(s);
   if (Status s = CheckRecipeName(req->recipe_id(), "recipe_id"); !s.ok()) return ToGrpcStatus(s);
@@ -90,7 +91,7 @@ grpc::Status InspectionServiceImpl::GetRecipe(grpc::ServerContext* ctx, const v1
 
 grpc::Status InspectionServiceImpl::ListRecipes(grpc::ServerContext* ctx, const v1::ListRecipesRequest*,
                                                 v1::ListRecipesResponse* out) {
-  auto who = CheckAuth(ctx, "ListRecipes");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return ToGrpcStatus(who.status());
   auto list = store_->ListRecipes();
   if (!list.ok()) return ToGrpcStatus(list.status());
@@ -100,7 +101,7 @@ grpc::Status InspectionServiceImpl::ListRecipes(grpc::ServerContext* ctx, const 
 
 grpc::Status InspectionServiceImpl::DeleteRecipe(grpc::ServerContext* ctx, const v1::DeleteRecipeRequest* req,
                                                  v1::DeleteResponse* out) {
-  auto who = CheckAuth(ctx, "DeleteRecipe");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return ToGrpcStatus(s);
   if (Status s = CheckRecipeName(req->recipe_id(), "recipe_id"); !s.ok()) return ToGrpcStatus(s);

@@ -6,6 +6,7 @@
 
 #include "server/api/grpc_status.h"
 #include "server/api/inspection_service.h"
+#include "server/security/call_authorization.h"
 #include "server/api/request_mapping.h"
 
 namespace inspection {
@@ -69,7 +70,7 @@ StatusOr<ResultQuery> MapListResultsRequest(const v1::ListResultsRequest& req) {
 
 grpc::Status InspectionServiceImpl::ListResults(grpc::ServerContext* ctx, const v1::ListResultsRequest* req,
                                                 v1::ListResultsResponse* out) {
-  auto who = CheckAuth(ctx, "ListResults");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
   auto query = MapListResultsRequest(*req);
@@ -85,7 +86,7 @@ grpc::Status InspectionServiceImpl::ListResults(grpc::ServerContext* ctx, const 
 
 grpc::Status InspectionServiceImpl::WatchResults(grpc::ServerContext* ctx, const v1::WatchResultsRequest* req,
                                                  grpc::ServerWriter<v1::InspectionResult>* writer) {
-  auto who = CheckAuth(ctx, "WatchResults");
+  auto who = CallerOf(ctx);
   if (!who.ok()) return Grpc(who.status());
   if (req->after_sequence() < 0) return Grpc(Status::InvalidArgument("after_sequence must be >= 0"));
   if (options_.results == nullptr) return Grpc(Status::FailedPrecondition("this server keeps no result feed"));

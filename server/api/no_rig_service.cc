@@ -2,6 +2,7 @@
 #include "server/api/no_rig_service.h"
 
 #include "server/api/grpc_status.h"
+#include "server/security/call_authorization.h"
 
 namespace inspection {
 
@@ -13,8 +14,8 @@ std::string NoRigMessage(std::string_view method) {
 namespace {
 // Authentication and the method's role first: an unauthenticated caller learns nothing about
 // the server's role.
-grpc::Status RefuseAfterAuth(grpc::ServerContext* ctx, const ServiceOptions& options, std::string_view method) {
-  if (auto who = AuthorizeCall(ctx, options.access, method); !who.ok()) return ToGrpcStatus(who.status());
+grpc::Status RefuseAfterAuth(grpc::ServerContext* ctx, const ServiceOptions&, std::string_view method) {
+  if (auto who = CallerOf(ctx); !who.ok()) return ToGrpcStatus(who.status());
   return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, NoRigMessage(method));
 }
 }  // namespace

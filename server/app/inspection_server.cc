@@ -7,6 +7,7 @@
 #include <algorithm>
 
 #include "server/security/access_control.h"
+#include "server/security/call_authorization.h"
 #include "server/security/audit_interceptor.h"
 #include "server/security/log_identity_interceptor.h"
 #include "server/security/transport_security.h"
@@ -121,7 +122,6 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
 
   ServiceOptions so;
   so.server_version = INSPECT_VERSION;
-  so.access = s->access_->enabled() ? s->access_.get() : nullptr;
   so.scene_dir = options.scene_dir;
   so.janitor = s->janitor_.get();
   so.min_free_bytes = min_free_bytes;
@@ -151,6 +151,8 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   interceptors.push_back(s->ops_->NewInterceptorFactory());  // inspectd_grpc_calls_total
   interceptors.push_back(std::make_unique<AuditInterceptorFactory>(s->audit_.get(), s->access_.get()));
   interceptors.push_back(std::make_unique<LogIdentityInterceptorFactory>(s->access_.get()));  // "identity" in logs
+  // Who may call what, decided before any handler runs; without it every call is refused.
+  interceptors.push_back(std::make_unique<AuthorizationInterceptorFactory>(s->access_.get()));
   builder.experimental().SetInterceptorCreators(std::move(interceptors));
   // Uploads arrive in 1 MiB chunks; keep headroom for the envelope.
   builder.SetMaxReceiveMessageSize(4 << 20);

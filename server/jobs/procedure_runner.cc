@@ -14,10 +14,11 @@
 
 #include "core/io/depth_export.h"
 #include "core/io/stack.h"
-#include "server/results/inspection_report.h"
-#include "server/storage/owned_folder.h"
+#include "server/jobs/result_proto.h"
 #include "server/procedures/z_range_search.h"
+#include "server/results/inspection_report.h"
 #include "server/results/result_publisher.h"
+#include "server/storage/owned_folder.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -74,52 +75,6 @@ void EmitPhase(const JobContext& context, v1::JobPhase phase, double progress = 
     if (progress > 0.0) e.set_progress(progress);
     if (!message.empty()) e.set_message(message);
   });
-}
-
-// The reconstruction method and, for the integral methods, their figures (DepthSummary).
-void RecordMethod(const ReconstructionMethodSettings& m, const IntegralSffFigures& figures, v1::DepthSummary* d) {
-  switch (m.method) {
-    case ReconstructionMethod::kSff:
-      d->set_method(v1::RECONSTRUCTION_METHOD_SFF);
-      return;
-    case ReconstructionMethod::kIsff:
-      d->set_method(v1::RECONSTRUCTION_METHOD_ISFF);
-      break;
-    case ReconstructionMethod::kIsffGroundTruth:
-      d->set_method(v1::RECONSTRUCTION_METHOD_ISFF_GT);
-      break;
-    case ReconstructionMethod::kIsffFast:
-      d->set_method(v1::RECONSTRUCTION_METHOD_ISFF_FAST);
-      d->set_isff_fast_threshold(m.isff_fast_threshold);
-      break;
-  }
-  d->set_frame_noise_sigma(figures.frame_noise_sigma);
-  d->set_frames_searched_fraction(figures.frames_searched_fraction);
-}
-
-// What the SFF post-processing took away and filled (DepthSummary 26..27).
-void RecordPostProcess(const DepthPostProcessFigures& f, v1::DepthSummary* d) {
-  d->set_consistency_rejected_percent(100.0 * f.consistency_rejected_fraction);
-  d->set_filled_percent(100.0 * f.filled_fraction);
-}
-
-// The lateral alignment that ran and its figures (DepthSummary 22..25).
-
-void RecordAlignment(const AlignmentFigures& a, v1::DepthSummary* d) {
-  switch (a.alignment) {
-    case FrameAlignment::kNone:
-      d->set_alignment(v1::FRAME_ALIGNMENT_NONE);
-      break;
-    case FrameAlignment::kEstimate:
-      d->set_alignment(v1::FRAME_ALIGNMENT_ESTIMATE);
-      break;
-    case FrameAlignment::kCalibrated:
-      d->set_alignment(v1::FRAME_ALIGNMENT_CALIBRATED);
-      break;
-  }
-  d->set_alignment_max_scale_change_percent(a.max_scale_change_percent);
-  d->set_alignment_max_shift_px(a.max_shift_px);
-  d->set_alignment_seen_percent(a.seen_by_every_frame_percent);
 }
 
 double SecondsSince(std::chrono::steady_clock::time_point t) {
@@ -203,7 +158,8 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
         }
         // Never goes back: coarse_taken <= coarse_planned and the fine count <= its estimate.
         const int done = f.z_range_search ? f.index : frames.coarse_taken + f.index;
-        const int total = f.z_range_search ? frames.coarse_planned + frames.fine_estimate : frames.coarse_taken + f.count;
+        const int total =
+            f.z_range_search ? frames.coarse_planned + frames.fine_estimate : frames.coarse_taken + f.count;
         FillFrameEvent(phase, done, total, f.z_um, f.exposure_us, f.statistics, &e);
         e.mutable_frame()->set_frame_index(f.index);  // within its phase
         e.mutable_frame()->set_frame_count(f.count);
@@ -233,31 +189,16 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
   v1::JobResult result;
   result.set_scan_id(job_id);
   result.set_calibration_id(plan.calibration_id);
-  *result.mutable_depth() =
-      SummariseDepth(outcome.depth, outcome.manifest.pixel_size_um, outcome.ground_truth_um, plan.sff.window_px);
-  result.mutable_depth()->set_engine_seconds(outcome.engine_finish_seconds);
-  RecordMethod(plan.reconstruction, outcome.isff, result.mutable_depth());
-  result.mutable_depth()->set_illumination(outcome.manifest.illumination);
-  result.mutable_depth()->set_illumination_decision(outcome.illumination_decision);
-  if (const auto& r = outcome.manifest.z_range_search) {
-    v1::ZRangeSearchResult* z = result.mutable_depth()->mutable_z_range_search();
-    z->set_window_start_um(r->window_start_um);
-    z->set_window_end_um(r->window_end_um);
-    z->set_coarse_step_um(r->coarse_step_um);
-    z->set_coarse_frame_count(int(r->coarse_frames.size()));
-    z->set_refine_frame_count(int(r->refine_frames.size()));
-    z->set_focus_low_um(r->focus_low_um);
-    z->set_focus_high_um(r->focus_high_um);
-    z->set_resolved_percent(r->resolved_percent);
-    z->set_settled_percent(r->settled_percent);
-    z->set_stopped_early(r->stopped_early);
-    z->set_margin_um(r->margin_um);
-    z->set_z_start_um(r->z_start_um);
-    z->set_z_end_um(r->z_end_um);
-    z->set_search_seconds(r->search_seconds);
-  }
-  RecordAlignment(outcome.alignment, result.mutable_depth());
-  RecordPostProcess(outcome.postprocess, result.mutable_depth());
+  DepthSummaryParts parts{outcome.depth, outcome.manifest.pixel_size_um, outcome.ground_truth_um, plan.sff.window_px};
+  parts.engine_seconds = outcome.engine_finish_seconds;
+  parts.method = &plan.reconstruction;
+  parts.integral = &outcome.isff;
+  parts.alignment = &outcome.alignment;
+  parts.postprocess = &outcome.postprocess;
+  parts.illumination = outcome.manifest.illumination;
+  parts.illumination_decision = outcome.illumination_decision;
+  parts.z_range_search = outcome.manifest.z_range_search ? &*outcome.manifest.z_range_search : nullptr;
+  *result.mutable_depth() = DepthSummaryProto(parts);
   const auto scanned_at = std::chrono::steady_clock::now();
   if (work.recipe) {
     EmitPhase(context, v1::JOB_PHASE_STORING, 0.95, "measuring recipe " + work.recipe->recipe.recipe_id());
@@ -329,7 +270,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   // The manifest the request was checked against: a stored scan's folder holds no frames (they
   // are read from its archive), so only the sequential path reads the folder's.
   INSPECT_ASSIGN_OR_RETURN(StackManifest m, work.decoded ? StatusOr<StackManifest>(work.decoded->manifest())
-                                                          : ReadStackManifest(work.stack_dir));
+                                                         : ReadStackManifest(work.stack_dir));
   auto on_frame = [&](int i, int n, double z, const FrameStatistics& st) {
     context.emit([&](v1::JobEvent& e) {
       FillFrameEvent(v1::JOB_PHASE_RECONSTRUCTING, i, n, z, m.frames[i].exposure_us, st, &e);
@@ -352,8 +293,8 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     // the folder.
     StatusOr<IsffResult> integral = Status::Internal("not run");
     if (work.decoded) {
-      StackFrameSource source{[&](int i) { return work.decoded->Frame(i); },
-                              [&](int i) { work.decoded->Release(i); }, {}};
+      StackFrameSource source{
+          [&](int i) { return work.decoded->Frame(i); }, [&](int i) { work.decoded->Release(i); }, {}};
       integral = ReconstructStackIntegralSff(m, source, work.method, work.sff, bundle.get());
       work.decoded->ReleaseAll();  // what a failure left
     } else {
@@ -380,8 +321,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     StatusOr<DepthResult> r = Status::Internal("not run");
     if (work.decoded) {
       a.options.threads = 0;  // frames in memory, Frame thread-safe: neighbour pairs register concurrently
-      StackFrameSource source{[&](int i) { return work.decoded->Frame(i); },
-                              [&](int i) { work.decoded->Release(i); },
+      StackFrameSource source{[&](int i) { return work.decoded->Frame(i); }, [&](int i) { work.decoded->Release(i); },
                               [&](int i) { return work.decoded->Statistics(i); }};
       r = ReconstructStackFrames(m, source, unthresholded, on_frame, *context.cancel, a, &alignment);
       work.decoded->ReleaseAll();  // what a failure left
@@ -424,11 +364,13 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   if (context.cancel->load()) return Status::Cancelled("reconstruction cancelled while storing");
   v1::JobResult result;
   result.set_scan_id(work.source_scan_id);
-  *result.mutable_depth() = SummariseDepth(depth, m.pixel_size_um, truth, work.sff.window_px);
-  result.mutable_depth()->set_engine_seconds(engine_seconds);
-  RecordMethod(work.method, isff, result.mutable_depth());
-  RecordAlignment(alignment, result.mutable_depth());
-  RecordPostProcess(postprocess, result.mutable_depth());
+  DepthSummaryParts parts{depth, m.pixel_size_um, truth, work.sff.window_px};
+  parts.engine_seconds = engine_seconds;
+  parts.method = &work.method;
+  parts.integral = &isff;
+  parts.alignment = &alignment;
+  parts.postprocess = &postprocess;
+  *result.mutable_depth() = DepthSummaryProto(parts);
   const auto t_publish = std::chrono::steady_clock::now();
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
   spdlog::debug("job {}: reconstruction {:.3f} s, artifacts written {:.3f} s, hashed and published {:.3f} s",

@@ -8,7 +8,6 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/io/depth_export.h"
-#include "devices/sim/simulated_rig.h"
 #include "core/sff/stack_reconstruct.h"
 #include "server/procedures/illumination_auto.h"
 #include "server/procedures/illumination_strategy.h"
@@ -359,10 +358,10 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
   }
   out.engine_finish_seconds = std::chrono::duration<double>(Clock::now() - t1).count();
   out.acquisition_seconds = std::chrono::duration<double>(t1 - t0).count();
-  if (rig.simulation() != nullptr) {
+  if (const SimulationControl* sim = rig.simulation()) {
     // In the grid of the middle frame, the alignment's reference (the specimen grid without
     // focus breathing).
-    out.ground_truth_um = GroundTruthInCameraGrid(rig, plan.z_um[(plan.z_um.size() - 1) / 2]);
+    out.ground_truth_um = sim->GroundTruthInCameraGridUm(plan.z_um[(plan.z_um.size() - 1) / 2]);
     DepthExportMeta meta;
     meta.pixel_size_um = m.pixel_size_um;
     meta.description = "ground truth depth (um) of simulated specimen " + m.specimen;

@@ -18,7 +18,7 @@
 #include "core/calibration/calibration_bundle.h"
 #include "core/illumination/compensation.h"
 #include "core/sff/depth_postprocess.h"
-#include "core/sff/focus_range_search.h"
+#include "core/sff/z_range_search.h"
 #include "core/io/frame_statistics.h"
 #include "core/sff/sff_engine.h"
 #include "core/io/stack.h"

@@ -1,5 +1,5 @@
 // Automatic z range: the coarse sweep on the rig, the range it finds and the fine scan over it
-// (z_range_search.h; core/sff/focus_range_search.h for the maths).
+// (z_range_search.h; core/sff/z_range_search.h for the maths).
 #include "server/procedures/z_range_search.h"
 
 #include <algorithm>
@@ -47,7 +47,7 @@ struct CoarseSweep {
   std::vector<double> z_um;
   std::vector<StackFrame> frames;
   std::vector<StackFrame> refine_frames;  // after the sweep, at the found range's ends
-  FocusRangeEstimate estimate;
+  ZRangeEstimate estimate;
   double settled_percent = 0.0;  // when the sweep ended
   bool stopped_early = false;    // before the window's end: the field had settled
 };
@@ -61,10 +61,10 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
   CoarseSweep sweep;
   INSPECT_ASSIGN_OR_RETURN(sweep.z_um,
                            CoarseSweepZ(s, stage.min_z_um(), stage.max_z_um(), kMaxCoarseFrames, "z_range_search."));
-  const FocusRangeSearchOptions search_options;
+  const ZRangeSearchOptions search_options;
   INSPECT_ASSIGN_OR_RETURN(
-      FocusRangeAccumulator acc,
-      FocusRangeAccumulator::Create(search_options, camera.frame_size(), camera.bit_depth()));
+      ZRangeAccumulator acc,
+      ZRangeAccumulator::Create(search_options, camera.frame_size(), camera.bit_depth()));
   // 64/192 rather than 0/255: the same mean as STD's grey 128 without doubling the light on
   // parts exposed for it (clipped squares would hide the pattern's edges).
   const cv::Mat pattern = 64 + 128 * CheckerboardMask(rig.projector().resolution(), kSearchCellProjectorPx);
@@ -77,7 +77,7 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
   if (camera.exposure_us() != exposure_us) INSPECT_RETURN_IF_ERROR(camera.SetExposure(exposure_us));
   const int n = int(sweep.z_um.size());
   // Progress counts the sweep and the refinement frames it may add.
-  const int planned = n + FocusRangeAccumulator::kMaxRefinementFrames;
+  const int planned = n + ZRangeAccumulator::kMaxRefinementFrames;
   // One capture of the search: stage, frame, raw/ file, statistics, progress event.
   auto capture = [&](int i, double z_um, const char* what, std::vector<StackFrame>* record) -> StatusOr<cv::Mat> {
     const std::string name = std::string(what) + " frame " + std::to_string(i);
@@ -111,7 +111,7 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, capture(i, sweep.z_um[size_t(i)], "coarse", &sweep.frames));
     INSPECT_RETURN_IF_ERROR(acc.PushFrame(frame, sweep.z_um[size_t(i)]));
     // The rest of the window can hold no more focus than the few unsettled pixels'
-    // (FocusRangeSearchOptions::stop_settled_percent): skip it.
+    // (ZRangeSearchOptions::stop_settled_percent): skip it.
     if (search_options.stop_settled_percent > 0.0 && i + 1 < n) {
       sweep.settled_percent = acc.SettledPercent();
       if (sweep.settled_percent >= search_options.stop_settled_percent) {
@@ -121,8 +121,8 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
     }
   }
   if (!sweep.stopped_early) sweep.settled_percent = acc.SettledPercent();
-  INSPECT_ASSIGN_OR_RETURN(const FocusRangeEstimate first, acc.Finish());
-  // The range's ends resampled at twice the density (FocusRangeAccumulator::PlanRefinement).
+  INSPECT_ASSIGN_OR_RETURN(const ZRangeEstimate first, acc.Finish());
+  // The range's ends resampled at twice the density (ZRangeAccumulator::PlanRefinement).
   const std::vector<double> refine_z = acc.PlanRefinement(first);
   for (size_t j = 0; j < refine_z.size(); ++j) {
     const int i = int(sweep.frames.size() + j);
@@ -131,7 +131,7 @@ StatusOr<CoarseSweep> RunCoarseSweep(Rig& rig, const ScanPlan& plan, const fs::p
   }
   // The refined samples drop the pixels they show to be halos; should that leave too few
   // peaks, the sweep's own estimate stands.
-  StatusOr<FocusRangeEstimate> refined = acc.Finish();
+  StatusOr<ZRangeEstimate> refined = acc.Finish();
   sweep.estimate = refined.ok() ? std::move(refined).value() : first;
   return sweep;
 }

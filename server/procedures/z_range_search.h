@@ -1,7 +1,7 @@
 // Automatic z range (issue 18): a coarse sweep over the search window finds where the specimen's
-// focus lies (core/sff/focus_range_search.h), then the normal scan (scan_procedure.h) runs over that
+// focus lies (core/sff/z_range_search.h), then the normal scan (scan_procedure.h) runs over that
 // range plus the margin at the requested step. After the sweep, 2-4 frames refine the found
-// range's ends (FocusRangeAccumulator::PlanRefinement). The search's frames are stored under
+// range's ends (ZRangeAccumulator::PlanRefinement). The search's frames are stored under
 // raw/ of the stack ("frame_<i>_coarse0.png", "frame_<i>_refine0.png") and recorded in
 // stack.json's "z_range_search" ("coarse_frames", "refine_frames").
 //
@@ -17,14 +17,14 @@
 #include <functional>
 
 #include "core/calibration/calibration_bundle.h"
-#include "core/sff/focus_range_search.h"
+#include "core/sff/z_range_search.h"
 #include "core/util/status.h"
 #include "devices/rig.h"
 #include "server/procedures/scan_procedure.h"
 
 namespace inspection {
 
-// The pattern's cell is kSearchCellProjectorPx (core/sff/focus_range_search.h): 3.4 camera pixels
+// The pattern's cell is kSearchCellProjectorPx (core/sff/z_range_search.h): 3.4 camera pixels
 // per projector pixel on the thesis rig, a period of ~14 camera pixels, resolved by the focus
 // measure at 1/4 scale.
 // Most coarse frames one search may take (a window / step needing more is INVALID_ARGUMENT).
@@ -42,7 +42,7 @@ inline constexpr double kDefaultCoarseSteps = 4.0;
 inline constexpr int kMinFineFrames = 7;
 inline constexpr double kDefaultMarginSteps = 1.5;
 // The margin covers the search's own error, which is set by the coarse step, not the fine one.
-// Before the refinement frames (FocusRangeAccumulator::PlanRefinement) it was up to 4 um
+// Before the refinement frames (ZRangeAccumulator::PlanRefinement) it was up to 4 um
 // inwards at 20 um coarse steps (the cutter's top: its clipped land resolves no peak) and a
 // quarter coarse step was needed: 1.5 fine steps alone (3 um at 2 um steps) cut the cutter's
 // top (93 % coverage at seed 23). The refinement halves the sampling at the ends, and an
@@ -67,7 +67,7 @@ StatusOr<ZRangeSearchSettings> ResolveZRangeSearch(const ZRangeSearchSettings& r
 // refinement; count = the window's coarse frames + kMaxRefinementFrames), then the scan's
 // frames. The outcome's manifest carries the record (also written to stack.json);
 // images_acquired and capture_statistics include the search's frames.
-// FAILED_PRECONDITION when the sweep finds no focus (core/sff/focus_range_search.h).
+// FAILED_PRECONDITION when the sweep finds no focus (core/sff/z_range_search.h).
 StatusOr<ScanOutcome> RunScanWithZRangeSearch(Rig& rig, const ScanPlan& plan, const std::filesystem::path& stack_dir,
                                               const std::function<void(const ScanFrameEvent&)>& on_frame,
                                               const std::atomic<bool>& cancel, const CalibrationBundle* bundle);

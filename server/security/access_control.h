@@ -33,9 +33,14 @@ enum class Role { kViewer = 0, kOperator = 1, kEngineer = 2, kAdmin = 3 };
 const char* RoleName(Role role);  // "viewer", "operator", "engineer", "admin"
 StatusOr<Role> ParseRole(std::string_view name);
 
-// The role an RPC needs, by its bare method name ("Scan", "DeleteJob"). Unknown methods need
-// admin, so a new RPC is closed until someone decides who may call it.
-Role RequiredRole(std::string_view method);
+// The role an RPC needs, by its full method name as gRPC routes it
+// ("/inspection.v1.InspectionService/Scan"); none for a method the table does not name, which
+// Authorize refuses, so a new RPC is closed until someone decides who may call it.
+std::optional<Role> RequiredRole(std::string_view full_method);
+// Every full method name the role table names (the test checks them against the descriptors).
+std::vector<std::string> MethodsWithRoles();
+// "/inspection.v1.InspectionService/Scan" -> "Scan"
+std::string_view BareMethodName(std::string_view full_method);
 
 // What a call presented, extracted from the transport. Kept free of gRPC types so the policy
 // is testable without a server.
@@ -103,8 +108,9 @@ class AccessControl {
   StatusOr<Identity> Authenticate(const CallerCredentials& credentials) const {
     return snapshot()->Authenticate(credentials);
   }
-  // Authenticate and check the role for one call of `method`.
-  StatusOr<Identity> Authorize(const CallerCredentials& credentials, std::string_view method) const;
+  // Authenticate and check the role for one call of `full_method` (RequiredRole); PERMISSION_DENIED
+  // for a method without a rule.
+  StatusOr<Identity> Authorize(const CallerCredentials& credentials, std::string_view full_method) const;
 
  private:
   std::shared_ptr<const AccessPolicy> snapshot() const;

@@ -14,13 +14,6 @@ namespace {
 
 constexpr const char* kTargetKey = "inspection-target";
 
-// "/inspection.v1.InspectionService/Scan" -> "Scan"
-std::string_view BareMethod(const char* full) {
-  std::string_view m = full ? full : "";
-  const auto slash = m.rfind('/');
-  return slash == std::string_view::npos ? m : m.substr(slash + 1);
-}
-
 // The id a request names (job_id, scan_id, artifact_id, calibration_id, specimen), also one
 // level down (ReconstructRequest.start.scan_id). Only these fields: never free text or data.
 std::string RequestTarget(const google::protobuf::Message& m, int depth = 0) {
@@ -79,10 +72,11 @@ class AuditInterceptor : public grpc::experimental::Interceptor {
  private:
   void Record(grpc::experimental::InterceptorBatchMethods* methods) {
     const grpc::Status status = methods->GetSendStatus();
-    const std::string_view method = BareMethod(info_->method());
+    const std::string_view full_method = info_->method() ? info_->method() : "";
+    const std::string_view method = BareMethodName(full_method);
     const bool denied = status.error_code() == grpc::StatusCode::UNAUTHENTICATED ||
                         status.error_code() == grpc::StatusCode::PERMISSION_DENIED;
-    if (!denied && !IsMutatingMethod(method)) return;
+    if (!denied && !IsMutatingMethod(full_method)) return;
     AuditRecord r;
     r.method = std::string(method);
     r.code = static_cast<StatusCode>(static_cast<int>(status.error_code()));
@@ -119,7 +113,7 @@ class AuditInterceptor : public grpc::experimental::Interceptor {
 
 }  // namespace
 
-bool IsMutatingMethod(std::string_view method) { return RequiredRole(method) != Role::kViewer; }
+bool IsMutatingMethod(std::string_view full_method) { return RequiredRole(full_method) != Role::kViewer; }
 
 void SetAuditTarget(grpc::ServerContext* context, const std::string& id) {
   if (context && !id.empty()) context->AddTrailingMetadata(kTargetKey, id);

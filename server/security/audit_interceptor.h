@@ -21,8 +21,9 @@ class ServerContext;
 namespace inspection {
 
 // True for RPCs that change state (start, cancel, delete, configure): every method that needs
-// more than the viewer role. Reads are audited only when refused.
-bool IsMutatingMethod(std::string_view method);
+// more than the viewer role, or none in the table (full method names, access_control.h). Reads
+// are audited only when refused.
+bool IsMutatingMethod(std::string_view full_method);
 
 // Records the id a call created or acted on (sent to the client as trailing metadata
 // "inspection-target", which is where the interceptor reads it; ids are not secret, the client

@@ -1,6 +1,5 @@
 #include "server/storage/artifact_files.h"
 
-#include <openssl/evp.h>
 #include <zip.h>
 
 #include <algorithm>
@@ -11,32 +10,17 @@
 #include <memory>
 #include <vector>
 
+#include "common/sha256_file.h"
 #include "server/storage/data_lifecycle.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
 
 StatusOr<std::string> Sha256File(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Status::Internal("cannot read " + path.string());
-  std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> ctx(EVP_MD_CTX_new(), EVP_MD_CTX_free);
-  if (!ctx || EVP_DigestInit_ex(ctx.get(), EVP_sha256(), nullptr) != 1) return Status::Internal("sha256 init failed");
-  std::vector<char> buf(1 << 20);
-  while (in) {
-    in.read(buf.data(), std::streamsize(buf.size()));
-    if (in.gcount() > 0) EVP_DigestUpdate(ctx.get(), buf.data(), size_t(in.gcount()));
-  }
-  if (in.bad()) return Status::Internal("read error on " + path.string());
-  unsigned char md[EVP_MAX_MD_SIZE];
-  unsigned int len = 0;
-  EVP_DigestFinal_ex(ctx.get(), md, &len);
-  static const char* hex = "0123456789abcdef";
-  std::string out;
-  for (unsigned int i = 0; i < len; ++i) {
-    out.push_back(hex[md[i] >> 4]);
-    out.push_back(hex[md[i] & 15]);
-  }
-  return out;
+  std::string error;
+  std::optional<std::string> hex = Sha256FileHex(path, &error);
+  if (!hex) return Status::Internal(error);
+  return std::move(*hex);
 }
 
 Status ZipFolder(const fs::path& folder, const fs::path& zip_path) {

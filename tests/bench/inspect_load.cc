@@ -22,6 +22,7 @@
 #include <thread>
 
 #include "client_cli/inspection_client.h"
+#include "common/sha256_file.h"
 
 namespace fs = std::filesystem;
 using inspection::client::ClientOptions;
@@ -205,7 +206,7 @@ int main(int argc, char** argv) {
     for (const auto& a : job.result().artifacts()) {
       const fs::path dest = downloads / ("verify-" + a.artifact_id());
       grpc::Status st = verifier.DownloadArtifact(a.artifact_id(), dest, false);
-      if (st.ok() && inspection::client::Sha256OfFile(dest) == a.sha256())
+      if (st.ok() && inspection::Sha256FileHex(dest) == a.sha256())
         ++verified;
       else
         ++mismatched;

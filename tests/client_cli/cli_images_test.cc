@@ -91,6 +91,9 @@ TEST_F(CliTest, ImageFolderIsOrderedNaturallyWithRegularZAndReconstructsLikeTheS
            kept.string(), "--out", (work_ / "rec2").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.err, "inspectctl: note: no --pixel-size; lateral outputs are in pixels (unknown scale)\n");
+  EXPECT_NE(r.out.find("depth: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" px (lateral scale unknown), "), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("0.000 um/px"), std::string::npos) << r.out;
   const json manifest = json::parse(ReadAll(kept / "stack.json"));
   EXPECT_FALSE(manifest.contains("pixel_size_um"));
   ASSERT_EQ(manifest["frames"].size(), n);

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <functional>
 
+#include "common/sha256_file.h"
 #include "core/io/depth_export.h"
 #include "tests/client_cli/cli_fixture.h"
 
@@ -28,7 +29,7 @@ TEST_F(CliTest, ScanWritesResultFilesAndPrintsFolderAndDepthSummary) {
     }
     ++files;
     ASSERT_TRUE(fs::exists(out / a.file_name())) << a.file_name();
-    EXPECT_EQ(client::Sha256OfFile(out / a.file_name()), a.sha256()) << a.file_name();
+    EXPECT_EQ(Sha256FileHex(out / a.file_name()), a.sha256()) << a.file_name();
   }
   EXPECT_GE(files, 4);
   for (const char* name : {"depth.tiff", "confidence.tiff", "all_in_focus.png", "depth_preview.png"}) {

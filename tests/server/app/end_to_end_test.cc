@@ -7,6 +7,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <set>
 
+#include "common/sha256_file.h"
 #include "core/io/depth_export.h"
 #include "core/metrology/depth_metrics.h"
 #include "core/io/stack.h"
@@ -168,7 +169,7 @@ TEST_F(LargeArtifactTest, DownloadsArtifactLargerThan4MiBVerifiedAndResumed) {
   const fs::path out = UniqueTempDir("dl");
   ASSERT_TRUE(client_->DownloadArtifact(zip->artifact_id(), out / "stack.zip", false).ok());
   EXPECT_EQ(int64_t(fs::file_size(out / "stack.zip")), zip->size_bytes());
-  EXPECT_EQ(client::Sha256OfFile(out / "stack.zip"), zip->sha256());
+  EXPECT_EQ(Sha256FileHex(out / "stack.zip"), zip->sha256());
   const std::string full = ReadAll(out / "stack.zip");
 
   // A range from an offset returns exactly those bytes, with the whole file's sha256.
@@ -331,7 +332,7 @@ TEST_F(EndToEndTest, JobsAndResultsSurviveARestart) {
   EXPECT_EQ(replay.back().state(), v1::JOB_STATE_SUCCEEDED);
   const fs::path out = UniqueTempDir("restart");
   ASSERT_TRUE(client_->DownloadArtifact(artifact_id, out / "depth.tiff", false).ok());
-  EXPECT_EQ(client::Sha256OfFile(out / "depth.tiff"), depth->sha256());
+  EXPECT_EQ(Sha256FileHex(out / "depth.tiff"), depth->sha256());
   fs::remove_all(out);
 }
 

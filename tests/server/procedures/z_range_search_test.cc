@@ -150,7 +150,7 @@ TEST_P(ZRangeSearchTest, RangeHoldsTheTrueHeightsWithAtMostThreeStepsToSpare) {
     EXPECT_FALSE(r.stopped_early) << specimen << ": " << r.settled_percent << " % settled";
   }
   // Then 2-4 frames half-way between the coarse frame nearest each end of the found range and
-  // its neighbours (FocusRangeAccumulator::PlanRefinement; 2 when both ends are nearest one frame).
+  // its neighbours (ZRangeAccumulator::PlanRefinement; 2 when both ends are nearest one frame).
   const int refine = int(r.refine_frames.size());
   EXPECT_GE(refine, 2) << specimen;
   EXPECT_LE(refine, 4) << specimen;
@@ -169,7 +169,7 @@ TEST_P(ZRangeSearchTest, RangeHoldsTheTrueHeightsWithAtMostThreeStepsToSpare) {
       EXPECT_EQ(events[size_t(k)].index, k) << k;
     }
   }
-  EXPECT_EQ(events.front().count, planned + FocusRangeAccumulator::kMaxRefinementFrames);
+  EXPECT_EQ(events.front().count, planned + ZRangeAccumulator::kMaxRefinementFrames);
   EXPECT_TRUE(fs::exists(dir_ / r.coarse_frames[2].file)) << r.coarse_frames[2].file;
 }
 

@@ -10,8 +10,10 @@
 #include <future>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <set>
 #include <sstream>
 
+#include "server/security/access_control.h"
 #include "tests/server/server_fixture.h"
 #include "tests/server/test_certs.h"
 
@@ -267,6 +269,39 @@ TEST_F(SecurityTest, NamedTokensOnPlaintextLoopback) {
             grpc::StatusCode::PERMISSION_DENIED);
   // Reflection is off because authentication is configured: the service is not there at all.
   EXPECT_EQ(CallReflection().error_code(), grpc::StatusCode::UNIMPLEMENTED);
+}
+
+// The role table and the services agree both ways, and every method of every service is decided
+// before its handler: each one, called with no credentials, answers UNAUTHENTICATED.
+TEST_F(SecurityTest, EveryMethodOfEveryServiceHasARuleAndIsRefusedWithoutCredentials) {
+  const google::protobuf::FileDescriptor* file = v1::ScanRequest::descriptor()->file();
+  std::set<std::string> methods;
+  for (int s = 0; s < file->service_count(); ++s) {
+    const google::protobuf::ServiceDescriptor* service = file->service(s);
+    for (int m = 0; m < service->method_count(); ++m) {
+      const std::string full = "/" + service->full_name() + "/" + service->method(m)->name();
+      EXPECT_TRUE(RequiredRole(full).has_value()) << full << " has no access rule";
+      methods.insert(full);
+    }
+  }
+  EXPECT_EQ(methods.size(), 24u);  // 22 InspectionService + 2 SimulationService
+  const std::vector<std::string> ruled = MethodsWithRoles();
+  EXPECT_EQ(std::set<std::string>(ruled.begin(), ruled.end()), methods) << "rules for methods no service has";
+
+  Start(TokenOptions());
+  auto channel = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
+  grpc::GenericStub stub(channel);
+  for (const std::string& full : methods) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    grpc::Slice slice("", 0);  // the empty request of every method (a stream's first message)
+    grpc::ByteBuffer request(&slice, 1), response;
+    std::promise<grpc::Status> done;
+    stub.UnaryCall(&ctx, full, grpc::StubOptions(), &request, &response, [&](grpc::Status s) { done.set_value(s); });
+    const grpc::Status s = done.get_future().get();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::UNAUTHENTICATED) << full << ": " << s.error_message();
+    EXPECT_EQ(s.error_message(), "missing bearer token") << full;
+  }
 }
 
 TEST_F(SecurityTest, ReflectionStaysOnWithoutAuthentication) {

@@ -1,6 +1,6 @@
 // Automatic z range: focus curves of a coarse sweep on a reduced grid, their resolved peaks and
-// the percentile range (focus_range_search.h; thesis eq. 3.14 and 3.3.3).
-#include "core/sff/focus_range_search.h"
+// the percentile range (z_range_search.h; thesis eq. 3.14 and 3.3.3).
+#include "core/sff/z_range_search.h"
 
 #include <algorithm>
 #include <cmath>
@@ -12,7 +12,7 @@
 
 namespace inspection {
 
-Status FocusRangeSearchOptions::Validate() const {
+Status ZRangeSearchOptions::Validate() const {
   if (downsample < 1 || downsample > 16) return Status::InvalidArgument("downsample must be in [1, 16]");
   if (window_px < 3 || window_px > 15 || window_px % 2 == 0) {
     return Status::InvalidArgument("window_px must be odd, 3..15");
@@ -36,7 +36,7 @@ Status FocusRangeSearchOptions::Validate() const {
   return Status::Ok();
 }
 
-StatusOr<FocusRangeAccumulator> FocusRangeAccumulator::Create(const FocusRangeSearchOptions& options,
+StatusOr<ZRangeAccumulator> ZRangeAccumulator::Create(const ZRangeSearchOptions& options,
                                                               cv::Size frame_size, int bit_depth) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
   if (bit_depth < 8 || bit_depth > 16) return Status::InvalidArgument("bit_depth must be in [8, 16]");
@@ -45,14 +45,14 @@ StatusOr<FocusRangeAccumulator> FocusRangeAccumulator::Create(const FocusRangeSe
                                    std::to_string(frame_size.height) + " is too small for downsample " +
                                    std::to_string(options.downsample));
   }
-  FocusRangeAccumulator a;
+  ZRangeAccumulator a;
   a.options_ = options;
   a.frame_size_ = frame_size;
   a.bit_depth_ = bit_depth;
   return a;
 }
 
-Status FocusRangeAccumulator::Reduce(const cv::Mat& frame, double z_um, const std::string& name, cv::Mat* energy,
+Status ZRangeAccumulator::Reduce(const cv::Mat& frame, double z_um, const std::string& name, cv::Mat* energy,
                                      cv::Mat* saturated) const {
   if (frame.size() != frame_size_ || (frame.type() != CV_8UC1 && frame.type() != CV_16UC1)) {
     return Status::InvalidArgument(name + ": expected a CV_8UC1/CV_16UC1 frame of the camera size");
@@ -83,7 +83,7 @@ Status FocusRangeAccumulator::Reduce(const cv::Mat& frame, double z_um, const st
   return Status::Ok();
 }
 
-Status FocusRangeAccumulator::PushFrame(const cv::Mat& frame, double z_um) {
+Status ZRangeAccumulator::PushFrame(const cv::Mat& frame, double z_um) {
   const std::string name = "coarse frame " + std::to_string(z_um_.size());
   if (!refine_centres_.empty()) return Status::FailedPrecondition(name + ": the sweep's refinement is planned already");
   cv::Mat energy, saturated;
@@ -118,7 +118,7 @@ Status FocusRangeAccumulator::PushFrame(const cv::Mat& frame, double z_um) {
   return Status::Ok();
 }
 
-bool FocusRangeAccumulator::PeakIsFocus(int r, int c) const {
+bool ZRangeAccumulator::PeakIsFocus(int r, int c) const {
   const int n = frames();
   const int best = argmax_.at<int>(r, c);
   const float f_max = max_.at<float>(r, c);
@@ -134,7 +134,7 @@ bool FocusRangeAccumulator::PeakIsFocus(int r, int c) const {
   return saturated_[size_t(best)].at<float>(r, c) <= options_.max_saturated_share;
 }
 
-double FocusRangeAccumulator::SettledPercent() const {
+double ZRangeAccumulator::SettledPercent() const {
   const int n = frames();
   if (n < 3) return 0.0;
   long settled = 0;
@@ -149,7 +149,7 @@ double FocusRangeAccumulator::SettledPercent() const {
   return 100.0 * double(settled) / double(max_.total());
 }
 
-Status FocusRangeAccumulator::PushRefinementFrame(const cv::Mat& frame, double z_um) {
+Status ZRangeAccumulator::PushRefinementFrame(const cv::Mat& frame, double z_um) {
   const std::string name = "refinement frame " + std::to_string(refine_z_um_.size());
   cv::Mat energy, saturated;
   INSPECT_RETURN_IF_ERROR(Reduce(frame, z_um, name, &energy, &saturated));
@@ -167,7 +167,7 @@ Status FocusRangeAccumulator::PushRefinementFrame(const cv::Mat& frame, double z
   return Status::Ok();
 }
 
-std::vector<double> FocusRangeAccumulator::PlanRefinement(const FocusRangeEstimate& first) {
+std::vector<double> ZRangeAccumulator::PlanRefinement(const ZRangeEstimate& first) {
   std::vector<double> out;
   const int n = frames();
   if (n < 3) return out;
@@ -201,7 +201,7 @@ std::vector<double> FocusRangeAccumulator::PlanRefinement(const FocusRangeEstima
 // See PeakZ: 1/e^2.
 constexpr double kSecondSourceRise = 0.135;
 
-float FocusRangeAccumulator::PeakZ(int r, int c, int best) const {
+float ZRangeAccumulator::PeakZ(int r, int c, int best) const {
   const double z_prev = z_um_[size_t(best - 1)], z_next = z_um_[size_t(best + 1)];
   const double z_min = std::min(z_prev, z_next), z_max = std::max(z_prev, z_next);
   // Samples (z, F, saturated share) of the curve from the coarse neighbours' z to the maximum's
@@ -286,8 +286,8 @@ void RejectInconsistentPeaks(int radius, double step_um, cv::Mat* peak_z_um) {
 // its land and the halo 15-40 um above it once the lowest peak moved by 5 um).
 constexpr double kClusterBinsPerStep = 4.0;
 
-// The peaks inside the kept clusters (FocusRangeSearchOptions::min_bin_percent).
-std::vector<float> ClusteredPeaks(const std::vector<float>& peaks, double step_um, const FocusRangeSearchOptions& o) {
+// The peaks inside the kept clusters (ZRangeSearchOptions::min_bin_percent).
+std::vector<float> ClusteredPeaks(const std::vector<float>& peaks, double step_um, const ZRangeSearchOptions& o) {
   const double bin_um = step_um / kClusterBinsPerStep;
   const auto [min_it, max_it] = std::minmax_element(peaks.begin(), peaks.end());
   const double z0 = *min_it;
@@ -332,11 +332,11 @@ std::vector<float> ClusteredPeaks(const std::vector<float>& peaks, double step_u
 
 }  // namespace
 
-StatusOr<FocusRangeEstimate> FocusRangeAccumulator::Finish() const {
+StatusOr<ZRangeEstimate> ZRangeAccumulator::Finish() const {
   const int n = frames();
   if (n < 3) return Status::FailedPrecondition("the coarse sweep needs at least 3 frames, has " + std::to_string(n));
   const cv::Size size = focus_[0].size();
-  FocusRangeEstimate e;
+  ZRangeEstimate e;
   e.peak_z_um.create(size, CV_32FC1);
   std::vector<float> peaks;
   peaks.reserve(size_t(size.area()));
@@ -432,7 +432,7 @@ StatusOr<std::vector<double>> CoarseSweepZ(const ZRangeSearchSettings& s, double
   return z;
 }
 
-FineRange ChooseFineRange(const FocusRangeEstimate& estimate, double fine_step_um, double margin_um, int min_frames,
+FineRange ChooseFineRange(const ZRangeEstimate& estimate, double fine_step_um, double margin_um, int min_frames,
                           double travel_min_um, double travel_max_um) {
   const double want_start = estimate.z_low_um - margin_um, want_end = estimate.z_high_um + margin_um;
   const long steps =

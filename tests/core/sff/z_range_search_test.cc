@@ -1,7 +1,7 @@
-// Automatic z range maths (core/sff/focus_range_search.h) on synthetic coarse sweeps with known
+// Automatic z range maths (core/sff/z_range_search.h) on synthetic coarse sweeps with known
 // heights: a textured two-level part blurred by the defocus model (blur sigma grows linearly with
 // |height - z|), a textureless field, and the sweep / fine range planning with its errors.
-#include "core/sff/focus_range_search.h"
+#include "core/sff/z_range_search.h"
 
 #include <gtest/gtest.h>
 
@@ -37,10 +37,10 @@ cv::Mat Frame(double h_left, double h_right, double z, uint64_t seed, bool textu
   return frame;
 }
 
-StatusOr<FocusRangeEstimate> Sweep(double h_left, double h_right, double z0, double z1, double step,
+StatusOr<ZRangeEstimate> Sweep(double h_left, double h_right, double z0, double z1, double step,
                                    bool textured = true) {
-  INSPECT_ASSIGN_OR_RETURN(FocusRangeAccumulator acc,
-                           FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8));
+  INSPECT_ASSIGN_OR_RETURN(ZRangeAccumulator acc,
+                           ZRangeAccumulator::Create(ZRangeSearchOptions{}, cv::Size(256, 192), 8));
   uint64_t seed = 1;
   for (double z = z0; z <= z1 + 1e-9; z += step) {
     INSPECT_RETURN_IF_ERROR(acc.PushFrame(Frame(h_left, h_right, z, seed++, textured), z));
@@ -48,7 +48,7 @@ StatusOr<FocusRangeEstimate> Sweep(double h_left, double h_right, double z0, dou
   return acc.Finish();
 }
 
-TEST(FocusRangeSearchTest, FindsBothLevelsOfATwoLevelPartBetweenCoarseFrames) {
+TEST(ZRangeAccumulatorTest, FindsBothLevelsOfATwoLevelPartBetweenCoarseFrames) {
   // Heights 233 and 271 um fall between the 20 um frames (at 220, 240, ... and 260, 280).
   auto e = Sweep(233.0, 271.0, 100.0, 400.0, 20.0);
   ASSERT_TRUE(e.ok()) << e.status().ToString();
@@ -61,10 +61,10 @@ TEST(FocusRangeSearchTest, FindsBothLevelsOfATwoLevelPartBetweenCoarseFrames) {
   EXPECT_NEAR(e->peak_z_um.at<float>(24, 40), 271.0, 4.0);
 }
 
-TEST(FocusRangeSearchTest, DescendingSweepGivesTheSameRange) {
+TEST(ZRangeAccumulatorTest, DescendingSweepGivesTheSameRange) {
   auto up = Sweep(233.0, 271.0, 100.0, 400.0, 20.0);
   ASSERT_TRUE(up.ok());
-  auto acc = FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8);
+  auto acc = ZRangeAccumulator::Create(ZRangeSearchOptions{}, cv::Size(256, 192), 8);
   ASSERT_TRUE(acc.ok());
   uint64_t seed = 1;
   for (double z = 400.0; z >= 100.0 - 1e-9; z -= 20.0) ASSERT_TRUE(acc->PushFrame(Frame(233, 271, z, seed++), z).ok());
@@ -74,31 +74,31 @@ TEST(FocusRangeSearchTest, DescendingSweepGivesTheSameRange) {
   EXPECT_NEAR(down->z_high_um, up->z_high_um, 2.0);
 }
 
-TEST(FocusRangeSearchTest, TexturelessFieldIsFailedPreconditionNotAGuess) {
+TEST(ZRangeAccumulatorTest, TexturelessFieldIsFailedPreconditionNotAGuess) {
   auto e = Sweep(233.0, 271.0, 100.0, 400.0, 20.0, /*textured=*/false);
   ASSERT_FALSE(e.ok());
   EXPECT_EQ(e.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(e.status().message().find("no focus found"), std::string::npos) << e.status().message();
 }
 
-TEST(FocusRangeSearchTest, FocusOutsideTheWindowIsNotFound) {
+TEST(ZRangeAccumulatorTest, FocusOutsideTheWindowIsNotFound) {
   // The part at 600 um, the sweep over 100 .. 400 um: every curve rises towards the last frame.
   auto e = Sweep(600.0, 600.0, 100.0, 400.0, 20.0);
   ASSERT_FALSE(e.ok());
   EXPECT_EQ(e.status().code(), StatusCode::kFailedPrecondition);
 }
 
-TEST(FocusRangeSearchTest, PushRejectsBadFramesAndBrokenOrder) {
-  auto acc = FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8);
+TEST(ZRangeAccumulatorTest, PushRejectsBadFramesAndBrokenOrder) {
+  auto acc = ZRangeAccumulator::Create(ZRangeSearchOptions{}, cv::Size(256, 192), 8);
   ASSERT_TRUE(acc.ok());
   EXPECT_EQ(acc->PushFrame(cv::Mat(10, 10, CV_8UC1), 0.0).code(), StatusCode::kInvalidArgument);
   ASSERT_TRUE(acc->PushFrame(Frame(0, 0, 0, 1), 0.0).ok());
   ASSERT_TRUE(acc->PushFrame(Frame(0, 0, 10, 2), 10.0).ok());
   EXPECT_EQ(acc->PushFrame(Frame(0, 0, 5, 3), 5.0).code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(acc->Finish().status().code(), StatusCode::kFailedPrecondition);  // 2 frames
-  FocusRangeSearchOptions bad;
+  ZRangeSearchOptions bad;
   bad.window_px = 4;
-  EXPECT_EQ(FocusRangeAccumulator::Create(bad, cv::Size(256, 192), 8).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(ZRangeAccumulator::Create(bad, cv::Size(256, 192), 8).status().code(), StatusCode::kInvalidArgument);
 }
 
 TEST(CoarseSweepZTest, CoversTheWindowAndNamesTheFieldOnBadInput) {
@@ -126,7 +126,7 @@ TEST(CoarseSweepZTest, CoversTheWindowAndNamesTheFieldOnBadInput) {
 }
 
 TEST(ChooseFineRangeTest, WholeStepsCentredOnTheRangeWithinTheTravel) {
-  FocusRangeEstimate e;
+  ZRangeEstimate e;
   e.z_low_um = 203.0;
   e.z_high_um = 231.0;
   // 203 - 7.5 .. 231 + 7.5 = 43 um -> 9 steps of 5 um = 45 um, the extra 2 um shared.
@@ -149,15 +149,15 @@ TEST(ChooseFineRangeTest, WholeStepsCentredOnTheRangeWithinTheTravel) {
   EXPECT_NEAR(r.z_end_um, 30.0, 1e-9);
 }
 
-// The sweep may stop once the field has settled (FocusRangeSearchOptions::stop_settled_percent):
+// The sweep may stop once the field has settled (ZRangeSearchOptions::stop_settled_percent):
 // each half of the two-level part counts once the sweep is two frames past its focus frame
 // (233 um: frame 240 at index 7, settled from index 9; 271 um: frame 280 at index 9, settled
 // from index 11); a textureless half never counts. The 3 of 64 reduced columns whose window
 // straddles the 38 um step see both levels (two peaks: not sharp) and never settle; with the
 // right half textureless they see the left half's texture alone and settle with it.
-TEST(FocusRangeSearchTest, FieldSettlesTwoFramesPastEachLevelsFocus) {
+TEST(ZRangeAccumulatorTest, FieldSettlesTwoFramesPastEachLevelsFocus) {
   for (bool right_textured : {true, false}) {
-    auto acc = FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8);
+    auto acc = ZRangeAccumulator::Create(ZRangeSearchOptions{}, cv::Size(256, 192), 8);
     ASSERT_TRUE(acc.ok());
     EXPECT_DOUBLE_EQ(acc->SettledPercent(), 0.0);
     std::vector<double> settled;
@@ -185,10 +185,10 @@ TEST(FocusRangeSearchTest, FieldSettlesTwoFramesPastEachLevelsFocus) {
 
 // A sweep of 100 .. 400 um at 20 um with the refinement PlanRefinement asks for; the estimate
 // before (*coarse) and after it.
-StatusOr<FocusRangeEstimate> RefinedSweep(double h_left, double h_right, double blur_px_per_um,
-                                          FocusRangeEstimate* coarse, std::vector<double>* refine_z) {
-  INSPECT_ASSIGN_OR_RETURN(FocusRangeAccumulator acc,
-                           FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8));
+StatusOr<ZRangeEstimate> RefinedSweep(double h_left, double h_right, double blur_px_per_um,
+                                          ZRangeEstimate* coarse, std::vector<double>* refine_z) {
+  INSPECT_ASSIGN_OR_RETURN(ZRangeAccumulator acc,
+                           ZRangeAccumulator::Create(ZRangeSearchOptions{}, cv::Size(256, 192), 8));
   uint64_t seed = 1;
   for (double z = 100.0; z <= 400.0 + 1e-9; z += 20.0) {
     INSPECT_RETURN_IF_ERROR(acc.PushFrame(Frame(h_left, h_right, z, seed++, true, blur_px_per_um), z));
@@ -205,10 +205,10 @@ StatusOr<FocusRangeEstimate> RefinedSweep(double h_left, double h_right, double 
 // (blur 0.8 px per um): the three coarse samples around the maximum place its vertex up to 7 um
 // off, as the coin's field was (its neighbours sit on the curve's tails). Two frames half a
 // step either side of the frame nearest the found range bring both ends within 2.5 um.
-TEST(FocusRangeSearchTest, RefinementFramesBringAFlatPartsEndsToItsHeight) {
+TEST(ZRangeAccumulatorTest, RefinementFramesBringAFlatPartsEndsToItsHeight) {
   double worst_coarse = 0.0;
   for (double h : {243.0, 247.0, 251.0, 255.0}) {
-    FocusRangeEstimate coarse;
+    ZRangeEstimate coarse;
     std::vector<double> refine_z;
     auto e = RefinedSweep(h, h, 0.8, &coarse, &refine_z);
     ASSERT_TRUE(e.ok()) << e.status().ToString();
@@ -227,8 +227,8 @@ TEST(FocusRangeSearchTest, RefinementFramesBringAFlatPartsEndsToItsHeight) {
   EXPECT_GT(worst_coarse, 5.0) << "the coarse samples alone place this part well";
 }
 
-TEST(FocusRangeSearchTest, RefinementOfATwoLevelPartSamplesBothEnds) {
-  FocusRangeEstimate coarse;
+TEST(ZRangeAccumulatorTest, RefinementOfATwoLevelPartSamplesBothEnds) {
+  ZRangeEstimate coarse;
   std::vector<double> refine_z;
   auto e = RefinedSweep(233.0, 271.0, 0.4, &coarse, &refine_z);
   ASSERT_TRUE(e.ok()) << e.status().ToString();
@@ -243,8 +243,8 @@ TEST(FocusRangeSearchTest, RefinementOfATwoLevelPartSamplesBothEnds) {
 // of it holds two sources of focus energy within one coarse step (a halo beside a surface):
 // the pixel is dropped. Here the refinement frame at 250 um shows no texture while the part at
 // 248 um is sharpest at 240 and still textured at 260.
-TEST(FocusRangeSearchTest, RefinedSamplesThatDipAndRiseAgainAreDropped) {
-  auto acc = FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8);
+TEST(ZRangeAccumulatorTest, RefinedSamplesThatDipAndRiseAgainAreDropped) {
+  auto acc = ZRangeAccumulator::Create(ZRangeSearchOptions{}, cv::Size(256, 192), 8);
   ASSERT_TRUE(acc.ok());
   uint64_t seed = 1;
   for (double z = 100.0; z <= 400.0 + 1e-9; z += 20.0) ASSERT_TRUE(acc->PushFrame(Frame(248, 248, z, seed++), z).ok());
@@ -258,13 +258,13 @@ TEST(FocusRangeSearchTest, RefinedSamplesThatDipAndRiseAgainAreDropped) {
   EXPECT_EQ(refined.status().code(), StatusCode::kFailedPrecondition);
 }
 
-TEST(FocusRangeSearchTest, RefinementFramesAreCheckedAndEndTheSweep) {
-  auto acc = FocusRangeAccumulator::Create(FocusRangeSearchOptions{}, cv::Size(256, 192), 8);
+TEST(ZRangeAccumulatorTest, RefinementFramesAreCheckedAndEndTheSweep) {
+  auto acc = ZRangeAccumulator::Create(ZRangeSearchOptions{}, cv::Size(256, 192), 8);
   ASSERT_TRUE(acc.ok());
   EXPECT_EQ(acc->PushRefinementFrame(Frame(0, 0, 0, 1), 10.0).code(), StatusCode::kFailedPrecondition);
   for (double z : {0.0, 20.0, 40.0}) ASSERT_TRUE(acc->PushFrame(Frame(20, 20, z, 1), z).ok());
   EXPECT_EQ(acc->PushRefinementFrame(Frame(20, 20, 10, 3), 10.0).code(), StatusCode::kFailedPrecondition);
-  FocusRangeEstimate flat;
+  ZRangeEstimate flat;
   flat.z_low_um = flat.z_high_um = 20.0;
   EXPECT_EQ(acc->PlanRefinement(flat), (std::vector<double>{10.0, 30.0}));
   EXPECT_EQ(acc->PushRefinementFrame(cv::Mat(10, 10, CV_8UC1), 10.0).code(), StatusCode::kInvalidArgument);

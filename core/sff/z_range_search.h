@@ -1,5 +1,10 @@
-// Automatic z range (issue 18; the focus measure of thesis eq. 3.14 and the three-point peak of
-// 3.3.3 applied to a coarse sweep): where a specimen's focus lies, from a few frames far apart.
+// One feature, one name in code: "z range search" (this file, server/procedures/z_range_search.h,
+// ZRange* types). The stable API keeps its own names for it: ScanRequest.z_range_search and
+// ZRangeSearchResult in the proto, `inspectctl scan --auto-range` on the CLI, "automatic z range"
+// in the user documentation.
+//
+// Automatic z range (the focus measure of thesis eq. 3.14 and the three-point peak of 3.3.3
+// applied to a coarse sweep): where a specimen's focus lies, from a few frames far apart.
 //
 // Method: every coarse frame is reduced by `downsample` (area average), its Tenengrad energy
 // summed over a window (eq. 3.14) gives one focus curve per reduced pixel. A reduced pixel sees the
@@ -42,7 +47,7 @@ struct ZRangeSearchSettings {
   double margin_um = 0.0;       // added below and above the found range
 };
 
-struct FocusRangeSearchOptions {
+struct ZRangeSearchOptions {
   int downsample = 4;  // frames reduced by this factor (INTER_AREA) before the focus measure
   int window_px = 5;   // Tenengrad window at the reduced scale (odd, 3..15)
   // A reduced pixel's peak is resolved when its maximum is at least this multiple of the lowest
@@ -69,7 +74,7 @@ struct FocusRangeSearchOptions {
   // this radius (reduced pixels) is dropped as inconsistent.
   int consistency_radius = 3;
   double min_cluster_percent = 5.0;
-  // The sweep may end early (FocusRangeAccumulator::SettledPercent) once this share of the
+  // The sweep may end early (ZRangeAccumulator::SettledPercent) once this share of the
   // reduced field has a focus peak the sweep has passed by two frames; 0 = never, sweep the whole
   // window. A depth map is single-valued: a pixel whose peak has been passed has no second
   // surface further on, so once (almost) the whole field has settled the rest of the window can
@@ -82,7 +87,7 @@ struct FocusRangeSearchOptions {
   Status Validate() const;
 };
 
-struct FocusRangeEstimate {
+struct ZRangeEstimate {
   double z_low_um = 0.0;  // percentiles of the resolved peak positions
   double z_high_um = 0.0;
   double resolved_percent = 0.0;   // share of reduced pixels with a resolved peak
@@ -96,10 +101,10 @@ struct FocusRangeEstimate {
 };
 
 // Accumulates the coarse frames' focus curves. Not thread-safe; one per sweep.
-class FocusRangeAccumulator {
+class ZRangeAccumulator {
  public:
   // bit_depth: significant bits of the frames (8..16), for the saturation level.
-  static StatusOr<FocusRangeAccumulator> Create(const FocusRangeSearchOptions& options, cv::Size frame_size,
+  static StatusOr<ZRangeAccumulator> Create(const ZRangeSearchOptions& options, cv::Size frame_size,
                                                 int bit_depth);
   // CV_8UC1 or CV_16UC1 frames of frame_size; z strictly monotonic over the pushes.
   Status PushFrame(const cv::Mat& frame, double z_um);
@@ -111,7 +116,7 @@ class FocusRangeAccumulator {
   double SettledPercent() const;
   // Needs >= 3 frames. FAILED_PRECONDITION when fewer than min_resolved_percent of the reduced
   // pixels resolve a peak (the message gives the share and the likely causes).
-  StatusOr<FocusRangeEstimate> Finish() const;
+  StatusOr<ZRangeEstimate> Finish() const;
 
   // Refining the range's ends. A focus curve narrower than the coarse step (a polished field
   // under the search pattern) has its two neighbour samples on its tails, where a floor of
@@ -122,7 +127,7 @@ class FocusRangeAccumulator {
   // twice the density: 2 frames for a flat part (both ends at one frame), at most 4. Returns
   // the positions to capture, inside the sweep, ascending, and remembers the coarse frames they
   // are centred on. Call once, after the sweep.
-  std::vector<double> PlanRefinement(const FocusRangeEstimate& first);
+  std::vector<double> PlanRefinement(const ZRangeEstimate& first);
   static constexpr int kMaxRefinementFrames = 4;
   // A frame at one of PlanRefinement's positions, each once (FAILED_PRECONDITION before the
   // plan, INVALID_ARGUMENT at another z or a second time). In Finish, a resolved pixel whose coarse maximum is on a frame the
@@ -136,7 +141,7 @@ class FocusRangeAccumulator {
   int refinement_frames() const { return int(refine_z_um_.size()); }
 
  private:
-  FocusRangeSearchOptions options_;
+  ZRangeSearchOptions options_;
   cv::Size frame_size_;
   int bit_depth_ = 8;
   std::vector<double> z_um_;
@@ -175,7 +180,7 @@ struct FineRange {
   double z_start_um = 0.0;
   double z_end_um = 0.0;
 };
-FineRange ChooseFineRange(const FocusRangeEstimate& estimate, double fine_step_um, double margin_um, int min_frames,
+FineRange ChooseFineRange(const ZRangeEstimate& estimate, double fine_step_um, double margin_um, int min_frames,
                           double travel_min_um, double travel_max_um);
 
 }  // namespace inspection
