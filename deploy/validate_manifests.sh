@@ -10,7 +10,9 @@
 #   4. the compose files (compose.yaml, compose.sim.yaml) get the same configuration checks.
 #
 #   deploy/validate_manifests.sh [INSPECTD]     INSPECTD: the built binary (default build/bin/inspectd)
-# Exit 0 when valid, 1 on a finding, 77 (CTest: skipped) when kubectl with kustomize is missing.
+# Exit 0 when valid, 1 on a finding, 77 (CTest: skipped; a failure in CI, where ctest has no
+# SKIP_RETURN_CODE) when kubectl with kustomize is missing: the kubectl-free compose and
+# configuration checks still run then, and a finding there still exits 1.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -19,15 +21,17 @@ python=/usr/bin/python3  # Debian's, with python3-yaml (a pyenv python3 may lack
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 
+have_kubectl=1
 if ! command -v kubectl >/dev/null || ! kubectl kustomize --help >/dev/null 2>&1; then
-  echo "SKIP: kubectl with kustomize (kubectl >= 1.21) is not installed"
-  exit 77
+  echo "kubectl with kustomize is not installed (Debian: kubernetes-client): deploy/k8s not checked"
+  have_kubectl=0
 fi
 [[ -x "$inspectd" ]] || { echo "FAIL: no inspectd at $inspectd"; exit 1; }
 "$python" -c 'import yaml' 2>/dev/null || { echo "FAIL: $python lacks yaml (apt-get install python3-yaml)"; exit 1; }
 
 status=0
-for dir in rig reconstruct example; do
+((have_kubectl)) && k8s_dirs=(rig reconstruct example) || k8s_dirs=()
+for dir in "${k8s_dirs[@]}"; do
   out="$work/$dir.yaml"
   echo "== deploy/k8s/$dir"
   if ! kubectl kustomize "$here/k8s/$dir" >"$out" 2>"$work/err"; then
@@ -50,8 +54,10 @@ for dir in rig reconstruct example; do
   "$python" "$here/check_manifests.py" "${args[@]}" | sed 's/^/   /' || status=1
 done
 
-echo "== self-test: broken manifests must be caught"
-"$python" "$here/check_manifests.py" self-test "$work/example.yaml" --inspectd "$inspectd" | sed 's/^/   /' || status=1
+if ((have_kubectl)); then
+  echo "== self-test: broken manifests must be caught"
+  "$python" "$here/check_manifests.py" self-test "$work/example.yaml" --inspectd "$inspectd" | sed 's/^/   /' || status=1
+fi
 
 echo "== compose"
 "$python" "$here/check_manifests.py" compose "$here/compose.yaml" --real-rig --inspectd "$inspectd" | sed 's/^/   /' || status=1
@@ -65,5 +71,12 @@ else
   status=1
 fi
 
-[[ $status == 0 ]] && echo "PASS: deployment files valid" || echo "FAIL: deployment files have findings"
-exit $status
+if [[ $status != 0 ]]; then
+  echo "FAIL: deployment files have findings"
+  exit 1
+fi
+if ((!have_kubectl)); then
+  echo "SKIP: compose and configuration valid; deploy/k8s needs kubectl (apt-get install kubernetes-client)"
+  exit 77
+fi
+echo "PASS: deployment files valid"

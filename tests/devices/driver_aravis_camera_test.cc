@@ -26,6 +26,7 @@
 #include "core/sff/sff_engine.h"
 #include "devices/rig_config.h"
 #include "devices/sim/simulated_rig.h"
+#include "tests/lib/skip_or_fail.h"
 
 extern char** environ;
 
@@ -102,7 +103,7 @@ AravisCameraOptions FakeOptions(const std::string& serial) {
 }
 
 TEST_F(GigeLoopbackTest, SoftwareTriggeredCaptureSurvivesCameraRestart) {
-  if (!FakeProgramPresent()) GTEST_SKIP() << "arv-fake-gv-camera-0.8 not installed";
+  if (!FakeProgramPresent()) INSPECT_SKIP_OR_FAIL() << "arv-fake-gv-camera-0.8 not installed";
   StartFakeCamera("DRVKILL");
   AravisCamera camera(FakeOptions("DRVKILL"));
   ASSERT_TRUE(ConnectWithin(camera, std::chrono::seconds(20)).ok());
@@ -141,7 +142,7 @@ TEST_F(GigeLoopbackTest, SoftwareTriggeredCaptureSurvivesCameraRestart) {
 }
 
 TEST_F(GigeLoopbackTest, OpensBySerialAndHonoursPixelFormat) {
-  if (!FakeProgramPresent()) GTEST_SKIP() << "arv-fake-gv-camera-0.8 not installed";
+  if (!FakeProgramPresent()) INSPECT_SKIP_OR_FAIL() << "arv-fake-gv-camera-0.8 not installed";
   StartFakeCamera("DRVFMT");
   AravisCameraOptions o = FakeOptions("DRVFMT");
   o.device_id.clear();  // discovery by serial number
@@ -176,7 +177,7 @@ TEST_F(GigeLoopbackTest, OpensBySerialAndHonoursPixelFormat) {
 // Rig level: a degraded start without the camera, the camera appearing, a reset picking it up,
 // the camera vanishing mid-scan and a reset reconnecting it again.
 TEST_F(GigeLoopbackTest, RigResetReconnectsTheCamera) {
-  if (!FakeProgramPresent()) GTEST_SKIP() << "arv-fake-gv-camera-0.8 not installed";
+  if (!FakeProgramPresent()) INSPECT_SKIP_OR_FAIL() << "arv-fake-gv-camera-0.8 not installed";
   StatusOr<RigConfig> config = ParseRigConfig(R"({
     "name": "loopback", "pixel_size_um": 1.0,
     "camera": {"driver": "aravis", "device_id": "Aravis-Fake-DRVRIG", "frame_timeout_ms": 1000,

@@ -8,6 +8,7 @@
 
 #include "devices/drivers/apt_stage.h"
 #include "devices/drivers/libusb_transport.h"
+#include "tests/lib/skip_or_fail.h"
 
 namespace inspection {
 namespace {
@@ -15,7 +16,7 @@ namespace {
 bool UnderUmockdev() { return std::getenv("UMOCKDEV_DIR") != nullptr; }
 
 TEST(AptUmockdevTest, WrongSerialIsUnavailable) {
-  if (!UnderUmockdev()) GTEST_SKIP() << "run under umockdev-run (see tests/drivers/CMakeLists.txt)";
+  if (!UnderUmockdev()) INSPECT_SKIP_OR_FAIL() << "run under umockdev-run (see tests/drivers/CMakeLists.txt)";
   UsbDeviceSelector sel;
   sel.serial = "12345678";
   StatusOr<std::unique_ptr<UsbTransport>> t = OpenLibusbTransport(sel);
@@ -24,7 +25,7 @@ TEST(AptUmockdevTest, WrongSerialIsUnavailable) {
 }
 
 TEST(AptUmockdevTest, ConnectMoveAndReadPositionThroughLibusb) {
-  if (!UnderUmockdev()) GTEST_SKIP() << "run under umockdev-run (see tests/drivers/CMakeLists.txt)";
+  if (!UnderUmockdev()) INSPECT_SKIP_OR_FAIL() << "run under umockdev-run (see tests/drivers/CMakeLists.txt)";
   UsbDeviceSelector sel;
   sel.serial = "27000001";
   AptStageOptions o;

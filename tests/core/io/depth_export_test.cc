@@ -1,5 +1,6 @@
 // Tests of the depth map exports: exact round trips, format tags, atomic writes, preview colours.
 #include "core/io/depth_export.h"
+#include "tests/lib/skip_or_fail.h"
 
 #include <gtest/gtest.h>
 #include <tiffio.h>
@@ -412,7 +413,7 @@ TEST_F(DepthExportTest, X3pOpensInGwyddion) {
   // Gwyddion's thumbnailer loads the file with its x3p reader and renders the height field. A
   // ramp along x must come out as a brightness ramp along x.
   if (std::system("command -v gwyddion-thumbnailer > /dev/null 2>&1") != 0) {
-    GTEST_SKIP() << "gwyddion-thumbnailer not installed (Debian package gwyddion)";
+    INSPECT_SKIP_OR_FAIL() << "gwyddion-thumbnailer not installed (Debian package gwyddion)";
   }
   cv::Mat d(64, 96, CV_32F);
   for (int y = 0; y < d.rows; ++y)
