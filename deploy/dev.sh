@@ -31,6 +31,7 @@ packages=(
   libcpp-httplib-dev  # inspectd's HTTP port: /metrics and the dashboard
   prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
+  libmosquitto-dev mosquitto mosquitto-clients  # server/plant: MQTT publishing; its tests run a real broker and mosquitto_sub
 )
 
 install_missing() {
