@@ -152,6 +152,7 @@ StatusOr<std::unique_ptr<MqttPublisher>> MqttPublisher::Start(const MqttOptions&
 void MqttPublisher::OnConnect(mosquitto*, void* self, int rc) {
   auto* p = static_cast<MqttPublisher*>(self);
   if (rc != 0) {
+    ++p->refused_;
     // Bad credentials or a refused client id: say so once per attempt; the loop retries.
     spdlog::warn("MQTT broker {}:{} refused the connection: {}", p->options_.host, p->options_.port,
                  mosquitto_connack_string(rc));

@@ -76,6 +76,7 @@ class MqttPublisher {
 
   bool connected() const { return connected_.load(); }
   int64_t last_acknowledged_sequence() const { return last_acked_.load(); }
+  int refused_connections() const { return refused_.load(); }  // CONNACK errors (credentials, id)
 
  private:
   MqttPublisher() = default;
@@ -96,6 +97,7 @@ class MqttPublisher {
   std::atomic<bool> stop_{false};
   std::atomic<bool> connected_{false};
   std::atomic<int64_t> last_acked_{0};
+  std::atomic<int> refused_{0};
   std::mutex mu_;
   std::condition_variable cv_;  // connect, disconnect, PUBACK, Stop
   uint64_t connections_ = 0;    // connects seen, so a waiter notices a reconnect

@@ -21,6 +21,8 @@
 #include <sstream>
 #include <thread>
 
+#include "tests/server/test_certs.h"
+
 
 extern char** environ;
 
@@ -297,6 +299,52 @@ TEST_F(MqttPublisherTest, BadSettingsAreRefusedNamingTheSetting) {
   std::filesystem::create_directories(o.sequence_file.parent_path());
   std::ofstream(o.sequence_file) << "12x\n";
   EXPECT_NE(start(o).message().find("not a sequence number: '12x'"), std::string::npos) << start(o).message();
+}
+
+// TLS with the broker's CA and a user name whose password comes from a file; a wrong password
+// is refused by the broker (CONNACK "not authorised") and nothing is published.
+TEST_F(MqttPublisherTest, TlsAndCredentialsAndAWrongPasswordIsRefused) {
+  const KeyAndCert ca = MakeCertificate("test-ca", "", nullptr, 1);
+  const KeyAndCert server = MakeCertificate("localhost", "DNS:localhost,IP:127.0.0.1", &ca, 2);
+  WriteText(dir_ / "ca.pem", ca.cert_pem);
+  WriteText(dir_ / "server.pem", server.cert_pem);
+  WriteText(dir_ / "server.key", server.key_pem);
+  WriteText(dir_ / "password", "s3cret\n");
+  WriteText(dir_ / "wrong", "guess\n");
+  ASSERT_EQ(std::system(("mosquitto_passwd -b -c " + (dir_ / "users").string() + " inspectd s3cret").c_str()), 0);
+  const passwd* pw = getpwuid(getuid());
+  std::ofstream(dir_ / "mosquitto.conf") << "listener " << port_ << " 127.0.0.1\ncafile " << (dir_ / "ca.pem").string()
+                                         << "\ncertfile " << (dir_ / "server.pem").string() << "\nkeyfile "
+                                         << (dir_ / "server.key").string() << "\nallow_anonymous false\npassword_file "
+                                         << (dir_ / "users").string() << "\nuser " << (pw ? pw->pw_name : "root")
+                                         << "\n";
+  pid_t broker = Spawn({"mosquitto", "-c", (dir_ / "mosquitto.conf").string()}, (dir_ / "broker.log").string());
+  ASSERT_TRUE(PollFor([&] { return Accepts(port_); }, std::chrono::seconds(10)));
+  sub_ = Spawn({"mosquitto_sub", "-h", "127.0.0.1", "-p", std::to_string(port_), "--cafile", (dir_ / "ca.pem").string(),
+                "-u", "inspectd", "-P", "s3cret", "-q", "1", "-v", "-t", "inspect/plant1/rig7/#"},
+               (dir_ / "sub.out").string());
+  options_.tls_ca_file = (dir_ / "ca.pem").string();
+  options_.username = "inspectd";
+
+  options_.password_file = (dir_ / "wrong").string();
+  StartPublisher();
+  ASSERT_TRUE(PollFor([&] { return publisher_->refused_connections() >= 1; }));
+  EXPECT_FALSE(publisher_->connected());
+  publisher_->Stop();
+  publisher_.reset();
+
+  options_.password_file = (dir_ / "password").string();
+  options_.client_id = "inspectd-tls";
+  StartPublisher();
+  // The retained state reaching the consumer says it has subscribed.
+  ASSERT_TRUE(PollFor([&] { return publisher_->connected() && !StateLines().empty(); }));
+  Append(1, 2);
+  ASSERT_TRUE(PollFor([&] { return ResultLines().size() >= 2 && publisher_->last_acknowledged_sequence() == 2; }))
+      << Sequences();
+  EXPECT_EQ(Sequences(), "1 2 ");
+  EXPECT_EQ(publisher_->refused_connections(), 0);
+  publisher_->Stop();
+  Terminate(&broker);
 }
 
 }  // namespace
