@@ -38,6 +38,7 @@ packages=(
   prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
   libopencv-contrib-dev  # core/sff/dense_depth.cc: cv::ximgproc fast global smoother (dense depth)
+  libmosquitto-dev mosquitto mosquitto-clients  # server/plant: MQTT publishing; its tests run a real broker and mosquitto_sub
 )
 
 install_missing() {

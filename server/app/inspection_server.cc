@@ -187,6 +187,18 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
     spdlog::info("metrics and dashboard on {}://{}/", options.tls_cert_file.empty() ? "http" : "https",
                  s->ops_->address());
   }
+  if (options.mqtt.enabled()) {
+    MqttOptions mo = options.mqtt;
+    if (mo.sequence_file.empty()) mo.sequence_file = options.data_dir / "plant" / "mqtt_sequence";
+    std::function<RigStateSample()> state;
+    if (s->rig_) state = [rig = s->rig_.get()] { return RigStateSample{rig->state(), rig->state_detail()}; };
+    auto mqtt = MqttPublisher::Start(mo, s->results_.get(), s->store_.get(), std::move(state));
+    if (!mqtt.ok()) {
+      s->Shutdown();
+      return mqtt.status();
+    }
+    s->mqtt_ = std::move(*mqtt);
+  }
   s->sweeper_->Start();
   spdlog::info("inspectd listening on {} (data dir {}, rig {}, state {})", s->address(), options.data_dir.string(),
                !s->rig_               ? "none (reconstruct only)"
@@ -207,6 +219,7 @@ void InspectionServer::Shutdown() {
   shut_down_ = true;
   ops_->Stop();  // its handlers read the jobs and the store
   if (sweeper_) sweeper_->Stop();
+  if (mqtt_) mqtt_->Stop();  // before the feed shuts down: what it has not sent waits in the store
   // Jobs first, so streaming handlers see terminal events and return; then the transport.
   jobs_->Shutdown();
   results_->Shutdown();  // open WatchResults streams end (UNAVAILABLE: resume elsewhere or later)

@@ -26,6 +26,7 @@
 #include "server/results/result_forwarder.h"
 #include "server/jobs/retention_sweeper.h"
 #include "server/jobs/rig_controller.h"
+#include "server/plant/mqtt_publisher.h"
 
 namespace inspection {
 
@@ -64,6 +65,9 @@ struct ServerOptions {
   ReconstructPipelineOptions reconstruct;
   // Prometheus /metrics and the web dashboard (host:port, port 0 = any); empty = no HTTP port.
   std::string http_listen_address;
+  // Results and rig states to an MQTT broker (server/plant/mqtt_publisher.h); no host = off.
+  // An empty sequence_file is <data_dir>/plant/mqtt_sequence.
+  MqttOptions mqtt;
 };
 
 // Health service names: "" is SERVING while the process runs; this one is SERVING only while
@@ -115,6 +119,7 @@ class InspectionServer {
   std::unique_ptr<JobManager> jobs_;  // declared after what its jobs use: destroyed (joined) first
   std::unique_ptr<DataJanitor> janitor_;
   std::unique_ptr<RetentionSweeper> sweeper_;  // destroyed (joined) before the jobs and the store
+  std::unique_ptr<MqttPublisher> mqtt_;        // reads the feed and the rig: destroyed before them
   std::unique_ptr<InspectionServiceImpl> service_;
   std::unique_ptr<SimulationServiceImpl> sim_service_;
   std::unique_ptr<NoRigInspectionService> no_rig_service_;

@@ -205,6 +205,19 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
        "engine needs them (bounds memory)"},
       {"artifact_threads", &C::artifact_threads,
        "reconstruct: artifact files written at once; 0: all hardware threads"},
+      {"mqtt_host", &C::mqtt_host,
+       "MQTT broker host: every inspection result and rig state change is published (QoS 1); empty: off"},
+      {"mqtt_port", &C::mqtt_port, "MQTT broker port (1883 plain, 8883 usual for TLS)"},
+      {"mqtt_site", &C::mqtt_site, "MQTT topic level for the site: <mqtt_topic_prefix>/<site>/<rig>/{results,state}"},
+      {"mqtt_rig", &C::mqtt_rig, "MQTT topic level for this rig"},
+      {"mqtt_topic_prefix", &C::mqtt_topic_prefix, "first MQTT topic level"},
+      {"mqtt_client_id", &C::mqtt_client_id,
+       "MQTT client id of the persistent session; empty: inspectd-<site>-<rig>"},
+      {"mqtt_username", &C::mqtt_username, "MQTT user name; empty: anonymous"},
+      {"mqtt_password_file", &C::mqtt_password_file, "file whose first line is the MQTT password"},
+      {"mqtt_tls_ca", &C::mqtt_tls_ca, "PEM CA of the MQTT broker: enables TLS"},
+      {"mqtt_tls_cert", &C::mqtt_tls_cert, "PEM client certificate for the MQTT broker (with mqtt_tls_key)"},
+      {"mqtt_tls_key", &C::mqtt_tls_key, "PEM private key of mqtt_tls_cert"},
   };
   return keys;
 }
@@ -426,6 +439,17 @@ StatusOr<ServerOptions> ToServerOptions(const InspectdConfig& c) {
   o.reconstruct.max_decoded_bytes = int64_t(c.decode_budget_mb) << 20;
   o.reconstruct.artifact_threads = c.artifact_threads;
   o.http_listen_address = c.http_listen;
+  o.mqtt.host = c.mqtt_host;
+  o.mqtt.port = c.mqtt_port;
+  o.mqtt.site = c.mqtt_site;
+  o.mqtt.rig = c.mqtt_rig;
+  o.mqtt.topic_prefix = c.mqtt_topic_prefix;
+  o.mqtt.client_id = c.mqtt_client_id;
+  o.mqtt.username = c.mqtt_username;
+  o.mqtt.password_file = c.mqtt_password_file;
+  o.mqtt.tls_ca_file = c.mqtt_tls_ca;
+  o.mqtt.tls_cert_file = c.mqtt_tls_cert;
+  o.mqtt.tls_key_file = c.mqtt_tls_key;
   o.simulation.specimen = c.specimen;
   o.simulation.seed = c.seed;
   (void)ParseCameraSize(c.camera_size, &o.simulation.camera_size);  // checked by ValidateConfig

@@ -56,6 +56,18 @@ struct InspectdConfig {
   int decode_threads = ServerOptions{}.reconstruct.decode_threads;
   int decode_budget_mb = int(ServerOptions{}.reconstruct.max_decoded_bytes >> 20);
   int artifact_threads = ServerOptions{}.reconstruct.artifact_threads;
+  // MQTT publishing of results and rig states (server/plant/mqtt_publisher.h); no host = off.
+  std::string mqtt_host;
+  int mqtt_port = MqttOptions{}.port;
+  std::string mqtt_site = MqttOptions{}.site;
+  std::string mqtt_rig = MqttOptions{}.rig;
+  std::string mqtt_topic_prefix = MqttOptions{}.topic_prefix;
+  std::string mqtt_client_id;
+  std::string mqtt_username;
+  std::string mqtt_password_file;  // the password itself never appears in the configuration
+  std::string mqtt_tls_ca;
+  std::string mqtt_tls_cert;
+  std::string mqtt_tls_key;
 
   bool operator==(const InspectdConfig&) const = default;
 };
