@@ -48,9 +48,10 @@ Stack Moving(cv::Size size, int n, double s_total, double sx, double sy, double 
   const int ref = (n - 1) / 2;
   cv::RNG rng(seed + 7);
   for (int i = 0; i < n; ++i) {
-    s.truth.push_back(Compose(world[size_t(i)], Invert(world[size_t(ref)])));
+    // warpAffine with WARP_INVERSE_MAP: frame pixel p shows the scene at world(p), so scene ->
+    // frame is world^-1 and reference grid -> frame i is world_i^-1 world_ref.
+    s.truth.push_back(Compose(Invert(world[size_t(i)]), world[size_t(ref)]));
     cv::Mat f;
-    // Frame pixel p shows the scene at world^-1(p).
     cv::warpAffine(scene, f, world[size_t(i)], size, cv::INTER_CUBIC | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT_101);
     const double blur = 0.6 + 1.8 * std::abs(double(i - n / 3)) / n;
     cv::GaussianBlur(f, f, cv::Size(0, 0), blur);
