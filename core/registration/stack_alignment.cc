@@ -310,18 +310,33 @@ StatusOr<StackAligner> StackAligner::Create(const FocusBreathingModel& model, Fr
                                       std::to_string(frame_size.width) + "x" + std::to_string(frame_size.height));
   }
   if (z_um.empty()) return Status::InvalidArgument("alignment needs the frames' z");
-  StackAligner a;
-  a.size_ = frame_size;
   const int n = int(z_um.size());
   const int ref = (n - 1) / 2;
+  std::vector<cv::Matx23d> maps;
+  for (int i = 0; i < n; ++i) maps.push_back(model.FrameFromReference(z_um[size_t(i)], z_um[size_t(ref)]));
+  INSPECT_ASSIGN_OR_RETURN(StackAligner a, FromTransforms(maps, ref, alignment, frame_size,
+                                                          MaxCornerDisplacementPx(model, z_um) >= kNegligibleAlignmentPx));
+  a.figures_.method = "model";
+  return a;
+}
+
+StatusOr<StackAligner> StackAligner::FromTransforms(const std::vector<cv::Matx23d>& frame_from_reference,
+                                                    int reference_frame, FrameAlignment alignment, cv::Size frame_size,
+                                                    bool warps) {
+  if (frame_from_reference.empty()) return Status::InvalidArgument("alignment needs the frames' transforms");
+  if (frame_size.width < 1 || frame_size.height < 1) return Status::InvalidArgument("alignment needs a frame size");
+  const int n = int(frame_from_reference.size());
+  const int ref = reference_frame;
+  StackAligner a;
+  a.size_ = frame_size;
   a.figures_.alignment = alignment;
   a.figures_.reference_frame = ref;
-  const cv::Point2d c = model.centre_px();
+  const cv::Point2d c((frame_size.width - 1) * 0.5, (frame_size.height - 1) * 0.5);
   // Per row, the x interval every frame sees (source inside [0, w-1] x [0, h-1]).
   std::vector<double> lo(size_t(frame_size.height), 0.0), hi(size_t(frame_size.height), frame_size.width - 1.0);
   const double w1 = frame_size.width - 1.0, h1 = frame_size.height - 1.0;
   for (int i = 0; i < n; ++i) {
-    const cv::Matx23d m = model.FrameFromReference(z_um[size_t(i)], z_um[size_t(ref)]);
+    const cv::Matx23d m = frame_from_reference[size_t(i)];
     a.maps_.push_back(m);
     const SimilarityTransform t = SimilarityOf(m, c);
     a.figures_.max_scale_change_percent = std::max(a.figures_.max_scale_change_percent, 100 * std::abs(t.scale - 1));
@@ -350,7 +365,9 @@ StatusOr<StackAligner> StackAligner::Create(const FocusBreathingModel& model, Fr
     if (x1 >= x0) a.seen_.row(y).colRange(x0, x1 + 1).setTo(255);
   }
   a.figures_.seen_by_every_frame_percent = 100.0 * cv::countNonZero(a.seen_) / double(frame_size.area());
-  a.warps_ = MaxCornerDisplacementPx(model, z_um) >= kNegligibleAlignmentPx;
+  a.warps_ = warps;
+  a.figures_.still = !warps;
+  a.figures_.frame_from_reference = a.maps_;
   if (!a.warps_) {
     a.seen_.setTo(255);
     a.figures_.seen_by_every_frame_percent = 100.0;

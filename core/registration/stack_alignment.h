@@ -113,6 +113,14 @@ struct AlignmentFigures {
   double max_scale_change_percent = 0.0;  // max |s - 1| over the frames, relative to the reference
   double max_shift_px = 0.0;              // max shift of the image centre
   double seen_by_every_frame_percent = 100.0;
+  // How the transforms were found: "model" (the focus-breathing model through z), "chain" (each
+  // frame registered to its neighbour, chain_registration.h), "" for none.
+  std::string method;
+  // Set when the default alignment fell back to none, and why (the CLI prints it).
+  std::string fallback_reason;
+  bool still = false;  // the transforms were measured and found indistinguishable from none
+  // Each frame's transform, reference grid -> frame pixels (empty for none).
+  std::vector<cv::Matx23d> frame_from_reference;
 };
 
 class StackAligner {
@@ -122,6 +130,11 @@ class StackAligner {
   // z_um: the stack's frame positions; the model must match frame_size.
   static StatusOr<StackAligner> Create(const FocusBreathingModel& model, FrameAlignment alignment,
                                        const std::vector<double>& z_um, cv::Size frame_size);
+  // From measured per-frame transforms (e.g. RegisterChain's): warps unless `warps` is false (a
+  // stack its still test could not tell from motionless), then frames stay as they are.
+  static StatusOr<StackAligner> FromTransforms(const std::vector<cv::Matx23d>& frame_from_reference,
+                                               int reference_frame, FrameAlignment alignment, cv::Size frame_size,
+                                               bool warps);
 
   // Frame `index` resampled onto the reference grid (bilinear; outside the frame the border is
   // replicated so no false edge enters the focus measure; those pixels are masked at Finish). A

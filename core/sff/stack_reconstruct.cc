@@ -43,16 +43,44 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
           return Status::Cancelled("reconstruction cancelled while aligning frame " + std::to_string(i));
         return source.grey(i);  // errors name the frame
       };
-      StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
-      if (!estimate.ok()) {
-        const StatusCode code = estimate.status().code();
-        if (a.fall_back_to_none && (code == StatusCode::kFailedPrecondition || code == StatusCode::kInvalidArgument)) {
+      // A rig's scan (its stack.json records the illumination it ran) has metric z from the
+      // stage: the linear-in-z focus-breathing model is the right prior there. An imported stack's
+      // z is nominal: a chain of neighbour registrations assumes nothing about it.
+      if (!manifest.illumination.empty()) {
+        StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
+        if (!estimate.ok()) {
+          const StatusCode code = estimate.status().code();
+          if (a.fall_back_to_none && (code == StatusCode::kFailedPrecondition || code == StatusCode::kInvalidArgument)) {
+            if (figures) figures->fallback_reason = "the focus-breathing estimate failed: " + estimate.status().message();
+            return std::optional<StackAligner>();
+          }
+          return estimate.status();
+        }
+        model = *estimate;
+        break;
+      }
+      if (a.fall_back_to_none && z_um.size() < 3) {
+        if (figures) figures->fallback_reason = "a stack of fewer than 3 frames is not registered";
+        return std::optional<StackAligner>();
+      }
+      int registered_pairs = 0;
+      StatusOr<ChainRegistration> chain = RegisterChain(load, int(z_um.size()), a.chain, &registered_pairs);
+      if (!chain.ok()) {
+        if (a.fall_back_to_none && chain.status().code() == StatusCode::kFailedPrecondition && registered_pairs == 0) {
+          if (figures) figures->fallback_reason = "no frame pair could be registered: " + chain.status().message();
           return std::optional<StackAligner>();
         }
-        return estimate.status();
+        return chain.status();
       }
-      model = *estimate;
-      break;
+      INSPECT_ASSIGN_OR_RETURN(cv::Mat first, source.grey(0));
+      INSPECT_ASSIGN_OR_RETURN(StackAligner aligner,
+                               StackAligner::FromTransforms(chain->frame_from_reference, chain->reference_frame,
+                                                            a.alignment, first.size(), !chain->still));
+      if (figures) {
+        *figures = aligner.figures();
+        figures->method = "chain";
+      }
+      return std::optional<StackAligner>(std::move(aligner));
     }
   }
   INSPECT_ASSIGN_OR_RETURN(cv::Mat first, source.grey(0));

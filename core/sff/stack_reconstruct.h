@@ -11,6 +11,7 @@
 #include "core/io/frame_statistics.h"
 #include "core/sff/sff_engine.h"
 #include "core/io/stack.h"
+#include "core/registration/chain_registration.h"
 #include "core/registration/stack_alignment.h"
 #include "core/util/status.h"
 
@@ -27,11 +28,18 @@ using StackFrameCallback = std::function<void(int, int, double, const FrameStati
 struct StackFolderAlignment {
   FrameAlignment alignment = FrameAlignment::kNone;
   const FocusBreathingModel* calibrated = nullptr;  // kCalibrated: the model (must outlive the call)
-  // kEstimate only: when the estimate fails to converge, reconstruct unaligned instead of failing
-  // (the server's default for imported stacks, which may be featureless; an explicit request
-  // fails). figures->alignment then says kNone.
+  // kEstimate only: when no frame pair registers at all (a featureless stack: no evidence of
+  // motion either way), reconstruct unaligned instead of failing (the server's default for
+  // imported stacks; an explicit request fails). figures->alignment then says kNone and
+  // figures->fallback_reason why. A stack some of whose pairs register but which cannot be aligned
+  // (pairs failing or disagreeing) fails either way, naming the frames.
   bool fall_back_to_none = false;
   StackAlignmentOptions options;
+  // kEstimate: imported stacks (a folder's z is nominal; stack.json names no illumination) are
+  // registered as a chain of neighbours (core/registration/chain_registration.h); a rig's scan
+  // (stack.json names its illumination; z is the stage's) gets the linear-in-z focus-breathing
+  // model estimated from its frames, as kCalibrated uses the calibrated one.
+  ChainRegistrationOptions chain;
 };
 
 // manifest: as read by ReadStackManifest(dir). on_frame may be empty. cancel is polled before

@@ -1,0 +1,267 @@
+// Chain registration of an imported stack (core/registration/chain_registration.h).
+#include "core/registration/chain_registration.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
+
+#include "core/registration/frame_registration.h"
+
+namespace inspection {
+
+Status ChainRegistrationOptions::Validate() const {
+  if (max_side_px < 64) return Status::InvalidArgument("max_side_px must be >= 64");
+  if (pyramid_levels < 1 || pyramid_levels > 5) return Status::InvalidArgument("pyramid_levels must be in 1..5");
+  if (!(gradient_sigma_px >= 0)) return Status::InvalidArgument("gradient_sigma_px must be >= 0");
+  if (max_iterations < 1) return Status::InvalidArgument("max_iterations must be >= 1");
+  if (!(epsilon > 0)) return Status::InvalidArgument("epsilon must be > 0");
+  if (!(min_correlation >= 0 && min_correlation < 1)) return Status::InvalidArgument("min_correlation must be in [0, 1)");
+  if (!(still_false_positive_rate > 0 && still_false_positive_rate < 0.5)) {
+    return Status::InvalidArgument("still_false_positive_rate must be in (0, 0.5)");
+  }
+  if (!(max_pair_outlier_px > 0)) return Status::InvalidArgument("max_pair_outlier_px must be > 0");
+  if (!(min_motion_px >= 0)) return Status::InvalidArgument("min_motion_px must be >= 0");
+  return Status::Ok();
+}
+
+double StudentTQuantile(double one_sided_alpha, int dof) {
+  // Normal quantile (Acklam's rational approximation, |error| < 1.2e-9), then Cornish-Fisher.
+  const double p = 1.0 - one_sided_alpha;
+  static const double a[] = {-3.969683028665376e+01, 2.209460984245205e+02, -2.759285104469687e+02,
+                             1.383577518672690e+02,  -3.066479806614716e+01, 2.506628277459239e+00};
+  static const double b[] = {-5.447609879822406e+01, 1.615858368580409e+02, -1.556989798598866e+02,
+                             6.680131188771972e+01,  -1.328068155288572e+01};
+  static const double c[] = {-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e+00,
+                             -2.549732539343734e+00, 4.374664141464968e+00,  2.938163982698783e+00};
+  static const double d[] = {7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e+00,
+                             3.754408661907416e+00};
+  double z;
+  if (p > 0.97575) {
+    const double q = std::sqrt(-2 * std::log(1 - p));
+    z = -(((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5]) /
+        ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1);
+  } else {
+    const double q = p - 0.5, r = q * q;
+    z = (((((a[0] * r + a[1]) * r + a[2]) * r + a[3]) * r + a[4]) * r + a[5]) * q /
+        (((((b[0] * r + b[1]) * r + b[2]) * r + b[3]) * r + b[4]) * r + 1);
+  }
+  const double v = std::max(1, dof), z3 = z * z * z, z5 = z3 * z * z, z7 = z5 * z * z;
+  return z + (z3 + z) / (4 * v) + (5 * z5 + 16 * z3 + 3 * z) / (96 * v * v) +
+         (3 * z7 + 19 * z5 + 17 * z3 - 15 * z) / (384 * v * v * v);
+}
+
+namespace {
+
+// Gradient magnitude of the smoothed, shrunk frame, and its pyramid (finest first).
+std::vector<cv::Mat> GradientPyramid(const cv::Mat& frame, double f, const ChainRegistrationOptions& o) {
+  cv::Mat grey;
+  frame.convertTo(grey, CV_32F);
+  cv::Mat small;
+  if (f < 1.0) {
+    cv::resize(grey, small, cv::Size(), f, f, cv::INTER_AREA);
+  } else {
+    small = grey;
+  }
+  if (o.gradient_sigma_px > 0) cv::GaussianBlur(small, small, cv::Size(), o.gradient_sigma_px);
+  cv::Mat gx, gy, mag;
+  cv::Sobel(small, gx, CV_32F, 1, 0);
+  cv::Sobel(small, gy, CV_32F, 0, 1);
+  cv::magnitude(gx, gy, mag);
+  std::vector<cv::Mat> levels{mag};
+  for (int k = 1; k < o.pyramid_levels && levels.back().cols >= 64 && levels.back().rows >= 64; ++k) {
+    cv::Mat down;
+    cv::pyrDown(levels.back(), down);
+    levels.push_back(down);
+  }
+  return levels;
+}
+
+cv::Matx23d Identity() { return cv::Matx23d(1, 0, 0, 0, 1, 0); }
+
+// ECC from coarse to fine, started at `start` (finest-level coordinates): template = previous frame,
+// input = this frame, so the warp maps previous-frame pixels to this frame's.
+bool RegisterPair(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& current, cv::Matx23d start,
+                  const ChainRegistrationOptions& o, cv::Matx23d* out, double* correlation) {
+  const int levels = int(std::min(previous.size(), current.size()));
+  cv::Matx23d w = start;
+  const double down = std::ldexp(1.0, -(levels - 1));
+  w(0, 2) *= down;
+  w(1, 2) *= down;
+  double rho = 0;
+  for (int k = levels - 1; k >= 0; --k) {
+    cv::Mat warp(w, true);
+    warp.convertTo(warp, CV_32F);
+    try {
+      rho = cv::findTransformECC(previous[size_t(k)], current[size_t(k)], warp, cv::MOTION_AFFINE,
+                                 cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, o.max_iterations,
+                                                  o.epsilon),
+                                 cv::noArray(), 1);
+    } catch (const cv::Exception&) {
+      return false;
+    }
+    cv::Mat wd;
+    warp.convertTo(wd, CV_64F);
+    w = cv::Matx23d(wd.ptr<double>());
+    if (k > 0) {
+      w(0, 2) *= 2;
+      w(1, 2) *= 2;
+    }
+  }
+  if (!std::isfinite(rho)) return false;
+  *out = w;
+  *correlation = rho;
+  return true;
+}
+
+// Working-size transform -> full-resolution: x_w = f x + (f - 1) / 2 (INTER_AREA's pixel centres).
+cv::Matx23d ToFullResolution(const cv::Matx23d& w, double f) {
+  const double b = 0.5 * f - 0.5;
+  const cv::Matx23d s(f, 0, b, 0, f, b);
+  return Compose(Invert(s), Compose(w, s));
+}
+
+std::array<double, 8> CornerDisplacement(const cv::Matx23d& m, cv::Size s) {
+  std::array<double, 8> d{};
+  int k = 0;
+  for (cv::Point2d p : {cv::Point2d(0, 0), cv::Point2d(s.width - 1, 0), cv::Point2d(0, s.height - 1),
+                        cv::Point2d(s.width - 1, s.height - 1)}) {
+    const cv::Vec2d q = m * cv::Vec3d(p.x, p.y, 1);
+    d[size_t(k++)] = q[0] - p.x;
+    d[size_t(k++)] = q[1] - p.y;
+  }
+  return d;
+}
+
+double Median(std::vector<double> v) {
+  const size_t m = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + long(m), v.end());
+  return v[m];
+}
+
+}  // namespace
+
+StatusOr<ChainRegistration> RegisterChain(const std::function<StatusOr<cv::Mat>(int)>& load, int n,
+                                          const ChainRegistrationOptions& options, int* registered_pairs) {
+  if (registered_pairs) *registered_pairs = 0;
+  INSPECT_RETURN_IF_ERROR(options.Validate());
+  if (n < 3) {
+    return Status::InvalidArgument("alignment needs at least 3 frames to register a stack (got " + std::to_string(n) +
+                                   ")");
+  }
+  ChainRegistration r;
+  r.reference_frame = (n - 1) / 2;
+  r.pair.assign(size_t(n), Identity());
+  r.pair_correlation.assign(size_t(n), 1.0);
+  cv::Size size;
+  double f = 1.0;
+  std::vector<cv::Mat> previous;
+  std::string failed;
+  int failures = 0;
+  cv::Matx23d start = Identity();  // working-size coordinates
+  for (int i = 0; i < n; ++i) {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(i));
+    if (frame.channels() != 1) return Status::InvalidArgument("frame " + std::to_string(i) + " is not grey");
+    if (i == 0) {
+      size = frame.size();
+      if (size.width < 32 || size.height < 32) {
+        return Status::InvalidArgument("alignment needs frames of at least 32x32 px (frame 0 is " +
+                                       std::to_string(size.width) + "x" + std::to_string(size.height) + ")");
+      }
+      f = std::min(1.0, double(options.max_side_px) / std::max(size.width, size.height));
+    } else if (frame.size() != size) {
+      return Status::InvalidArgument("frame " + std::to_string(i) + " is " + std::to_string(frame.cols) + "x" +
+                                     std::to_string(frame.rows) + ", frame 0 is " + std::to_string(size.width) + "x" +
+                                     std::to_string(size.height) + ": a stack's frames must have one size");
+    }
+    std::vector<cv::Mat> current = GradientPyramid(frame, f, options);
+    if (i > 0) {
+      cv::Matx23d w;
+      double rho = 0;
+      bool ok = RegisterPair(previous, current, start, options, &w, &rho);
+      if ((!ok || rho < options.min_correlation) && start != Identity()) {
+        double rho_identity = 0;
+        cv::Matx23d w_identity;
+        if (RegisterPair(previous, current, Identity(), options, &w_identity, &rho_identity) &&
+            rho_identity > (ok ? rho : -1.0)) {
+          ok = true, w = w_identity, rho = rho_identity;
+        }
+      }
+      if (!ok || rho < options.min_correlation) {
+        ++failures;
+        if (failed.size() < 200) {
+          failed += (failed.empty() ? "" : ", ") + std::to_string(i - 1) + "->" + std::to_string(i) +
+                    (ok ? " (correlation " + std::to_string(rho).substr(0, 5) + ")" : " (did not converge)");
+        }
+      } else {
+        r.pair[size_t(i)] = ToFullResolution(w, f);
+        r.pair_correlation[size_t(i)] = rho;
+        start = w;
+      }
+    }
+    previous = std::move(current);
+  }
+  if (registered_pairs) *registered_pairs = n - 1 - failures;
+  if (failures > 0) {
+    return Status::FailedPrecondition("alignment could not register " + std::to_string(failures) + " of " +
+                                      std::to_string(n - 1) + " neighbouring frame pairs: " + failed +
+                                      " (too featureless or unrelated; --alignment none reconstructs unaligned)");
+  }
+
+  // Pairs against each other: corner displacements per pair.
+  const int m = n - 1;
+  std::vector<std::array<double, 8>> d;
+  for (int i = 1; i < n; ++i) d.push_back(CornerDisplacement(r.pair[size_t(i)], size));
+  std::string outliers;
+  for (int k = 0; k < 8; ++k) {
+    std::vector<double> v;
+    for (const auto& e : d) v.push_back(e[size_t(k)]);
+    const double med = Median(v);
+    std::vector<double> dev;
+    for (double x : v) dev.push_back(std::abs(x - med));
+    const double limit = options.max_pair_outlier_px + 6 * 1.4826 * Median(dev);
+    for (int j = 0; j < m; ++j) {
+      const std::string name = std::to_string(j) + "->" + std::to_string(j + 1);
+      if (std::abs(v[size_t(j)] - med) > limit && outliers.find(name) == std::string::npos && outliers.size() < 200) {
+        outliers += (outliers.empty() ? "" : ", ") + name;
+      }
+    }
+  }
+  if (!outliers.empty()) {
+    return Status::FailedPrecondition("alignment: frame pairs " + outliers +
+                                      " disagree with the rest of the chain (their motion is far from the other "
+                                      "pairs'; a frame out of line or mis-registered)");
+  }
+  // Still test: is the mean pair motion distinguishable from zero given the pairs' spread?
+  r.still_threshold = StudentTQuantile(options.still_false_positive_rate / 16.0, m - 1);
+  // The pairs' noise from successive differences (von Neumann's mean square successive
+  // difference): a stack's motion varies smoothly from pair to pair (non-linear breathing), so the
+  // plain spread of the pairs would count that variation as noise and hide a moving stack.
+  for (int k = 0; k < 8; ++k) {
+    double mean = 0, mssd = 0;
+    for (const auto& e : d) mean += e[size_t(k)];
+    mean /= m;
+    for (int j = 1; j < m; ++j) mssd += std::pow(d[size_t(j)][size_t(k)] - d[size_t(j - 1)][size_t(k)], 2);
+    const double sd = std::sqrt(mssd / (2.0 * std::max(1, m - 1)));
+    const double se = sd / std::sqrt(double(m));
+    const double t = se > 0 ? std::abs(mean) / se : (mean != 0 ? 1e9 : 0.0);
+    r.still_statistic = std::max(r.still_statistic, t);
+  }
+  r.still = r.still_statistic < r.still_threshold;
+
+  r.frame_from_reference.assign(size_t(n), Identity());
+  for (int i = r.reference_frame + 1; i < n; ++i)
+    r.frame_from_reference[size_t(i)] = Compose(r.pair[size_t(i)], r.frame_from_reference[size_t(i - 1)]);
+  for (int i = r.reference_frame - 1; i >= 0; --i)
+    r.frame_from_reference[size_t(i)] = Compose(Invert(r.pair[size_t(i + 1)]), r.frame_from_reference[size_t(i + 1)]);
+  for (const cv::Matx23d& t : r.frame_from_reference)
+    for (size_t k = 0; k < 8; k += 2) {
+      const auto c = CornerDisplacement(t, size);
+      r.max_corner_displacement_px = std::max(r.max_corner_displacement_px, std::hypot(c[k], c[k + 1]));
+    }
+  if (r.max_corner_displacement_px < options.min_motion_px) r.still = true;
+  return r;
+}
+
+}  // namespace inspection

@@ -1,0 +1,69 @@
+// Registration of an imported stack as a chain: each frame registered to its neighbour (ECC on
+// gradient-magnitude images, coarse to fine, each pair started from the previous pair's result)
+// and the pair transforms accumulated onto the middle frame. Unlike the focus-breathing model
+// (stack_alignment.h) nothing is assumed about z: an imported stack's z is nominal or unknown, and
+// a real focus rail's scale and shift need not be linear in it.
+#pragma once
+
+#include <functional>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "core/util/status.h"
+
+namespace inspection {
+
+struct ChainRegistrationOptions {
+  // The registration runs on frames shrunk to at most this many pixels on the longer side; the
+  // transforms are scaled back to full resolution.
+  int max_side_px = 512;
+  int pyramid_levels = 3;  // 1..5, each halves the working size
+  // Gaussian smoothing before the gradient magnitude (px of the working size): the gradient
+  // magnitude of neighbours at different defocus differs mostly in its finest detail.
+  double gradient_sigma_px = 1.5;
+  int max_iterations = 30;        // ECC iterations per level
+  double epsilon = 1e-4;          // ECC convergence
+  double min_correlation = 0.5;   // ECC correlation of a registered pair; below = not registered
+  // Still test: the stack is called still when no corner displacement of the pair transforms
+  // differs from zero at this false-positive rate (two-sided, Bonferroni over the 8 corner
+  // coordinates, Student t of the pairs' own spread); a still stack is left unwarped.
+  double still_false_positive_rate = 0.01;
+  // A pair whose corner displacement is further than this from the median pair's (plus 6 robust
+  // sigmas of the pairs' spread) disagrees with the chain: FAILED_PRECONDITION naming it.
+  double max_pair_outlier_px = 8.0;
+  // A stack whose motion is statistically significant but whose accumulated transforms move no
+  // frame corner by this much is still left unwarped: neighbours at different defocus register
+  // with a small systematic bias (~0.01 px per pair on still stacks of chain-evaluate's renderer,
+  // up to 0.3 px accumulated over 40 frames) that no statistic on the pairs can tell from motion,
+  // and a warp that small costs more in resampling than it corrects.
+  double min_motion_px = 1.0;
+  Status Validate() const;
+};
+
+struct ChainRegistration {
+  int reference_frame = 0;                        // (n - 1) / 2
+  std::vector<cv::Matx23d> frame_from_reference;  // full-resolution px: reference grid -> frame i
+  std::vector<cv::Matx23d> pair;                  // pair[i]: frame i-1 -> frame i (pair[0] identity)
+  std::vector<double> pair_correlation;           // ECC correlation of pair i (pair 0: 1)
+  // The still test could not tell the motion from 0, or it is below min_motion_px.
+  bool still = false;
+  double still_statistic = 0.0;                   // max |mean| / standard error over the corner coordinates
+  double still_threshold = 0.0;                   // the statistic's critical value at the stated rate
+  double max_corner_displacement_px = 0.0;        // of the accumulated transforms
+};
+
+// load(i), i in [0, n): frame i (CV_8UC1, CV_16UC1 or CV_32FC1), called once per frame in order.
+// INVALID_ARGUMENT: fewer than 3 frames, frames smaller than 32x32 px or of different sizes (naming
+// the frame); FAILED_PRECONDITION naming the frame pairs that could not be registered (featureless,
+// unrelated) or disagree with the chain.
+// registered_pairs (may be null) receives how many pairs registered, also when the chain fails:
+// 0 on a failure means the stack gave no measurement of motion at all (e.g. featureless).
+StatusOr<ChainRegistration> RegisterChain(const std::function<StatusOr<cv::Mat>(int)>& load, int n,
+                                          const ChainRegistrationOptions& options, int* registered_pairs = nullptr);
+
+// Upper (1 - alpha/2) quantile of Student's t with dof degrees of freedom (Cornish-Fisher; within
+// 1 % for dof >= 3).
+double StudentTQuantile(double one_sided_alpha, int dof);
+
+}  // namespace inspection
