@@ -29,6 +29,8 @@ packages=(
   python3 python3-yaml  # deploy/validate_manifests.sh, tests/fault/kill9_test.sh (Debian's /usr/bin/python3)
   python3-grpcio python3-protobuf  # examples/python: the MES client (tests/mes)
   libcpp-httplib-dev  # inspectd's HTTP port: /metrics and the dashboard
+  prometheus-cpp-dev  # server/http/metrics_registry: the /metrics registry and its text exposition
+  zlib1g-dev  # core/io/depth_export: crc32 of the PNG chunks (OpenSSL EVP from libssl-dev: the x3p MD5)
   prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
 )
