@@ -44,33 +44,17 @@ TemplateStats MakeTemplateStats(const cv::Mat& templ, int correlation_window_px)
 
 namespace {
 
-// Row kernels, kept apart so they vectorise (AVX2 where the CPU has it, chosen at run time by
-// target_clones). Clang rejects target_clones on function templates; its builds (the libFuzzer
-// targets, tests/fuzz/run_fuzz.sh) get the portable code, which is the same arithmetic.
-#if defined(__clang__)
-#define INSPECT_NCC_ROW_KERNEL
-#else
-#define INSPECT_NCC_ROW_KERNEL __attribute__((target_clones("avx2", "default")))
-#endif
-
-// out[x] = sum of v[x .. x + k - 1], x = 0..count-1.
+// Row kernels (core/sff/internal/ncc_row_kernel.h), AVX2 where the CPU has it.
 template <typename A>
-INSPECT_NCC_ROW_KERNEL void WindowSums(const A* __restrict v, A* __restrict out, int count, int k) {
-  for (int x = 0; x < count; ++x) out[x] = v[x];
-  for (int j = 1; j < k; ++j)
-    for (int x = 0; x < count; ++x) out[x] += v[x + j];
+void WindowSums(const A* v, A* out, int count, int k) {
+  static const auto fn = PickPatchSums<A>().window_sums;
+  fn(v, out, count, k);
 }
 
-// Slides the vertical patch sums by one row: - row o, + row n (o and n of w and t).
 template <typename A>
-INSPECT_NCC_ROW_KERNEL void SlidePatchSums(const A* __restrict wo, const A* __restrict wn, const float* __restrict to,
-                                           const float* __restrict tn, A* __restrict vw, A* __restrict vww,
-                                           A* __restrict vwt, int count) {
-  for (int c = 0; c < count; ++c) {
-    vw[c] += wn[c] - wo[c];
-    vww[c] += wn[c] * wn[c] - wo[c] * wo[c];
-    vwt[c] += wn[c] * A(tn[c]) - wo[c] * A(to[c]);
-  }
+void SlidePatchSums(const A* wo, const A* wn, const float* to, const float* tn, A* vw, A* vww, A* vwt, int count) {
+  static const auto fn = PickPatchSums<A>().slide;
+  fn(wo, wn, to, tn, vw, vww, vwt, count);
 }
 
 template <typename A>

@@ -28,6 +28,42 @@ void NccRowPortable(const A* sw, const A* sww, const A* swt, const float* tsum, 
   }
 }
 
+// The patch-sum loops, written once and compiled into each variant below (they vectorise).
+// out[x] = sum of v[x .. x + k - 1], x = 0..count-1.
+template <typename A>
+__attribute__((always_inline)) inline void WindowSumsLoop(const A* __restrict v, A* __restrict out, int count, int k) {
+  for (int x = 0; x < count; ++x) out[x] = v[x];
+  for (int j = 1; j < k; ++j)
+    for (int x = 0; x < count; ++x) out[x] += v[x + j];
+}
+
+// Slides the vertical patch sums by one row: - row o, + row n (o and n of w and t).
+template <typename A>
+__attribute__((always_inline)) inline void SlidePatchSumsLoop(const A* __restrict wo, const A* __restrict wn,
+                                                              const float* __restrict to, const float* __restrict tn,
+                                                              A* __restrict vw, A* __restrict vww, A* __restrict vwt,
+                                                              int count) {
+  for (int c = 0; c < count; ++c) {
+    vw[c] += wn[c] - wo[c];
+    vww[c] += wn[c] * wn[c] - wo[c] * wo[c];
+    vwt[c] += wn[c] * A(tn[c]) - wo[c] * A(to[c]);
+  }
+}
+
+// The two loops for float (A = float) and double sums. Variants: portable, AVX2 (compiled for
+// AVX2 without FMA, so each product is rounded as in the portable code: the same sums).
+template <typename A>
+struct PatchSumKernels {
+  void (*window_sums)(const A* v, A* out, int count, int k);
+  void (*slide)(const A* wo, const A* wn, const float* to, const float* tn, A* vw, A* vww, A* vwt, int count);
+};
+template <typename A>
+PatchSumKernels<A> PatchSumsPortable();
+template <typename A>
+PatchSumKernels<A> PatchSumsAvx2();  // needs Isa::kAvx2
+template <typename A>
+const PatchSumKernels<A>& PickPatchSums();  // the variant for this CPU
+
 // The float-sum row over x in [0, count).
 using NccRowFloatFn = void (*)(const float* sw, const float* sww, const float* swt, const float* tsum,
                                const float* tinv, int n, int count, float* c_out, float* p_out);

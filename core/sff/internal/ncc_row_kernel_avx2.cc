@@ -1,5 +1,6 @@
-// AVX2 variant of the float-sum NCC row (core/sff/internal/ncc_row_kernel.h): 8 pixels a step,
-// the rest of the row by the portable loop.
+// AVX2 variants of the NCC row kernels (core/sff/internal/ncc_row_kernel.h): the float-sum row
+// 8 pixels a step (the rest of the row by the portable loop), and the patch-sum loops compiled
+// for AVX2.
 #include "core/sff/internal/ncc_row_kernel.h"
 
 #if defined(__x86_64__)
@@ -40,6 +41,26 @@ __attribute__((target("avx2"))) void NccRowFloatAvx2(const float* sw, const floa
   }
   NccRowPortable(sw, sww, swt, tsum, tinv, n, x, count, c_out, p_out);
 }
+
+namespace {
+template <typename A>
+__attribute__((target("avx2"))) void WindowSumsAvx2(const A* v, A* out, int count, int k) {
+  WindowSumsLoop(v, out, count, k);
+}
+template <typename A>
+__attribute__((target("avx2"))) void SlideAvx2(const A* wo, const A* wn, const float* to, const float* tn, A* vw,
+                                               A* vww, A* vwt, int count) {
+  SlidePatchSumsLoop(wo, wn, to, tn, vw, vww, vwt, count);
+}
+}  // namespace
+
+template <typename A>
+PatchSumKernels<A> PatchSumsAvx2() {
+  return {WindowSumsAvx2<A>, SlideAvx2<A>};
+}
+
+template PatchSumKernels<float> PatchSumsAvx2<float>();
+template PatchSumKernels<double> PatchSumsAvx2<double>();
 
 }  // namespace inspection::ncc_kernel
 #endif

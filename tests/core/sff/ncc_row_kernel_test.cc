@@ -84,6 +84,45 @@ TEST(NccRowKernelTest, EveryIsaVariantMatchesPortable) {
   }
 }
 
+// The patch-sum loops: element-wise sums in the same order in every variant, so exactly equal.
+template <typename A>
+void CheckPatchSums(Isa isa, std::mt19937& rng) {
+  const PatchSumKernels<A> port = PatchSumsPortable<A>();
+  const PatchSumKernels<A> simd = isa == Isa::kAvx2 ? PatchSumsAvx2<A>() : port;
+  std::uniform_real_distribution<float> value(-300.f, 300.f);
+  for (int count : {0, 1, 3, 4, 7, 8, 9, 16, 33, 257}) {
+    for (int k : {1, 3, 7, 15}) {
+      std::vector<A> v(static_cast<size_t>(count + k)), a(static_cast<size_t>(count) + 1, A(-9)), b = a;
+      for (auto& x : v) x = A(value(rng)) / A(7);
+      port.window_sums(v.data(), a.data(), count, k);
+      simd.window_sums(v.data(), b.data(), count, k);
+      EXPECT_EQ(a, b) << IsaName(isa) << " window sums count " << count << " k " << k;
+    }
+    std::vector<A> wo(static_cast<size_t>(count)), wn(static_cast<size_t>(count));
+    std::vector<float> to(static_cast<size_t>(count)), tn(static_cast<size_t>(count));
+    for (int c = 0; c < count; ++c) wo[c] = A(value(rng)), wn[c] = A(value(rng)), to[c] = value(rng), tn[c] = value(rng);
+    std::vector<A> vw(size_t(count), A(1.5)), vww = vw, vwt = vw, vw2 = vw, vww2 = vw, vwt2 = vw;
+    port.slide(wo.data(), wn.data(), to.data(), tn.data(), vw.data(), vww.data(), vwt.data(), count);
+    simd.slide(wo.data(), wn.data(), to.data(), tn.data(), vw2.data(), vww2.data(), vwt2.data(), count);
+    EXPECT_EQ(vw, vw2) << IsaName(isa) << " slide count " << count;
+    EXPECT_EQ(vww, vww2) << IsaName(isa) << " slide count " << count;
+    EXPECT_EQ(vwt, vwt2) << IsaName(isa) << " slide count " << count;
+  }
+}
+
+TEST(NccRowKernelTest, PatchSumVariantsMatchPortableExactly) {
+  std::mt19937 rng(13);
+  for (Isa isa : testing_isa::IsasToCheck({Isa::kAvx2})) {
+    CheckPatchSums<float>(isa, rng);
+    CheckPatchSums<double>(isa, rng);
+  }
+  // Analytic: window sums of 1, 2, 3, 4, 5 with k = 3.
+  const std::vector<float> v = {1, 2, 3, 4, 5};
+  std::vector<float> out(3);
+  PickPatchSums<float>().window_sums(v.data(), out.data(), 3, 3);
+  EXPECT_EQ(out, (std::vector<float>{6, 9, 12}));
+}
+
 TEST(NccRowKernelTest, PortableOnAnalyticCases) {
   // Patch w = {0, 255} x 4 + {0}: t = w - mean gives C = 1; a flat patch gives 0.
   std::mt19937 rng(11);
