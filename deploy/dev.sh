@@ -35,6 +35,7 @@ packages=(
   python3-grpcio python3-protobuf  # examples/python: the MES client (tests/mes)
   libcpp-httplib-dev  # inspectd's HTTP port: /metrics and the dashboard
   postgresql libpq-dev  # server/storage: the PostgreSQL backend (pool, site) and its tests' private server
+  zlib1g-dev  # core/io/depth_export: crc32 of the PNG chunks (OpenSSL EVP from libssl-dev: the x3p MD5)
   prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
   libopencv-contrib-dev  # core/sff/dense_depth.cc: cv::ximgproc fast global smoother (dense depth)

@@ -3,8 +3,10 @@
 // Every writer renders into memory or "<path>.tmp" first and renames, so failures leave nothing.
 #include "core/io/depth_export.h"
 
+#include <openssl/evp.h>
 #include <tiffio.h>
 #include <zip.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <array>
@@ -380,81 +382,27 @@ Status WriteDepthPreviewPng(const fs::path& path, const cv::Mat& depth_um, const
 }
 
 // ---------------------------------------------------------------------------------------------
-// MD5 (RFC 1321) for the x3p checksums.
+// MD5 (RFC 1321) for the x3p checksums, by OpenSSL's EVP interface.
 
 std::string Md5Hex(const void* data, size_t size) {
-  static constexpr uint32_t kShift[64] = {7, 12, 17, 22, 7, 12, 17, 22, 7, 12, 17, 22, 7, 12, 17, 22,
-                                          5, 9,  14, 20, 5, 9,  14, 20, 5, 9,  14, 20, 5, 9,  14, 20,
-                                          4, 11, 16, 23, 4, 11, 16, 23, 4, 11, 16, 23, 4, 11, 16, 23,
-                                          6, 10, 15, 21, 6, 10, 15, 21, 6, 10, 15, 21, 6, 10, 15, 21};
-  uint32_t k[64];
-  for (int i = 0; i < 64; ++i) k[i] = uint32_t(std::floor(std::abs(std::sin(double(i + 1))) * 4294967296.0));
-  uint32_t a0 = 0x67452301u, b0 = 0xefcdab89u, c0 = 0x98badcfeu, d0 = 0x10325476u;
-  // Message + 0x80 + zeros to 56 mod 64 + bit length (little endian).
-  std::vector<uint8_t> msg(static_cast<const uint8_t*>(data), static_cast<const uint8_t*>(data) + size);
-  msg.push_back(0x80);
-  while (msg.size() % 64 != 56) msg.push_back(0);
-  const uint64_t bits = uint64_t(size) * 8;
-  for (int i = 0; i < 8; ++i) msg.push_back(uint8_t(bits >> (8 * i)));
-  auto rotl = [](uint32_t x, uint32_t c) { return (x << c) | (x >> (32 - c)); };
-  for (size_t off = 0; off < msg.size(); off += 64) {
-    uint32_t m[16];
-    for (int i = 0; i < 16; ++i) {
-      const uint8_t* p = &msg[off + 4 * size_t(i)];
-      m[i] = uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
-    }
-    uint32_t a = a0, b = b0, c = c0, d = d0;
-    for (int i = 0; i < 64; ++i) {
-      uint32_t f;
-      int g;
-      if (i < 16) {
-        f = (b & c) | (~b & d);
-        g = i;
-      } else if (i < 32) {
-        f = (d & b) | (~d & c);
-        g = (5 * i + 1) % 16;
-      } else if (i < 48) {
-        f = b ^ c ^ d;
-        g = (3 * i + 5) % 16;
-      } else {
-        f = c ^ (b | ~d);
-        g = (7 * i) % 16;
-      }
-      f = f + a + k[i] + m[g];
-      a = d;
-      d = c;
-      c = b;
-      b = b + rotl(f, kShift[i]);
-    }
-    a0 += a;
-    b0 += b;
-    c0 += c;
-    d0 += d;
-  }
-  std::string hex;
-  char buf[3];
-  for (uint32_t v : {a0, b0, c0, d0}) {
-    for (int i = 0; i < 4; ++i) {
-      std::snprintf(buf, sizeof(buf), "%02x", unsigned((v >> (8 * i)) & 0xffu));
-      hex += buf;
-    }
+  unsigned char digest[EVP_MAX_MD_SIZE];
+  unsigned int length = 0;
+  // EVP_Digest fails only when OpenSSL cannot allocate its context or offers no MD5 (a
+  // FIPS-only provider): empty then, which the x3p writer reports instead of a wrong checksum.
+  if (EVP_Digest(data, size, digest, &length, EVP_md5(), nullptr) != 1 || length != 16) return {};
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string hex(2 * length, '0');
+  for (unsigned int i = 0; i < length; ++i) {
+    hex[2 * i] = kHex[digest[i] >> 4];
+    hex[2 * i + 1] = kHex[digest[i] & 0xf];
   }
   return hex;
 }
 
 namespace {
 
-uint32_t Crc32(const uint8_t* p, size_t n) {
-  uint32_t table[256];
-  for (uint32_t i = 0; i < 256; ++i) {
-    uint32_t c = i;
-    for (int j = 0; j < 8; ++j) c = (c & 1) ? 0xedb88320u ^ (c >> 1) : c >> 1;
-    table[i] = c;
-  }
-  uint32_t crc = 0xffffffffu;
-  for (size_t i = 0; i < n; ++i) crc = table[(crc ^ p[i]) & 0xffu] ^ (crc >> 8);
-  return crc ^ 0xffffffffu;
-}
+// CRC-32 of a PNG chunk (ISO 3309, as PNG spec 5.5 defines it), by zlib.
+uint32_t Crc32(const uint8_t* p, size_t n) { return uint32_t(crc32_z(0L, p, n)); }
 
 void PutBigEndian32(std::string* out, uint32_t v) {
   for (int i = 3; i >= 0; --i) out->push_back(char(uint8_t(v >> (8 * i))));
@@ -629,6 +577,7 @@ Status WriteDepthX3p(const fs::path& path, const cv::Mat& depth_um, const DepthE
     }
   }
   const std::string data_md5 = Md5Hex(data.data(), data.size() * sizeof(double));
+  if (data_md5.empty()) return Status::Internal("x3p " + path.string() + ": OpenSSL has no MD5 for the checksums");
   // Unknown scale: a 1 um increment (one unit per pixel), stated in Record2's comment.
   const std::string px_m = FormatDouble(LateralStepOrOne(meta) * 1e-6);
   const std::string comment = meta.pixel_size_um > 0.0

@@ -9,11 +9,7 @@
 #include <string>
 #include <vector>
 
-#if defined(__x86_64__)
-#include <immintrin.h>
-#endif
-
-#include "core/util/cpu_features.h"
+#include "core/registration/internal/gauss_newton_kernel.h"
 
 namespace inspection {
 
@@ -97,69 +93,6 @@ struct IterationResult {
   double valid_share = 0;
 };
 
-#if defined(__x86_64__)
-// AVX2 + FMA: blocks of 8 pixels of a row run [x, x + 8 * blocks) accumulate in float lanes (a
-// lane sums at most a row's pixels / 8 values of order 1, where float keeps ~6 digits); the
-// caller adds each row's lane totals to its double sums. The scalar double loop below did 32
-// dependent-free but unvectorised double sums per pixel at ~50 cycles a pixel; this is ~10x
-// faster. wr, up, dn: the warped frame's row and its neighbours at x; tr: the reference's row.
-struct LaneSums {
-  // The 21 upper-triangle Hessian terms j_i j_k (row-major, i <= k), the 6 gradient terms j_i r,
-  // then sw, st, sww, stt, swt.
-  static constexpr int kTerms = 32;
-  alignas(32) float v[kTerms][8] = {};
-};
-
-__attribute__((target("avx2,fma"))) void AccumulateBlocksAvx2(const float* wr, const float* up, const float* dn,
-                                                             const float* tr, int blocks, float u0, float du,
-                                                             float v, float gain, float offset, LaneSums* out) {
-  __m256 acc[LaneSums::kTerms];
-  for (int q = 0; q < LaneSums::kTerms; ++q) acc[q] = _mm256_setzero_ps();
-  const __m256 half_gain = _mm256_set1_ps(0.5f * gain), vv = _mm256_set1_ps(v), g = _mm256_set1_ps(gain),
-               o = _mm256_set1_ps(offset), step = _mm256_set1_ps(8.0f * du);
-  __m256 u = _mm256_add_ps(_mm256_set1_ps(u0), _mm256_mul_ps(_mm256_set1_ps(du), _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7)));
-  for (int b = 0; b < blocks; ++b, wr += 8, up += 8, dn += 8, tr += 8) {
-    const __m256 w = _mm256_loadu_ps(wr), t = _mm256_loadu_ps(tr);
-    const __m256 ix = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(wr + 1), _mm256_loadu_ps(wr - 1)), half_gain);
-    const __m256 iy = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(dn), _mm256_loadu_ps(up)), half_gain);
-    const __m256 j[5] = {_mm256_fmadd_ps(ix, u, _mm256_mul_ps(iy, vv)),     // d/da
-                         _mm256_fmsub_ps(iy, u, _mm256_mul_ps(ix, vv)),     // d/db
-                         ix, iy, w};                                         // d/dtx, d/dty, d/dgain
-    const __m256 r = _mm256_sub_ps(_mm256_fmadd_ps(g, w, o), t);           // j_5 = 1 (d/doffset)
-    int q = 0;
-    for (int i = 0; i < 5; ++i) {
-      for (int k = i; k < 5; ++k, ++q) acc[q] = _mm256_fmadd_ps(j[i], j[k], acc[q]);
-      acc[q] = _mm256_add_ps(acc[q], j[i]);  // j_i * j_5
-      ++q;
-    }
-    acc[20] = _mm256_add_ps(acc[20], _mm256_set1_ps(1.0f));  // j_5 * j_5
-    for (int i = 0; i < 5; ++i) acc[21 + i] = _mm256_fmadd_ps(j[i], r, acc[21 + i]);
-    acc[26] = _mm256_add_ps(acc[26], r);
-    acc[27] = _mm256_add_ps(acc[27], w);
-    acc[28] = _mm256_add_ps(acc[28], t);
-    acc[29] = _mm256_fmadd_ps(w, w, acc[29]);
-    acc[30] = _mm256_fmadd_ps(t, t, acc[30]);
-    acc[31] = _mm256_fmadd_ps(w, t, acc[31]);
-    u = _mm256_add_ps(u, step);
-  }
-  for (int q = 0; q < LaneSums::kTerms; ++q) _mm256_store_ps(out->v[q], acc[q]);
-}
-
-// Adds one row's lane totals to the double sums, in Iterate's order of terms.
-void AddLaneSums(const LaneSums& lanes, double hs[6][6], double gs[6], double* s5) {
-  auto total = [&](int q) {
-    double t = 0;
-    for (int l = 0; l < 8; ++l) t += lanes.v[q][l];
-    return t;
-  };
-  int q = 0;
-  for (int i = 0; i < 6; ++i)
-    for (int k = i; k < 6; ++k) hs[i][k] += total(q++);
-  for (int i = 0; i < 6; ++i) gs[i] += total(q++);
-  for (int i = 0; i < 5; ++i) s5[i] += total(q++);
-}
-#endif
-
 // One Gauss-Newton step; updates p. Residual r = gain * I(W(x)) + offset - T(x).
 IterationResult Iterate(const Level& L, Params& p, bool use_simd) {
   const int w = L.reference.cols, h = L.reference.rows;
@@ -168,16 +101,10 @@ IterationResult Iterate(const Level& L, Params& p, bool use_simd) {
   const cv::Matx23d m = MatrixOf(p, c, half);
   cv::Mat warped;
   cv::warpAffine(L.frame, warped, m, L.reference.size(), cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
-  // Normal equations in local arrays: per row, the AVX2 kernel's float lanes over blocks of 8
-  // pixels, then the scalar double loop over the rest of the row (all of it without AVX2; each
-  // sum in a register or a plain stack slot rather than a Matx element kept in memory).
-  double hs[6][6] = {}, gs[6] = {};
-  double s5[5] = {};  // sw, st, sww, stt, swt: the correlation's sums
-  long n = 0;
-#if defined(__x86_64__)
-  static const bool cpu_avx2 = CpuHasAvx2() && __builtin_cpu_supports("fma");
-  const bool avx2 = use_simd && cpu_avx2;
-#endif
+  // Normal equations, row by row, by the kernel for this CPU (the AVX2 one sums blocks of 8
+  // pixels in float lanes).
+  registration_internal::NormalSums sums;
+  const registration_internal::GaussNewtonRowFn row_sums = registration_internal::PickGaussNewtonRow(use_simd);
   for (int y = 1; y < h - 1; ++y) {
     const float* wr = warped.ptr<float>(y);
     const float* up = warped.ptr<float>(y - 1);
@@ -208,34 +135,12 @@ IterationResult Iterate(const Level& L, Params& p, bool use_simd) {
     while (x0 > 1 && inside(x0 - 1)) --x0;
     while (x1 >= x0 && !inside(x1)) --x1;
     while (x1 < w - 2 && x1 >= x0 && inside(x1 + 1)) ++x1;
-    int x = x0;
-#if defined(__x86_64__)
-    if (avx2 && x1 - x0 + 1 >= 8) {
-      LaneSums lanes;
-      const int blocks = (x1 - x0 + 1) / 8;
-      AccumulateBlocksAvx2(wr + x0, up + x0, dn + x0, tr + x0, blocks, float((x0 - c.x) / half), float(1.0 / half),
-                           float(v), float(p.gain), float(p.offset), &lanes);
-      AddLaneSums(lanes, hs, gs, s5);
-      x = x0 + blocks * 8;
-      n += x - x0;
-    }
-#endif
-    for (; x <= x1; ++x) {
-      const double u = (x - c.x) / half;
-      const double iw = wr[x], t = tr[x];
-      const double ix = 0.5 * (wr[x + 1] - wr[x - 1]) * p.gain, iy = 0.5 * (dn[x] - up[x]) * p.gain;
-      const double j[6] = {ix * u + iy * v, -ix * v + iy * u, ix, iy, iw, 1.0};
-      const double r = p.gain * iw + p.offset - t;
-#pragma GCC unroll 6
-      for (int i = 0; i < 6; ++i) {
-        gs[i] += j[i] * r;
-#pragma GCC unroll 6
-        for (int k = i; k < 6; ++k) hs[i][k] += j[i] * j[k];
-      }
-      s5[0] += iw, s5[1] += t, s5[2] += iw * iw, s5[3] += t * t, s5[4] += iw * t;
-      ++n;
-    }
+    row_sums({wr, up, dn, tr, x0, x1, c.x, half, v, p.gain, p.offset}, &sums);
   }
+  const auto& hs = sums.hs;
+  const auto& gs = sums.gs;
+  const auto& s5 = sums.s5;
+  const long n = sums.n;
   IterationResult out;
   out.valid_share = double(n) / std::max(1, (w - 2) * (h - 2));
   if (n < 64) return out;

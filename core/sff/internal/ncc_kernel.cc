@@ -3,12 +3,12 @@
 // at run time); see TileFocusT for the numerics.
 #include "core/sff/internal/ncc_kernel.h"
 
-#include <immintrin.h>
-
 #include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 #include <type_traits>
+
+#include "core/sff/internal/ncc_row_kernel.h"
 
 namespace inspection::ncc_kernel {
 
@@ -44,99 +44,25 @@ TemplateStats MakeTemplateStats(const cv::Mat& templ, int correlation_window_px)
 
 namespace {
 
-// Row kernels, kept apart so they vectorise (AVX2 where the CPU has it, chosen at run time by
-// target_clones). Clang rejects target_clones on function templates; its builds (the libFuzzer
-// targets, tests/fuzz/run_fuzz.sh) get the portable code, which is the same arithmetic.
-#if defined(__clang__)
-#define INSPECT_NCC_ROW_KERNEL
-#else
-#define INSPECT_NCC_ROW_KERNEL __attribute__((target_clones("avx2", "default")))
-#endif
-
-// out[x] = sum of v[x .. x + k - 1], x = 0..count-1.
+// Row kernels (core/sff/internal/ncc_row_kernel.h), AVX2 where the CPU has it.
 template <typename A>
-INSPECT_NCC_ROW_KERNEL void WindowSums(const A* __restrict v, A* __restrict out, int count, int k) {
-  for (int x = 0; x < count; ++x) out[x] = v[x];
-  for (int j = 1; j < k; ++j)
-    for (int x = 0; x < count; ++x) out[x] += v[x + j];
+void WindowSums(const A* v, A* out, int count, int k) {
+  static const auto fn = PickPatchSums<A>().window_sums;
+  fn(v, out, count, k);
 }
 
-// Slides the vertical patch sums by one row: - row o, + row n (o and n of w and t).
 template <typename A>
-INSPECT_NCC_ROW_KERNEL void SlidePatchSums(const A* __restrict wo, const A* __restrict wn, const float* __restrict to,
-                                           const float* __restrict tn, A* __restrict vw, A* __restrict vww,
-                                           A* __restrict vwt, int count) {
-  for (int c = 0; c < count; ++c) {
-    vw[c] += wn[c] - wo[c];
-    vww[c] += wn[c] * wn[c] - wo[c] * wo[c];
-    vwt[c] += wn[c] * A(tn[c]) - wo[c] * A(to[c]);
-  }
-}
-
-// eq. 5.25 in sums: C = (n Swt - Sw St) / sqrt((n Sww - Sw^2)(n Stt - St^2)), and
-// C sigma_w = cov(w, t) / sigma_t = (n Swt - Sw St) / (n sqrt(n Stt - St^2)); 0 for a flat patch
-// (sww >= 0, so var_w > 1e-9 n sww also asks var_w > 0: a variance at rounding level is flat).
-template <typename A>
-void NccRowPortable(const A* sw, const A* sww, const A* swt, const float* tsum, const float* tinv, int n, int begin,
-                    int count, float* c_out, float* p_out) {
-  for (int x = begin; x < count; ++x) {
-    const double var_w = double(n) * double(sww[x]) - double(sw[x]) * double(sw[x]);
-    const float num = (float(n) * float(swt[x]) - float(sw[x]) * tsum[x]) * tinv[x];
-    const bool ok = var_w > 1e-9 * double(n) * double(sww[x]);
-    const float root = ok ? float(std::sqrt(var_w)) : 1.0f;
-    const float c = ok ? std::clamp(num / root, -1.0f, 1.0f) : 0.0f;
-    c_out[x] = c;
-    p_out[x] = c * root / float(n);
-  }
-}
-
-// The same for float sums, 8 pixels per step; the variance in double as above (the float sums
-// are exact integers, their products are not). Same results as the portable loop up to the
-// rounding of one float division.
-__attribute__((target("avx2"))) void NccRowAvx2(const float* sw, const float* sww, const float* swt, const float* tsum,
-                                                const float* tinv, int n, int count, float* c_out, float* p_out) {
-  const __m256d nd = _mm256_set1_pd(n), tiny = _mm256_set1_pd(1e-9 * n);
-  const __m256 nf = _mm256_set1_ps(float(n)), inv_n = _mm256_set1_ps(1.0f / float(n));
-  const __m256 one = _mm256_set1_ps(1.0f), minus_one = _mm256_set1_ps(-1.0f);
-  int x = 0;
-  for (; x + 8 <= count; x += 8) {
-    const __m256 a = _mm256_loadu_ps(sw + x), b = _mm256_loadu_ps(sww + x);
-    __m256d var[2], thr[2];
-    for (int h = 0; h < 2; ++h) {
-      const __m256d ad = _mm256_cvtps_pd(h ? _mm256_extractf128_ps(a, 1) : _mm256_castps256_ps128(a));
-      const __m256d bd = _mm256_cvtps_pd(h ? _mm256_extractf128_ps(b, 1) : _mm256_castps256_ps128(b));
-      var[h] = _mm256_sub_pd(_mm256_mul_pd(nd, bd), _mm256_mul_pd(ad, ad));
-      thr[h] = _mm256_mul_pd(tiny, bd);
-    }
-    // Pack the two 4 x 64-bit masks and variances into 8 x 32-bit lanes.
-    const __m128 m0 = _mm256_cvtpd_ps(_mm256_cmp_pd(var[0], thr[0], _CMP_GT_OQ));
-    const __m128 m1 = _mm256_cvtpd_ps(_mm256_cmp_pd(var[1], thr[1], _CMP_GT_OQ));
-    // A true 64-bit mask converts to NaN, a false one to 0: NaN != NaN marks the true lanes.
-    const __m256 mask_nan = _mm256_set_m128(m1, m0);
-    const __m256 ok = _mm256_cmp_ps(mask_nan, mask_nan, _CMP_UNORD_Q);
-    const __m256 var_f = _mm256_set_m128(_mm256_cvtpd_ps(var[1]), _mm256_cvtpd_ps(var[0]));
-    const __m256 root = _mm256_sqrt_ps(_mm256_blendv_ps(one, var_f, ok));
-    const __m256 num = _mm256_mul_ps(
-        _mm256_sub_ps(_mm256_mul_ps(nf, _mm256_loadu_ps(swt + x)), _mm256_mul_ps(a, _mm256_loadu_ps(tsum + x))),
-        _mm256_loadu_ps(tinv + x));
-    __m256 c = _mm256_min_ps(_mm256_max_ps(_mm256_div_ps(num, root), minus_one), one);
-    c = _mm256_and_ps(c, ok);
-    _mm256_storeu_ps(c_out + x, c);
-    _mm256_storeu_ps(p_out + x, _mm256_mul_ps(_mm256_mul_ps(c, root), inv_n));
-  }
-  NccRowPortable(sw, sww, swt, tsum, tinv, n, x, count, c_out, p_out);
-}
-
-bool HasAvx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
+void SlidePatchSums(const A* wo, const A* wn, const float* to, const float* tn, A* vw, A* vww, A* vwt, int count) {
+  static const auto fn = PickPatchSums<A>().slide;
+  fn(wo, wn, to, tn, vw, vww, vwt, count);
 }
 
 template <typename A>
 void NccRow(const A* sw, const A* sww, const A* swt, const float* tsum, const float* tinv, int n, int count,
             float* c_out, float* p_out) {
   if constexpr (std::is_same_v<A, float>) {
-    if (HasAvx2()) return NccRowAvx2(sw, sww, swt, tsum, tinv, n, count, c_out, p_out);
+    static const NccRowFloatFn row = PickNccRowFloat();
+    return row(sw, sww, swt, tsum, tinv, n, count, c_out, p_out);
   }
   NccRowPortable(sw, sww, swt, tsum, tinv, n, 0, count, c_out, p_out);
 }

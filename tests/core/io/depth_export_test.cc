@@ -409,6 +409,34 @@ TEST_F(DepthExportTest, X3pHasIsoLayoutAndValidChecksums) {
     }
 }
 
+// The exports' bytes as the hand-written MD5 and CRC-32 produced them before OpenSSL and zlib
+// took over (digests recorded from that build): the PNG's tEXt chunk CRC and the x3p's data
+// checksum must not change, nor anything else in the files (main.xml without its two dates).
+TEST_F(DepthExportTest, ExportBytesMatchGoldenDigests) {
+  const cv::Mat d = SampleDepth();
+  DepthExportMeta meta;
+  meta.pixel_size_um = 0.5;
+  meta.description = "golden";
+  const fs::path png = dir_ / "golden16.png", x3p = dir_ / "golden.x3p";
+  ASSERT_TRUE(WriteDepthPng16(png, d, meta).ok());
+  ASSERT_TRUE(WriteDepthX3p(x3p, d, meta).ok());
+  const std::string png_bytes = ReadAll(png);
+  EXPECT_EQ(Md5Hex(png_bytes.data(), png_bytes.size()), "72b49511c5232693fe4fef827acef33d");
+  const ZipEntries z = ReadZip(x3p);
+  ASSERT_TRUE(z.data.count("main.xml"));
+  std::string xml = z.data.at("main.xml");
+  const std::string& bin = z.data.at("bindata/data.bin");
+  EXPECT_EQ(Between(xml, "<MD5ChecksumPointData>", "</MD5ChecksumPointData>"), "85c8acb2b74d6d30604ad4f7fedc03d6");
+  EXPECT_EQ(Md5Hex(bin.data(), bin.size()), "85c8acb2b74d6d30604ad4f7fedc03d6");
+  for (const std::string tag : {"<Date>", "<CalibrationDate>"}) {
+    const size_t at = xml.find(tag);
+    ASSERT_NE(at, std::string::npos) << tag;
+    xml.replace(at + tag.size(), 25, std::string(25, '-'));  // 2026-01-01T00:00:00+00:00
+  }
+  EXPECT_EQ(Md5Hex(xml.data(), xml.size()), "5e157f1b88e1c8f932302da6cc1ead00");
+  EXPECT_EQ(z.data.at("md5checksum.hex"), Md5Hex(z.data.at("main.xml").data(), z.data.at("main.xml").size()) +
+                                              " *main.xml\n");
+}
 TEST_F(DepthExportTest, X3pOpensInGwyddion) {
   // Gwyddion's thumbnailer loads the file with its x3p reader and renders the height field. A
   // ramp along x must come out as a brightness ramp along x.
