@@ -142,7 +142,7 @@ void PrintDepthSummary(const v1::DepthSummary& d) {
       std::cout << Format(", threshold %.2f", d.isff_fast_threshold());
     std::cout << Format(", frames searched %.0f %%", 100.0 * d.frames_searched_fraction()) << '\n';
   }
-  // Lateral alignment (issue 18): shown when frames were aligned.
+  // Lateral alignment: shown when frames were aligned.
   if (d.alignment() == v1::FRAME_ALIGNMENT_ESTIMATE || d.alignment() == v1::FRAME_ALIGNMENT_CALIBRATED) {
     std::cout << "alignment: " << (d.alignment() == v1::FRAME_ALIGNMENT_ESTIMATE ? "estimate" : "calibrated")
               << Format(", scale change up to %.2f %%, shift up to %.2f px, seen by every frame %.1f %%\n",

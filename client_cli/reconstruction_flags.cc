@@ -108,8 +108,7 @@ void ReconstructionFlags::Add(CLI::App* cmd) {
                 "(ADAPT-family scans, flicker); off by default (docs/reconstruction.md)");
   cmd->add_option("--dense", dense,
                   "Depth at every pixel (edge-aware fit of the measured depths; inferred pixels keep "
-                  "confidence below the threshold): on | off | auto (default: on for imported stacks, "
-                  "off for rig scans)")
+                  "confidence below the threshold): on | off | auto (default: off)")
       ->check(CLI::IsMember({"on", "off", "auto"}));
   cmd->add_flag("--fill", fill,
                 "Fill pixels without depth from measured neighbours (interpolated, not measured; off by default)");

@@ -10,7 +10,7 @@
 //   scatter_matrix.bin                CSC float32 (see core/calibration/scatter_matrix.h)
 //   scatter_black_radiance.tiff       float32, camera size
 //   integral_psf.tiff                 float32 kernel
-// The focus-breathing model (issue 18, core/registration/stack_alignment.h) and the z-linearity table (issue
+// The focus-breathing model (core/registration/stack_alignment.h) and the z-linearity table
 // 13, core/metrology/z_linearity.h) are scalar: bundle.json only.
 // Models that were not calibrated are absent from bundle.json and have no files.
 #pragma once
@@ -45,8 +45,8 @@ enum class CalibrationStep {
   kPsf,                // thesis 4.3.3 and sigma_p of 5.2.1
   kScatterMatrix,      // thesis 4.3.4, eq. 4.11-4.12
   kIntegralPsf,        // thesis 5.4.1, eq. 5.22
-  kZLinearity,         // issue 13: the depth's periodic error between frames, for uncertainties
-  kFocusBreathing,     // issue 18: magnification change and lateral drift through z
+  kZLinearity,         // the depth's periodic error between frames, for uncertainties
+  kFocusBreathing,     // magnification change and lateral drift through z
 };
 inline constexpr int kCalibrationStepCount = 8;
 

@@ -1,7 +1,7 @@
 // A fast path for the most common stack frame file, a plain PNG (grey or RGB, 8 or 16 bit, not
 // interlaced), decoded in one pass with libdeflate into the frame's own buffer: the frames of an
 // upload decode while it arrives (core/io/stack_frame_decoder.h), and PNG inflation was most of the
-// end-to-end time of a reconstruction (issue 16). The pixels are cv::imread's bit for bit (PNG is
+// end-to-end time of a reconstruction. The pixels are cv::imread's bit for bit (PNG is
 // lossless): the same channel order (BGR) and byte order (native) as cv::IMREAD_UNCHANGED.
 #pragma once
 

@@ -1,4 +1,4 @@
-// One entry point for recipe measurements on a depth map (issue 13): a measurement names what
+// One entry point for recipe measurements on a depth map: a measurement names what
 // to compute (ISO 25178-2 height parameter, step height, flatness, tilt, volume, form radius),
 // on which region(s) of interest, with which options; the result is the value, its unit, its
 // standard uncertainty (core/metrology/measurement_uncertainty.h) and the region's coverage. The verdict

@@ -1,6 +1,6 @@
 // Regions of interest on a depth map (the "definition area" of ISO 25178-2 3.1.9): a rectangle,
 // a polygon or the whole field, in pixels or µm, rasterised to a pixel mask and intersected with
-// the measured (finite-depth) pixels; coverage = measured share of the region (issue 13).
+// the measured (finite-depth) pixels; coverage = measured share of the region.
 //
 // Coordinates (px or µm) are measured from the image's top-left corner, x to the right (columns),
 // y down (rows). Pixel (col, row) covers [col, col + 1) x [row, row + 1) px; its centre is at

@@ -1,4 +1,4 @@
-// Registration of one stack frame to another (issue 18, lateral alignment before the focus
+// Registration of one stack frame to another (lateral alignment before the focus
 // measure of thesis 3.1.3): a similarity transform (scale, small rotation, translation) found by
 // Gauss-Newton intensity alignment on an image pyramid, started from phase correlation.
 #pragma once

@@ -1,4 +1,4 @@
-// Lateral alignment of a focus stack (issue 18): the focus measure of thesis 3.1.3 compares a
+// Lateral alignment of a focus stack: the focus measure of thesis 3.1.3 compares a
 // pixel across frames, which assumes frames registered pixel for pixel. Non-telecentric optics
 // change the magnification through focus ("focus breathing") and stages drift laterally, so each
 // frame is warped onto the grid of a reference frame before it is measured. The transform is a

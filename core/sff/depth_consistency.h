@@ -13,7 +13,7 @@
 // residual exceeds 1 z step, with the window one pixel wider than the focus window, cut the
 // RMSE of Tenengrad 11x11 from ~5.9 to ~0.7 frames at 43 % coverage (from 79 %).
 //
-// Window mixing (issue 17): the plane check passes a smooth but wrong transition. Beside a steep
+// Window mixing: the plane check passes a smooth but wrong transition. Beside a steep
 // flank the focus window's energy is often dominated by one strong edge away from the pixel (a
 // clipped or bright border next to a dark flank), and the pixel gets that edge's depth: the
 // measured map is a smooth ramp, displaced. To first order a pixel's depth is the true depth at

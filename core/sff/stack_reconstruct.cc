@@ -43,10 +43,12 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
           return Status::Cancelled("reconstruction cancelled while aligning frame " + std::to_string(i));
         return source.grey(i);  // errors name the frame
       };
-      // A rig's scan (its stack.json records the illumination it ran) has metric z from the
-      // stage: the linear-in-z focus-breathing model is the right prior there. An imported stack's
-      // z is nominal: a chain of neighbour registrations assumes nothing about it.
-      if (!manifest.illumination.empty()) {
+      // A rig's scan has metric z from the stage: the linear-in-z focus-breathing model is the
+      // right prior there. An imported stack's z is nominal: a chain of neighbour registrations
+      // assumes nothing about it, but only when asked for (a.chain_for_imported_stacks) until the
+      // server, CLI and report carry its figures and its default no longer fails stacks the
+      // linear estimate reconstructs.
+      if (!a.chain_for_imported_stacks || !manifest.illumination.empty()) {
         StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
         if (!estimate.ok()) {
           const StatusCode code = estimate.status().code();
@@ -66,8 +68,14 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
       int registered_pairs = 0;
       StatusOr<ChainRegistration> chain = RegisterChain(load, int(z_um.size()), a.chain, &registered_pairs);
       if (!chain.ok()) {
-        if (a.fall_back_to_none && chain.status().code() == StatusCode::kFailedPrecondition && registered_pairs == 0) {
-          if (figures) figures->fallback_reason = "no frame pair could be registered: " + chain.status().message();
+        // The default (not an explicit request) reconstructs unaligned when the chain cannot be
+        // registered, and says so in figures->fallback_reason (the job result and the CLI print it).
+        if (a.fall_back_to_none && chain.status().code() == StatusCode::kFailedPrecondition) {
+          if (figures) {
+            figures->fallback_reason = (registered_pairs == 0 ? "no frame pair could be registered: "
+                                                              : "the frame chain could not be registered: ") +
+                                       chain.status().message();
+          }
           return std::optional<StackAligner>();
         }
         return chain.status();

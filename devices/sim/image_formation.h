@@ -21,7 +21,7 @@
 
 namespace inspection {
 
-// Lateral optics through focus (issue 18): a non-telecentric objective's magnification changes
+// Lateral optics through focus: a non-telecentric objective's magnification changes
 // with the stage z ("focus breathing") and the stage drifts laterally. The camera grid at z is
 // the specimen grid (the grid of the specimen maps and of the ground truth) transformed by
 // FocusBreathingModel::At(z) (core/registration/stack_alignment.h: scale about the image centre, then shift);

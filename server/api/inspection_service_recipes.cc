@@ -1,4 +1,4 @@
-// Recipe RPCs of InspectionService (issue 13): create, update (a new version), get, list,
+// Recipe RPCs of InspectionService: create, update (a new version), get, list,
 // delete. The document is checked in full (server/results/recipe_mapping.h, and its scan section as the
 // ScanRequest it stands for) before anything is stored; the store assigns versions atomically.
 #include <google/protobuf/util/time_util.h>

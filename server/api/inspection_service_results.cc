@@ -1,4 +1,4 @@
-// Inspection result RPCs of InspectionService (issue 13): ListResults (a query with paging) and
+// Inspection result RPCs of InspectionService: ListResults (a query with paging) and
 // WatchResults (the feed an MES keeps open; server/results/result_feed.h).
 #include <google/protobuf/util/time_util.h>
 

@@ -1,4 +1,4 @@
-// MapScanRequestWithRecipe: a ScanRequest with or without a recipe, as ScanWork (issue 13).
+// MapScanRequestWithRecipe: a ScanRequest with or without a recipe, as ScanWork.
 #include "server/api/recipe_scan.h"
 
 namespace inspection {

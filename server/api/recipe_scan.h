@@ -1,4 +1,4 @@
-// A scan request as the job queue takes it, with or without a recipe (issue 13): a request that
+// A scan request as the job queue takes it, with or without a recipe: a request that
 // names a recipe runs the recipe's scan section, and its measurements are made when the depth
 // map is ready. The recipe document is resolved (id, version) and copied into the job at
 // submission, so editing or deleting the recipe later never changes a queued scan.

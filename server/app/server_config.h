@@ -51,7 +51,7 @@ struct InspectdConfig {
   uint64_t retention_max_mb = 0;     // finished jobs' data above this is deleted, oldest first; 0 = none
   int retention_keep_last = 0;       // the newest N finished jobs are always kept
   int retention_interval_s = ServerOptions{}.retention_interval_s;
-  // Reconstruction pipeline (issue 16): decode threads, the decoded frames kept per
+  // Reconstruction pipeline: decode threads, the decoded frames kept per
   // reconstruction (MiB), artifact files written at once; 0 threads = all hardware threads.
   int decode_threads = ServerOptions{}.reconstruct.decode_threads;
   int decode_budget_mb = int(ServerOptions{}.reconstruct.max_decoded_bytes >> 20);

@@ -32,7 +32,8 @@ namespace inspection {
 struct HttpEndpointOptions {
   std::string listen_address;                   // host:port; port 0 picks a free port (see port())
   std::shared_ptr<const AccessControl> access;  // null = open (no authentication configured)
-  std::string role_method = "GetRigStatus";     // the gRPC method whose role the data routes need
+  // The gRPC method (full name, as the authorization table keys it) whose role the data routes need.
+  std::string role_method = "/inspection.v1.InspectionService/GetRigStatus";
   // PEM files: with both, the port speaks HTTPS with the gRPC port's certificate, so a token
   // never crosses the network in clear when gRPC is protected by TLS.
   std::string tls_cert_file;

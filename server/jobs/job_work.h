@@ -39,7 +39,7 @@ struct CalibrateWork {
   CalibrationOptions options;
 };
 
-// How a reconstruction reads its frames and writes its artifacts (issue 16 item 4).
+// How a reconstruction reads its frames and writes its artifacts.
 struct ReconstructPipelineOptions {
   // Frames decode on this many threads while the upload arrives (or the stored scan is read);
   // 0 = all hardware threads.
@@ -47,7 +47,7 @@ struct ReconstructPipelineOptions {
   // Decoded frames kept per reconstruction for the engine; beyond it the job decodes again.
   int64_t max_decoded_bytes = StackFrameDecoderOptions{}.max_kept_bytes;
   int artifact_threads = 0;  // artifact files written (and hashed) at once; 0 = all hardware threads
-  // The path before issue 16, for the end-to-end benchmark's baseline: every frame decoded after
+  // The sequential path, the end-to-end benchmark's baseline: every frame decoded after
   // the upload to check it and again in the job, one after another; artifacts one at a time.
   bool sequential = false;
 };

@@ -510,7 +510,7 @@ Status RunIntegralPsf(Session& s, Targeting& t, const CalibrationOptions& o, Cal
   return Status::Ok();
 }
 
-// Focus breathing (issue 18): the textured target scanned through z around its focus; the
+// Focus breathing: the textured target scanned through z around its focus; the
 // frames' neighbour registrations give the model scans align with (core/registration/stack_alignment.h).
 Status RunFocusBreathing(Session& s, Targeting& t, const CalibrationOptions& o, CalibrationBundle& b,
                          CalibrationStepReport& rep) {
@@ -546,7 +546,7 @@ Status RunFocusBreathing(Session& s, Targeting& t, const CalibrationOptions& o, 
   return Status::Ok();
 }
 
-// z linearity (issue 13): a tilted flat scanned through the rig's default range at its default
+// z linearity: a tilted flat scanned through the rig's default range at its default
 // step under uniform grey, as scans would; the SFF depth's periodic error is tabulated.
 Status RunZLinearity(Session& s, Targeting& t, const CalibrationOptions& o, CalibrationBundle& b,
                      CalibrationStepReport& rep) {

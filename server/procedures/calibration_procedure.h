@@ -1,6 +1,6 @@
 // Calibration procedure: drives a Rig through the calibration steps of thesis 4.3 and 5.4.1
 // (camera response, projector response, geometric LUTs, PSF + sigma_p, scatter matrix,
-// integral PSF) and the focus-breathing model of issue 18, calls the core estimators and returns a CalibrationBundle
+// integral PSF) and the focus-breathing model, calls the core estimators and returns a CalibrationBundle
 // with the figures that verify each step. No gRPC here: the server's Calibrate job wraps RunCalibration.
 //
 // What it needs from the rig: a planar, diffuse target normal to the optical axis under the
@@ -87,12 +87,12 @@ struct CalibrationOptions {
   // region of at most this many pixels per side, which bounds the solve time on big cameras.
   int ipsf_region_px = 512;
 
-  // Focus breathing (issue 18): the target from focus - half range to focus + half range (frames
+  // Focus breathing: the target from focus - half range to focus + half range (frames
   // beyond the stage travel are skipped), registered neighbour to neighbour.
   double breathing_half_range_um = 40.0;
   double breathing_step_um = 5.0;
 
-  // z linearity (issue 13): a smooth, textured flat tilted so its heights span several z steps
+  // z linearity: a smooth, textured flat tilted so its heights span several z steps
   // (an optical flat on a wedge on a real rig; SKEW10, tilted 10 deg, on the simulated rig),
   // scanned over the rig's default range at this step (0 = the rig's default step: the table
   // applies only to scans at that step).

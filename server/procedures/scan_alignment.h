@@ -1,4 +1,4 @@
-// Lateral alignment during a scan (issue 18): which alignment a scan runs and the aligner that
+// Lateral alignment during a scan: which alignment a scan runs and the aligner that
 // warps each stack frame onto the middle frame's grid before the engine measures its focus, with
 // the calibrated focus-breathing model (core/registration/stack_alignment.h). The stored stack keeps the
 // frames as captured.

@@ -1,4 +1,4 @@
-// The z-linearity calibration step (issue 13; core/metrology/z_linearity.h): a smooth tilted flat scanned
+// The z-linearity calibration step (core/metrology/z_linearity.h): a smooth tilted flat scanned
 // through z at the step scans use, reconstructed with the default SFF options, and the depth's
 // periodic error between frames tabulated. Measurement uncertainties then use this table
 // instead of the +-1/2 step peak-locking bound (core/metrology/depth_noise_model.h), which is safe but

@@ -1,4 +1,4 @@
-// Automatic z range (issue 18): a coarse sweep over the search window finds where the specimen's
+// Automatic z range: a coarse sweep over the search window finds where the specimen's
 // focus lies (core/sff/z_range_search.h), then the normal scan (scan_procedure.h) runs over that
 // range plus the margin at the requested step. After the sweep, 2-4 frames refine the found
 // range's ends (ZRangeAccumulator::PlanRefinement). The search's frames are stored under

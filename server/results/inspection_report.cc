@@ -1,4 +1,4 @@
-// The inspection report (issue 13): one self-contained HTML page per inspection result, with the
+// The inspection report: one self-contained HTML page per inspection result, with the
 // verdicts (ISO 14253-1, U = 2u), the depth map (thesis 3.1 output) and all-in-focus image as
 // data: PNGs, the plots of server/report_plots as inline SVG and the scan metadata.
 // A Content-Security-Policy in the page itself forbids scripts and any fetch but data: images,

@@ -1,4 +1,4 @@
-// The inspection report (issue 13): one self-contained HTML file per inspection result, written
+// The inspection report: one self-contained HTML file per inspection result, written
 // beside the depth map as an artifact (ARTIFACT_KIND_REPORT_HTML). Everything is inside the file:
 // images as data: URIs (PNG), plots as inline SVG drawn here, no script and no remote resource,
 // so it opens the same on a line PC without network as in the MES archive years later.

@@ -1,4 +1,4 @@
-// Inspect: recipe measurements on a depth map, with uncertainty and verdicts (issue 13).
+// Inspect: recipe measurements on a depth map, with uncertainty and verdicts.
 #include "server/results/inspection_result.h"
 
 #include <algorithm>

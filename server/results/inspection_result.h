@@ -1,5 +1,5 @@
 // An inspection: a recipe's measurements made on one part's depth map and judged against their
-// tolerances (issue 13; core/metrology/measurement.h measures, core/metrology/verdict.h decides per ISO 14253-1).
+// tolerances (core/metrology/measurement.h measures, core/metrology/verdict.h decides per ISO 14253-1).
 // The result names the recipe version, part and station, so an MES can act on it alone.
 #pragma once
 

@@ -1,4 +1,4 @@
-// Recipe documents: validation and mapping to core/metrology/measurement.h specs (issue 13).
+// Recipe documents: validation and mapping to core/metrology/measurement.h specs.
 #include "server/results/recipe_mapping.h"
 
 #include <cmath>

@@ -1,4 +1,4 @@
-// Recipes (issue 13, OPC 40100 style): the checks a recipe document passes before it is stored
+// Recipes (OPC 40100 style): the checks a recipe document passes before it is stored
 // and its translation into core/ measurement specs and tolerances. Field names in errors are
 // the document's ("recipe.measurements[2].roi.width"), so an engineer can fix the JSON they
 // wrote. No storage here (server/storage/data_store.h) and no gRPC service (inspection_service.cc).

@@ -1,4 +1,4 @@
-// The inspection report's SVG plots (issue 13): the height histogram of the depth map (thesis
+// The inspection report's SVG plots: the height histogram of the depth map (thesis
 // 3.1 output) and the line profiles with their +-2u band (k = 2, as the verdicts use it).
 // Numbers are written with std::to_chars, so a process locale never turns "1.5" into "1,5".
 #include "server/results/report_plots.h"

@@ -1,4 +1,4 @@
-// The inspection report's plots (issue 13): a histogram of the depth map's valid heights and the
+// The inspection report's plots: a histogram of the depth map's valid heights and the
 // line profiles (height with its +-2u band against position), drawn as inline SVG with axes in
 // um; plus the HTML escaping and number formatting the report and its plots share.
 #pragma once

@@ -1,7 +1,7 @@
 // A stored scan's stack, opened for one reconstruction. The server keeps each scan's raw stack
-// once, as the stack.zip artifact users download (issue 14: a folder beside its own archive
-// doubled every scan's footprint). A reconstruction reads the frames' bytes from that archive
-// and decodes them in memory (issue 16): the frames are never written to disk a second time.
+// once, as the stack.zip artifact users download (a folder beside its own archive would double
+// every scan's footprint). A reconstruction reads the frames' bytes from that archive
+// and decodes them in memory: the frames are never written to disk a second time.
 // Only the small files a job reads by path (stack.json, the ground truth) go to a private folder
 // that goes with the job.
 #pragma once
@@ -34,7 +34,7 @@ struct StoredStack {
 enum class StoredFrames {
   kInMemory,  // frames read from the archive by `decode`
   // The whole archive extracted to `dir`: the sequential path (ReconstructPipelineOptions), the
-  // end-to-end benchmark's baseline, reads the stack as it did before issue 16.
+  // end-to-end benchmark's baseline, reads the stack from extracted files.
   kExtracted,
 };
 

@@ -1,4 +1,4 @@
-// Lateral alignment (issue 18) evaluated against ground truth: specimen x focus breathing / drift
+// Lateral alignment evaluated against ground truth: specimen x focus breathing / drift
 // -> RMSE, bias and sigma unperturbed, unaligned, aligned by the calibrated model (rig scans) and
 // by an estimate from the stack, plus what alignment costs: scan wall time and the reconstruction
 // of the stored stack, each as a ratio against the unaligned run measured in the same process.

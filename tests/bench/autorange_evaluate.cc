@@ -1,4 +1,4 @@
-// Automatic z range (issue 18, server/procedures/z_range_search.h) on the simulated rig: every
+// Automatic z range (server/procedures/z_range_search.h) on the simulated rig: every
 // built-in specimen placed at a random height (drawn from the seed) inside the search window,
 // scanned with the coarse sweep and the fine scan; the chosen range against the ground truth.
 //

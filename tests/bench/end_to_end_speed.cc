@@ -1,4 +1,4 @@
-// e2e-bench: `inspectctl reconstruct --stack` end to end (issue 16 item 4) with server and client
+// e2e-bench: `inspectctl reconstruct --stack` end to end with server and client
 // in this process on loopback: a generated stack (default 60 x 1600x1200 8-bit PNG, a textured
 // tilted wavy surface, defocus growing with |z - surface|) is uploaded, reconstructed with the
 // request's defaults (the streaming SFF engine of thesis 3.1, estimated alignment) and its result
@@ -11,8 +11,8 @@
 //   artifacts writing and hashing the result files, publication
 //   download  the result files to the client
 // and the process's peak RSS above its level before the run, against the decoded stack's size.
-// The baseline is the sequential path (ReconstructPipelineOptions::sequential, the path before
-// issue 16), run alternately with the parallel path in the same process: the machine is shared
+// The baseline is the sequential path (ReconstructPipelineOptions::sequential: decode after the
+// upload, then one frame after another), run alternately with the parallel path in the same process: the machine is shared
 // and noisy, so only the ratios mean anything. Each run's depth, confidence and all-in-focus are
 // compared bit for bit with the first run's.
 //

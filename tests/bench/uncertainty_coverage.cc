@@ -1,4 +1,4 @@
-// Uncertainty coverage on the simulated rig (issue 13): does the expanded uncertainty (k = 2) of
+// Uncertainty coverage on the simulated rig: does the expanded uncertainty (k = 2) of
 // every measurement cover >= 95 % of its deviations from the truth over repeated scans?
 // Scans each specimen with different seeds (texture, camera noise, stage errors differ), measures
 // it through core/metrology/measurement.h with the error model of core/metrology/depth_noise_model.h, and compares

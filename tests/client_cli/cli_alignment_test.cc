@@ -1,4 +1,4 @@
-// inspectctl --alignment (issue 18 point 3) through the built binary: a rig whose magnification
+// inspectctl --alignment through the built binary: a rig whose magnification
 // breathes 2 %/100 um and drifts laterally; `reconstruct --scan-id ID --alignment estimate`
 // prints the estimated alignment; `--alignment calibrated` without the focus_breathing step is
 // FAILED_PRECONDITION naming it (exit 4); an unknown value exits 2.

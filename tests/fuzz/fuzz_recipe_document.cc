@@ -1,4 +1,4 @@
-// libFuzzer target: recipe documents (issue 13/14) as `inspectctl recipe create` and an MES send
+// libFuzzer target: recipe documents as `inspectctl recipe create` and an MES send
 // them: JSON text in protobuf's JSON mapping, or the binary message; then the server's full
 // check (server/results/recipe_mapping.h) against a 320 x 240 px image of 0.74 um pixels, and for a
 // valid recipe the mapping to core/ measurement specs. Each step must answer, never crash.

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The inspection report (issue 13) in a real headless Chromium (Selenium + chromedriver):
+"""The inspection report in a real headless Chromium (Selenium + chromedriver):
 report_sample writes a report of a synthetic step gauge (1024x768 depth map, two measurements
 with different verdicts, one profile across a hole); the page is opened from the file, a
 full-page screenshot is saved as OUT_DIR/report.png and decoded (stdlib zlib) to check it is not

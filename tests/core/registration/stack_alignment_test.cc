@@ -176,7 +176,7 @@ TEST(StackAlignmentTest, EstimatesTheBreathingModelFromNeighbourPairs) {
   EXPECT_LT(cv::norm(a * corner - b * corner), 0.5);
 }
 
-// Issue 16: neighbour pairs registered concurrently give the sequential estimate bit for bit.
+// neighbour pairs registered concurrently give the sequential estimate bit for bit.
 TEST(StackAlignmentTest, ConcurrentPairsGiveTheSequentialModelExactly) {
   const BreathingStack s = MakeStack({320, 240}, 11, 10.0, 0.02, 0.002, 3.0, -2.0);
   auto load = [&](int i) -> StatusOr<cv::Mat> { return s.frames[size_t(i)]; };
@@ -245,7 +245,7 @@ TEST(StackAlignmentTest, CoarseEstimateFirstDecidesStacksThatDoNotMove) {
   }
 }
 
-// Issue 16: a long stack registers a chain of frames `stride` apart (max_pairs); the model
+// a long stack registers a chain of frames `stride` apart (max_pairs); the model
 // matches the truth as the all-neighbour estimate does, and a pair is named by its frames.
 TEST(StackAlignmentTest, LongStacksRegisterAChainOfFramesStrideApart) {
   const BreathingStack s = MakeStack({256, 192}, 41, 5.0, 0.02, 0.002, 3.0, -2.0, 0.03);

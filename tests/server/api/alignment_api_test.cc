@@ -1,4 +1,4 @@
-// Lateral alignment through the real server (issue 18): ReconstructionOptions.alignment, the
+// Lateral alignment through the real server: ReconstructionOptions.alignment, the
 // focus_breathing calibration step, the DepthSummary figures, and bad input: ESTIMATE on a scan,
 // CALIBRATED without the model, alignment with an integral method, frames too small to register
 // (INVALID_ARGUMENT naming the field) and frames that do not register (the job fails with

@@ -113,7 +113,7 @@ TEST_F(BadInputTest, UnreadableFrameNamesTheFrame) {
   ExpectNothingLeft();
 }
 
-// Issue 16: frames decode on a pool while the upload arrives. A bad frame in the middle (and a
+// frames decode on a pool while the upload arrives. A bad frame in the middle (and a
 // later frame of another size, which may finish decoding first) gets the sequential path's
 // INVALID_ARGUMENT naming the first bad frame, and leaves no job, upload or result file.
 TEST_F(BadInputTest, BadFrameMidUploadOfParallelDecodeNamesItLikeTheSequentialPath) {

@@ -1,4 +1,4 @@
-// Colour stacks through the real server (issue 16): an uploaded colour stack (8-bit PNG, 16-bit
+// Colour stacks through the real server: an uploaded colour stack (8-bit PNG, 16-bit
 // TIFF) publishes a 3-channel all_in_focus.png whose colours are the in-focus frame's where the
 // depth is right; a grey frame in a colour stack is INVALID_ARGUMENT naming it; grey stacks
 // still give a 1-channel all_in_focus.png.

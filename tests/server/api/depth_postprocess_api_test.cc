@@ -1,4 +1,4 @@
-// SFF post-processing through the real server (issue 16 item 3): ReconstructionOptions
+// SFF post-processing through the real server: ReconstructionOptions
 // depth_consistency (default on), refinement and fill_low_confidence on scans and on stored
 // stacks, the DepthSummary figures, and bad input naming the field.
 #include <gtest/gtest.h>

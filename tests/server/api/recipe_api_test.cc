@@ -1,4 +1,4 @@
-// Recipes through the real server (issue 13 points 1 and 6): create, versioned update with
+// Recipes through the real server: create, versioned update with
 // optimistic locking, get by version, list, delete; every bad document refused with
 // INVALID_ARGUMENT naming the field and nothing stored; unknown ids and versions NOT_FOUND.
 // The camera is 320 x 240 px (ServerTest::SimOptions), which bounds the regions.

@@ -1,4 +1,4 @@
-// Scans that run a recipe, through the real server on the simulated rig (issue 13 point 3): the
+// Scans that run a recipe, through the real server on the simulated rig: the
 // recipe's scan section runs, its measurements are made on the depth map with uncertainty and
 // judged; the job and its result carry part, station and recipe version. The specimen is skew5,
 // a textured plane tilted by 5.000 deg about the image's y axis (devices/sim/specimen.cc), so the

@@ -1,4 +1,4 @@
-// Reconstructing a stored scan (ReconstructStart.scan_id; server/storage/stored_stack.h, issue 16): the
+// Reconstructing a stored scan (ReconstructStart.scan_id; server/storage/stored_stack.h): the
 // frames are read from the scan's stack.zip into memory and decoded there. The results are bit
 // for bit those of the stack extracted to disk (the sequential path reads it as every
 // reconstruction did before) for SFF and ISFF; no frame file is written under uploads/, also when

@@ -1,4 +1,4 @@
-// A stack.json without pixel_size_um through the real server (issue 16): the reconstruction runs,
+// A stack.json without pixel_size_um through the real server: the reconstruction runs,
 // depth stays in the z unit, DepthSummary.pixel_size_um is 0 (unknown scale), the PLY counts
 // pixels and says "unknown scale", the x3p has 1-unit increments and says so, the depth TIFF
 // carries no resolution; a bad pixel_size_um is INVALID_ARGUMENT naming the field.

@@ -1,4 +1,4 @@
-// Automatic z range through the real server (ScanRequest.z_range_search, issue 18): bad input is
+// Automatic z range through the real server (ScanRequest.z_range_search): bad input is
 // INVALID_ARGUMENT naming the field before any job exists; a search on the simulated rig with the
 // specimen placed off the rig's default range reports both phases in its events, records the
 // search in the result and in stack.json, and its range holds the specimen's true heights.

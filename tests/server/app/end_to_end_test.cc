@@ -49,7 +49,7 @@ class EndToEndTest : public ServerTest {
   }
 };
 
-// Issue 2, test 1: depth of the simulated tilted textured plane against its ground truth.
+// depth of the simulated tilted textured plane against its ground truth.
 // Bound: 0.2 z step. Gaussian interpolation of a well-textured focus curve resolves well below
 // one step (thesis 3.1.4); half a step would be what the maximum method alone reaches.
 TEST_F(EndToEndTest, ScanOfTiltedPlaneMatchesGroundTruth) {

@@ -118,7 +118,7 @@ TEST(ServerConfig, OperationsSettingsAreCheckedAndReachServerOptions) {
   rejected(c, "no_rig and rig_config exclude each other");
 }
 
-// Issue 16: the reconstruction pipeline's decode threads, decode budget and artifact threads.
+// the reconstruction pipeline's decode threads, decode budget and artifact threads.
 TEST(ServerConfig, ReconstructPipelineSettingsReachServerOptions) {
   const ServerOptions d;
   auto defaults = ToServerOptions(InspectdConfig{});

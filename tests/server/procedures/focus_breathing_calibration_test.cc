@@ -1,4 +1,4 @@
-// Calibration step focus_breathing (issue 18) on the simulated rig: the model it stores matches
+// Calibration step focus_breathing on the simulated rig: the model it stores matches
 // the rig's configured breathing and drift, and is ~0 on a rig without them.
 #include <gtest/gtest.h>
 

@@ -156,7 +156,7 @@ TEST_F(ScanModesTest, BiasWithinBoundOnTexturedFlatAndSaturatingSpecimens) {
       }
       if (m == IlluminationMode::kAuto) default_rmse = r->error.rmse_um;
     }
-    // Issue 17's target for the default against the better of STD and TEXTURE: within 10 %.
+    // The default's target against the better of STD and TEXTURE: within 10 %.
     std::printf("%s: default AUTO RMSE %.3f um, better of STD and TEXTURE %.3f um, ratio %.2f\n", specimen,
                 default_rmse, best_std_texture_rmse, default_rmse / best_std_texture_rmse);
     EXPECT_LE(default_rmse, 1.1 * best_std_texture_rmse) << specimen;

@@ -1,4 +1,4 @@
-// Lateral alignment end to end on the simulated rig (issue 18): with 1-3 % focus breathing per
+// Lateral alignment end to end on the simulated rig: with 1-3 % focus breathing per
 // 100 um and a few px of drift, scans aligned by the calibrated model and stored stacks aligned
 // by an estimate come back to within 10 % of the unperturbed rig's RMSE; unaligned they are
 // measurably worse. Ground truth: in the grid of the stack's middle frame (the reference).

@@ -1,4 +1,4 @@
-// Automatic z range on the simulated rig (server/procedures/z_range_search.h, issue 18): built-in
+// Automatic z range on the simulated rig (server/procedures/z_range_search.h): built-in
 // specimens placed at random heights (drawn from the seed) inside the search window; the chosen
 // range must hold the true heights of >= 99 % of the pixels with at most 3 fine steps to spare on
 // either side of the truth's P0.5 .. P99.5 range (parts flatter than the engine's shortest stack,

@@ -1,4 +1,4 @@
-// The inspection report (server/results/inspection_report.h, issue 13): verdict text, escaping of user
+// The inspection report (server/results/inspection_report.h): verdict text, escaping of user
 // text, self-containedness, histogram counts against a known map, NaN gaps in profiles, the
 // embedded PNGs' sizes after decoding, and bad input.
 #include "server/results/inspection_report.h"

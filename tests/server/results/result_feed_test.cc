@@ -1,4 +1,4 @@
-// The inspection result feed through the real server on the simulated rig (issue 13 point 3):
+// The inspection result feed through the real server on the simulated rig:
 // results of recipe scans are stored with part, recipe, job, calibration, timings, profiles and
 // the report; ListResults filters and pages them; WatchResults delivers stored then live results
 // and resumes from a sequence number without loss or repetition. The specimen is skew5, a
