@@ -13,6 +13,7 @@ const DEFAULTS = {
   grpc_tls_cert: "", // the gateway's client certificate (mTLS identity, its role from `policy`)
   grpc_tls_key: "",
   grpc_server_name: "", // name to verify in inspectd's certificate; empty: the host of `inspectd`
+  grpc_token_file: "", // bearer token for inspectd; empty: inspectd's own auth_token_file, if set
   certificate: "", // OPC UA application instance certificate (PEM, RSA)
   private_key: "",
   application_uri: "urn:inspection:opcua-gateway", // must be the certificate's SAN URI
@@ -33,12 +34,37 @@ const LEVELS = ["trace", "debug", "info", "warn", "error", "fatal", "silent"];
 
 class ConfigError extends Error {}
 
+const ENV_PREFIX = "INSPECT_OPCUA_";
+
+function fromText(name, text, like) {
+  if (typeof like === "number") {
+    if (!/^-?[0-9]+$/.test(text)) throw new ConfigError(`${name} '${text}' must be an integer`);
+    return Number(text);
+  }
+  if (typeof like === "boolean") {
+    if (!["true", "false", "1", "0"].includes(text)) throw new ConfigError(`${name} '${text}' must be true or false`);
+    return text === "true" || text === "1";
+  }
+  if (Array.isArray(like)) {
+    let v;
+    try {
+      v = JSON.parse(text);
+    } catch {
+      v = null;
+    }
+    if (!Array.isArray(v)) throw new ConfigError(`${name} must be a JSON array, e.g. ["a", "b"]`);
+    return v;
+  }
+  return text;
+}
+
 function typeName(v) {
   return Array.isArray(v) ? "array" : v === null ? "null" : typeof v;
 }
 
 // Returns the effective settings; throws ConfigError naming the file and key on bad input.
-function loadConfig(file) {
+// checkFiles false: keys, types and values only (a manifest checked where its secrets are not).
+function loadConfig(file, { checkFiles = true, env = process.env } = {}) {
   let text;
   try {
     text = fs.readFileSync(file, "utf8");
@@ -64,6 +90,14 @@ function loadConfig(file) {
     }
   }
   Object.assign(c, structuredClone(DEFAULTS), structuredClone(block));
+  // INSPECT_OPCUA_<KEY> overrides opcua.<key> (as INSPECTD_<KEY> does inspectd's settings), so a
+  // container can change one setting without its own copy of the file.
+  for (const [name, text] of Object.entries(env)) {
+    if (!name.startsWith(ENV_PREFIX)) continue;
+    const key = name.slice(ENV_PREFIX.length).toLowerCase();
+    if (!(key in DEFAULTS)) throw new ConfigError(`environment variable ${name} names no opcua setting`);
+    c[key] = fromText(name, text, DEFAULTS[key]);
+  }
   const bad = (key, why) => new ConfigError(`${file}: 'opcua.${key}' ${why}`);
   if (!Number.isInteger(c.port) || c.port < 0 || c.port > 65535) throw bad("port", "must be 0..65535");
   for (const m of c.security_modes) {
@@ -84,19 +118,28 @@ function loadConfig(file) {
   if (!c.pki_dir) c.pki_dir = path.join(dataDir, "opcua", "pki");
   if (!c.audit_log) c.audit_log = path.join(dataDir, "audit", "opcua-audit.jsonl");
   c.policy = typeof doc.policy === "string" ? doc.policy : "";
+  if (!c.grpc_token_file && typeof doc.auth_token_file === "string" && doc.auth_token_file) {
+    c.grpc_token_file = doc.auth_token_file;
+    c.fallbacks.push(`grpc_token_file: inspectd's auth_token_file ${doc.auth_token_file}`);
+  }
 
   const pairs = [["certificate", "private_key"], ["grpc_tls_cert", "grpc_tls_key"]];
   for (const [a, b] of pairs) {
     if (!!c[a] !== !!c[b]) throw bad(c[a] ? b : a, `is needed with '${c[a] ? a : b}'`);
   }
   if (c.grpc_tls_cert && !c.grpc_tls_ca) throw bad("grpc_tls_ca", "is needed with grpc_tls_cert (mTLS is TLS first)");
-  for (const key of ["certificate", "private_key", "grpc_tls_ca", "grpc_tls_cert", "grpc_tls_key", "users_file"]) {
-    if (c[key] && !readable(c[key])) throw bad(key, `'${c[key]}' cannot be read`);
-  }
   c.trusted_client_certificates.forEach((f, i) => {
-    if (typeof f !== "string" || !readable(f)) throw bad(`trusted_client_certificates[${i}]`, `'${f}' cannot be read`);
+    if (typeof f !== "string" || !f) throw bad(`trusted_client_certificates[${i}]`, "must be a file name");
   });
-  if (c.policy && !readable(c.policy)) throw new ConfigError(`${file}: 'policy' '${c.policy}' cannot be read`);
+  if (checkFiles) {
+    for (const key of ["certificate", "private_key", "grpc_tls_ca", "grpc_tls_cert", "grpc_tls_key", "grpc_token_file", "users_file"]) {
+      if (c[key] && !readable(c[key])) throw bad(key, `'${c[key]}' cannot be read`);
+    }
+    c.trusted_client_certificates.forEach((f, i) => {
+      if (!readable(f)) throw bad(`trusted_client_certificates[${i}]`, `'${f}' cannot be read`);
+    });
+    if (c.policy && !readable(c.policy)) throw new ConfigError(`${file}: 'policy' '${c.policy}' cannot be read`);
+  }
   if (!c.certificate) c.fallbacks.push(`certificate: none configured, a self-signed one is made in ${c.pki_dir}`);
   if (!c.grpc_tls_ca) c.fallbacks.push("inspectd connection: plaintext (no grpc_tls_ca)");
   return c;

@@ -44,11 +44,18 @@ class InspectdClient {
     if (config.grpc_server_name) options["grpc.ssl_target_name_override"] = config.grpc_server_name;
     this.address = config.inspectd;
     this.stub = new pkg.InspectionService(config.inspectd, creds, options);
+    this.metadata = new grpc.Metadata();
+    if (config.grpc_token_file) {
+      const token = fs.readFileSync(config.grpc_token_file, "utf8").split(/\r?\n/)[0].trim();
+      this.metadata.set("authorization", `Bearer ${token}`);
+    }
   }
 
   unary(method, request, timeoutMs = 15000) {
     return new Promise((resolve, reject) => {
-      this.stub[method](request, { deadline: Date.now() + timeoutMs }, (err, response) => (err ? reject(err) : resolve(response)));
+      this.stub[method](request, this.metadata, { deadline: Date.now() + timeoutMs }, (err, response) =>
+        err ? reject(err) : resolve(response),
+      );
     });
   }
 
@@ -75,7 +82,7 @@ class InspectdClient {
   // once with the terminal event's job (or the stream's error).
   scan(request, onEnd) {
     return new Promise((resolve, reject) => {
-      const call = this.stub.Scan(request);
+      const call = this.stub.Scan(request, this.metadata);
       let jobId = null;
       let ended = false;
       const end = (job, err) => {
@@ -104,7 +111,7 @@ class InspectdClient {
   // Follows the result feed after `afterSequence`; onResult(result) for each, onError(err) once
   // when the stream breaks (the caller resubscribes after the last sequence it saw).
   watchResults(afterSequence, onResult, onError) {
-    const call = this.stub.WatchResults({ after_sequence: String(afterSequence) });
+    const call = this.stub.WatchResults({ after_sequence: String(afterSequence) }, this.metadata);
     call.on("data", onResult);
     call.on("error", onError);
     call.on("end", () => onError(new Error("WatchResults ended")));

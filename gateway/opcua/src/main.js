@@ -3,31 +3,22 @@
 // inspect-opcua-gateway: an OPC UA server (OPC 40100-1 Machine Vision) for one rig, speaking gRPC
 // to its inspectd. Settings: the `opcua` block of inspectd's config file (gateway/opcua/README.md).
 //   inspect-opcua-gateway [--config FILE]      (default: $INSPECTD_CONFIG)
+//   inspect-opcua-gateway --check-config [--config FILE]   (prints the effective settings; files
+//                                              named in them are not opened)
 //   inspect-opcua-gateway hash-password        (reads a password on stdin, prints its scrypt hash)
 const fs = require("fs");
 const path = require("path");
-const pino = require("pino");
-const {
-  OPCUAServer,
-  OPCUACertificateManager,
-  SecurityPolicy,
-  MessageSecurityMode,
-  nodesets,
-} = require("node-opcua");
 const { loadConfig, ConfigError } = require("./config");
 const { Identities, hashPassword, certificateName } = require("./identity");
-const { AuditLog } = require("./audit");
-const { InspectdClient } = require("./inspectd_client");
-const { VisionSystem } = require("./vision_system");
 
 const CONTENT_NODESET = path.join(__dirname, "..", "nodesets", "Inspection.ResultContent.NodeSet2.xml");
-const SECURE_POLICIES = [SecurityPolicy.Basic256Sha256, SecurityPolicy.Aes128_Sha256_RsaOaep, SecurityPolicy.Aes256_Sha256_RsaPss];
 
 function parseArgs(argv) {
   const a = { config: process.env.INSPECTD_CONFIG || "", command: "serve" };
   for (let i = 0; i < argv.length; i++) {
     if (argv[i] === "--config") a.config = argv[++i] || "";
     else if (argv[i] === "hash-password") a.command = "hash-password";
+    else if (argv[i] === "--check-config") a.command = "check-config";
     else if (argv[i] === "--help" || argv[i] === "-h") a.command = "help";
     else throw new ConfigError(`unknown argument '${argv[i]}' (inspect-opcua-gateway [--config FILE] | hash-password)`);
   }
@@ -43,7 +34,7 @@ async function main() {
     return 2;
   }
   if (args.command === "help") {
-    process.stdout.write("inspect-opcua-gateway [--config FILE] | hash-password  (gateway/opcua/README.md)\n");
+    process.stdout.write("inspect-opcua-gateway [--config FILE] [--check-config] | hash-password  (gateway/opcua/README.md)\n");
     return 0;
   }
   if (args.command === "hash-password") {
@@ -59,6 +50,16 @@ async function main() {
     process.stderr.write("inspect-opcua-gateway: no config file (--config FILE or INSPECTD_CONFIG)\n");
     return 2;
   }
+  if (args.command === "check-config") {
+    try {
+      const c = loadConfig(args.config, { checkFiles: false });
+      process.stdout.write(JSON.stringify(c, null, 2) + "\n");
+      return 0;
+    } catch (e) {
+      process.stderr.write(`inspect-opcua-gateway: ${e.message}\n`);
+      return 2;
+    }
+  }
   let config, identities;
   try {
     config = loadConfig(args.config);
@@ -67,6 +68,13 @@ async function main() {
     process.stderr.write(`inspect-opcua-gateway: ${e.message}\n`);
     return 2;
   }
+  // The OPC UA stack only for serving: --check-config and hash-password stay quick.
+  const pino = require("pino");
+  const { OPCUAServer, OPCUACertificateManager, SecurityPolicy, MessageSecurityMode, nodesets } = require("node-opcua");
+  const { AuditLog } = require("./audit");
+  const { InspectdClient } = require("./inspectd_client");
+  const { VisionSystem } = require("./vision_system");
+  const SECURE_POLICIES = [SecurityPolicy.Basic256Sha256, SecurityPolicy.Aes128_Sha256_RsaOaep, SecurityPolicy.Aes256_Sha256_RsaPss];
   const log = pino({ level: config.log_level, base: { service: "inspect-opcua-gateway" } }, pino.destination(2));
   for (const f of config.fallbacks) log.info(`default: ${f}`);
   const audit = new AuditLog(config.audit_log);
