@@ -439,6 +439,35 @@ async function main() {
     assert.equal(await state(), "Operational/Initialized");
     assert.equal((await call(autoNode, "Abort", [{ dataType: DataType.Int32, value: 0 }, { dataType: DataType.String, value: "test" }])).statusCode.name, "BadInvalidState");
   });
+  await check("an X.509 user certificate (qa-lead, engineer) may AddRecipe; an operator may not", async () => {
+    const c3 = client("mes-client");
+    await c3.connect(endpointUrl);
+    const pem = fs.readFileSync(path.join(pki, "qa-lead.crt"), "utf8");
+    const der = Buffer.from(pem.replace(/-----[^-]+-----/g, "").replace(/\s+/g, ""), "base64");
+    const s3 = await c3.createSession({ type: UserTokenType.Certificate, certificateData: der, privateKey: fs.readFileSync(path.join(pki, "qa-lead.key"), "utf8") });
+    transcript("  session: user certificate CN qa-lead");
+    const add = async (id, sess) =>
+      call(recipeMgmt, "AddRecipe", [
+        { dataType: DataType.ExtensionObject, value: await ext(recipeIdType, { id }) },
+        { dataType: DataType.ExtensionObject, value: await ext(productIdType, { id: "" }) },
+      ], sess);
+    const r = await add(recipe.recipe_id, s3);
+    assert.equal(r.statusCode.name, "Good");
+    assert.equal(r.outputArguments[0].value.id, `${recipe.recipe_id}@1`);
+    assert.equal(r.outputArguments[3].value, false); // TransferRequired: the recipe is stored in inspectd
+    assert.equal((await add("no-such-recipe", s3)).statusCode.name, "BadNotFound");
+    assert.equal((await add(recipe.recipe_id, session)).statusCode.name, "BadUserAccessDenied");
+    await s3.close();
+    await c3.disconnect();
+  });
+  await check("Halt: Halted refuses StartSingleJob (Bad_InvalidState); Reset: Preoperational", async () => {
+    const cause = [{ dataType: DataType.Int32, value: 0 }, { dataType: DataType.String, value: "test" }];
+    assert.equal((await call(smNode, "Halt", cause)).statusCode.name, "Good");
+    assert.equal(await state(), "Halted");
+    assert.equal((await call(autoNode, "StartSingleJob", await startArgs(PART, recipe.recipe_id))).statusCode.name, "BadInvalidState");
+    assert.equal((await call(smNode, "Reset", cause)).statusCode.name, "Good");
+    assert.equal(await state(), "Preoperational");
+  });
   await check("every call and refusal is audited with identity, role, method and code", async () => {
     const lines = auditLines();
     const has = (pred, what) => assert.ok(lines.some(pred), `no audit line for ${what}: ${JSON.stringify(lines.slice(-5))}`);
@@ -448,7 +477,8 @@ async function main() {
     has((l) => l.method === "StartSingleJob" && l.code === "BadInvalidArgument", "oversized part id");
     has((l) => l.method === "StartSingleJob" && l.code === "Good" && l.target === jobId, "the started job");
     has((l) => l.method === "ActivateSession" && l.code === "BadUserAccessDenied" && l.identity === "station-7", "wrong password");
-    has((l) => l.method === "OpenSecureChannel" && l.code !== "Good", "the untrusted certificate");
+    has((l) => l.method === "OpenSecureChannel" && l.code === "BadSecurityChecksFailed" && l.identity === "rogue-client", "the untrusted certificate");
+    has((l) => l.method === "AddRecipe" && l.code === "Good" && l.identity === "qa-lead" && l.role === "engineer", "AddRecipe by certificate");
     assert.ok(!fs.readFileSync(auditLog, "utf8").includes("s3cret"), "a password in the audit log");
     transcript(`  audit log ${auditLog}: ${lines.length} lines, e.g.`);
     transcript(`    ${JSON.stringify(lines.find((l) => l.method === "PrepareRecipe" && l.code === "BadNotFound"))}`);
