@@ -458,14 +458,12 @@ def self_test(path, inspectd=None, gateway=None):
     gw = lambda ds: next(c for c in pod(ds, "rig")["containers"] if c["name"] == GATEWAY)
     breaks.update({
         "must not be privileged": lambda ds: gw(ds)["securityContext"].update(privileged=True),
-        "must read the same config": None,
         "is not a container port": lambda ds: gw(ds)["ports"][0].update(containerPort=4841),
         "is not in a mounted volume or secret": lambda ds: gw(ds)["volumeMounts"].pop(
             next(i for i, m in enumerate(gw(ds)["volumeMounts"]) if m["mountPath"] == "/etc/inspection/opcua")),
         "INSPECTD_CONFIG must be inspectd's": lambda ds: gw(ds)["env"][0].update(value="/etc/other.json"),
         "no OPC UA gateway": lambda ds: pod(ds, "reconstruct")["containers"].append(copy.deepcopy(gw(ds))),
     })
-    breaks.pop("must read the same config")
     if gateway:
         breaks["the OPC UA gateway rejects its configuration"] = lambda ds: cm(ds, "inspectd.json")["data"].update(
             {"inspectd.json": json.dumps({"listen": "0.0.0.0:50051", "data_dir": "/var/lib/inspection",
