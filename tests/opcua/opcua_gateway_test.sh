@@ -4,9 +4,12 @@
 # one config file (the `opcua` block is the gateway's), and an independent node-opcua client
 # (opcua_client_test.js) that browses, runs one inspection over SignAndEncrypt and checks every
 # refused case's status code and audit line.
-#   opcua_gateway_test.sh BIN_DIR
+# With --rig-error, inspectd runs a configured rig whose devices are absent (--degraded: the rig is
+# in Error) and opcua_rig_error_test.js checks the Error state and the admin-only Reset.
+#   opcua_gateway_test.sh BIN_DIR [--rig-error]
 set -euo pipefail
 bin="$(cd "$1" && pwd)"
+mode="${2:-}"
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 gateway="$here/../../gateway/opcua"
 work="$(mktemp -d)"
@@ -38,15 +41,19 @@ bash "$here/make_certs.sh" "$pki"
 hash() { node "$gateway/src/main.js" hash-password <<<"$1"; }
 cat >"$work/users.json" <<JSON
 {"users": [{"name": "station-7", "password_hash": "$(hash s3cret-operator)"},
-           {"name": "viewer-1", "password_hash": "$(hash s3cret-viewer)"}]}
+           {"name": "viewer-1", "password_hash": "$(hash s3cret-viewer)"},
+           {"name": "it-admin", "password_hash": "$(hash s3cret-admin)"}]}
 JSON
 # One policy for both protocols: gRPC identities (certificate CNs) and OPC UA users.
 cat >"$work/policy.json" <<'JSON'
 {"identities": {"opcua-gateway": "admin", "mes-verifier": "engineer", "station-7": "operator", "viewer-1": "viewer",
-                "qa-lead": "engineer"}}
+                "qa-lead": "engineer", "it-admin": "admin"}}
 JSON
+rig=""
+# A real rig's configuration whose camera, stage and projector are not here: inspectd starts degraded, in Error.
+[[ $mode == --rig-error ]] && rig='"rig_config": "'"$here/../../deploy/compose/rig.json"'", "degraded": true,'
 cat >"$work/inspectd.json" <<JSON
-{"listen": "127.0.0.1:0", "data_dir": "$work/data", "camera_size": "320x240", "specimen": "skew5",
+{"listen": "127.0.0.1:0", "data_dir": "$work/data", "camera_size": "320x240", "specimen": "skew5", $rig
  "tls_cert": "$pki/inspectd.crt", "tls_key": "$pki/inspectd.key", "tls_client_ca": "$pki/grpc-ca.crt",
  "policy": "$work/policy.json",
  "opcua": {"port": 0, "hostname": "localhost",
@@ -73,6 +80,10 @@ url="$(sed -n 's/^inspect-opcua-gateway listening on \(opc.tcp:[^ ]*\).*/\1/p' "
 grep "inspect-opcua-gateway listening on" "$gw_log"
 wait_for "the gateway to reach inspectd" 30 grep -q "connected to inspectd" "$gw_log"
 
-node "$here/opcua_client_test.js" "$url" "$pki" "$addr" "$work/opcua-audit.jsonl" "$here/../../examples/python/recipe_tilt.json" \
-  || fail "the OPC UA client's checks failed"
+if [[ $mode == --rig-error ]]; then
+  node "$here/opcua_rig_error_test.js" "$url" "$pki" "$work/opcua-audit.jsonl" || fail "the OPC UA client's checks failed"
+else
+  node "$here/opcua_client_test.js" "$url" "$pki" "$addr" "$work/opcua-audit.jsonl" "$here/../../examples/python/recipe_tilt.json" \
+    || fail "the OPC UA client's checks failed"
+fi
 echo "PASS"

@@ -300,6 +300,9 @@ class VisionSystem {
       try {
         this.rig = await this.inspectd.resetRig();
       } catch (e) {
+        // The rig went through Initializing: answer with the state it is in now, not the last poll's.
+        this.rig = await this.inspectd.getRigStatus().catch(() => this.rig);
+        this.updateState();
         throw new MethodError(fromGrpc(e), `ResetRig: ${e.details || e.message}`);
       }
     }
