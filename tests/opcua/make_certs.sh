@@ -16,12 +16,12 @@ mkdir -p "$dir"
 cd "$dir"
 ossl() { openssl "$@" 2>/dev/null; }
 
-ossl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -keyout grpc-ca.key -out grpc-ca.crt -days 2 \
+ossl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -keyout grpc-ca.key -out grpc-ca.crt -days 30 \
   -subj "/CN=inspection test CA" -addext "basicConstraints=critical,CA:TRUE" -addext "keyUsage=critical,keyCertSign,cRLSign"
 grpc_leaf() {  # name CN SAN
   ossl req -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -keyout "$1.key" -out "$1.csr" -subj "/CN=$2"
   printf 'basicConstraints=critical,CA:FALSE\nsubjectAltName=%s\n' "$3" >"$1.ext"
-  ossl x509 -req -in "$1.csr" -CA grpc-ca.crt -CAkey grpc-ca.key -CAcreateserial -days 2 -extfile "$1.ext" -out "$1.crt"
+  ossl x509 -req -in "$1.csr" -CA grpc-ca.crt -CAkey grpc-ca.key -CAcreateserial -days 30 -extfile "$1.ext" -out "$1.crt"
   rm -f "$1.csr" "$1.ext"
 }
 grpc_leaf inspectd localhost "DNS:localhost,IP:127.0.0.1"
@@ -29,7 +29,7 @@ grpc_leaf gateway-grpc opcua-gateway "DNS:opcua-gateway"
 grpc_leaf mes-grpc mes-verifier "DNS:mes-verifier"
 
 opcua_app() {  # name CN applicationUri
-  ossl req -x509 -newkey rsa:2048 -nodes -keyout "$1.key" -out "$1.crt" -days 2 -subj "/CN=$2/O=inspection test" \
+  ossl req -x509 -newkey rsa:2048 -nodes -keyout "$1.key" -out "$1.crt" -days 30 -subj "/CN=$2/O=inspection test" \
     -addext "subjectAltName=URI:$3,DNS:localhost,IP:127.0.0.1" \
     -addext "basicConstraints=critical,CA:FALSE" \
     -addext "keyUsage=critical,digitalSignature,nonRepudiation,keyEncipherment,dataEncipherment" \
