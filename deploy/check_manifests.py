@@ -2,9 +2,9 @@
 """Offline checks of inspectd's deployment files: rendered Kubernetes manifests (deploy/k8s, after
 `kubectl kustomize`) and the compose files. deploy/validate_manifests.sh runs it.
 
-  check_manifests.py k8s RENDERED.yaml [--placeholders] [--inspectd BIN]
-  check_manifests.py compose FILE.yaml [--real-rig] [--inspectd BIN]
-  check_manifests.py self-test RENDERED.yaml [--inspectd BIN]   (each rule breaks a copy of a valid render once
+  check_manifests.py k8s RENDERED.yaml [--placeholders] [--inspectd BIN] [--gateway MAIN_JS]
+  check_manifests.py compose FILE.yaml [--real-rig] [--inspectd BIN] [--gateway MAIN_JS]
+  check_manifests.py self-test RENDERED.yaml [--inspectd BIN] [--gateway MAIN_JS]   (each rule breaks a copy of a valid render once
                                                 and must be caught: the checks can fail)
 
 k8s: references between the objects (volumes, ConfigMaps, PVCs, Secrets, Service selectors and
@@ -15,6 +15,11 @@ inspection.v1.InspectionService (kubelet gRPC probe or exec inspect-health-probe
 --inspectd, every inspectd.json is loaded by the real binary (`inspectd --print-config`) with the
 container's INSPECTD_* variables, so a wrong key or value fails here, not at a rig.
 --placeholders accepts the rig base's nodeSelector value RIG (set by each rig's overlay).
+OPC UA gateway (gateway/opcua): a rig's sidecar container opcua-gateway, and the compose service
+of that name, run the same image and the same config file as inspectd; its port is the `opcua`
+block's, every file the block names is in a mounted volume or secret, and with --gateway MAIN_JS
+the gateway itself checks the block (`inspect-opcua-gateway --check-config`, with the container's
+INSPECT_OPCUA_* variables).
 """
 import copy
 import json
@@ -26,14 +31,18 @@ import tempfile
 
 import yaml
 
-EXTERNAL_SECRETS = {"inspectd-auth", "inspectd-tls"}  # created by the admin, never committed
+EXTERNAL_SECRETS = {"inspectd-auth", "inspectd-tls", "inspectd-opcua"}  # created by the admin, never committed
+GATEWAY = "opcua-gateway"  # the OPC UA gateway's container / compose service
+GATEWAY_FILE_KEYS = ("certificate", "private_key", "grpc_tls_ca", "grpc_tls_cert", "grpc_tls_key", "grpc_token_file",
+                     "users_file")
 RIG_HEALTH = "inspection.v1.InspectionService"
 NAME_RE = re.compile(r"^[a-z0-9]([-a-z0-9]*[a-z0-9])?$")
 
 
 class Checker:
-    def __init__(self, inspectd=None):
+    def __init__(self, inspectd=None, gateway=None):
         self.inspectd = inspectd
+        self.gateway = gateway
         self.failures = []
         self.lines = []
         self._keys = None
@@ -85,6 +94,76 @@ class Checker:
             self.fail(where, "inspectd.json must listen on 0.0.0.0 (probes and clients come from outside)")
         if doc.get("data_dir") != "/var/lib/inspection":
             self.fail(where, "inspectd.json data_dir must be the volume /var/lib/inspection")
+
+    # --- OPC UA gateway ----------------------------------------------------------------------
+    def gateway_settings(self, where, config_text, env):
+        """The effective `opcua` block as the gateway reads it (None when it refuses it)."""
+        try:
+            doc = json.loads(config_text)
+        except ValueError:
+            return None  # reported by check_config_values
+        block = doc.get("opcua")
+        if not isinstance(block, dict):
+            self.fail(where, "the config file has no `opcua` object for the gateway")
+            return None
+        if not self.gateway:
+            return dict(block, port=block.get("port", 4840))
+        with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
+            f.write(config_text)
+        try:
+            run_env = {k: v for k, v in env.items() if k.startswith("INSPECT_OPCUA_")}
+            run_env["PATH"] = os.environ.get("PATH", "/usr/bin:/bin")
+            out = subprocess.run(["node", self.gateway, "--check-config", "--config", f.name], env=run_env,
+                                 capture_output=True, text=True)
+        finally:
+            os.unlink(f.name)
+        if out.returncode != 0:
+            self.fail(where, f"the OPC UA gateway rejects its configuration: {out.stderr.strip()}")
+            return None
+        return json.loads(out.stdout)
+
+    def check_gateway_files(self, where, settings, mounted):
+        """Every file the opcua block names lies under one of `mounted` (directories or files)."""
+        files = [settings.get(k) for k in GATEWAY_FILE_KEYS if settings.get(k)]
+        files += list(settings.get("trusted_client_certificates") or [])
+        for f in files:
+            if not any(f == m or f.startswith(m.rstrip("/") + "/") for m in mounted):
+                self.fail(where, f"opcua file {f!r} is not in a mounted volume or secret")
+
+    def check_k8s_gateway(self, where, pod, volumes, inspectd, config_text):
+        gw = [c for c in pod.get("containers", []) if c.get("name") == GATEWAY]
+        if not gw:
+            return
+        g = gw[0]
+        w = f"{where} container {GATEWAY}"
+        if g.get("image") != inspectd.get("image"):
+            self.fail(w, f"image {g.get('image')!r} must be inspectd's {inspectd.get('image')!r} (one image, one version)")
+        if not (g.get("command") or [""])[0].endswith("inspect-opcua-gateway"):
+            self.fail(w, "command must be /usr/local/bin/inspect-opcua-gateway")
+        env = {e["name"]: e.get("value", "") for e in g.get("env", [])}
+        ienv = {e["name"]: e.get("value", "") for e in inspectd.get("env", [])}
+        if env.get("INSPECTD_CONFIG") != ienv.get("INSPECTD_CONFIG"):
+            self.fail(w, "INSPECTD_CONFIG must be inspectd's: the gateway reads the same config file")
+        sc = g.get("securityContext") or {}
+        if sc.get("privileged"):
+            self.fail(w, "must not be privileged (it opens no device)")
+        if sc.get("readOnlyRootFilesystem") is not True:
+            self.fail(w, "needs readOnlyRootFilesystem")
+        mounts = {m["mountPath"]: m for m in g.get("volumeMounts", [])}
+        for m in mounts.values():
+            if m["name"] not in volumes:
+                self.fail(w, f"volumeMount {m['mountPath']} names no volume '{m['name']}'")
+        if "/var/lib/inspection" not in mounts:
+            self.fail(w, "needs the data volume at /var/lib/inspection (trust store and audit log)")
+        if config_text is None:
+            return
+        settings = self.gateway_settings(w, config_text, env)
+        if settings is None:
+            return
+        ports = [p.get("containerPort") for p in g.get("ports", [])]
+        if settings.get("port") not in ports:
+            self.fail(w, f"opcua port {settings.get('port')} is not a container port {ports}")
+        self.check_gateway_files(w, settings, list(mounts))
 
     # --- Kubernetes --------------------------------------------------------------------------
     def probe_service(self, where, probe, container):
@@ -218,7 +297,10 @@ class Checker:
                 self.fail(where, "a rig's data directory must be a PersistentVolumeClaim")
             if "startupProbe" in c and self.probe_service(f"{where} startupProbe", c["startupProbe"], c) != "":
                 self.fail(where, "startupProbe must ask for service \"\"")
+            self.check_k8s_gateway(where, pod, volumes, c, config_text)
         elif component == "reconstruct":
+            if any(x.get("name") == GATEWAY for x in pod.get("containers", [])):
+                self.fail(where, "the reconstruct pool has no rig: no OPC UA gateway")
             if "--no-rig" not in c.get("args", []):
                 self.fail(where, "the reconstruct pool runs inspectd --no-rig")
             if (spec.get("replicas") or 1) < 2:
@@ -291,12 +373,50 @@ class Checker:
         elif svc.get("network_mode") == "host" or svc.get("devices"):
             self.fail(where, "the simulated rig needs neither host network nor devices")
         self.done(where)
+        gw = (doc.get("services") or {}).get(GATEWAY)
+        if gw:
+            self.check_compose_gateway(os.path.basename(path), doc, svc, gw, config_text, base)
+
+    def check_compose_gateway(self, name, doc, svc, gw, config_text, base):
+        where = f"{name} service {GATEWAY}"
+        if gw.get("image") != svc.get("image"):
+            self.fail(where, f"image {gw.get('image')!r} must be inspectd's {svc.get('image')!r}")
+        entry = gw.get("entrypoint") or [""]
+        if not (entry if isinstance(entry, list) else [entry])[0].endswith("inspect-opcua-gateway"):
+            self.fail(where, "entrypoint must be /usr/local/bin/inspect-opcua-gateway")
+        # Both mount the same file, or neither does (the image's own).
+        mine = [v for v in gw.get("volumes", []) if ":/etc/inspection/inspectd.json" in v]
+        theirs = [v for v in svc.get("volumes", []) if ":/etc/inspection/inspectd.json" in v]
+        if [v.split(":")[0] for v in mine] != [v.split(":")[0] for v in theirs]:
+            self.fail(where, "must mount inspectd's config file: the gateway reads the same file")
+        net = gw.get("network_mode")
+        if net not in ("host", "service:inspectd"):
+            self.fail(where, f"network_mode {net!r}: host or service:inspectd (gRPC to inspectd on 127.0.0.1)")
+        if net == "host" and svc.get("network_mode") != "host":
+            self.fail(where, "network_mode host while inspectd is not on the host network")
+        if not any(":/var/lib/inspection" in v for v in gw.get("volumes", [])):
+            self.fail(where, "needs the data volume at /var/lib/inspection (trust store and audit log)")
+        declared = doc.get("secrets") or {}
+        names = [(s if isinstance(s, str) else s.get("source")) for s in gw.get("secrets", [])]
+        for s in names:
+            if s not in declared:
+                self.fail(where, f"secret {s} is not declared")
+        env = {k: str(v) for k, v in (gw.get("environment") or {}).items()}
+        settings = self.gateway_settings(where, config_text, env)
+        if settings is not None:
+            mounted = [f"/run/secrets/{s}" for s in names] + [v.split(":")[1] for v in gw.get("volumes", []) if v.count(":")]
+            self.check_gateway_files(where, settings, mounted)
+            port = settings.get("port")
+            published = [str(p) for p in svc.get("ports", [])]
+            if net == "service:inspectd" and not any(str(p).endswith(f":{port}") for p in published):
+                self.fail(where, f"opcua port {port} is not published by service inspectd (whose network it shares)")
+        self.done(where)
 
 
-def self_test(path, inspectd=None):
+def self_test(path, inspectd=None, gateway=None):
     """Every rule must catch one broken copy of a valid render."""
     docs = [d for d in yaml.safe_load_all(open(path)) if d]
-    valid = Checker(inspectd)
+    valid = Checker(inspectd, gateway)
     valid.check_k8s(docs)
     if valid.failures:
         print("self-test needs a render that passes:", valid.failures)
@@ -335,6 +455,19 @@ def self_test(path, inspectd=None):
         "is not a documented one": lambda ds: next(v for v in pod(ds, "rig")["volumes"] if "secret" in v)["secret"].update(
             secretName="committed-secret"),
     }
+    gw = lambda ds: next(c for c in pod(ds, "rig")["containers"] if c["name"] == GATEWAY)
+    breaks.update({
+        "must not be privileged": lambda ds: gw(ds)["securityContext"].update(privileged=True),
+        "is not a container port": lambda ds: gw(ds)["ports"][0].update(containerPort=4841),
+        "is not in a mounted volume or secret": lambda ds: gw(ds)["volumeMounts"].pop(
+            next(i for i, m in enumerate(gw(ds)["volumeMounts"]) if m["mountPath"] == "/etc/inspection/opcua")),
+        "INSPECTD_CONFIG must be inspectd's": lambda ds: gw(ds)["env"][0].update(value="/etc/other.json"),
+        "no OPC UA gateway": lambda ds: pod(ds, "reconstruct")["containers"].append(copy.deepcopy(gw(ds))),
+    })
+    if gateway:
+        breaks["the OPC UA gateway rejects its configuration"] = lambda ds: cm(ds, "inspectd.json")["data"].update(
+            {"inspectd.json": json.dumps({"listen": "0.0.0.0:50051", "data_dir": "/var/lib/inspection",
+                                          "opcua": {"port": 4840, "security_modes": ["None"]}})})
     if inspectd:
         breaks["inspectd rejects its configuration"] = lambda ds: cm(ds, "inspectd.json")["data"].update(
             {"inspectd.json": json.dumps({"listen": "0.0.0.0:50051", "data_dir": "/var/lib/inspection", "lissten": 1})})
@@ -344,7 +477,7 @@ def self_test(path, inspectd=None):
     for expected, breaker in breaks.items():
         broken = copy.deepcopy(docs)
         breaker(broken)
-        c = Checker(inspectd)
+        c = Checker(inspectd, gateway)
         c.check_k8s(broken)
         caught = [f for f in c.failures if expected in f]
         print(f"{'caught' if caught else 'MISSED'}  {expected}: {caught[0] if caught else c.failures}")
@@ -372,9 +505,10 @@ def main(argv):
         print(__doc__)
         return 2
     inspectd = argv[argv.index("--inspectd") + 1] if "--inspectd" in argv else None
+    gateway = argv[argv.index("--gateway") + 1] if "--gateway" in argv else None
     if argv[1] == "self-test":
-        return self_test(argv[2], inspectd)
-    c = Checker(inspectd)
+        return self_test(argv[2], inspectd, gateway)
+    c = Checker(inspectd, gateway)
     if argv[1] == "k8s":
         c.check_k8s([d for d in yaml.safe_load_all(open(argv[2])) if d], "--placeholders" in argv)
     else:

@@ -40,6 +40,7 @@ packages=(
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
   libopencv-contrib-dev  # core/sff/dense_depth.cc: cv::ximgproc fast global smoother (dense depth)
   libmosquitto-dev mosquitto mosquitto-clients  # server/plant: MQTT publishing; its tests run a real broker and mosquitto_sub
+  openssl  # tests/opcua/make_certs.sh: the OPC UA gateway test's certificates (the gateway itself: Node.js 20 + npm ci)
 )
 
 install_missing() {
@@ -147,7 +148,19 @@ ctest_counting_skips() {  # dir, ctest args...: runs ctest, prints the skip coun
   return "$rc"
 }
 
+# The OPC UA gateway's packages (gateway/opcua/package-lock.json) from the npm registry with the
+# machine's Node.js 20; again only when the lock file changed since the last install.
+npm_ci_gateway() {
+  local dir="$here/gateway/opcua" stamp="$here/gateway/opcua/node_modules/.lock-sha256"
+  local sum
+  sum="$(sha256sum "$dir/package-lock.json" | cut -d' ' -f1)"
+  [[ -f "$stamp" && "$(cat "$stamp")" == "$sum" ]] && return 0
+  echo "== npm ci in gateway/opcua"
+  (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error) && echo "$sum" >"$stamp"
+}
+
 test_all() {
+  npm_ci_gateway
   configure_and_build "$build" -DINSPECT_REQUIRE_ALL_TESTS=$require_all
   ctest_counting_skips "$build" --timeout 600
   if [[ "${FUZZ_SECONDS:-30}" != 0 ]]; then

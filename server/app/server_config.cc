@@ -265,13 +265,23 @@ Status ApplyConfigJson(std::string_view json_text, std::string_view origin, Insp
   // Check every key before changing anything: a bad file leaves the configuration as it was.
   InspectdConfig updated = *config;
   for (const auto& [name, value] : doc.items()) {
+    // The OPC UA gateway (gateway/opcua) reads its settings from the same file: inspectd checks
+    // only that its block is an object and leaves its keys to the gateway.
+    if (name == kOpcuaGatewayBlock) {
+      if (!value.is_object()) {
+        return Status::InvalidArgument(prefix + Quoted(name) + " must be a JSON object (the OPC UA gateway's settings)");
+      }
+      continue;
+    }
     const ConfigKey* key = FindConfigKey(name);
     if (!key) return Status::InvalidArgument(prefix + UnknownKeyMessage(name));
     INSPECT_RETURN_IF_ERROR(SetFromJson(*key, value, &updated).WithContext(std::string(origin)));
   }
   *config = updated;
   if (sources) {
-    for (const auto& item : doc.items()) (*sources)[item.key()] = std::string(origin);
+    for (const auto& item : doc.items()) {
+      if (item.key() != kOpcuaGatewayBlock) (*sources)[item.key()] = std::string(origin);
+    }
   }
   return Status::Ok();
 }

@@ -92,6 +92,8 @@ const ConfigKey* FindConfigKey(std::string_view name);
 
 // The file named by --config, else by this variable.
 inline constexpr const char* kConfigFileEnvironment = "INSPECTD_CONFIG";
+// The config file's block for the OPC UA gateway (gateway/opcua): an object inspectd does not read.
+inline constexpr const char* kOpcuaGatewayBlock = "opcua";
 
 // Where each effective value came from: "default", the file path, "INSPECTD_X" or "--x".
 using ConfigSources = std::map<std::string, std::string, std::less<>>;

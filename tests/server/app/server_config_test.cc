@@ -392,5 +392,24 @@ TEST(ServerConfigTrust, TrustSettingsReachServerOptionsAndAreCheckedTogether) {
   EXPECT_EQ(ValidateConfig(lonely_policy).message(), "policy needs identities: token_file or tls_client_ca");
 }
 
+// --- OPC UA gateway block -------------------------------------------------------------------
+// The gateway (gateway/opcua) shares the config file: its "opcua" object is accepted and left
+// alone, anything else under that name is refused with the key named.
+TEST_F(ConfigFileTest, OpcuaGatewayBlockIsAcceptedAndNotRead) {
+  std::string file = Write("gw.json", R"({"listen": "0.0.0.0:7", "opcua": {"port": 4840, "anything": [1]}})");
+  InspectdConfig c;
+  ConfigSources sources;
+  ASSERT_TRUE(ApplyConfigFile(file, &c, &sources).ok());
+  EXPECT_EQ(c.listen, "0.0.0.0:7");
+  EXPECT_EQ(sources.count("opcua"), 0u);
+  EXPECT_EQ(sources["listen"], file);
+
+  InspectdConfig untouched;
+  Status s = ApplyConfigJson(R"({"listen": "0.0.0.0:8", "opcua": 4840})", "gw.json", &untouched);
+  ASSERT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(s.message(), "gw.json: 'opcua' must be a JSON object (the OPC UA gateway's settings)");
+  EXPECT_EQ(untouched, InspectdConfig{});
+}
+
 }  // namespace
 }  // namespace inspection
