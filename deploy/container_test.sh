@@ -15,6 +15,9 @@
 #   CCACHE_HOST_DIR  the host's ccache directory, mounted into the build stage so the image reuses
 #                the host's objects (default: `ccache -k cache_dir`; empty = the build's own cache
 #                mount only). docs/operations.md "Building the image fast".
+#   NPM_CA       CA bundle passed to the gateway stage's npm as the build secret npm_ca, for a
+#                TLS-inspecting proxy (default /etc/ssl/certs/ca-certificates.crt when it exists;
+#                empty = none). docs/operations.md "Building behind a TLS-inspecting proxy".
 # Podman on these machines needs --runtime runc, explicit ulimits and chroot isolation for builds
 # (../shared/PLATFORM.md "Containers").
 set -euo pipefail
@@ -73,6 +76,11 @@ if [[ "${SKIP_BUILD:-0}" != 1 ]]; then
     mkdir -p "$ccache_dir"
     cache_args=(--volume "$ccache_dir:/ccache" --build-arg CCACHE_DIR=/ccache)
     echo "   ccache: the host's $ccache_dir"
+  fi
+  npm_ca="${NPM_CA-/etc/ssl/certs/ca-certificates.crt}"
+  if [[ -n "$npm_ca" && -s "$npm_ca" ]]; then
+    cache_args+=(--secret "id=npm_ca,src=$npm_ca")
+    echo "   npm CA bundle (build secret npm_ca): $npm_ca"
   fi
   "${podman[@]}" build --format docker --isolation chroot "${ulimits[@]}" "${cache_args[@]}" \
     --build-arg BASE_IMAGE="$base_image" --build-arg JOBS="${JOBS:-2}" \
