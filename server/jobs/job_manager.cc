@@ -870,6 +870,8 @@ void JobManager::RunPoolJob(const QueuedWork& claimed) {
     r->End(*outcome, fill, persist);
     if (recorded) {
       if (!input.empty()) RemoveFolder(input);
+      Status forgotten = store_->ForgetWork(id);  // else the next sweep does it
+      if (!forgotten.ok()) spdlog::debug("job {}: queue row left for the sweep: {}", id, forgotten.ToString());
       if (status.ok()) {
         spdlog::info("job {} succeeded", id);
       } else {
@@ -920,6 +922,13 @@ void JobManager::PoolHeartbeat() {
     auto depth = store_->QueueDepth();
     if (depth.ok()) pool_queue_depth_ = *depth;
     auto queued = store_->QueuedWorkIds();
+    // Inputs of ended jobs that their replica did not remove (it died right after the end).
+    if (auto ended = store_->EndedWork(); ended.ok()) {
+      for (const QueuedWork& w : *ended) {
+        if (!w.stack_dir.empty()) RemoveFolder(store_->data_dir() / w.stack_dir);
+        (void)store_->ForgetWork(w.job_id);
+      }
+    }
     std::lock_guard<std::mutex> lock(mu_);
     const std::set<std::string> held(renewal->held.begin(), renewal->held.end());
     for (const std::string& id : held_before) {

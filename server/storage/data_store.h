@@ -176,20 +176,25 @@ class DataStore {
                                                         const std::vector<std::string>& preferred) = 0;
   // Extends every lease `worker` holds.
   virtual StatusOr<LeaseRenewal> RenewLeases(const std::string& worker, int64_t lease_ms) = 0;
-  // Ends a job `worker` holds: its queue row goes and the ended job and its terminal event are
-  // stored. false (nothing written) when the worker no longer holds it: another took it over.
+  // Ends a job `worker` holds: the ended job and its terminal event are stored and its queue row
+  // is marked ended (its input folder to remove: EndedWork). false (nothing written) when the
+  // worker no longer holds it: another took it over, or it ended already.
   virtual StatusOr<bool> CompleteWork(const std::string& worker, const v1::Job& ended,
                                       const v1::JobEvent& terminal_event) = 0;
   // Hands a job back (a draining replica): the lease is cleared and the job stored as `queued`
   // (state QUEUED) with `event`. false when the worker no longer held it.
   virtual StatusOr<bool> ReleaseWork(const std::string& worker, const v1::Job& queued, const v1::JobEvent& event) = 0;
-  // Cancels a job nobody holds: its queue row goes, `cancelled` and `event` are stored; true. A job
+  // Cancels a job nobody holds: its queue row is marked ended, `cancelled` and `event` are stored; true. A job
   // a worker holds is flagged instead (the worker sees it at its next renewal) and false returned.
   virtual StatusOr<bool> CancelQueuedWork(const v1::Job& cancelled, const v1::JobEvent& event) = 0;
   // Jobs waiting for a worker (queued, handed back, or held under a lease that ran out).
   virtual StatusOr<int64_t> QueueDepth() = 0;
-  // Every job in the queue, held or not.
+  // Every job in the queue that has not ended, held or not.
   virtual StatusOr<std::vector<std::string>> QueuedWorkIds() = 0;
+  // Ended jobs whose input folder (stack_dir) may still be on the disk: whoever removes it then
+  // forgets the row. A replica that dies between the two leaves the row for the next sweep.
+  virtual StatusOr<std::vector<QueuedWork>> EndedWork() = 0;
+  virtual Status ForgetWork(const std::string& job_id) = 0;
 
   virtual Status SetSetting(const std::string& key, const std::string& value) = 0;
   virtual std::string GetSetting(const std::string& key) = 0;

@@ -404,6 +404,9 @@ void VerifyPool(Pool& pool, const std::vector<Submission>& subs, const std::stri
     CHECK_OR_COUNT(rows == j.result().artifacts_size() && rows >= 4,
                    j.job_id() << ": " << rows << " artifact rows, the job lists " << j.result().artifacts_size());
   }
+  // Ended rows go once their input folder is removed (by the replica that ended the job, or the
+  // others' sweep when it died right after).
+  PollUntil([&] { return sql.Count("SELECT count(*) FROM work_queue") == 0; }, 30, 0.1);
   CHECK_OR_COUNT(sql.Count("SELECT count(*) FROM work_queue") == 0, "rows left in the work queue");
   auto left_in = [&](const char* sub) {
     std::error_code ec;
@@ -474,14 +477,17 @@ int ScenarioKill(const Common& c, inspection::testing::PostgresServer& pg, const
   std::vector<Row> table;
   Sql sql(pool.url, pool.password);
   const size_t victim = c.replicas > 1 ? 1 : 0;
-  // Kill once a quarter of the jobs are done and the victim holds a lease (is mid-job).
-  const std::string held_by_victim = "SELECT count(*) FROM work_queue WHERE lease_owner LIKE '%-" +
-                                     std::to_string(pool.replicas[victim].pid) + "-%'";
+  // Kill once a quarter of the jobs are done and the victim is mid-job: it holds a lease on a
+  // RUNNING job that has reported frames.
+  const std::string held_by_victim =
+      "SELECT count(*) FROM work_queue q JOIN jobs j USING (job_id) WHERE q.ended = 0 AND q.lease_owner LIKE '%-" +
+      std::to_string(pool.replicas[victim].pid) + "-%' AND j.state = 2 AND "
+      "(SELECT count(*) FROM events e WHERE e.job_id = q.job_id) >= 4";
   PollUntil([&] { return submitter.succeeded() >= c.jobs / 4 && sql.Count(held_by_victim) > 0; }, 300, 0.02);
   std::string held_ids;
   {
     PGconn* conn = PQconnectdb((pool.url + "?password=" + pool.password).c_str());
-    PGresult* r = PQexec(conn, ("SELECT job_id FROM work_queue WHERE lease_owner LIKE '%-" +
+    PGresult* r = PQexec(conn, ("SELECT job_id FROM work_queue WHERE ended = 0 AND lease_owner LIKE '%-" +
                                 std::to_string(pool.replicas[victim].pid) + "-%'")
                                    .c_str());
     for (int i = 0; i < PQntuples(r); ++i) held_ids += std::string(i ? ", " : "") + PQgetvalue(r, i, 0);
@@ -497,7 +503,7 @@ int ScenarioKill(const Common& c, inspection::testing::PostgresServer& pg, const
                    submitter.succeeded(), "it held: " + (held_ids.empty() ? std::string("-") : held_ids)});
   CHECK_OR_COUNT(!held_ids.empty(), "the killed replica held no job");
   // Its jobs are taken over once their leases run out.
-  const std::string still_dead_lease = "SELECT count(*) FROM work_queue WHERE lease_owner LIKE '%-" +
+  const std::string still_dead_lease = "SELECT count(*) FROM work_queue WHERE ended = 0 AND lease_owner LIKE '%-" +
                                        std::to_string(killed_pid) + "-%'";
   if (PollUntil([&] { return sql.Count(still_dead_lease) == 0; }, 60, 0.05)) {
     table.push_back({Since(run0), "its leases taken over by the other replicas", submitter.succeeded(),

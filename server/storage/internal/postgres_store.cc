@@ -108,7 +108,8 @@ const char* const kPostgresMigrations[] = {
     CREATE TABLE work_queue (
       job_id TEXT PRIMARY KEY, enqueue_ns BIGINT NOT NULL, input BYTEA NOT NULL, stack_dir TEXT NOT NULL,
       lease_owner TEXT NOT NULL DEFAULT '', lease_expires_ns BIGINT NOT NULL DEFAULT 0,
-      attempts INTEGER NOT NULL DEFAULT 0, cancel_requested INTEGER NOT NULL DEFAULT 0);
+      attempts INTEGER NOT NULL DEFAULT 0, cancel_requested INTEGER NOT NULL DEFAULT 0,
+      ended INTEGER NOT NULL DEFAULT 0);
     CREATE INDEX work_queue_by_age ON work_queue(enqueue_ns);
     )sql",
 };
@@ -198,6 +199,8 @@ class PostgresDataStore final : public DataStore {
   StatusOr<bool> CancelQueuedWork(const v1::Job& cancelled, const v1::JobEvent& event) override;
   StatusOr<int64_t> QueueDepth() override;
   StatusOr<std::vector<std::string>> QueuedWorkIds() override;
+  StatusOr<std::vector<QueuedWork>> EndedWork() override;
+  Status ForgetWork(const std::string& job_id) override;
 
  private:
   // The job row and one event, inside the caller's transaction (caller holds mu_).
@@ -728,7 +731,7 @@ StatusOr<std::optional<QueuedWork>> PostgresDataStore::ClaimWork(const std::stri
     // SKIP LOCKED: a row another worker is taking right now is passed over, not waited for.
     Result r = Run("UPDATE work_queue SET lease_owner = $1, lease_expires_ns = " INSPECT_PG_NOW_NS " + $2::bigint, "
                    "attempts = attempts + 1 WHERE job_id = (SELECT job_id FROM work_queue "
-                   "WHERE lease_owner = '' OR lease_expires_ns < " INSPECT_PG_NOW_NS " "
+                   "WHERE ended = 0 AND (lease_owner = '' OR lease_expires_ns < " INSPECT_PG_NOW_NS ") "
                    "ORDER BY (job_id = ANY($3::text[])) DESC, enqueue_ns, job_id LIMIT 1 FOR UPDATE SKIP LOCKED) "
                    "RETURNING job_id, input, stack_dir, attempts, cancel_requested",
                    {T(worker), I(lease_ms * 1000000), T(TextArray(preferred))}, &s, "ClaimWork");
@@ -757,7 +760,7 @@ StatusOr<LeaseRenewal> PostgresDataStore::RenewLeases(const std::string& worker,
   std::lock_guard<std::mutex> lock(mu_);
   Status s;
   Result r = Run("UPDATE work_queue SET lease_expires_ns = " INSPECT_PG_NOW_NS " + $2::bigint WHERE lease_owner = $1 "
-                 "RETURNING job_id, cancel_requested",
+                 "AND ended = 0 RETURNING job_id, cancel_requested",
                  {T(worker), I(lease_ms * 1000000)}, &s, "RenewLeases");
   INSPECT_RETURN_IF_ERROR(s);
   LeaseRenewal out;
@@ -774,7 +777,10 @@ StatusOr<bool> PostgresDataStore::CompleteWork(const std::string& worker, const 
   bool held = false;
   Status status = InTransaction("CompleteWork", [&]() -> Status {
     Status s;
-    Result r = Run("DELETE FROM work_queue WHERE job_id = $1 AND lease_owner = $2 RETURNING job_id",
+    // The row stays, marked ended, until the input folder is gone (EndedWork / ForgetWork): a
+    // replica dying in between leaves the folder to the others' sweep, not on the disk for ever.
+    Result r = Run("UPDATE work_queue SET ended = 1, lease_owner = '' WHERE job_id = $1 AND lease_owner = $2 "
+                   "AND ended = 0 RETURNING job_id",
                    {T(ended.job_id()), T(worker)}, &s, "CompleteWork");
     INSPECT_RETURN_IF_ERROR(s);
     held = r.rows() > 0;
@@ -792,7 +798,7 @@ StatusOr<bool> PostgresDataStore::ReleaseWork(const std::string& worker, const v
   Status status = InTransaction("ReleaseWork", [&]() -> Status {
     Status s;
     Result r = Run("UPDATE work_queue SET lease_owner = '', lease_expires_ns = 0 WHERE job_id = $1 AND lease_owner = $2 "
-                   "RETURNING job_id",
+                   "AND ended = 0 RETURNING job_id",
                    {T(queued.job_id()), T(worker)}, &s, "ReleaseWork");
     INSPECT_RETURN_IF_ERROR(s);
     held = r.rows() > 0;
@@ -808,13 +814,13 @@ StatusOr<bool> PostgresDataStore::CancelQueuedWork(const v1::Job& cancelled, con
   bool removed = false;
   Status status = InTransaction("CancelQueuedWork", [&]() -> Status {
     Status s;
-    Result r = Run("DELETE FROM work_queue WHERE job_id = $1 AND (lease_owner = '' OR lease_expires_ns < " INSPECT_PG_NOW_NS
-                   ") RETURNING job_id",
+    Result r = Run("UPDATE work_queue SET ended = 1, lease_owner = '' WHERE job_id = $1 AND ended = 0 AND "
+                   "(lease_owner = '' OR lease_expires_ns < " INSPECT_PG_NOW_NS ") RETURNING job_id",
                    {T(cancelled.job_id())}, &s, "CancelQueuedWork");
     INSPECT_RETURN_IF_ERROR(s);
     removed = r.rows() > 0;
     if (removed) return WriteJobAndEvent(cancelled, event, "CancelQueuedWork");
-    Run("UPDATE work_queue SET cancel_requested = 1 WHERE job_id = $1", {T(cancelled.job_id())}, &s, "CancelQueuedWork");
+    Run("UPDATE work_queue SET cancel_requested = 1 WHERE job_id = $1 AND ended = 0", {T(cancelled.job_id())}, &s, "CancelQueuedWork");
     return s;
   });
   INSPECT_RETURN_IF_ERROR(status);
@@ -824,7 +830,8 @@ StatusOr<bool> PostgresDataStore::CancelQueuedWork(const v1::Job& cancelled, con
 StatusOr<int64_t> PostgresDataStore::QueueDepth() {
   std::lock_guard<std::mutex> lock(mu_);
   Status s;
-  Result r = Run("SELECT count(*)::bigint FROM work_queue WHERE lease_owner = '' OR lease_expires_ns < " INSPECT_PG_NOW_NS,
+  Result r = Run("SELECT count(*)::bigint FROM work_queue WHERE ended = 0 AND (lease_owner = '' OR lease_expires_ns < "
+                 INSPECT_PG_NOW_NS ")",
                  {}, &s, "QueueDepth");
   INSPECT_RETURN_IF_ERROR(s);
   return r.Int(0, 0);
@@ -833,11 +840,33 @@ StatusOr<int64_t> PostgresDataStore::QueueDepth() {
 StatusOr<std::vector<std::string>> PostgresDataStore::QueuedWorkIds() {
   std::lock_guard<std::mutex> lock(mu_);
   Status s;
-  Result r = Run("SELECT job_id FROM work_queue", {}, &s, "QueuedWorkIds");
+  Result r = Run("SELECT job_id FROM work_queue WHERE ended = 0", {}, &s, "QueuedWorkIds");
   INSPECT_RETURN_IF_ERROR(s);
   std::vector<std::string> ids;
   for (int i = 0; i < r.rows(); ++i) ids.push_back(r.Bytes(i, 0));
   return ids;
+}
+
+StatusOr<std::vector<QueuedWork>> PostgresDataStore::EndedWork() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT job_id, stack_dir FROM work_queue WHERE ended = 1", {}, &s, "EndedWork");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<QueuedWork> out;
+  for (int i = 0; i < r.rows(); ++i) {
+    QueuedWork w;
+    w.job_id = r.Bytes(i, 0);
+    w.stack_dir = r.Bytes(i, 1);
+    out.push_back(std::move(w));
+  }
+  return out;
+}
+
+Status PostgresDataStore::ForgetWork(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Run("DELETE FROM work_queue WHERE job_id = $1 AND ended = 1", {T(job_id)}, &s, "ForgetWork");
+  return s;
 }
 
 }  // namespace

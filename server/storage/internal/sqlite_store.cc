@@ -105,6 +105,8 @@ class SqliteDataStore final : public DataStore {
   StatusOr<bool> CancelQueuedWork(const v1::Job& cancelled, const v1::JobEvent& event) override;
   StatusOr<int64_t> QueueDepth() override;
   StatusOr<std::vector<std::string>> QueuedWorkIds() override;
+  StatusOr<std::vector<QueuedWork>> EndedWork() override;
+  Status ForgetWork(const std::string& job_id) override;
 
  private:
   // `body` between BEGIN IMMEDIATE and COMMIT (ROLLBACK when it fails). Caller holds mu_.
@@ -159,7 +161,8 @@ const char* const kSqliteMigrations[] = {
     CREATE TABLE work_queue (
       job_id TEXT PRIMARY KEY, enqueue_ns INTEGER NOT NULL, input BLOB NOT NULL, stack_dir TEXT NOT NULL,
       lease_owner TEXT NOT NULL DEFAULT '', lease_expires_ns INTEGER NOT NULL DEFAULT 0,
-      attempts INTEGER NOT NULL DEFAULT 0, cancel_requested INTEGER NOT NULL DEFAULT 0);
+      attempts INTEGER NOT NULL DEFAULT 0, cancel_requested INTEGER NOT NULL DEFAULT 0,
+      ended INTEGER NOT NULL DEFAULT 0);
     CREATE INDEX work_queue_by_age ON work_queue(enqueue_ns);
   )sql",
 };
@@ -703,7 +706,7 @@ StatusOr<std::optional<QueuedWork>> SqliteDataStore::ClaimWork(const std::string
     {
       Stmt st(db_,
               "SELECT job_id, input, stack_dir, attempts, cancel_requested FROM work_queue "
-              "WHERE lease_owner = '' OR lease_expires_ns < ? ORDER BY enqueue_ns, job_id");
+              "WHERE ended = 0 AND (lease_owner = '' OR lease_expires_ns < ?) ORDER BY enqueue_ns, job_id");
       st.Int(1, now);
       for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
         QueuedWork w;
@@ -743,11 +746,11 @@ StatusOr<LeaseRenewal> SqliteDataStore::RenewLeases(const std::string& worker, i
   LeaseRenewal out;
   Status status = InTransaction([&]() -> Status {
     {
-      Stmt st(db_, "UPDATE work_queue SET lease_expires_ns = ? WHERE lease_owner = ?");
+      Stmt st(db_, "UPDATE work_queue SET lease_expires_ns = ? WHERE lease_owner = ? AND ended = 0");
       st.Int(1, NowNs() + lease_ms * 1000000).Text(2, worker);
       if (st.Step() != SQLITE_DONE) return DbError(db_, "RenewLeases");
     }
-    Stmt st(db_, "SELECT job_id, cancel_requested FROM work_queue WHERE lease_owner = ?");
+    Stmt st(db_, "SELECT job_id, cancel_requested FROM work_queue WHERE lease_owner = ? AND ended = 0");
     st.Text(1, worker);
     for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
       out.held.push_back(st.ColumnText(0));
@@ -764,7 +767,8 @@ StatusOr<bool> SqliteDataStore::CompleteWork(const std::string& worker, const v1
   std::lock_guard<std::mutex> lock(mu_);
   bool held = false;
   Status status = InTransaction([&]() -> Status {
-    Stmt st(db_, "DELETE FROM work_queue WHERE job_id = ? AND lease_owner = ?");
+    // Marked ended until the input folder is gone (EndedWork / ForgetWork).
+    Stmt st(db_, "UPDATE work_queue SET ended = 1, lease_owner = '' WHERE job_id = ? AND lease_owner = ? AND ended = 0");
     st.Text(1, ended.job_id()).Text(2, worker);
     if (st.Step() != SQLITE_DONE) return DbError(db_, "CompleteWork");
     held = sqlite3_changes(db_) > 0;
@@ -779,7 +783,8 @@ StatusOr<bool> SqliteDataStore::ReleaseWork(const std::string& worker, const v1:
   std::lock_guard<std::mutex> lock(mu_);
   bool held = false;
   Status status = InTransaction([&]() -> Status {
-    Stmt st(db_, "UPDATE work_queue SET lease_owner = '', lease_expires_ns = 0 WHERE job_id = ? AND lease_owner = ?");
+    Stmt st(db_,
+            "UPDATE work_queue SET lease_owner = '', lease_expires_ns = 0 WHERE job_id = ? AND lease_owner = ? AND ended = 0");
     st.Text(1, queued.job_id()).Text(2, worker);
     if (st.Step() != SQLITE_DONE) return DbError(db_, "ReleaseWork");
     held = sqlite3_changes(db_) > 0;
@@ -794,13 +799,15 @@ StatusOr<bool> SqliteDataStore::CancelQueuedWork(const v1::Job& cancelled, const
   bool removed = false;
   Status status = InTransaction([&]() -> Status {
     {
-      Stmt st(db_, "DELETE FROM work_queue WHERE job_id = ? AND (lease_owner = '' OR lease_expires_ns < ?)");
+      Stmt st(db_,
+              "UPDATE work_queue SET ended = 1, lease_owner = '' WHERE job_id = ? AND ended = 0 AND "
+              "(lease_owner = '' OR lease_expires_ns < ?)");
       st.Text(1, cancelled.job_id()).Int(2, NowNs());
       if (st.Step() != SQLITE_DONE) return DbError(db_, "CancelQueuedWork");
       removed = sqlite3_changes(db_) > 0;
     }
     if (removed) return WriteJobAndEvent(cancelled, event);
-    Stmt st(db_, "UPDATE work_queue SET cancel_requested = 1 WHERE job_id = ?");
+    Stmt st(db_, "UPDATE work_queue SET cancel_requested = 1 WHERE job_id = ? AND ended = 0");
     st.Text(1, cancelled.job_id());
     if (st.Step() != SQLITE_DONE) return DbError(db_, "CancelQueuedWork");
     return Status::Ok();
@@ -811,7 +818,7 @@ StatusOr<bool> SqliteDataStore::CancelQueuedWork(const v1::Job& cancelled, const
 
 StatusOr<int64_t> SqliteDataStore::QueueDepth() {
   std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT count(*) FROM work_queue WHERE lease_owner = '' OR lease_expires_ns < ?");
+  Stmt st(db_, "SELECT count(*) FROM work_queue WHERE ended = 0 AND (lease_owner = '' OR lease_expires_ns < ?)");
   st.Int(1, NowNs());
   if (st.Step() != SQLITE_ROW) return DbError(db_, "QueueDepth");
   return int64_t(sqlite3_column_int64(st.stmt(), 0));
@@ -819,10 +826,31 @@ StatusOr<int64_t> SqliteDataStore::QueueDepth() {
 
 StatusOr<std::vector<std::string>> SqliteDataStore::QueuedWorkIds() {
   std::lock_guard<std::mutex> lock(mu_);
-  Stmt st(db_, "SELECT job_id FROM work_queue");
+  Stmt st(db_, "SELECT job_id FROM work_queue WHERE ended = 0");
   std::vector<std::string> ids;
   for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) ids.push_back(st.ColumnText(0));
   return ids;
+}
+
+StatusOr<std::vector<QueuedWork>> SqliteDataStore::EndedWork() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT job_id, stack_dir FROM work_queue WHERE ended = 1");
+  std::vector<QueuedWork> out;
+  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
+    QueuedWork w;
+    w.job_id = st.ColumnText(0);
+    w.stack_dir = st.ColumnText(1);
+    out.push_back(std::move(w));
+  }
+  return out;
+}
+
+Status SqliteDataStore::ForgetWork(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "DELETE FROM work_queue WHERE job_id = ? AND ended = 1");
+  st.Text(1, job_id);
+  if (st.Step() != SQLITE_DONE) return DbError(db_, "ForgetWork");
+  return Status::Ok();
 }
 
 }  // namespace inspection

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <optional>
@@ -334,6 +335,17 @@ TEST_P(DataStoreTest, TheWorkQueueLeasesEachJobToOneWorkerAndOnlyTheHolderEndsIt
   EXPECT_EQ(renewal->cancel_requested, std::vector<std::string>{"rec-1"});
   EXPECT_EQ(*store_->QueuedWorkIds(), std::vector<std::string>{"rec-1"});
   EXPECT_EQ(*store_->QueueDepth(), 0);
+  // The ended jobs' inputs are listed for removal until forgotten.
+  auto ended = store_->EndedWork();
+  ASSERT_TRUE(ended.ok());
+  std::vector<std::string> ended_dirs;
+  for (const QueuedWork& w : *ended) ended_dirs.push_back(w.stack_dir);
+  std::sort(ended_dirs.begin(), ended_dirs.end());
+  EXPECT_EQ(ended_dirs, (std::vector<std::string>{"uploads/rec-2", "uploads/rec-3"}));
+  ASSERT_TRUE(store_->ForgetWork("rec-3").ok());
+  ASSERT_TRUE(store_->ForgetWork("rec-1").ok());  // not ended: kept
+  EXPECT_EQ(store_->EndedWork()->size(), 1u);
+  EXPECT_EQ(*store_->QueuedWorkIds(), std::vector<std::string>{"rec-1"});
 }
 
 TEST_P(DataStoreTest, AnExpiredLeaseIsTakenOverAndTheEarlierAttemptsArtifactRowsGo) {
