@@ -816,27 +816,46 @@ void JobManager::RunPoolJob(const QueuedWork& claimed) {
     work.reset();  // decoded frames and private folders go before the job ends
   }
   bool lost, hand_back;
+  // The database went away during the run (a write of the job's events or artifacts failed
+  // UNAVAILABLE): the job is not the failure, so it is queued again once the database answers.
+  const bool store_lost = !outcome->ok() && outcome->status().code() == StatusCode::kUnavailable;
   {
     std::lock_guard<std::mutex> lock(mu_);
     lost = pool_lost_.count(id) > 0;
-    hand_back = pool_hand_back_.count(id) > 0 && !outcome->ok() && outcome->status().code() == StatusCode::kCancelled;
+    hand_back = (pool_hand_back_.count(id) > 0 && !outcome->ok() && outcome->status().code() == StatusCode::kCancelled) ||
+                store_lost;
   }
   bool recorded = false;
   if (lost) {
     spdlog::warn("job {}: another worker took its lease over; this attempt's outcome is discarded", id);
   } else if (hand_back) {
-    v1::Job queued = r->Snapshot();
-    queued.set_state(v1::JOB_STATE_QUEUED);
-    queued.clear_start_time();
-    auto stored = store_->Events(id);
-    v1::JobEvent e = PoolEvent(queued, (stored.ok() ? stored->size() : 0) + 1, v1::JOB_PHASE_QUEUED,
-                               "handed back by " + worker_id_ + " (shutting down): queued again");
-    auto released = store_->ReleaseWork(worker_id_, queued, e);
-    if (released.ok() && *released) {
-      spdlog::info("job {} handed back to the pool", id);
-    } else {
-      spdlog::warn("job {}: hand-back not recorded ({}); its lease runs out instead", id,
-                   released.ok() ? "lease lost" : released.status().ToString());
+    const std::string why = store_lost ? "the database was lost during the run (" + outcome->status().message() + ")"
+                                       : "handed back by " + worker_id_ + " (shutting down)";
+    std::chrono::milliseconds wait{250};
+    for (bool logged = false;;) {
+      v1::Job queued = r->Snapshot();
+      queued.set_state(v1::JOB_STATE_QUEUED);
+      queued.clear_start_time();
+      auto stored = store_->Events(id);
+      StatusOr<bool> released = stored.status();
+      if (stored.ok()) {
+        v1::JobEvent e = PoolEvent(queued, stored->size() + 1, v1::JOB_PHASE_QUEUED, why + ": queued again");
+        released = store_->ReleaseWork(worker_id_, queued, e);
+      }
+      if (released.ok()) {
+        if (*released) {
+          spdlog::warn("job {} queued again: {}", id, why);
+        } else {
+          spdlog::warn("job {}: lease lost before it was handed back", id);
+        }
+        break;
+      }
+      if (!logged) spdlog::error("job {}: cannot hand it back yet: {} (retrying)", id, released.status().ToString());
+      logged = true;
+      std::unique_lock<std::mutex> lock(mu_);
+      if (stopping_ || pool_lost_.count(id)) break;  // the lease's expiry queues it again
+      pool_cv_.wait_for(lock, wait, [&] { return stopping_ || pool_lost_.count(id) > 0; });
+      wait = std::min(wait * 2, std::chrono::milliseconds(5000));
     }
   } else {
     const Status status = outcome->ok() ? Status::Ok() : outcome->status();

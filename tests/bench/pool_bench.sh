@@ -5,7 +5,8 @@
 #      sha-verified from every replica);
 #   2. throughput with 1 and 2 replicas (each replica's engine, decoding and artifact writing on
 #      one thread: two replicas use two cores without oversubscribing them);
-#   3. one rig on SQLite against PostgreSQL: scan and reconstruct latency.
+#   3. one rig on SQLite against PostgreSQL: scan and reconstruct latency;
+#   4. faults: the database stopped while a job runs, a full shared folder.
 #   tests/bench/pool_bench.sh BUILD_DIR [JOBS]        (JOBS default 200)
 set -euo pipefail
 build="$(cd "$1" && pwd)"
@@ -20,7 +21,7 @@ bench="$build/bin/pool-bench"
   echo
   echo "## 1. $jobs reconstructs, 3 replicas, one killed with -9 and restarted"
   echo '```'
-  "$bench" --bin "$build/bin" --scenario kill --jobs "$jobs" --replicas 3 --clients 6 2>&1
+  "$bench" --bin "$build/bin" --scenario kill --jobs "$jobs" --replicas 3 --clients 6 --width 640 --height 480 --frames 16 2>&1
   echo '```'
   echo
   echo "## 2. Throughput, 1 against 2 replicas"
@@ -31,5 +32,10 @@ bench="$build/bin/pool-bench"
   echo "## 3. One rig: SQLite against PostgreSQL"
   echo '```'
   "$bench" --bin "$build/bin" --scenario latency --jobs 10 2>&1
+  echo '```'
+  echo
+  echo "## 4. Faults: the database lost mid-job, a full shared folder"
+  echo '```'
+  "$bench" --bin "$build/bin" --scenario faults --width 640 --height 480 --frames 24 2>&1
   echo '```'
 } | tee "$out"

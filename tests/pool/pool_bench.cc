@@ -598,6 +598,7 @@ double Median(std::vector<double> v) {
 
 Latency RigLatency(const Common& c, const fs::path& work, const std::string& database, const std::string& password_file,
                    const fs::path& stack) {
+  fs::create_directories(work);
   Process p;
   p.name = database.empty() ? "rig on SQLite" : "rig on PostgreSQL";
   p.port = FreePort();
