@@ -6,7 +6,8 @@
 #   2. throughput with 1 and 2 replicas (each replica's engine, decoding and artifact writing on
 #      one thread: two replicas use two cores without oversubscribing them);
 #   3. one rig on SQLite against PostgreSQL: scan and reconstruct latency;
-#   4. faults: the database stopped while a job runs, a full shared folder.
+#   4. faults: the database stopped while a job runs, a SIGTERM drain, a full shared folder;
+#   5. the site feed with its database stopped for 30 s (site_forwarding_outage_test.sh).
 #   tests/bench/pool_bench.sh BUILD_DIR [JOBS]        (JOBS default 200)
 set -euo pipefail
 build="$(cd "$1" && pwd)"
@@ -37,5 +38,10 @@ bench="$build/bin/pool-bench"
   echo "## 4. Faults: the database lost mid-job, a full shared folder"
   echo '```'
   "$bench" --bin "$build/bin" --scenario faults --width 640 --height 480 --frames 24 2>&1
+  echo '```'
+  echo
+  echo "## 5. Site feed: the site database stopped for 30 s during a run of rig scans"
+  echo '```'
+  OUTAGE_SECONDS=30 bash "$here/../server/results/site_forwarding_outage_test.sh" "$build/bin" 2>&1 | grep -v Killed
   echo '```'
 } | tee "$out"

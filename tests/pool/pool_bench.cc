@@ -201,6 +201,7 @@ struct Pool {
   int decode_threads = 0;
   int artifact_threads = 0;
   int lease_s = 3;
+  int drain_s = 10;
 
   Process MakeReplica(int i) {
     Process p;
@@ -224,7 +225,7 @@ struct Pool {
               "--pool-poll-ms",
               "100",
               "--drain-timeout-s",
-              "10",
+              std::to_string(drain_s),
               "--engine-threads",
               std::to_string(engine_threads),
               "--decode-threads",
@@ -726,6 +727,61 @@ int ScenarioFaults(const Common& c, inspection::testing::PostgresServer& pg, con
     CHECK_OR_COUNT(sql.Count("SELECT count(*) FROM work_queue") == 0, "the job is still queued after it ended");
   }
   pool.StopAll();
+  // SIGTERM with drain_timeout_s 0: the running job is handed back at once, another replica
+  // finishes it, the drained replica exits 0.
+  {
+    Pool drain;
+    drain.work = work / "drain";
+    fs::create_directories(drain.work);
+    drain.url = pg.CreateDatabase("pool_drain");
+    drain.password_file = pg.PasswordFile();
+    drain.password = pool.password;
+    drain.inspectd = pool.inspectd;
+    drain.engine_threads = 1;
+    drain.decode_threads = 1;
+    drain.artifact_threads = 1;
+    drain.lease_s = 30;
+    drain.drain_s = 0;
+    if (drain.Start(2)) {
+      Sql sql(drain.url, drain.password);
+      InspectionClient a(ClientFor(drain.replicas[0].address()));
+      std::string job_id;
+      std::thread submit([&] {
+        v1::ReconstructStart start;
+        start.set_request_id("faults-drain");
+        v1::Job job;
+        a.ReconstructUpload(stack, start, [&](const v1::JobEvent& e) { job_id = e.job_id(); }, &job);
+      });
+      size_t holder = 0;
+      PollUntil([&] {
+        for (size_t r = 0; r < 2; ++r) {
+          if (sql.Count("SELECT count(*) FROM work_queue q JOIN jobs j USING (job_id) WHERE q.ended = 0 AND j.state = 2 "
+                        "AND q.lease_owner LIKE '%-" + std::to_string(drain.replicas[r].pid) + "-%'") > 0) {
+            holder = r;
+            return true;
+          }
+        }
+        return false;
+      }, 120, 0.01);
+      const int rc = drain.replicas[holder].Term();
+      submit.join();
+      InspectionClient other(ClientFor(drain.replicas[1 - holder].address()));
+      v1::Job after;
+      PollUntil([&] { return other.GetJob(job_id, &after).ok() && after.state() == v1::JOB_STATE_SUCCEEDED; }, 120, 0.1);
+      const int64_t handed = sql.Count("SELECT count(*) FROM jobs WHERE job_id = '" + job_id + "'");
+      const std::string log = ReadFile(drain.replicas[holder].log);
+      const bool said = log.find("handing them back") != std::string::npos;
+      std::printf("| SIGTERM (drain_timeout_s 0) while %s runs | exit 0, handed back, SUCCEEDED on the other | exit %d, %s, %s |\n",
+                  job_id.c_str(), rc, said ? "handed back" : "not handed back", v1::JobState_Name(after.state()).c_str());
+      CHECK_OR_COUNT(rc == 0, "the drained replica exited " << rc);
+      CHECK_OR_COUNT(said, "the drained replica did not hand its job back");
+      CHECK_OR_COUNT(handed == 1 && after.state() == v1::JOB_STATE_SUCCEEDED,
+                     "after the drain the job is " << v1::JobState_Name(after.state()));
+      drain.StopAll();
+    } else {
+      ++g_failures;
+    }
+  }
   // A full shared folder: a replica on a tmpfs too small for the upload (root: mount).
   if (geteuid() == 0) {
     Pool full;
