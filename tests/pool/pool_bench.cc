@@ -479,11 +479,11 @@ int ScenarioKill(const Common& c, inspection::testing::PostgresServer& pg, const
   Sql sql(pool.url, pool.password);
   const size_t victim = c.replicas > 1 ? 1 : 0;
   // Kill once a quarter of the jobs are done and the victim is mid-job: it holds a lease on a
-  // RUNNING job that has reported frames.
+  // RUNNING job early in its frames (a job about to end could finish between the look and the kill).
   const std::string held_by_victim =
       "SELECT count(*) FROM work_queue q JOIN jobs j USING (job_id) WHERE q.ended = 0 AND q.lease_owner LIKE '%-" +
       std::to_string(pool.replicas[victim].pid) + "-%' AND j.state = 2 AND "
-      "(SELECT count(*) FROM events e WHERE e.job_id = q.job_id) >= 4";
+      "(SELECT count(*) FROM events e WHERE e.job_id = q.job_id) BETWEEN 3 AND 8";
   PollUntil([&] { return submitter.succeeded() >= c.jobs / 4 && sql.Count(held_by_victim) > 0; }, 300, 0.02);
   std::string held_ids;
   {
