@@ -336,10 +336,10 @@ TEST_P(DataStoreTest, TheWorkQueueLeasesEachJobToOneWorkerAndOnlyTheHolderEndsIt
   EXPECT_EQ(*store_->QueuedWorkIds(), std::vector<std::string>{"rec-1"});
   EXPECT_EQ(*store_->QueueDepth(), 0);
   // The ended jobs' inputs are listed for removal until forgotten.
-  auto ended = store_->EndedWork();
-  ASSERT_TRUE(ended.ok());
+  auto ended_work = store_->EndedWork();
+  ASSERT_TRUE(ended_work.ok());
   std::vector<std::string> ended_dirs;
-  for (const QueuedWork& w : *ended) ended_dirs.push_back(w.stack_dir);
+  for (const QueuedWork& w : *ended_work) ended_dirs.push_back(w.stack_dir);
   std::sort(ended_dirs.begin(), ended_dirs.end());
   EXPECT_EQ(ended_dirs, (std::vector<std::string>{"uploads/rec-2", "uploads/rec-3"}));
   ASSERT_TRUE(store_->ForgetWork("rec-3").ok());
