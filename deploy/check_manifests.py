@@ -35,6 +35,7 @@ EXTERNAL_SECRETS = {"inspectd-auth", "inspectd-tls", "inspectd-opcua"}  # create
 GATEWAY = "opcua-gateway"  # the OPC UA gateway's container / compose service
 GATEWAY_FILE_KEYS = ("certificate", "private_key", "grpc_tls_ca", "grpc_tls_cert", "grpc_tls_key", "grpc_token_file",
                      "users_file")
+EXTERNAL_SECRETS |= {"inspectd-db"}  # the reconstruct pool's database password
 RIG_HEALTH = "inspection.v1.InspectionService"
 NAME_RE = re.compile(r"^[a-z0-9]([-a-z0-9]*[a-z0-9])?$")
 
@@ -208,6 +209,9 @@ class Checker:
         for name, dep in deployments.items():
             self.check_deployment(f"Deployment/{name}", dep, configmaps, claims, placeholders)
             templates.append(dep)
+        # The reconstruct pool's database (deploy/k8s/reconstruct/postgres) is a StatefulSet with
+        # its own Service.
+        templates += list(by_kind.get("StatefulSet", {}).values())
         for name, svc in by_kind.get("Service", {}).items():
             self.check_service(f"Service/{name}", svc, templates)
         for name, cm in configmaps.items():
@@ -309,9 +313,39 @@ class Checker:
                 self.fail(where, "the reconstruct pool needs no host network")
             if any(m.startswith("/dev") for m in mounts):
                 self.fail(where, "the reconstruct pool needs no devices")
+            self.check_pool(where, pod, c, volumes, mounts, claims, config_text, env)
         else:
             self.fail(where, f"label app.kubernetes.io/component must be rig or reconstruct, is {component!r}")
         self.done(where)
+
+    # --- the reconstruct pool's shared state (docs/database.md) --------------------------------
+    def check_pool(self, where, pod, c, volumes, mounts, claims, config_text, env):
+        """Replicas share jobs through PostgreSQL and files through a ReadWriteMany volume; SIGTERM
+        drains within the grace period."""
+        try:
+            config = json.loads(config_text or "{}")
+        except ValueError:
+            config = {}
+        database = env.get("INSPECTD_DATABASE", config.get("database", ""))
+        if not str(database).startswith(("postgresql://", "postgres://", "host=")):
+            self.fail(where, "the reconstruct pool needs a shared database (database: postgresql://...)")
+        password_file = env.get("INSPECTD_DATABASE_PASSWORD_FILE", config.get("database_password_file", ""))
+        mount = mounts.get(str(password_file).rsplit("/", 1)[0]) if password_file else None
+        if password_file and (not mount or "secret" not in volumes.get(mount["name"], {})):
+            self.fail(where, f"database_password_file {password_file!r} is not in a mounted Secret")
+        data = volumes.get((mounts.get("/var/lib/inspection") or {}).get("name"), {})
+        claim = claims.get(data.get("persistentVolumeClaim", {}).get("claimName"))
+        if not claim:
+            self.fail(where, "the reconstruct pool's data folder must be a shared PersistentVolumeClaim")
+        elif "ReadWriteMany" not in claim["spec"].get("accessModes", []):
+            self.fail(where, "the reconstruct pool's data claim must be ReadWriteMany (every replica reads every job)")
+        drain = int(config.get("drain_timeout_s", 60))
+        grace = pod.get("terminationGracePeriodSeconds", 30)
+        if grace < drain + 10:
+            self.fail(where, f"terminationGracePeriodSeconds {grace} leaves no room for drain_timeout_s {drain} "
+                             "(+10 s for preStop and the hand-back)")
+        if not (c.get("lifecycle") or {}).get("preStop"):
+            self.fail(where, "the reconstruct pool needs a preStop pause (the endpoint goes before SIGTERM drains)")
 
     def check_service(self, where, svc, deployments):
         selector = svc["spec"].get("selector", {})
@@ -447,6 +481,19 @@ def self_test(path, inspectd=None, gateway=None):
         "--no-rig": lambda ds: pod(ds, "reconstruct")["containers"][0].update(args=[]),
         "several replicas": lambda ds: dep(ds, "reconstruct")["spec"].update(replicas=1),
         "enableServiceLinks": lambda ds: pod(ds, "reconstruct").pop("enableServiceLinks"),
+        # The pool's shared state.
+        "needs a shared database": lambda ds: next(d for d in ds if d["kind"] == "ConfigMap" and
+                                                   "postgresql" in d.get("data", {}).get("inspectd.json", ""))["data"].update(
+            {"inspectd.json": json.dumps({"listen": "0.0.0.0:50051", "data_dir": "/var/lib/inspection"})}),
+        "must be ReadWriteMany": lambda ds: next(d for d in ds if d["kind"] == "PersistentVolumeClaim" and
+                                                 "ReadWriteMany" in d["spec"]["accessModes"])["spec"].update(
+            accessModes=["ReadWriteOnce"]),
+        "shared PersistentVolumeClaim": lambda ds: next(v for v in pod(ds, "reconstruct")["volumes"]
+                                                        if v["name"] == "data").update(
+            {"persistentVolumeClaim": None, "emptyDir": {}}) or next(
+            v for v in pod(ds, "reconstruct")["volumes"] if v["name"] == "data").pop("persistentVolumeClaim"),
+        "leaves no room for drain_timeout_s": lambda ds: pod(ds, "reconstruct").update(terminationGracePeriodSeconds=30),
+        "needs a preStop pause": lambda ds: pod(ds, "reconstruct")["containers"][0].pop("lifecycle"),
         "targetPort": lambda ds: next(d for d in ds if d["kind"] == "Service")["spec"]["ports"][0].update(targetPort="grcp"),
         "matches 0 Deployments": lambda ds: next(d for d in ds if d["kind"] == "Service")["spec"].update(selector={"app": "x"}),
         "is not in the manifests": lambda ds: [d for d in ds if d["kind"] == "ConfigMap"][0]["metadata"].update(name="renamed"),

@@ -51,7 +51,7 @@ code=$?
 set -e
 check "unknown key: exit 2" 2 "$code"
 check "unknown key: one line naming it" \
-  "inspectd: $work/typo.json: unknown key 'queue_capacty' (did you mean 'queue_capacity'?); known keys: listen, data_dir, database, database_password_file, rig_id, site_database, site_database_password_file, queue_capacity, reflection, tls_cert, tls_key, tls_client_ca, insecure, auth_token_file, token_file, policy, rig_config, degraded, specimen, seed, camera_size, log_level, log_format, no_rig, http_listen, scene_dir, audit_log, min_free_mb, retention_max_age_s, retention_max_mb, retention_keep_last, retention_interval_s, decode_threads, decode_budget_mb, artifact_threads, mqtt_host, mqtt_port, mqtt_site, mqtt_rig, mqtt_topic_prefix, mqtt_client_id, mqtt_username, mqtt_password_file, mqtt_tls_ca, mqtt_tls_cert, mqtt_tls_key" \
+  "inspectd: $work/typo.json: unknown key 'queue_capacty' (did you mean 'queue_capacity'?); known keys: listen, data_dir, database, database_password_file, rig_id, site_database, site_database_password_file, queue_capacity, reflection, tls_cert, tls_key, tls_client_ca, insecure, auth_token_file, token_file, policy, rig_config, degraded, specimen, seed, camera_size, log_level, log_format, no_rig, http_listen, scene_dir, audit_log, min_free_mb, retention_max_age_s, retention_max_mb, retention_keep_last, retention_interval_s, decode_threads, decode_budget_mb, artifact_threads, mqtt_host, mqtt_port, mqtt_site, mqtt_rig, mqtt_topic_prefix, mqtt_client_id, mqtt_username, mqtt_password_file, mqtt_tls_ca, mqtt_tls_cert, mqtt_tls_key, pool_lease_s, pool_workers, pool_poll_ms, drain_timeout_s, engine_threads" \
   "$err"
 set +e
 err="$(run INSPECTD_QUEUE_CAPACITY=lots "$inspectd" --print-config 2>&1 >/dev/null)"

@@ -157,14 +157,14 @@ grpc::Status InspectionServiceImpl::Reconstruct(
   auto source = MapReconstructSource(start, options_.max_upload_bytes);
   if (!source.ok()) return Grpc(source.status());
   fs::path dir;
-  std::shared_ptr<const OwnedFolder> upload;  // removed on every early return
+  std::shared_ptr<OwnedFolder> upload;  // removed on every early return
   // Declared after `upload`: its decode threads are joined before the folder goes.
   std::shared_ptr<StackFrameDecoder> decoded;
   std::optional<StackManifest> stored_manifest;  // a stored scan's, checked against its archive
   StackFrameDecodeFn decode_stored;              // empty: the frames decode from `dir`
   if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
   if (source->upload) {
-    upload = std::make_shared<const OwnedFolder>(store_->uploads_dir() / NewId("upload"));
+    upload = std::make_shared<OwnedFolder>(store_->uploads_dir() / NewId("upload"));
     dir = upload->path();
     UploadDecoding decoding(dir, options_.reconstruct);
     Status received = ReceiveUpload(stream, *source, dir, options_.max_upload_bytes, &decoding);
@@ -192,6 +192,7 @@ grpc::Status InspectionServiceImpl::Reconstruct(
       [&, upload = std::move(upload)]() -> StatusOr<JobWork> {
         INSPECT_ASSIGN_OR_RETURN(ReconstructWork work, MapReconstructStart(start, dir, upload));
         work.decoded = std::move(decoded);
+        work.pool_input = start.SerializeAsString();  // a pool replica rebuilds the work from it
         return JobWork(std::move(work));
       },
       who->name);

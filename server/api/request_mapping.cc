@@ -446,7 +446,7 @@ Status CheckUploadChunk(const v1::StackFileChunk& chunk) {
 }
 
 StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start, const fs::path& stack_dir,
-                                              std::shared_ptr<const OwnedFolder> upload) {
+                                              std::shared_ptr<OwnedFolder> upload) {
   ReconstructWork work;
   INSPECT_ASSIGN_OR_RETURN(ReconstructionSettings rec, MapReconstructionOptions(start.options(), "options"));
   work.stack_dir = stack_dir;

@@ -99,7 +99,7 @@ inline constexpr int64_t kMaxChunkBytes = 1 << 20;  // 1 MiB: far below gRPC's 4
 Status CheckUploadChunk(const v1::StackFileChunk& chunk);
 // The work for a stack folder that is in place and validated; `upload` owns it when uploaded.
 StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start, const std::filesystem::path& stack_dir,
-                                              std::shared_ptr<const OwnedFolder> upload);
+                                              std::shared_ptr<OwnedFolder> upload);
 
 // ---------------------------------------------------------------------------------------------
 // Other requests

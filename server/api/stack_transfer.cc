@@ -8,6 +8,7 @@
 
 #include "core/io/stack.h"
 #include "server/storage/data_lifecycle.h"
+#include "server/storage/stored_stack.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -99,6 +100,41 @@ Status CheckStackFrames(const fs::path& dir, const std::optional<StackManifest>&
     *decoded = std::make_shared<StackFrameDecoder>(dir, *manifest, o, decode_stored);
   }
   return (*decoded)->Finish();
+}
+
+StatusOr<JobWork> RestoreReconstructWork(DataStore& store, const ReconstructPipelineOptions& options,
+                                         const QueuedWork& queued, const fs::path& stack_dir) {
+  v1::ReconstructStart start;
+  if (!start.ParseFromString(queued.input)) {
+    return Status::DataLoss("the stored request of job " + queued.job_id + " is corrupt");
+  }
+  fs::path dir = stack_dir;
+  std::shared_ptr<OwnedFolder> folder;
+  std::optional<StackManifest> stored_manifest;
+  StackFrameDecodeFn decode_stored;
+  if (stack_dir.empty()) {
+    if (start.scan_id().empty()) return Status::DataLoss("the stored request of job " + queued.job_id + " names no stack");
+    INSPECT_ASSIGN_OR_RETURN(StoredStack stored,
+                             OpenStoredStack(store, start.scan_id(),
+                                             options.sequential ? StoredFrames::kExtracted : StoredFrames::kInMemory));
+    dir = stored.dir;
+    folder = std::move(stored.extraction);
+    stored_manifest = std::move(stored.manifest);
+    decode_stored = std::move(stored.decode);
+  } else {
+    std::error_code ec;
+    if (!fs::is_regular_file(stack_dir / kStackManifestName, ec)) {
+      return Status::DataLoss("the stored input of job " + queued.job_id + " (" + stack_dir.string() +
+                              ") is gone from the shared data folder");
+    }
+    folder = std::make_shared<OwnedFolder>(stack_dir);
+  }
+  std::shared_ptr<StackFrameDecoder> decoded;
+  INSPECT_RETURN_IF_ERROR(CheckStackFrames(dir, stored_manifest, options, decode_stored, &decoded));
+  INSPECT_ASSIGN_OR_RETURN(ReconstructWork work, MapReconstructStart(start, dir, folder));
+  work.decoded = std::move(decoded);
+  work.pool_input = queued.input;
+  return JobWork(std::move(work));
 }
 
 Status SendArtifactFile(const StoredArtifact& artifact, const ArtifactRange& range,

@@ -55,6 +55,14 @@ Status CheckStackFrames(const std::filesystem::path& dir, const std::optional<St
                         const ReconstructPipelineOptions& options, const StackFrameDecodeFn& decode_stored,
                         std::shared_ptr<StackFrameDecoder>* decoded);
 
+// A reconstruct pool job's work rebuilt from its stored input (server/jobs/job_manager.h pool
+// mode) on a replica that did not receive the request: the stored ReconstructStart and the
+// uploaded stack in `stack_dir` on the shared data folder (empty: the request named a stored
+// scan, opened again). The frames are checked and decoded as at the upload. DATA_LOSS naming the
+// folder when the stored input is gone; the request's own errors as at the upload.
+StatusOr<JobWork> RestoreReconstructWork(DataStore& store, const ReconstructPipelineOptions& options,
+                                         const QueuedWork& queued, const std::filesystem::path& stack_dir);
+
 // Sends the byte range `range` of a stored artifact's file in chunks of at most kMaxChunkBytes
 // through `write` (false: the client stopped reading, CANCELLED). OUT_OF_RANGE for an offset
 // beyond the file, DATA_LOSS when the file is missing or shorter than recorded.

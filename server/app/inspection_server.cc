@@ -11,6 +11,7 @@
 #include "server/security/audit_interceptor.h"
 #include "server/security/log_identity_interceptor.h"
 #include "server/security/transport_security.h"
+#include "server/api/stack_transfer.h"
 
 namespace inspection {
 
@@ -113,6 +114,14 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   jo.disk_full = [dir = options.data_dir, full_below = std::max<int64_t>(min_free_bytes, int64_t(64) << 20)] {
     auto free_bytes = FreeDiskBytes(dir);
     return free_bytes.ok() && *free_bytes < full_below;
+  };
+  // A shared store (PostgreSQL) makes this server a pool replica: reconstructions go through the
+  // store's work queue and any replica runs them, from their input on the shared data folder.
+  jo.pool = options.pool;
+  jo.pool.enabled = s->store_->shared();
+  jo.pool.restore = [store = s->store_.get(), pipeline = options.reconstruct](const QueuedWork& w,
+                                                                             const std::filesystem::path& dir) {
+    return RestoreReconstructWork(*store, pipeline, w, dir);
   };
   s->jobs_ = std::make_unique<JobManager>(jo, s->store_.get(), s->runner_.get());
   INSPECT_RETURN_IF_ERROR(s->jobs_->Start());
@@ -225,6 +234,16 @@ void InspectionServer::Shutdown() {
   results_->Shutdown();  // open WatchResults streams end (UNAVAILABLE: resume elsewhere or later)
   if (forwarder_) forwarder_->Stop();  // what it did not forward stays in the outbox for the next start
   server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
+}
+
+void InspectionServer::Drain() {
+  if (shut_down_ || !jobs_->pool()) return;
+  // Readiness drops first: the Service stops sending this replica new calls.
+  grpc::HealthCheckServiceInterface* health = server_->GetHealthCheckService();
+  health->SetServingStatus("", false);
+  health->SetServingStatus(kRigHealthService, false);
+  const int handed_back = jobs_->Drain(options_.drain_timeout);
+  spdlog::info("drained ({} job(s) handed back to the pool)", handed_back);
 }
 
 void InspectionServer::Wait() { server_->Wait(); }

@@ -68,6 +68,11 @@ struct ServerOptions {
   // Results and rig states to an MQTT broker (server/plant/mqtt_publisher.h); no host = off.
   // An empty sequence_file is <data_dir>/plant/mqtt_sequence.
   MqttOptions mqtt;
+  // Reconstruct pool (replicas on one PostgreSQL database and one shared data folder): the
+  // work queue's lease, workers and poll (server/jobs/job_manager.h). On when the store is shared.
+  PoolOptions pool;
+  // SIGTERM in a pool: how long the running jobs may take to finish before they are handed back.
+  std::chrono::milliseconds drain_timeout{60000};
 };
 
 // Health service names: "" is SERVING while the process runs; this one is SERVING only while
@@ -89,6 +94,9 @@ class InspectionServer {
   std::string address() const;  // host:port actually bound
   // Stops accepting calls, cancels jobs, waits for the workers.
   void Shutdown();
+  // A pool replica's SIGTERM: health NOT_SERVING, no more work taken, the running jobs finish
+  // (up to drain_timeout) or are handed back. Shutdown follows. No-op outside a pool.
+  void Drain();
   void Wait();
 
   JobManager& jobs() { return *jobs_; }

@@ -167,6 +167,8 @@ int main(int argc, char** argv) {
         continue;
       }
       spdlog::info("signal {}: shutting down", sig);
+      // A pool replica finishes or hands back its reconstructions first (bounded by drain_timeout_s).
+      if (sig == SIGTERM) (*server)->Drain();
       (*server)->Shutdown();
       return;
     }

@@ -218,6 +218,17 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
       {"mqtt_tls_ca", &C::mqtt_tls_ca, "PEM CA of the MQTT broker: enables TLS"},
       {"mqtt_tls_cert", &C::mqtt_tls_cert, "PEM client certificate for the MQTT broker (with mqtt_tls_key)"},
       {"mqtt_tls_key", &C::mqtt_tls_key, "PEM private key of mqtt_tls_cert"},
+      // Reconstruct pool (database: postgresql://...).
+      {"pool_lease_s", &C::pool_lease_s,
+       "pool: seconds a replica's lease on a job lasts unrenewed; a replica silent this long (killed) is taken "
+       "for dead and another reruns the job"},
+      {"pool_workers", &C::pool_workers, "pool: reconstructions this replica runs at once"},
+      {"pool_poll_ms", &C::pool_poll_ms, "pool: how often idle replicas look for work and watchers for events (ms)"},
+      {"drain_timeout_s", &C::drain_timeout_s,
+       "pool: on SIGTERM, seconds the running reconstructions may take to finish before they are handed back"},
+      {"engine_threads", &C::engine_threads,
+       "reconstruct: SFF engine threads per reconstruction (set each replica's share of a shared host); 0: all "
+       "hardware threads"},
   };
   return keys;
 }
@@ -398,6 +409,11 @@ Status ValidateConfig(const InspectdConfig& c) {
   if (c.decode_threads < 0) return bad("decode_threads", std::to_string(c.decode_threads), "must be >= 0");
   if (c.decode_budget_mb < 0) return bad("decode_budget_mb", std::to_string(c.decode_budget_mb), "must be >= 0");
   if (c.artifact_threads < 0) return bad("artifact_threads", std::to_string(c.artifact_threads), "must be >= 0");
+  if (c.pool_lease_s < 1) return bad("pool_lease_s", std::to_string(c.pool_lease_s), "must be >= 1");
+  if (c.pool_workers < 1) return bad("pool_workers", std::to_string(c.pool_workers), "must be >= 1");
+  if (c.pool_poll_ms < 10) return bad("pool_poll_ms", std::to_string(c.pool_poll_ms), "must be >= 10");
+  if (c.drain_timeout_s < 0) return bad("drain_timeout_s", std::to_string(c.drain_timeout_s), "must be >= 0");
+  if (c.engine_threads < 0) return bad("engine_threads", std::to_string(c.engine_threads), "must be >= 0");
   if (c.tls_cert.empty() != c.tls_key.empty()) {
     return Status::InvalidArgument("TLS needs both tls_cert and tls_key (only " +
                                    std::string(c.tls_cert.empty() ? "tls_key" : "tls_cert") + " is set)");
@@ -460,6 +476,11 @@ StatusOr<ServerOptions> ToServerOptions(const InspectdConfig& c) {
   o.mqtt.tls_ca_file = c.mqtt_tls_ca;
   o.mqtt.tls_cert_file = c.mqtt_tls_cert;
   o.mqtt.tls_key_file = c.mqtt_tls_key;
+  o.pool.lease = std::chrono::seconds(c.pool_lease_s);
+  o.pool.workers = c.pool_workers;
+  o.pool.poll = std::chrono::milliseconds(c.pool_poll_ms);
+  o.drain_timeout = std::chrono::seconds(c.drain_timeout_s);
+  o.reconstruct.engine_threads = c.engine_threads;
   o.simulation.specimen = c.specimen;
   o.simulation.seed = c.seed;
   (void)ParseCameraSize(c.camera_size, &o.simulation.camera_size);  // checked by ValidateConfig

@@ -68,6 +68,12 @@ struct InspectdConfig {
   std::string mqtt_tls_ca;
   std::string mqtt_tls_cert;
   std::string mqtt_tls_key;
+  // Reconstruct pool (a shared PostgreSQL database; server/jobs/job_manager.h pool mode).
+  int pool_lease_s = 30;         // a replica silent this long is taken for dead; its job runs again
+  int pool_workers = 1;          // reconstructions this replica runs at once
+  int pool_poll_ms = 250;        // idle replicas look for work, watchers for events, this often
+  int drain_timeout_s = 60;      // SIGTERM: running jobs may finish this long, then are handed back
+  int engine_threads = 0;        // SFF engine threads per reconstruction; 0 = all hardware threads
 
   bool operator==(const InspectdConfig&) const = default;
 };

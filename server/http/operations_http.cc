@@ -26,6 +26,7 @@ std::string OperationsHttp::MetricsText() {
   if (sources_.jobs) {
     state.queued_rig_jobs = sources_.jobs->queued_rig_jobs();
     state.rig_job_running = !sources_.jobs->running_rig_job().empty();
+    state.reconstruct_queue_depth = sources_.jobs->reconstruct_queue_depth();
   }
   std::error_code ec;
   const std::filesystem::space_info space = std::filesystem::space(data_dir_, ec);

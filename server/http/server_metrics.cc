@@ -77,7 +77,10 @@ ServerMetrics::ServerMetrics(std::string server_version, std::function<double()>
                                     "Bytes available to inspectd on the data directory's file system.")),
       grpc_calls_(registry_.AddCounter("inspectd_grpc_calls_total", "Finished gRPC calls by method and status code.",
                                        {"method", "code"})),
-      build_info_(registry_.AddGauge("inspectd_build_info", "Always 1; the server version as a label.", {"version"})) {
+      build_info_(registry_.AddGauge("inspectd_build_info", "Always 1; the server version as a label.", {"version"})),
+      // The reconstruct pool's backlog: replicas to add while it grows.
+      queue_depth_(registry_.AddGauge("inspectd_queue_depth",
+                                      "Reconstruct jobs waiting for a replica (the whole pool's on a shared database).")) {
   build_info_.Set({std::move(server_version)}, 1);
   now_s_ = now_s ? std::move(now_s) : [] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
@@ -150,6 +153,7 @@ std::string ServerMetrics::Render(const ScrapeState& state) {
   queued_jobs_.Set({}, state.queued_rig_jobs);
   running_jobs_.Set({}, state.rig_job_running ? 1 : 0);
   if (state.data_disk_free_bytes) disk_free_.Set({}, double(*state.data_disk_free_bytes));
+  queue_depth_.Set({}, double(state.reconstruct_queue_depth));
   return registry_.Render();
 }
 

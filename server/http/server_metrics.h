@@ -23,6 +23,9 @@ struct ScrapeState {
   int queued_rig_jobs = 0;
   bool rig_job_running = false;
   std::optional<uint64_t> data_disk_free_bytes;  // nullopt when the data dir cannot be queried
+  // Reconstruct pool: jobs waiting for a replica (the whole pool's on a shared store), for an
+  // autoscaler (inspectd_queue_depth).
+  int64_t reconstruct_queue_depth = 0;
 };
 
 class ServerMetrics {
@@ -61,6 +64,7 @@ class ServerMetrics {
   Gauge disk_free_;
   Counter grpc_calls_;
   Gauge build_info_;
+  Gauge queue_depth_;  // inspectd_queue_depth
 
   // Per unfinished job: when it was queued and whether its wait is counted; for scans, sums
   // over the stack frames that become the last-scan gauges at its end.

@@ -8,6 +8,15 @@
 //    this run or an earlier one.
 //  - Each job's events are persisted as they happen; a job that was queued or running when the
 //    server stopped is marked FAILED (ABORTED) at the next start.
+//  - Pool mode (options.pool.enabled: replicas sharing one PostgreSQL store and one data folder):
+//    reconstruct jobs go through the store's work queue (DataStore::EnqueueWork) instead of this
+//    process's queue. Any replica accepts an upload; any idle replica's worker takes the oldest
+//    queued job under a lease its heartbeat renews, and ends it in the store only while it still
+//    holds the lease (so a job's outcome is recorded once). A replica that dies (kill -9) stops
+//    renewing: its lease runs out and another replica reruns the job from the stored input (the
+//    upload's folder on the shared data folder and the stored ReconstructStart). Drain stops
+//    taking work and waits for the running jobs; what is still running then is handed back
+//    (queued again for another replica). Records of jobs running elsewhere follow the store.
 // Thread-safe.
 #pragma once
 
@@ -47,7 +56,9 @@ class JobRecord {
   bool terminal() const;
   // Copies events [from, ...) into *out. Waits up to `timeout` when there are none yet and the
   // job has not ended. Returns true when the job has ended and *out holds the last events.
-  bool EventsSince(size_t from, std::chrono::milliseconds timeout, std::vector<v1::JobEvent>* out) const;
+  // A record that follows the store (a pool job running on another replica) looks there for new
+  // events at least every poll interval while it waits.
+  bool EventsSince(size_t from, std::chrono::milliseconds timeout, std::vector<v1::JobEvent>* out);
 
   std::atomic<bool> cancel_requested{false};
 
@@ -64,6 +75,15 @@ class JobRecord {
   // `persist`, then wakes the watchers; returns it.
   v1::JobEvent AppendEvent(const EventFill& fill, const std::function<void(const v1::JobEvent&)>& persist);
 
+  // Pool mode. Follow: the job runs elsewhere; EventsSince and Refresh read `store` (every `poll`).
+  void Follow(DataStore* store, std::chrono::milliseconds poll);
+  void StopFollowing();
+  // Reads the stored job and its events newer than this record's; false when the store does not
+  // answer (the record stays as it was).
+  bool Refresh();
+  // Replaces the record with the stored one (a worker taking the job: others may have run it).
+  void Reload(v1::Job job, std::vector<v1::JobEvent> events);
+
  private:
   const std::string job_id_;
   const v1::JobKind kind_;
@@ -76,6 +96,22 @@ class JobRecord {
   v1::Job job_;
   std::vector<v1::JobEvent> events_;
   std::chrono::steady_clock::time_point started_;
+  DataStore* follow_store_ = nullptr;  // set: the job runs elsewhere
+  std::chrono::milliseconds follow_poll_{250};
+};
+
+// A reconstruct pool's settings (JobManager pool mode, above).
+struct PoolOptions {
+  bool enabled = false;   // the server sets it when its store is shared (PostgreSQL)
+  std::string worker_id;  // this replica's name on its leases; empty = host name, pid and a random suffix
+  // A worker that has not renewed its lease for this long is taken for dead; renewed every third.
+  std::chrono::milliseconds lease{30000};
+  std::chrono::milliseconds poll{250};  // idle workers look for work, followers for events, this often
+  int workers = 1;                      // reconstructions run at once by this replica
+  int64_t queue_capacity = 1000;        // queued jobs of the whole pool; beyond: RESOURCE_EXHAUSTED
+  // Rebuilds a job's work from its stored input (server/api: the stored ReconstructStart and the
+  // stack folder `stack_dir`, empty for a stored scan) when this replica did not accept the job.
+  std::function<StatusOr<JobWork>(const QueuedWork& work, const std::filesystem::path& stack_dir)> restore;
 };
 
 struct JobManagerOptions {
@@ -90,6 +126,7 @@ struct JobManagerOptions {
   // it wrote are gone by then (the runner removes them before returning), so the free space
   // seen after the failure alone would not tell. Empty = never.
   std::function<bool()> disk_full;
+  PoolOptions pool;
 };
 
 class JobManager {
@@ -100,8 +137,17 @@ class JobManager {
 
   // Marks jobs left unfinished by a previous run, then starts the workers.
   Status Start();
-  // Ends queued jobs (FAILED, ABORTED), asks running ones to cancel and joins the workers.
+  // Ends queued jobs (FAILED, ABORTED), asks running ones to cancel and joins the workers. Pool
+  // mode: queued jobs stay queued in the store and running ones are handed back.
   void Shutdown();
+  // Pool mode: takes no more work (new uploads get UNAVAILABLE), waits up to `timeout` for the
+  // jobs running here to end, then hands back the rest. Shutdown follows. Returns the number of
+  // jobs handed back.
+  int Drain(std::chrono::milliseconds timeout);
+  bool pool() const { return options_.pool.enabled; }
+  const std::string& worker_id() const { return worker_id_; }
+  // Reconstruct jobs waiting to run: the pool's (sampled by the heartbeat), or this process's queue.
+  int64_t reconstruct_queue_depth() const;
 
   // Builds the work of a new job (`prepare`: request mapping and rig checks, called without the
   // manager's lock) and queues it. With a request id that an earlier job of this kind carries,
@@ -154,6 +200,14 @@ class JobManager {
   // Runs the jobs of one queue, one at a time, until the manager stops.
   void Worker(Queue* queue, bool rig);
 
+  // Pool mode (see the top of this file).
+  StatusOr<RecordPtr> SubmitToPool(v1::Job job, JobWork work, const std::string& description);
+  void PoolWorker();
+  void RunPoolJob(const QueuedWork& claimed);
+  void PoolHeartbeat();
+  StatusOr<v1::Job> CancelPoolJob(const RecordPtr& r);
+  RecordPtr FollowerFor(v1::Job job, std::vector<v1::JobEvent> events);
+
   const JobManagerOptions options_;
   DataStore* const store_;
   JobRunner* const runner_;
@@ -169,6 +223,20 @@ class JobManager {
   std::set<std::string> deleting_;                   // jobs (and so scans) being deleted
 
   std::thread rig_thread_, reconstruct_thread_;
+
+  // Pool mode; guarded by mu_ unless atomic.
+  std::string worker_id_;
+  bool draining_ = false;
+  uint64_t pool_submissions_ = 0;                          // wakes idle workers at a local upload
+  std::map<std::string, JobWork> pool_hints_;              // accepted here, frames decoded, not yet taken here
+  std::map<std::string, std::weak_ptr<JobRecord>> pool_followers_;  // records streamed to clients here
+  std::map<std::string, RecordPtr> pool_held_;             // running here under our lease
+  std::set<std::string> pool_lost_;                        // held, but another worker took the lease over
+  std::set<std::string> pool_hand_back_;                   // held, to be handed back when they stop
+  std::condition_variable pool_cv_;                        // a held job ended, or the manager stops
+  std::atomic<int64_t> pool_queue_depth_{0};
+  std::vector<std::thread> pool_threads_;
+  std::thread heartbeat_thread_;
 };
 
 }  // namespace inspection

@@ -50,16 +50,22 @@ struct ReconstructPipelineOptions {
   // The sequential path, the end-to-end benchmark's baseline: every frame decoded after
   // the upload to check it and again in the job, one after another; artifacts one at a time.
   bool sequential = false;
+  // Threads of the SFF engine and the frame alignment per reconstruction; 0 = all hardware
+  // threads. Replicas sharing a host set their share, so they do not oversubscribe its cores.
+  int engine_threads = 0;
 };
 
 // Reconstruct a stack (core/io/stack.h format) that has already been validated.
 struct ReconstructWork {
   std::filesystem::path stack_dir;
   std::string source_scan_id;  // the stored scan read; empty for an upload
+  // The request it was built from (a serialised v1::ReconstructStart, the upload's bytes aside):
+  // the stored input from which another pool replica builds the same work again.
+  std::string pool_input;
   // Set for an uploaded stack or a stored scan's private folder (server/storage/stored_stack.h): the
   // folder goes when the last copy of the work does (the job ended, was cancelled while queued,
   // or never got queued).
-  std::shared_ptr<const OwnedFolder> upload;
+  std::shared_ptr<OwnedFolder> upload;
   // The stack's frames, decoded (and checked) while the request was received, from stack_dir or
   // from a stored scan's archive (then stack_dir holds no frames); null = the job decodes them
   // from stack_dir (the sequential path). Declared after `upload`: destroyed (its threads

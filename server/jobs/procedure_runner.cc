@@ -316,11 +316,14 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     // Unthresholded engine, then the post-processing (core/sff/depth_postprocess.h) thresholds.
     SffOptions unthresholded = work.sff;
     unthresholded.min_confidence = 0.0;
+    // A pool replica sharing its cores with others runs its engine on its share of them.
+    if (pipeline_.engine_threads > 0) unthresholded.threads = pipeline_.engine_threads;
     // Frames decoded while the request arrived come from memory, in z order, each freed once
     // the engine has it; without them (the sequential path) the folder is read here.
     StatusOr<DepthResult> r = Status::Internal("not run");
     if (work.decoded) {
-      a.options.threads = 0;  // frames in memory, Frame thread-safe: neighbour pairs register concurrently
+      // Frames in memory, Frame thread-safe: neighbour pairs register concurrently.
+      a.options.threads = pipeline_.engine_threads;
       StackFrameSource source{[&](int i) { return work.decoded->Frame(i); }, [&](int i) { work.decoded->Release(i); },
                               [&](int i) { return work.decoded->Statistics(i); }};
       r = ReconstructStackFrames(m, source, unthresholded, on_frame, *context.cancel, a, &alignment);

@@ -44,6 +44,23 @@ struct ResultQuery {
   int limit = 50;
 };
 
+// A reconstruct job waiting in, or taken from, the pool's work queue (the JobManager's pool mode,
+// server/jobs/job_manager.h): what any replica needs to run the job from its stored input.
+struct QueuedWork {
+  std::string job_id;
+  std::string input;      // the serialised v1::ReconstructStart the job was accepted with
+  std::string stack_dir;  // the stored input: the stack's folder, relative to the data directory
+  int attempts = 0;       // replicas that took it, this one included (> 1: a rerun)
+  bool cancel_requested = false;
+};
+
+// What a worker's lease renewal found: the jobs it still holds, and those of them a CancelJob
+// on any replica asked to stop.
+struct LeaseRenewal {
+  std::vector<std::string> held;
+  std::vector<std::string> cancel_requested;
+};
+
 // Where the metadata lives. Validated by DataStore::Open (INVALID_ARGUMENT naming `database`).
 struct DatabaseOptions {
   // "" or "sqlite": <data dir>/inspection.db. "postgresql://user@host:port/db?..." (or
@@ -144,6 +161,40 @@ class DataStore {
   virtual StatusOr<std::vector<v1::InspectionResult>> ResultsAfter(int64_t after_sequence, int limit) = 0;
   // The highest sequence number stored (0 = none).
   virtual StatusOr<int64_t> LastResultSequence() = 0;
+
+  // The work queue of a reconstruct pool (schema version 3). A job is queued with its input, taken
+  // by one worker at a time under a lease (`lease_ms`, on the database's clock for PostgreSQL) that
+  // the worker renews; a lease that runs out (the worker died) lets another worker take the job
+  // again. The job's record and its queue row change together, in one transaction.
+  // Stores the QUEUED job, its first event and its queue row.
+  virtual Status EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) = 0;
+  // Takes the oldest job nobody holds (never taken, handed back, or its lease ran out), those in
+  // `preferred` first (their frames are decoded in this process already), under a lease for
+  // `worker`. A rerun (attempts > 1) loses the artifact rows an earlier attempt left. nullopt: none.
+  // PostgreSQL: FOR UPDATE SKIP LOCKED, so workers taking at once never block on or take the same row.
+  virtual StatusOr<std::optional<QueuedWork>> ClaimWork(const std::string& worker, int64_t lease_ms,
+                                                        const std::vector<std::string>& preferred) = 0;
+  // Extends every lease `worker` holds.
+  virtual StatusOr<LeaseRenewal> RenewLeases(const std::string& worker, int64_t lease_ms) = 0;
+  // Ends a job `worker` holds: the ended job and its terminal event are stored and its queue row
+  // is marked ended (its input folder to remove: EndedWork). false (nothing written) when the
+  // worker no longer holds it: another took it over, or it ended already.
+  virtual StatusOr<bool> CompleteWork(const std::string& worker, const v1::Job& ended,
+                                      const v1::JobEvent& terminal_event) = 0;
+  // Hands a job back (a draining replica): the lease is cleared and the job stored as `queued`
+  // (state QUEUED) with `event`. false when the worker no longer held it.
+  virtual StatusOr<bool> ReleaseWork(const std::string& worker, const v1::Job& queued, const v1::JobEvent& event) = 0;
+  // Cancels a job nobody holds: its queue row is marked ended, `cancelled` and `event` are stored; true. A job
+  // a worker holds is flagged instead (the worker sees it at its next renewal) and false returned.
+  virtual StatusOr<bool> CancelQueuedWork(const v1::Job& cancelled, const v1::JobEvent& event) = 0;
+  // Jobs waiting for a worker (queued, handed back, or held under a lease that ran out).
+  virtual StatusOr<int64_t> QueueDepth() = 0;
+  // Every job in the queue that has not ended, held or not.
+  virtual StatusOr<std::vector<std::string>> QueuedWorkIds() = 0;
+  // Ended jobs whose input folder (stack_dir) may still be on the disk: whoever removes it then
+  // forgets the row. A replica that dies between the two leaves the row for the next sweep.
+  virtual StatusOr<std::vector<QueuedWork>> EndedWork() = 0;
+  virtual Status ForgetWork(const std::string& job_id) = 0;
 
   virtual Status SetSetting(const std::string& key, const std::string& value) = 0;
   virtual std::string GetSetting(const std::string& key) = 0;

@@ -23,7 +23,7 @@ struct StoredStack {
   // of the pre-archive layout (scans/<scan_id>/, frames included, read in place).
   std::filesystem::path dir;
   // Set when `dir` is a private folder: removed when the last holder lets go.
-  std::shared_ptr<const OwnedFolder> extraction;
+  std::shared_ptr<OwnedFolder> extraction;
   StackManifest manifest;  // checked: every frame is in the archive (or the folder)
   // Frame i decoded from its archive entry, read again at each call (a frame the decoder dropped
   // is read again from the archive, never from a file); holds the archive open. Empty when the

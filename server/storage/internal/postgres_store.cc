@@ -102,7 +102,34 @@ const char* const kPostgresMigrations[] = {
     ALTER TABLE results ADD COLUMN rig_sequence BIGINT NOT NULL DEFAULT 0;
     CREATE UNIQUE INDEX results_by_rig ON results(rig_id, rig_sequence) WHERE rig_id <> '';
     )sql",
+    // The pool's work queue: one row per reconstruct job not yet ended. lease_owner '' = nobody
+    // holds it; a lease past lease_expires_ns (database clock) is free to take again.
+    R"sql(
+    CREATE TABLE work_queue (
+      job_id TEXT PRIMARY KEY, enqueue_ns BIGINT NOT NULL, input BYTEA NOT NULL, stack_dir TEXT NOT NULL,
+      lease_owner TEXT NOT NULL DEFAULT '', lease_expires_ns BIGINT NOT NULL DEFAULT 0,
+      attempts INTEGER NOT NULL DEFAULT 0, cancel_requested INTEGER NOT NULL DEFAULT 0,
+      ended INTEGER NOT NULL DEFAULT 0);
+    CREATE INDEX work_queue_by_age ON work_queue(enqueue_ns);
+    )sql",
 };
+
+// The database server's clock in nanoseconds: every replica's leases are judged by one clock.
+#define INSPECT_PG_NOW_NS "(extract(epoch from clock_timestamp()) * 1000000000)::bigint"
+
+// A text[] literal of job ids for "= ANY($n::text[])".
+std::string TextArray(const std::vector<std::string>& ids) {
+  std::string out = "{";
+  for (size_t i = 0; i < ids.size(); ++i) {
+    out += (i ? ",\"" : "\"");
+    for (char c : ids[i]) {
+      if (c == '"' || c == '\\') out += '\\';
+      out += c;
+    }
+    out += '"';
+  }
+  return out + "}";
+}
 static_assert(std::size(kPostgresMigrations) == kStoreSchemaVersion, "one migration per schema version");
 
 // libpq's messages end in a newline and continue on tab-indented lines: one line for logs.
@@ -163,8 +190,21 @@ class PostgresDataStore final : public DataStore {
   StatusOr<int64_t> LastResultSequence() override;
   Status SetSetting(const std::string& key, const std::string& value) override;
   std::string GetSetting(const std::string& key) override;
+  Status EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) override;
+  StatusOr<std::optional<QueuedWork>> ClaimWork(const std::string& worker, int64_t lease_ms,
+                                                const std::vector<std::string>& preferred) override;
+  StatusOr<LeaseRenewal> RenewLeases(const std::string& worker, int64_t lease_ms) override;
+  StatusOr<bool> CompleteWork(const std::string& worker, const v1::Job& ended, const v1::JobEvent& terminal_event) override;
+  StatusOr<bool> ReleaseWork(const std::string& worker, const v1::Job& queued, const v1::JobEvent& event) override;
+  StatusOr<bool> CancelQueuedWork(const v1::Job& cancelled, const v1::JobEvent& event) override;
+  StatusOr<int64_t> QueueDepth() override;
+  StatusOr<std::vector<std::string>> QueuedWorkIds() override;
+  StatusOr<std::vector<QueuedWork>> EndedWork() override;
+  Status ForgetWork(const std::string& job_id) override;
 
  private:
+  // The job row and one event, inside the caller's transaction (caller holds mu_).
+  Status WriteJobAndEvent(const v1::Job& job, const v1::JobEvent& event, const char* what);
   // Runs one statement; `error` is set (and the result empty) on failure. A connection found
   // broken outside a transaction is reset once and the statement retried: the server may have
   // restarted. Still broken: UNAVAILABLE.
@@ -654,6 +694,179 @@ std::string PostgresDataStore::GetSetting(const std::string& key) {
   Status s;
   Result r = Run("SELECT value FROM settings WHERE key = $1", {T(key)}, &s, "GetSetting");
   return s.ok() && r.rows() > 0 ? r.Bytes(0, 0) : std::string();
+}
+
+Status PostgresDataStore::WriteJobAndEvent(const v1::Job& job, const v1::JobEvent& event, const char* what) {
+  Status s;
+  Run("INSERT INTO jobs(job_id, kind, state, request_id, create_ns, calibration_id, job) "
+      "VALUES($1,$2,$3,$4,$5,'',$6) ON CONFLICT (job_id) DO UPDATE SET kind = EXCLUDED.kind, "
+      "state = EXCLUDED.state, request_id = EXCLUDED.request_id, create_ns = EXCLUDED.create_ns, job = EXCLUDED.job",
+      {T(job.job_id()), I(job.kind()), I(job.state()), T(job.request_id()), I(CreateNs(job)),
+       B(job.SerializeAsString())},
+      &s, what);
+  INSPECT_RETURN_IF_ERROR(s);
+  Run("INSERT INTO events(job_id, sequence, event) VALUES($1,$2,$3) "
+      "ON CONFLICT (job_id, sequence) DO UPDATE SET event = EXCLUDED.event",
+      {T(event.job_id()), I(int64_t(event.sequence())), B(event.SerializeAsString())}, &s, what);
+  return s;
+}
+
+Status PostgresDataStore::EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) {
+  std::lock_guard<std::mutex> lock(mu_);
+  return InTransaction("EnqueueWork", [&]() -> Status {
+    INSPECT_RETURN_IF_ERROR(WriteJobAndEvent(job, queued_event, "EnqueueWork"));
+    Status s;
+    Run("INSERT INTO work_queue(job_id, enqueue_ns, input, stack_dir) VALUES($1," INSPECT_PG_NOW_NS ",$2,$3)",
+        {T(job.job_id()), B(work.input), T(work.stack_dir)}, &s, "EnqueueWork");
+    return s;
+  });
+}
+
+StatusOr<std::optional<QueuedWork>> PostgresDataStore::ClaimWork(const std::string& worker, int64_t lease_ms,
+                                                                 const std::vector<std::string>& preferred) {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::optional<QueuedWork> claimed;
+  Status status = InTransaction("ClaimWork", [&]() -> Status {
+    Status s;
+    // SKIP LOCKED: a row another worker is taking right now is passed over, not waited for.
+    Result r = Run("UPDATE work_queue SET lease_owner = $1, lease_expires_ns = " INSPECT_PG_NOW_NS " + $2::bigint, "
+                   "attempts = attempts + 1 WHERE job_id = (SELECT job_id FROM work_queue "
+                   "WHERE ended = 0 AND (lease_owner = '' OR lease_expires_ns < " INSPECT_PG_NOW_NS ") "
+                   "ORDER BY (job_id = ANY($3::text[])) DESC, enqueue_ns, job_id LIMIT 1 FOR UPDATE SKIP LOCKED) "
+                   "RETURNING job_id, input, stack_dir, attempts, cancel_requested",
+                   {T(worker), I(lease_ms * 1000000), T(TextArray(preferred))}, &s, "ClaimWork");
+    INSPECT_RETURN_IF_ERROR(s);
+    if (r.rows() == 0) return Status::Ok();
+    QueuedWork w;
+    w.job_id = r.Bytes(0, 0);
+    w.input = r.Bytes(0, 1);
+    w.stack_dir = r.Bytes(0, 2);
+    w.attempts = int(r.Int(0, 3));
+    w.cancel_requested = r.Int(0, 4) != 0;
+    if (w.attempts > 1) {
+      // An earlier attempt may have recorded artifacts before its worker died: the rerun's are
+      // the job's only ones.
+      Run("DELETE FROM artifacts WHERE job_id = $1", {T(w.job_id)}, &s, "ClaimWork");
+      INSPECT_RETURN_IF_ERROR(s);
+    }
+    claimed = std::move(w);
+    return Status::Ok();
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return claimed;
+}
+
+StatusOr<LeaseRenewal> PostgresDataStore::RenewLeases(const std::string& worker, int64_t lease_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("UPDATE work_queue SET lease_expires_ns = " INSPECT_PG_NOW_NS " + $2::bigint WHERE lease_owner = $1 "
+                 "AND ended = 0 RETURNING job_id, cancel_requested",
+                 {T(worker), I(lease_ms * 1000000)}, &s, "RenewLeases");
+  INSPECT_RETURN_IF_ERROR(s);
+  LeaseRenewal out;
+  for (int i = 0; i < r.rows(); ++i) {
+    out.held.push_back(r.Bytes(i, 0));
+    if (r.Int(i, 1) != 0) out.cancel_requested.push_back(r.Bytes(i, 0));
+  }
+  return out;
+}
+
+StatusOr<bool> PostgresDataStore::CompleteWork(const std::string& worker, const v1::Job& ended,
+                                               const v1::JobEvent& terminal_event) {
+  std::lock_guard<std::mutex> lock(mu_);
+  bool held = false;
+  Status status = InTransaction("CompleteWork", [&]() -> Status {
+    Status s;
+    // The row stays, marked ended, until the input folder is gone (EndedWork / ForgetWork): a
+    // replica dying in between leaves the folder to the others' sweep, not on the disk for ever.
+    Result r = Run("UPDATE work_queue SET ended = 1, lease_owner = '' WHERE job_id = $1 AND lease_owner = $2 "
+                   "AND ended = 0 RETURNING job_id",
+                   {T(ended.job_id()), T(worker)}, &s, "CompleteWork");
+    INSPECT_RETURN_IF_ERROR(s);
+    held = r.rows() > 0;
+    if (!held) return Status::Ok();  // another worker runs it now: its outcome is the job's
+    return WriteJobAndEvent(ended, terminal_event, "CompleteWork");
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return held;
+}
+
+StatusOr<bool> PostgresDataStore::ReleaseWork(const std::string& worker, const v1::Job& queued,
+                                              const v1::JobEvent& event) {
+  std::lock_guard<std::mutex> lock(mu_);
+  bool held = false;
+  Status status = InTransaction("ReleaseWork", [&]() -> Status {
+    Status s;
+    Result r = Run("UPDATE work_queue SET lease_owner = '', lease_expires_ns = 0 WHERE job_id = $1 AND lease_owner = $2 "
+                   "AND ended = 0 RETURNING job_id",
+                   {T(queued.job_id()), T(worker)}, &s, "ReleaseWork");
+    INSPECT_RETURN_IF_ERROR(s);
+    held = r.rows() > 0;
+    if (!held) return Status::Ok();
+    return WriteJobAndEvent(queued, event, "ReleaseWork");
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return held;
+}
+
+StatusOr<bool> PostgresDataStore::CancelQueuedWork(const v1::Job& cancelled, const v1::JobEvent& event) {
+  std::lock_guard<std::mutex> lock(mu_);
+  bool removed = false;
+  Status status = InTransaction("CancelQueuedWork", [&]() -> Status {
+    Status s;
+    Result r = Run("UPDATE work_queue SET ended = 1, lease_owner = '' WHERE job_id = $1 AND ended = 0 AND "
+                   "(lease_owner = '' OR lease_expires_ns < " INSPECT_PG_NOW_NS ") RETURNING job_id",
+                   {T(cancelled.job_id())}, &s, "CancelQueuedWork");
+    INSPECT_RETURN_IF_ERROR(s);
+    removed = r.rows() > 0;
+    if (removed) return WriteJobAndEvent(cancelled, event, "CancelQueuedWork");
+    Run("UPDATE work_queue SET cancel_requested = 1 WHERE job_id = $1 AND ended = 0", {T(cancelled.job_id())}, &s, "CancelQueuedWork");
+    return s;
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return removed;
+}
+
+StatusOr<int64_t> PostgresDataStore::QueueDepth() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT count(*)::bigint FROM work_queue WHERE ended = 0 AND (lease_owner = '' OR lease_expires_ns < "
+                 INSPECT_PG_NOW_NS ")",
+                 {}, &s, "QueueDepth");
+  INSPECT_RETURN_IF_ERROR(s);
+  return r.Int(0, 0);
+}
+
+StatusOr<std::vector<std::string>> PostgresDataStore::QueuedWorkIds() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT job_id FROM work_queue WHERE ended = 0", {}, &s, "QueuedWorkIds");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<std::string> ids;
+  for (int i = 0; i < r.rows(); ++i) ids.push_back(r.Bytes(i, 0));
+  return ids;
+}
+
+StatusOr<std::vector<QueuedWork>> PostgresDataStore::EndedWork() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT job_id, stack_dir FROM work_queue WHERE ended = 1", {}, &s, "EndedWork");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<QueuedWork> out;
+  for (int i = 0; i < r.rows(); ++i) {
+    QueuedWork w;
+    w.job_id = r.Bytes(i, 0);
+    w.stack_dir = r.Bytes(i, 1);
+    out.push_back(std::move(w));
+  }
+  return out;
+}
+
+Status PostgresDataStore::ForgetWork(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Run("DELETE FROM work_queue WHERE job_id = $1 AND ended = 1", {T(job_id)}, &s, "ForgetWork");
+  return s;
 }
 
 }  // namespace

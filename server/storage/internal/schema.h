@@ -13,7 +13,8 @@ namespace inspection {
 
 // Version 1: jobs, events, artifacts, calibrations, settings, pins, recipes, results.
 // Version 2: results forwarded by rigs to a site store (results.rig_id, results.rig_sequence).
-inline constexpr int64_t kStoreSchemaVersion = 2;
+// Version 3: the reconstruct pool's work queue (work_queue: stored input, lease, heartbeat).
+inline constexpr int64_t kStoreSchemaVersion = 3;
 
 inline Status CheckSchemaVersion(int64_t stored, const std::string& where) {
   if (stored > kStoreSchemaVersion) {

@@ -8,6 +8,7 @@
 #include "server/storage/internal/schema.h"
 
 #include <algorithm>
+#include <chrono>
 #include <random>
 
 namespace inspection {
@@ -95,8 +96,24 @@ class SqliteDataStore final : public DataStore {
   StatusOr<int64_t> LastResultSequence() override;
   Status SetSetting(const std::string& key, const std::string& value) override;
   std::string GetSetting(const std::string& key) override;
+  Status EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) override;
+  StatusOr<std::optional<QueuedWork>> ClaimWork(const std::string& worker, int64_t lease_ms,
+                                                const std::vector<std::string>& preferred) override;
+  StatusOr<LeaseRenewal> RenewLeases(const std::string& worker, int64_t lease_ms) override;
+  StatusOr<bool> CompleteWork(const std::string& worker, const v1::Job& ended, const v1::JobEvent& terminal_event) override;
+  StatusOr<bool> ReleaseWork(const std::string& worker, const v1::Job& queued, const v1::JobEvent& event) override;
+  StatusOr<bool> CancelQueuedWork(const v1::Job& cancelled, const v1::JobEvent& event) override;
+  StatusOr<int64_t> QueueDepth() override;
+  StatusOr<std::vector<std::string>> QueuedWorkIds() override;
+  StatusOr<std::vector<QueuedWork>> EndedWork() override;
+  Status ForgetWork(const std::string& job_id) override;
 
  private:
+  // `body` between BEGIN IMMEDIATE and COMMIT (ROLLBACK when it fails). Caller holds mu_.
+  template <typename F>
+  Status InTransaction(F&& body);
+  // The job row and one event (caller holds mu_, inside a transaction).
+  Status WriteJobAndEvent(const v1::Job& job, const v1::JobEvent& event);
   Status Exec(const char* sql);
   Status Migrate();
 
@@ -137,6 +154,16 @@ const char* const kSqliteMigrations[] = {
     ALTER TABLE results ADD COLUMN rig_id TEXT NOT NULL DEFAULT '';
     ALTER TABLE results ADD COLUMN rig_sequence INTEGER NOT NULL DEFAULT 0;
     CREATE UNIQUE INDEX results_by_rig ON results(rig_id, rig_sequence) WHERE rig_id <> '';
+  )sql",
+    // The work queue (data_store.h): kept in step with PostgreSQL's so one interface serves both;
+    // one process uses a SQLite file, so its leases are judged by this process's clock.
+    R"sql(
+    CREATE TABLE work_queue (
+      job_id TEXT PRIMARY KEY, enqueue_ns INTEGER NOT NULL, input BLOB NOT NULL, stack_dir TEXT NOT NULL,
+      lease_owner TEXT NOT NULL DEFAULT '', lease_expires_ns INTEGER NOT NULL DEFAULT 0,
+      attempts INTEGER NOT NULL DEFAULT 0, cancel_requested INTEGER NOT NULL DEFAULT 0,
+      ended INTEGER NOT NULL DEFAULT 0);
+    CREATE INDEX work_queue_by_age ON work_queue(enqueue_ns);
   )sql",
 };
 static_assert(std::size(kSqliteMigrations) == kStoreSchemaVersion, "one migration per schema version");
@@ -623,6 +650,207 @@ std::string SqliteDataStore::GetSetting(const std::string& key) {
   Stmt st(db_, "SELECT value FROM settings WHERE key = ?");
   st.Text(1, key);
   return st.Step() == SQLITE_ROW ? st.ColumnText(0) : std::string();
+}
+
+namespace {
+int64_t NowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+}  // namespace
+
+template <typename F>
+Status SqliteDataStore::InTransaction(F&& body) {
+  INSPECT_RETURN_IF_ERROR(Exec("BEGIN IMMEDIATE"));
+  Status s = body();
+  if (!s.ok()) {
+    Exec("ROLLBACK").IgnoreError();
+    return s;
+  }
+  return Exec("COMMIT");
+}
+
+Status SqliteDataStore::WriteJobAndEvent(const v1::Job& job, const v1::JobEvent& event) {
+  {
+    Stmt st(db_,
+            "INSERT OR REPLACE INTO jobs(job_id, kind, state, request_id, create_ns, calibration_id, job) "
+            "VALUES(?,?,?,?,?,'',?)");
+    st.Text(1, job.job_id()).Int(2, job.kind()).Int(3, job.state()).Text(4, job.request_id()).Int(5, CreateNs(job));
+    st.Blob(6, job.SerializeAsString());
+    if (st.Step() != SQLITE_DONE) return DbError(db_, "job record");
+  }
+  Stmt st(db_, "INSERT OR REPLACE INTO events(job_id, sequence, event) VALUES(?,?,?)");
+  st.Text(1, event.job_id()).Int(2, int64_t(event.sequence())).Blob(3, event.SerializeAsString());
+  if (st.Step() != SQLITE_DONE) return DbError(db_, "job event");
+  return Status::Ok();
+}
+
+Status SqliteDataStore::EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) {
+  std::lock_guard<std::mutex> lock(mu_);
+  return InTransaction([&]() -> Status {
+    INSPECT_RETURN_IF_ERROR(WriteJobAndEvent(job, queued_event));
+    Stmt st(db_, "INSERT INTO work_queue(job_id, enqueue_ns, input, stack_dir) VALUES(?,?,?,?)");
+    st.Text(1, job.job_id()).Int(2, NowNs()).Blob(3, work.input).Text(4, work.stack_dir);
+    if (st.Step() != SQLITE_DONE) return DbError(db_, "EnqueueWork");
+    return Status::Ok();
+  });
+}
+
+StatusOr<std::optional<QueuedWork>> SqliteDataStore::ClaimWork(const std::string& worker, int64_t lease_ms,
+                                                               const std::vector<std::string>& preferred) {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::optional<QueuedWork> claimed;
+  Status status = InTransaction([&]() -> Status {
+    const int64_t now = NowNs();
+    std::vector<QueuedWork> free;
+    {
+      Stmt st(db_,
+              "SELECT job_id, input, stack_dir, attempts, cancel_requested FROM work_queue "
+              "WHERE ended = 0 AND (lease_owner = '' OR lease_expires_ns < ?) ORDER BY enqueue_ns, job_id");
+      st.Int(1, now);
+      for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
+        QueuedWork w;
+        w.job_id = st.ColumnText(0);
+        w.input = st.ColumnBlob(1);
+        w.stack_dir = st.ColumnText(2);
+        w.attempts = int(sqlite3_column_int64(st.stmt(), 3));
+        w.cancel_requested = sqlite3_column_int64(st.stmt(), 4) != 0;
+        free.push_back(std::move(w));
+      }
+    }
+    if (free.empty()) return Status::Ok();
+    auto pick = std::find_if(free.begin(), free.end(), [&](const QueuedWork& w) {
+      return std::find(preferred.begin(), preferred.end(), w.job_id) != preferred.end();
+    });
+    QueuedWork w = std::move(pick != free.end() ? *pick : free.front());
+    w.attempts += 1;
+    {
+      Stmt st(db_, "UPDATE work_queue SET lease_owner = ?, lease_expires_ns = ?, attempts = ? WHERE job_id = ?");
+      st.Text(1, worker).Int(2, now + lease_ms * 1000000).Int(3, w.attempts).Text(4, w.job_id);
+      if (st.Step() != SQLITE_DONE) return DbError(db_, "ClaimWork");
+    }
+    if (w.attempts > 1) {
+      Stmt st(db_, "DELETE FROM artifacts WHERE job_id = ?");
+      st.Text(1, w.job_id);
+      if (st.Step() != SQLITE_DONE) return DbError(db_, "ClaimWork");
+    }
+    claimed = std::move(w);
+    return Status::Ok();
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return claimed;
+}
+
+StatusOr<LeaseRenewal> SqliteDataStore::RenewLeases(const std::string& worker, int64_t lease_ms) {
+  std::lock_guard<std::mutex> lock(mu_);
+  LeaseRenewal out;
+  Status status = InTransaction([&]() -> Status {
+    {
+      Stmt st(db_, "UPDATE work_queue SET lease_expires_ns = ? WHERE lease_owner = ? AND ended = 0");
+      st.Int(1, NowNs() + lease_ms * 1000000).Text(2, worker);
+      if (st.Step() != SQLITE_DONE) return DbError(db_, "RenewLeases");
+    }
+    Stmt st(db_, "SELECT job_id, cancel_requested FROM work_queue WHERE lease_owner = ? AND ended = 0");
+    st.Text(1, worker);
+    for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
+      out.held.push_back(st.ColumnText(0));
+      if (sqlite3_column_int64(st.stmt(), 1) != 0) out.cancel_requested.push_back(st.ColumnText(0));
+    }
+    return Status::Ok();
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return out;
+}
+
+StatusOr<bool> SqliteDataStore::CompleteWork(const std::string& worker, const v1::Job& ended,
+                                             const v1::JobEvent& terminal_event) {
+  std::lock_guard<std::mutex> lock(mu_);
+  bool held = false;
+  Status status = InTransaction([&]() -> Status {
+    // Marked ended until the input folder is gone (EndedWork / ForgetWork).
+    Stmt st(db_, "UPDATE work_queue SET ended = 1, lease_owner = '' WHERE job_id = ? AND lease_owner = ? AND ended = 0");
+    st.Text(1, ended.job_id()).Text(2, worker);
+    if (st.Step() != SQLITE_DONE) return DbError(db_, "CompleteWork");
+    held = sqlite3_changes(db_) > 0;
+    return held ? WriteJobAndEvent(ended, terminal_event) : Status::Ok();
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return held;
+}
+
+StatusOr<bool> SqliteDataStore::ReleaseWork(const std::string& worker, const v1::Job& queued,
+                                            const v1::JobEvent& event) {
+  std::lock_guard<std::mutex> lock(mu_);
+  bool held = false;
+  Status status = InTransaction([&]() -> Status {
+    Stmt st(db_,
+            "UPDATE work_queue SET lease_owner = '', lease_expires_ns = 0 WHERE job_id = ? AND lease_owner = ? AND ended = 0");
+    st.Text(1, queued.job_id()).Text(2, worker);
+    if (st.Step() != SQLITE_DONE) return DbError(db_, "ReleaseWork");
+    held = sqlite3_changes(db_) > 0;
+    return held ? WriteJobAndEvent(queued, event) : Status::Ok();
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return held;
+}
+
+StatusOr<bool> SqliteDataStore::CancelQueuedWork(const v1::Job& cancelled, const v1::JobEvent& event) {
+  std::lock_guard<std::mutex> lock(mu_);
+  bool removed = false;
+  Status status = InTransaction([&]() -> Status {
+    {
+      Stmt st(db_,
+              "UPDATE work_queue SET ended = 1, lease_owner = '' WHERE job_id = ? AND ended = 0 AND "
+              "(lease_owner = '' OR lease_expires_ns < ?)");
+      st.Text(1, cancelled.job_id()).Int(2, NowNs());
+      if (st.Step() != SQLITE_DONE) return DbError(db_, "CancelQueuedWork");
+      removed = sqlite3_changes(db_) > 0;
+    }
+    if (removed) return WriteJobAndEvent(cancelled, event);
+    Stmt st(db_, "UPDATE work_queue SET cancel_requested = 1 WHERE job_id = ? AND ended = 0");
+    st.Text(1, cancelled.job_id());
+    if (st.Step() != SQLITE_DONE) return DbError(db_, "CancelQueuedWork");
+    return Status::Ok();
+  });
+  INSPECT_RETURN_IF_ERROR(status);
+  return removed;
+}
+
+StatusOr<int64_t> SqliteDataStore::QueueDepth() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT count(*) FROM work_queue WHERE ended = 0 AND (lease_owner = '' OR lease_expires_ns < ?)");
+  st.Int(1, NowNs());
+  if (st.Step() != SQLITE_ROW) return DbError(db_, "QueueDepth");
+  return int64_t(sqlite3_column_int64(st.stmt(), 0));
+}
+
+StatusOr<std::vector<std::string>> SqliteDataStore::QueuedWorkIds() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT job_id FROM work_queue WHERE ended = 0");
+  std::vector<std::string> ids;
+  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) ids.push_back(st.ColumnText(0));
+  return ids;
+}
+
+StatusOr<std::vector<QueuedWork>> SqliteDataStore::EndedWork() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT job_id, stack_dir FROM work_queue WHERE ended = 1");
+  std::vector<QueuedWork> out;
+  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
+    QueuedWork w;
+    w.job_id = st.ColumnText(0);
+    w.stack_dir = st.ColumnText(1);
+    out.push_back(std::move(w));
+  }
+  return out;
+}
+
+Status SqliteDataStore::ForgetWork(const std::string& job_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "DELETE FROM work_queue WHERE job_id = ? AND ended = 1");
+  st.Text(1, job_id);
+  if (st.Step() != SQLITE_DONE) return DbError(db_, "ForgetWork");
+  return Status::Ok();
 }
 
 }  // namespace inspection

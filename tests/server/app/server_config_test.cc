@@ -55,7 +55,7 @@ TEST(ServerConfig, NamesDerivedFromTheKey) {
   EXPECT_EQ(key->FlagName(), "--auth-token-file");
   EXPECT_EQ(key->EnvironmentName(), "INSPECTD_AUTH_TOKEN_FILE");
   EXPECT_EQ(FindConfigKey("auth-token-file"), nullptr);  // file keys use '_' only
-  EXPECT_EQ(InspectdConfigKeys().size(), 46u);           // every inspectd flag before --config
+  EXPECT_EQ(InspectdConfigKeys().size(), 51u);           // every inspectd flag before --config
 }
 
 TEST(ServerConfig, DatabaseSettingsAreCheckedRedactedAndReachServerOptions) {

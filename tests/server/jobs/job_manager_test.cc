@@ -320,7 +320,7 @@ TEST_F(JobManagerTest, CancelledQueuedUploadIsRemovedWithItsWork) {
   runner_.WaitStarted(1);
   const fs::path upload_dir = dir_ / "uploads" / "upload-test";
   fs::create_directories(upload_dir);
-  auto upload = std::make_shared<const OwnedFolder>(upload_dir);
+  auto upload = std::make_shared<OwnedFolder>(upload_dir);
   auto queued = manager_->Submit(v1::JOB_KIND_RECONSTRUCT, "", "", [&upload]() -> StatusOr<JobWork> {
     ReconstructWork w;
     w.upload = std::move(upload);

@@ -68,7 +68,10 @@ done
 rig_count=$("$bin/inspectctl" --server "$rig" results list --limit 500 | grep -c "P-" || true)
 # Every result reaches the site (the forwarder retries with backoff up to 30 s).
 site_rows() { PGPASSWORD="$password" psql -h 127.0.0.1 -p "$port" -U postgres -d postgres -Atc "$1"; }
-wait_for "the site to hold all $rig_count results" 180 test "$(site_rows 'SELECT count(*) FROM results')" -eq "$rig_count"
+# A function, so the count is asked again at every poll (a "$(...)" argument would be read once,
+# when wait_for is called: a site still catching up then never looked complete).
+site_holds() { [[ "$(site_rows 'SELECT count(*) FROM results')" -eq "$1" ]]; }
+wait_for "the site to hold all $rig_count results" 180 site_holds "$rig_count"
 [[ "$(site_rows "SELECT count(DISTINCT rig_sequence) FROM results WHERE rig_id = 'line2-rig7'")" -eq "$rig_count" ]] ||
   fail "duplicate or missing rig sequence numbers on the site"
 [[ "$(site_rows "SELECT min(rig_sequence) || ' ' || max(rig_sequence) FROM results")" == "1 $rig_count" ]] ||

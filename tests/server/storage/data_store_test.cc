@@ -7,7 +7,10 @@
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <atomic>
+#include <chrono>
+#include <optional>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -253,7 +256,125 @@ TEST_P(DataStoreTest, ASchemaNewerThanThisBinaryIsRefusedNamingBothVersions) {
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(s.status().message().find("schema version 7"), std::string::npos) << s.status().message();
-  EXPECT_NE(s.status().message().find("newer than this inspectd knows (2)"), std::string::npos) << s.status().message();
+  EXPECT_NE(s.status().message().find("newer than this inspectd knows (3)"), std::string::npos) << s.status().message();
+}
+
+// The pool's work queue (schema version 3): leases, takeover after expiry, completion only by
+// the holder, hand-back, cancel of a queued and of a held job.
+v1::JobEvent QueueEvent(const std::string& job_id, uint64_t sequence, v1::JobState state) {
+  v1::JobEvent e;
+  e.set_job_id(job_id);
+  e.set_sequence(sequence);
+  e.set_state(state);
+  return e;
+}
+
+QueuedWork Work(const std::string& job_id) {
+  QueuedWork w;
+  w.job_id = job_id;
+  w.input = std::string("start\0bytes", 11);
+  w.stack_dir = "uploads/" + job_id;
+  return w;
+}
+
+TEST_P(DataStoreTest, TheWorkQueueLeasesEachJobToOneWorkerAndOnlyTheHolderEndsIt) {
+  for (int i = 1; i <= 3; ++i) {
+    const std::string id = "rec-" + std::to_string(i);
+    ASSERT_TRUE(store_->EnqueueWork(Job(id, v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_QUEUED, i),
+                                    QueueEvent(id, 1, v1::JOB_STATE_QUEUED), Work(id))
+                    .ok());
+  }
+  EXPECT_EQ(*store_->QueueDepth(), 3);
+  EXPECT_EQ(store_->GetJob("rec-2")->state(), v1::JOB_STATE_QUEUED);  // job row and queue row together
+  ASSERT_EQ(store_->Events("rec-2")->size(), 1u);
+
+  // Oldest first, but a preferred job (decoded here already) before it.
+  auto a = store_->ClaimWork("worker-a", 60000, {"rec-3"});
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  ASSERT_TRUE(a->has_value());
+  EXPECT_EQ((*a)->job_id, "rec-3");
+  EXPECT_EQ((*a)->input, std::string("start\0bytes", 11));
+  EXPECT_EQ((*a)->stack_dir, "uploads/rec-3");
+  EXPECT_EQ((*a)->attempts, 1);
+  auto b = store_->ClaimWork("worker-b", 60000, {});
+  ASSERT_TRUE(b.ok() && b->has_value());
+  EXPECT_EQ((*b)->job_id, "rec-1");
+  EXPECT_EQ(*store_->QueueDepth(), 1);
+
+  // The holder renews; another worker cannot end a job it does not hold.
+  auto renewal = store_->RenewLeases("worker-a", 60000);
+  ASSERT_TRUE(renewal.ok());
+  EXPECT_EQ(renewal->held, std::vector<std::string>{"rec-3"});
+  v1::Job ended = Job("rec-3", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_SUCCEEDED, 3);
+  EXPECT_FALSE(*store_->CompleteWork("worker-b", ended, QueueEvent("rec-3", 2, v1::JOB_STATE_SUCCEEDED)));
+  EXPECT_EQ(store_->GetJob("rec-3")->state(), v1::JOB_STATE_QUEUED);
+  EXPECT_TRUE(*store_->CompleteWork("worker-a", ended, QueueEvent("rec-3", 2, v1::JOB_STATE_SUCCEEDED)));
+  EXPECT_EQ(store_->GetJob("rec-3")->state(), v1::JOB_STATE_SUCCEEDED);
+  EXPECT_EQ(store_->Events("rec-3")->size(), 2u);
+  EXPECT_FALSE(*store_->CompleteWork("worker-a", ended, QueueEvent("rec-3", 2, v1::JOB_STATE_SUCCEEDED)))
+      << "a job ends once";
+
+  // Hand-back: queued again, taken by the next worker as a second attempt.
+  v1::Job requeued = Job("rec-1", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_QUEUED, 1);
+  EXPECT_TRUE(*store_->ReleaseWork("worker-b", requeued, QueueEvent("rec-1", 2, v1::JOB_STATE_QUEUED)));
+  EXPECT_EQ(*store_->QueueDepth(), 2);
+  auto c = store_->ClaimWork("worker-c", 60000, {});
+  ASSERT_TRUE(c.ok() && c->has_value());
+  EXPECT_EQ((*c)->job_id, "rec-1");
+  EXPECT_EQ((*c)->attempts, 2);
+
+  // Cancel: a queued job ends at once; a held one is flagged for its holder.
+  v1::Job cancelled = Job("rec-2", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_CANCELLED, 2);
+  EXPECT_TRUE(*store_->CancelQueuedWork(cancelled, QueueEvent("rec-2", 2, v1::JOB_STATE_CANCELLED)));
+  EXPECT_EQ(store_->GetJob("rec-2")->state(), v1::JOB_STATE_CANCELLED);
+  v1::Job cancel_held = Job("rec-1", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_CANCELLED, 1);
+  EXPECT_FALSE(*store_->CancelQueuedWork(cancel_held, QueueEvent("rec-1", 3, v1::JOB_STATE_CANCELLED)));
+  EXPECT_EQ(store_->GetJob("rec-1")->state(), v1::JOB_STATE_QUEUED);
+  renewal = store_->RenewLeases("worker-c", 60000);
+  ASSERT_TRUE(renewal.ok());
+  EXPECT_EQ(renewal->cancel_requested, std::vector<std::string>{"rec-1"});
+  EXPECT_EQ(*store_->QueuedWorkIds(), std::vector<std::string>{"rec-1"});
+  EXPECT_EQ(*store_->QueueDepth(), 0);
+  // The ended jobs' inputs are listed for removal until forgotten.
+  auto ended_work = store_->EndedWork();
+  ASSERT_TRUE(ended_work.ok());
+  std::vector<std::string> ended_dirs;
+  for (const QueuedWork& w : *ended_work) ended_dirs.push_back(w.stack_dir);
+  std::sort(ended_dirs.begin(), ended_dirs.end());
+  EXPECT_EQ(ended_dirs, (std::vector<std::string>{"uploads/rec-2", "uploads/rec-3"}));
+  ASSERT_TRUE(store_->ForgetWork("rec-3").ok());
+  ASSERT_TRUE(store_->ForgetWork("rec-1").ok());  // not ended: kept
+  EXPECT_EQ(store_->EndedWork()->size(), 1u);
+  EXPECT_EQ(*store_->QueuedWorkIds(), std::vector<std::string>{"rec-1"});
+}
+
+TEST_P(DataStoreTest, AnExpiredLeaseIsTakenOverAndTheEarlierAttemptsArtifactRowsGo) {
+  ASSERT_TRUE(store_->EnqueueWork(Job("rec-1", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_QUEUED, 1),
+                                  QueueEvent("rec-1", 1, v1::JOB_STATE_QUEUED), Work("rec-1"))
+                  .ok());
+  auto dead = store_->ClaimWork("worker-dead", /*lease_ms=*/1, {});
+  ASSERT_TRUE(dead.ok() && dead->has_value());
+  StoredArtifact art;
+  art.job_id = "rec-1";
+  art.path = dir_ / "artifacts/rec-1/depth.tiff";
+  art.artifact.set_artifact_id("art-1");
+  ASSERT_TRUE(store_->PutArtifact(art).ok());
+  // Poll (with a deadline) until the 1 ms lease has run out on the store's clock.
+  std::optional<QueuedWork> taken;
+  for (auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+       !taken && std::chrono::steady_clock::now() < deadline;) {
+    auto c = store_->ClaimWork("worker-b", 60000, {});
+    ASSERT_TRUE(c.ok()) << c.status().ToString();
+    taken = *c;
+  }
+  ASSERT_TRUE(taken.has_value()) << "the expired lease was never taken over";
+  EXPECT_EQ(taken->attempts, 2);
+  EXPECT_EQ(store_->GetArtifact("art-1").status().code(), StatusCode::kNotFound);
+  // The dead worker's late end is refused; the new holder's is recorded.
+  v1::Job ended = Job("rec-1", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_SUCCEEDED, 1);
+  EXPECT_FALSE(*store_->CompleteWork("worker-dead", ended, QueueEvent("rec-1", 2, v1::JOB_STATE_SUCCEEDED)));
+  EXPECT_TRUE(*store_->CompleteWork("worker-b", ended, QueueEvent("rec-1", 2, v1::JOB_STATE_SUCCEEDED)));
+  EXPECT_TRUE(store_->QueuedWorkIds()->empty());
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, DataStoreTest, ::testing::Values("sqlite", "postgresql"),
