@@ -75,7 +75,7 @@ void RegisterReconstructCommand(CLI::App& app, CliContext& context) {
   source->add_option("--stack", f->stack_dir, "Stack folder to upload (stack.json + frames)")
       ->check(CLI::ExistingDirectory);
   auto* images = source->add_option("--images", f->images.images,
-                                    "Folder of .png/.tif/.tiff/.jpg/.jpeg images, or a quoted glob ('dir/*.png'); "
+                                    "Folder of .png/.tif/.tiff/.jpg/.jpeg or camera RAW (.dng/.cr2/.nef/.arw/...) images, or a quoted glob ('dir/*.png'); "
                                     "natural file-name order is the z order");
   source->add_option("--scan-id", f->scan_id, "A stored scan (JobResult.scan_id)");
   source->require_option(1);

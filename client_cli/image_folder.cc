@@ -23,11 +23,35 @@ namespace fs = std::filesystem;
 
 grpc::Status Invalid(const std::string& message) { return {grpc::StatusCode::INVALID_ARGUMENT, message}; }
 
-bool IsImageFile(const fs::path& p) {
+std::string LowerExtension(const fs::path& p) {
   std::string ext = p.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  return ext == ".png" || ext == ".tif" || ext == ".tiff" || ext == ".jpg" || ext == ".jpeg";
+  return ext;
 }
+
+// The camera RAW formats the server decodes (LibRaw), as in docs/import-stacks.md.
+bool IsRawExtension(const std::string& ext) {
+  static const std::set<std::string> kRaw = {".dng", ".cr2", ".cr3", ".crw", ".nef", ".nrw", ".arw",
+                                             ".srw", ".raf", ".orf", ".rw2", ".pef", ".3fr", ".iiq"};
+  return kRaw.count(ext) > 0;
+}
+
+// The format a file's extension names ("" when unknown): a folder mixing formats is refused
+// here, naming the file, before anything is uploaded (the server checks stack.json the same way).
+std::string FormatOf(const fs::path& p) {
+  const std::string ext = LowerExtension(p);
+  if (ext == ".png") return "PNG";
+  if (ext == ".tif" || ext == ".tiff") return "TIFF";
+  if (ext == ".jpg" || ext == ".jpeg") return "JPEG";
+  if (IsRawExtension(ext)) {
+    std::string upper = ext.substr(1);
+    std::transform(upper.begin(), upper.end(), upper.begin(), [](unsigned char c) { return std::toupper(c); });
+    return "camera RAW (" + upper + ")";
+  }
+  return "";
+}
+
+bool IsImageFile(const fs::path& p) { return !FormatOf(p).empty(); }
 
 // The image files of a folder (regular files with an image extension), or what a glob matches.
 grpc::Status ListImages(const std::string& images, std::vector<fs::path>* out) {
@@ -38,7 +62,10 @@ grpc::Status ListImages(const std::string& images, std::vector<fs::path>* out) {
       if (entry.is_regular_file(ec) && IsImageFile(entry.path())) out->push_back(entry.path());
     }
     if (ec) return Invalid("--images: cannot list " + images + ": " + ec.message());
-    if (out->empty()) return Invalid("--images: no .png, .tif, .tiff, .jpg or .jpeg file in " + images);
+    if (out->empty()) {
+      return Invalid("--images: no .png, .tif, .tiff, .jpg, .jpeg or camera RAW (.dng, .cr2, .nef, .arw, ...) file in " +
+                     images);
+    }
     return grpc::Status::OK;
   }
   glob_t g{};
@@ -192,6 +219,21 @@ grpc::Status BuildImageStack(const ImageFolderOptions& options, std::vector<Imag
           << (*frames)[i - 1].z_um << " um, " << (*frames)[i].file << " " << (*frames)[i].z_um << " um";
       frames->clear();
       return Invalid(msg.str());
+    }
+  }
+  // One format per stack, checked last so that the flag errors above come first (mixed bit
+  // depths and sizes are the server's to find: it decodes).
+  const fs::path* first_known = nullptr;
+  for (const auto& p : images) {
+    const std::string format = FormatOf(p);
+    if (format.empty()) continue;
+    if (first_known == nullptr) {
+      first_known = &p;
+    } else if (format != FormatOf(*first_known)) {
+      frames->clear();
+      return Invalid("--images: " + p.filename().string() + " is " + format + " but " +
+                     first_known->filename().string() + " is " + FormatOf(*first_known) +
+                     "; the frames of a stack share one format");
     }
   }
   return grpc::Status::OK;

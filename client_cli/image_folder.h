@@ -1,8 +1,8 @@
 // A stack from a plain folder of images (`reconstruct --images`): lists the images, orders them
 // by natural sort of their names, gives each its z (regular step or a CSV) and writes the stack
 // folder the upload reads (docs/stack-format.md; thesis 3.2: one frame per z position).
-// Client side only: speaks the stack format, never reads pixels (channels and bit depth are the
-// server's to check).
+// Client side only: speaks the stack format, never reads pixels (channels, bit depth and size are
+// the server's to check; the format is told by the file extension).
 #pragma once
 
 #include <grpcpp/grpcpp.h>
@@ -37,7 +37,8 @@ bool NaturalLess(const std::string& a, const std::string& b);
 
 // The frames in stack order. Every error is INVALID_ARGUMENT whose message starts with the flag
 // it concerns (--images, --z-step, --z-csv, --pixel-size): no image matched, fewer than 3
-// images, an empty image file, two images with the same file name, a CSV line that does not
+// images, images of different formats (by extension: PNG, TIFF, JPEG, one camera RAW format),
+// an empty image file, two images with the same file name, a CSV line that does not
 // parse or names a file that is not among the images, an image without a CSV z, z not strictly
 // monotonic, --z-step <= 0, --pixel-size <= 0.
 grpc::Status BuildImageStack(const ImageFolderOptions& options, std::vector<ImageFrame>* frames);

@@ -54,7 +54,10 @@ FrameStatistics Compute(const cv::Mat& frame, int bit_depth) {
 }  // namespace
 
 FrameStatistics ComputeFrameStatistics(const cv::Mat& frame, int bit_depth) {
-  if (frame.depth() == CV_16U) return Compute<uint16_t>(frame, std::clamp(bit_depth, 8, 16));
+  // A 16-bit frame in a stack that states 8 significant bits (stack.json's default, e.g. an
+  // imported folder of 16-bit TIFFs) uses its full range: full scale 255 would count nearly every
+  // pixel as saturated.
+  if (frame.depth() == CV_16U) return Compute<uint16_t>(frame, bit_depth <= 8 ? 16 : std::min(bit_depth, 16));
   return Compute<uint8_t>(frame, 8);
 }
 

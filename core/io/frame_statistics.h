@@ -13,7 +13,8 @@ struct FrameStatistics {
   double underexposed_percent = 0.0;  // share of pixels below 2 % of full scale
 };
 
-// frame: CV_8UC1 or CV_16UC1; bit_depth: significant bits (8..16).
+// frame: CV_8UC1 or CV_16UC1; bit_depth: significant bits (8..16); a CV_16UC1 frame with
+// bit_depth 8 (not stated) is taken at 16.
 FrameStatistics ComputeFrameStatistics(const cv::Mat& frame, int bit_depth);
 
 }  // namespace inspection

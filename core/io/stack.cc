@@ -1,5 +1,7 @@
 #include "core/io/stack.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -7,6 +9,7 @@
 #include <sstream>
 
 #include "core/io/colour.h"
+#include "core/io/raw_frame_decode.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -29,6 +32,43 @@ Status CheckRelativeFile(const std::string& file, size_t index) {
 }
 
 }  // namespace
+
+std::string FrameFileFormat(std::string_view file) {
+  const size_t dot = file.rfind('.');
+  if (dot == std::string_view::npos || file.find('/', dot) != std::string_view::npos) return "";
+  std::string ext(file.substr(dot + 1));
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  if (ext == "png") return "PNG";
+  if (ext == "tif" || ext == "tiff") return "TIFF";
+  if (ext == "jpg" || ext == "jpeg") return "JPEG";
+  if (IsRawFrameFile(file)) {
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::toupper(c)); });
+    return "camera RAW (" + ext + ")";
+  }
+  return "";
+}
+
+Status CheckOneFrameFormat(const StackManifest& m) {
+  // Mixed formats in one stack (a JPEG among PNGs, a NEF among DNGs) are almost always a stray
+  // file in the folder; their grey values are not comparable (lossy coding, another camera's
+  // processing) even when the sizes agree. Files without a known extension are decoded by their
+  // content and not compared here.
+  std::string first;
+  size_t first_index = 0;
+  for (size_t i = 0; i < m.frames.size(); ++i) {
+    const std::string format = FrameFileFormat(m.frames[i].file);
+    if (format.empty()) continue;
+    if (first.empty()) {
+      first = format;
+      first_index = i;
+    } else if (format != first) {
+      return Invalid("frames[" + std::to_string(i) + "].file '" + m.frames[i].file + "' is " + format +
+                     " but frames[" + std::to_string(first_index) + "].file '" + m.frames[first_index].file +
+                     "' is " + first + "; the frames of a stack share one format");
+    }
+  }
+  return Status::Ok();
+}
 
 Status CheckMonotonicZ(const std::vector<double>& z_um) {
   if (z_um.size() < 2) return Status::Ok();
@@ -113,6 +153,7 @@ StatusOr<StackManifest> ParseStackManifest(const std::string& json_text) {
   }
   Status mono = CheckMonotonicZ(z);
   if (!mono.ok()) return Invalid(mono.message());
+  INSPECT_RETURN_IF_ERROR(CheckOneFrameFormat(m));
   return m;
 }
 
@@ -206,13 +247,35 @@ StatusOr<cv::Mat> CheckDecodedFrame(const std::string& name, cv::Mat img) {
   return img;
 }
 
-// Decodes a frame as stored: CV_8U or CV_16U, 1 or 3 channels.
+bool HasJpegSignature(std::string_view bytes) {
+  return bytes.size() >= 3 && static_cast<unsigned char>(bytes[0]) == 0xFF &&
+         static_cast<unsigned char>(bytes[1]) == 0xD8 && static_cast<unsigned char>(bytes[2]) == 0xFF;
+}
+
+// cv::IMREAD_UNCHANGED keeps depth and channels but ignores a JPEG's EXIF orientation; for JPEGs
+// (never 16-bit, never with alpha) any depth and any colour keep the same pixels and apply the
+// orientation, as a photo viewer shows the frame.
+int ReadFlags(std::string_view signature) {
+  return HasJpegSignature(signature) ? (cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR) : cv::IMREAD_UNCHANGED;
+}
+
+// Decodes a frame as stored: CV_8U or CV_16U, 1 or 3 channels; camera RAW through LibRaw.
 StatusOr<cv::Mat> DecodeFrame(const fs::path& dir, const StackManifest& m, size_t index) {
   if (index >= m.frames.size()) return Status::OutOfRange("frame index " + std::to_string(index));
   const std::string name = FrameName(m, index);
+  const fs::path path = dir / m.frames[index].file;
+  if (IsRawFrameFile(m.frames[index].file)) {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat raw, DecodeRawFrameFile(path.string(), name));
+    return CheckDecodedFrame(name, std::move(raw));
+  }
+  char signature[3] = {};
+  {
+    std::ifstream in(path, std::ios::binary);
+    in.read(signature, sizeof signature);
+  }
   cv::Mat img;
   try {
-    img = cv::imread((dir / m.frames[index].file).string(), cv::IMREAD_UNCHANGED);
+    img = cv::imread(path.string(), ReadFlags(std::string_view(signature, sizeof signature)));
   } catch (const cv::Exception& e) {
     return Status::InvalidArgument(name + ": cannot decode: " + e.what());
   }
@@ -247,11 +310,15 @@ StatusOr<cv::Mat> DecodeStackFrame(const fs::path& dir, const StackManifest& m, 
 StatusOr<cv::Mat> DecodeStackFrameBytes(std::string_view file, const StackManifest& m, size_t index) {
   if (index >= m.frames.size()) return Status::OutOfRange("frame index " + std::to_string(index));
   const std::string name = FrameName(m, index);
+  if (IsRawFrameFile(m.frames[index].file)) {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat raw, DecodeRawFrame(file, name));
+    return CheckDecodedFrame(name, std::move(raw));
+  }
   cv::Mat img;
   try {
     // imdecode reads the buffer only; the header is a view, no copy.
     const cv::Mat buffer(1, int(file.size()), CV_8UC1, const_cast<char*>(file.data()));
-    if (!file.empty()) img = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
+    if (!file.empty()) img = cv::imdecode(buffer, ReadFlags(file));
   } catch (const cv::Exception& e) {
     return Status::InvalidArgument(name + ": cannot decode: " + e.what());
   }

@@ -2,8 +2,9 @@
 // writes it), Reconstruct (reads it) and the CLI (uploads it). Format (docs/stack-format.md):
 //
 //   <dir>/stack.json          manifest, see StackManifest
-//   <dir>/<frame files>       8- or 16-bit PNG, TIFF or JPEG, one per z position: grey (1 channel)
-//                             or colour (3 channels); all frames alike
+//   <dir>/<frame files>       8- or 16-bit PNG, TIFF or JPEG, or camera RAW (core/io/raw_frame_decode.h),
+//                             one per z position: grey (1 channel) or colour (3 channels); all
+//                             frames alike (one format, size, channel count and bit depth)
 //   <dir>/ground_truth_depth.tiff   optional, float32 µm, written by the simulated rig
 //
 // stack.json:
@@ -74,6 +75,15 @@ struct StackManifest {
 inline constexpr const char* kStackManifestName = "stack.json";
 inline constexpr const char* kGroundTruthDepthName = "ground_truth_depth.tiff";
 
+// The format a frame file's extension names: "PNG", "TIFF", "JPEG" or "camera RAW (NEF)" etc.;
+// "" for an extension it does not know (such a file is decoded by its content).
+std::string FrameFileFormat(std::string_view file);
+
+// INVALID_ARGUMENT naming the first frame whose file format (FrameFileFormat) differs from the
+// first frame with a known one: "stack.json: frames[3].file 'b.jpg' is JPEG but frames[0].file
+// 'a.png' is PNG; ...". ParseStackManifest runs it.
+Status CheckOneFrameFormat(const StackManifest& manifest);
+
 // Parses <dir>/stack.json and checks what can be checked without decoding images: required
 // fields present and typed, >= 3 frames, z strictly monotonic, files exist and stay inside dir.
 // Errors are INVALID_ARGUMENT naming the field or frame, e.g. "stack.json: frames[4].z_um ...".
@@ -93,7 +103,9 @@ struct StackFrameImage {
   bool is_colour() const { return !colour.empty(); }
 };
 
-// Decodes one frame (8- or 16-bit, 1 or 3 channels). Errors name the frame.
+// Decodes one frame (8- or 16-bit, 1 or 3 channels). Errors name the frame. A JPEG's EXIF
+// orientation and a camera RAW's orientation flag are applied (the frame as a viewer shows it);
+// PNG and TIFF frames are taken as stored.
 StatusOr<StackFrameImage> LoadStackFrameImage(const std::filesystem::path& dir, const StackManifest& manifest,
                                               size_t index);
 

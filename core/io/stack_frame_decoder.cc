@@ -88,6 +88,29 @@ void StackFrameDecoder::QueueLocked(int index) {
   queue_.push_back(index);
 }
 
+int64_t StackFrameDecoder::BudgetLocked(int64_t frame_bytes) const {
+  if (frame_bytes <= 0 || frame_bytes * int64_t(slots_.size()) <= options_.max_kept_bytes) return options_.max_kept_bytes;
+  const int64_t lookahead = int64_t(kLookaheadFramesPerThread) * std::max<int64_t>(1, int64_t(threads_.size()));
+  return std::min(options_.max_kept_bytes, lookahead * frame_bytes);
+}
+
+void StackFrameDecoder::PrefetchLocked(int after) {
+  if (threads_.empty() || !slots_[0].shape) return;
+  const StackFrameShape& shape = *slots_[0].shape;
+  const int64_t bytes = int64_t(shape.size.area()) * shape.channels * (shape.depth == CV_16U ? 2 : 1);
+  const int64_t budget = BudgetLocked(bytes);
+  const int lookahead = kLookaheadFramesPerThread * int(threads_.size());
+  for (int j = after + 1; j < int(slots_.size()) && j <= after + lookahead; ++j) {
+    Slot& slot = slots_[size_t(j)];
+    if (slot.state != State::kDropped && slot.state != State::kReleased) continue;
+    if (kept_bytes_ + reserved_bytes_ + bytes > budget) break;
+    slot.state = State::kQueued;
+    slot.prefetch = true;
+    reserved_bytes_ += bytes;
+    queue_.push_back(j);
+  }
+}
+
 void StackFrameDecoder::Submit(int index) {
   {
     std::lock_guard lock(mu_);
@@ -122,19 +145,31 @@ void StackFrameDecoder::Work() {
     Slot& slot = slots_[size_t(index)];
     slot.state = State::kDecoding;
     lock.unlock();
+    const bool again = slot.prefetch;  // statistics known from the first decode
     StatusOr<cv::Mat> image = decode_(index);
     std::optional<FrameStatistics> statistics;
-    if (image.ok() && image->channels() == 1) statistics = ComputeFrameStatistics(*image, manifest_.bit_depth);
+    if (!again && image.ok() && image->channels() == 1) {
+      statistics = ComputeFrameStatistics(*image, manifest_.bit_depth);
+    }
     lock.lock();
     ++decoded_;
+    int64_t reserved = 0;
+    if (again) {
+      slot.prefetch = false;
+      if (slots_[0].shape) {
+        const StackFrameShape& s0 = *slots_[0].shape;
+        reserved = int64_t(s0.size.area()) * s0.channels * (s0.depth == CV_16U ? 2 : 1);
+      }
+      reserved_bytes_ -= reserved;
+    }
     if (!image.ok()) {
       slot.state = State::kFailed;
       slot.error = image.status();
     } else {
       slot.shape = StackFrameShape::Of(*image);
-      slot.statistics = statistics;
+      if (!again) slot.statistics = statistics;
       const int64_t bytes = BytesOf(*image);
-      if (kept_bytes_ + bytes <= options_.max_kept_bytes) {
+      if (kept_bytes_ + bytes <= BudgetLocked(bytes)) {
         slot.image = std::move(image).value();
         slot.state = State::kKept;
         kept_bytes_ += bytes;
@@ -192,7 +227,12 @@ StatusOr<cv::Mat> StackFrameDecoder::Frame(int index) {
     slot.state = State::kQueued;
     queue_.push_front(index);
     cv_.notify_all();
+  } else if (slot.state == State::kQueued && slot.prefetch) {  // a look-ahead the consumer caught up with
+    queue_.erase(std::remove(queue_.begin(), queue_.end(), index), queue_.end());
+    queue_.push_front(index);
   }
+  PrefetchLocked(index);
+  cv_.notify_all();
   while (slot.state == State::kQueued || slot.state == State::kDecoding) {
     if (threads_.empty()) {
       queue_.erase(std::remove(queue_.begin(), queue_.end(), index), queue_.end());

@@ -39,13 +39,18 @@ StatusOr<cv::Mat> DecodeStackFrameInMemory(std::string_view file, const StackMan
 struct StackFrameDecoderOptions {
   int threads = 0;  // decode threads; 0 = all hardware threads
   // Decoded frames kept for the consumer, bytes; frames beyond it are decoded again when
-  // consumed. The default holds 60 colour frames of 1600 x 1200 at 8 bits.
+  // consumed. The default holds 60 colour frames of 1600 x 1200 at 8 bits. A stack that does
+  // not fit whole keeps only a look-ahead of kLookaheadFramesPerThread frames per decode thread
+  // (at least 2) within it: most of its frames are decoded twice anyway, and 1 GiB of frames
+  // beside the engine's state would be most of the memory of a 24 MP stack.
   int64_t max_kept_bytes = int64_t(1) << 30;
 };
 
 // Thread-safe: Submit*, Finish and Frame/Release may be called from any thread (one consumer).
 class StackFrameDecoder {
  public:
+  static constexpr int kLookaheadFramesPerThread = 2;
+
   // manifest: the stack's frames (Submit by index or by file name). decode empty = decode from
   // `dir` (DecodeStackFrame).
   StackFrameDecoder(std::filesystem::path dir, StackManifest manifest, const StackFrameDecoderOptions& options,
@@ -67,7 +72,9 @@ class StackFrameDecoder {
   Status Finish();
 
   // Frame `index` as stored (CV_8U/16U, 1 or 3 channels), waiting for its decode (queued now if
-  // it was not); a dropped frame is decoded here. The cv::Mat shares the kept pixels.
+  // it was not); a dropped frame is decoded here. The cv::Mat shares the kept pixels. Frames
+  // after it that were dropped or released are queued again on the pool (a look-ahead within the
+  // budget), so a stack larger than the budget still decodes ahead of the consumer.
   StatusOr<cv::Mat> Frame(int index);
   // The progress-event statistics (core/io/frame_statistics.h) of grey frame `index` as stored,
   // computed by the thread that decoded it while its pixels were in cache; nullopt for colour
@@ -92,10 +99,14 @@ class StackFrameDecoder {
     std::optional<StackFrameShape> shape;
     std::optional<FrameStatistics> statistics;  // grey frames decoded by the pool
     Status error = Status::Ok();  // kFailed
+    bool prefetch = false;        // queued again after a drop or release; its bytes are reserved
   };
 
   void Work();
   void QueueLocked(int index);
+  // The budget frames of `frame_bytes` are kept within (max_kept_bytes, or the look-ahead).
+  int64_t BudgetLocked(int64_t frame_bytes) const;
+  void PrefetchLocked(int after);
   StatusOr<cv::Mat> DecodeOne(int index);
 
   const std::filesystem::path dir_;
@@ -110,6 +121,7 @@ class StackFrameDecoder {
   std::deque<int> queue_;
   bool stop_ = false;
   int64_t kept_bytes_ = 0;
+  int64_t reserved_bytes_ = 0;  // prefetches queued or decoding
   int64_t peak_kept_bytes_ = 0;
   int decoded_ = 0;
   std::vector<std::thread> threads_;

@@ -23,7 +23,10 @@ namespace inspection {
 
 struct ServiceOptions {
   std::string server_version;
-  int64_t max_upload_bytes = int64_t(2) << 30;
+  // An upload's total size: 300 frames of 24 MP at 16 bits are 14.4 GB grey, 43 GB colour. The
+  // data disk's free-space reserve is what bounds an upload in practice (checked at its start;
+  // a full disk ends it with RESOURCE_EXHAUSTED and the upload folder removed).
+  int64_t max_upload_bytes = int64_t(64) << 30;
   // User scenes of the simulated rig: SetSpecimen takes a scene by NAME from this folder
   // (<name>.json); empty = built-in specimens only. Paths ("file:...") are always refused.
   std::filesystem::path scene_dir;

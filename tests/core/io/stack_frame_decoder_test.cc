@@ -186,6 +186,43 @@ TEST(StackFrameDecoderTest, ByteBudgetBoundsKeptFramesWithoutChangingTheResult) 
   fs::remove_all(dir);
 }
 
+// A stack that does not fit the budget whole (8 frames, room for 6) keeps only the look-ahead
+// (2 frames per decode thread): holding 6 of 300 frames of 24 MP would cost 1 GiB beside the
+// engine and save 2 % of the decodes. Dropped frames are decoded again once each, ahead of the
+// engine by the pool, and the result does not change.
+TEST(StackFrameDecoderTest, AStackLargerThanTheBudgetKeepsOnlyTheLookAhead) {
+  const fs::path dir = TempDir("lookahead");
+  const StackManifest m = WriteGreyStack(dir);
+  const int64_t frame_bytes = 64 * 48;
+  StackFrameDecoderOptions o;
+  o.threads = 1;
+  o.max_kept_bytes = 6 * frame_bytes;
+  StackFrameDecoder decoder(dir, m, o);
+  ASSERT_TRUE(decoder.Finish().ok());
+  const int64_t lookahead = StackFrameDecoder::kLookaheadFramesPerThread * frame_bytes;
+  EXPECT_EQ(decoder.peak_kept_bytes(), lookahead);
+  EXPECT_EQ(decoder.kept_bytes(), lookahead);
+  std::atomic<bool> cancel{false};
+  int64_t peak_during = 0;
+  auto on_frame = [&](int, int, double, const FrameStatistics&) {
+    peak_during = std::max(peak_during, decoder.kept_bytes());
+  };
+  auto parallel = ReconstructStackFrames(m, SourceOf(decoder), SffOptions{}, on_frame, cancel);
+  ASSERT_TRUE(parallel.ok()) << parallel.status().ToString();
+  EXPECT_LE(peak_during, lookahead);
+  EXPECT_EQ(decoder.peak_kept_bytes(), lookahead);
+  EXPECT_EQ(decoder.decoded_frames(), 8 + 6);  // the 6 dropped frames once more each
+  auto sequential = ReconstructStackFolder(dir, m, SffOptions{}, {}, cancel);
+  ASSERT_TRUE(sequential.ok());
+  ExpectBitIdentical(*parallel, *sequential);
+  // A stack that fits whole keeps every frame, decoded once.
+  o.max_kept_bytes = 8 * frame_bytes;
+  StackFrameDecoder whole(dir, m, o);
+  ASSERT_TRUE(whole.Finish().ok());
+  EXPECT_EQ(whole.kept_bytes(), 8 * frame_bytes);
+  fs::remove_all(dir);
+}
+
 // Frame 2 is not an image and frame 5 has another size; decoding 7..0 (frame 5 finishes before
 // frame 2) still reports frame 2, with ValidateStackFrames' message; with frame 2 repaired,
 // frame 5's size.

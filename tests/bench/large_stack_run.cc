@@ -1,0 +1,322 @@
+// large-stack-bench: the stack sizes focus-stacking users have (300 frames of 24 MP) through
+// `inspectctl reconstruct --images` against a local inspectd, both real processes. Frames are
+// generated on the fly into a folder on disk (a tilted textured plane: each frame's columns
+// taken from one of a few precomputed defocus levels, so generation costs a copy per frame),
+// then the client uploads the folder. Measured per run: the server's and the client's peak RSS
+// (VmHWM of the server before it stops, ru_maxrss of the client), wall time of the client from
+// start to downloaded result, time per frame, and the largest disk use of the server's data
+// directory and the client's temporary folder during the run (sampled), against the stack's size.
+// Prints one Markdown table (docs: tests/bench/large_stack_output.md).
+//
+//   large-stack-bench --inspectd build/bin/inspectd --inspectctl build/bin/inspectctl \
+//       --work /work/tmp/large --format tiff16 --frames 30,100 [--width 6000 --height 4000]
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <sys/statvfs.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+extern char** environ;
+
+namespace {
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
+
+// Bytes of the regular files below dir (0 when it does not exist).
+int64_t TreeBytes(const fs::path& dir) {
+  std::error_code ec;
+  int64_t total = 0;
+  if (!fs::exists(dir, ec)) return 0;
+  for (auto it = fs::recursive_directory_iterator(dir, fs::directory_options::skip_permission_denied, ec);
+       !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    std::error_code e2;
+    if (it->is_regular_file(e2) && !it->is_symlink(e2)) {
+      // Hard links to the user's images cost no space: count a file only once per inode.
+      struct stat st {};
+      if (::lstat(it->path().c_str(), &st) == 0 && st.st_nlink == 1) total += int64_t(st.st_blocks) * 512;
+    }
+  }
+  return total;
+}
+
+long StatusKb(pid_t pid, const char* key) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind(key, 0) == 0) return std::atol(line.c_str() + std::strlen(key) + 1);
+  }
+  return -1;
+}
+
+pid_t Spawn(const std::vector<std::string>& args, const fs::path& out, const fs::path& err) {
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  std::vector<std::string> storage = args;
+  std::vector<char*> argv;
+  for (auto& s : storage) argv.push_back(s.data());
+  argv.push_back(nullptr);
+  pid_t pid = -1;
+  const int rc = posix_spawn(&pid, storage[0].c_str(), &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) {
+    std::cerr << "cannot start " << storage[0] << ": " << std::strerror(rc) << "\n";
+    return -1;
+  }
+  return pid;
+}
+
+std::string ReadAll(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// A tilted plane: frame k is sharp where the focus index (N - 1) * x / width is k; elsewhere
+// defocus level min(levels - 1, |k - focus| / frames_per_level).
+class StackGenerator {
+ public:
+  StackGenerator(cv::Size size, int frames, bool colour) : size_(size), frames_(frames), colour_(colour) {
+    cv::Mat noise(size, CV_32F);
+    cv::RNG rng(24);
+    rng.fill(noise, cv::RNG::UNIFORM, -1.0, 1.0);
+    for (int l = 0; l < kLevels; ++l) {
+      cv::Mat blurred;
+      cv::GaussianBlur(noise, blurred, cv::Size(0, 0), 0.5 + 1.2 * l);
+      double lo = 0, hi = 0;
+      cv::minMaxLoc(blurred, &lo, &hi);
+      // 16-bit: mid grey +- 12000 for the sharpest level; 8-bit: +- 60.
+      cv::Mat level;
+      blurred.convertTo(level, colour ? CV_8U : CV_16U, (colour ? 60.0 : 12000.0) / std::max(-lo, hi),
+                        colour ? 128.0 : 32768.0);
+      levels_.push_back(level);
+    }
+  }
+
+  cv::Mat Frame(int k) const {
+    cv::Mat out(size_, levels_[0].type());
+    const double frames_per_level = std::max(1.0, frames_ / 24.0);
+    for (int l = 0; l < kLevels; ++l) {
+      // Columns whose defocus level is l (a run per level on each side of the focus column).
+      int x0 = -1;
+      for (int x = 0; x <= size_.width; ++x) {
+        bool in = false;
+        if (x < size_.width) {
+          const double focus = (frames_ - 1) * double(x) / (size_.width - 1);
+          in = std::min(kLevels - 1, int(std::abs(k - focus) / frames_per_level)) == l;
+        }
+        if (in && x0 < 0) x0 = x;
+        if (!in && x0 >= 0) {
+          levels_[l].colRange(x0, x).copyTo(out.colRange(x0, x));
+          x0 = -1;
+        }
+      }
+    }
+    if (!colour_) return out;
+    cv::Mat bgr;
+    cv::cvtColor(out, bgr, cv::COLOR_GRAY2BGR);
+    bgr.forEach<cv::Vec3b>([](cv::Vec3b& p, const int*) { p[0] = cv::saturate_cast<uchar>(p[0] * 0.6); });
+    return bgr;
+  }
+
+ private:
+  static constexpr int kLevels = 8;
+  cv::Size size_;
+  int frames_;
+  bool colour_;
+  std::vector<cv::Mat> levels_;
+};
+
+struct Run {
+  std::string format;
+  int frames = 0;
+  bool ok = false;
+  std::string note;
+  double generate_s = 0, client_s = 0, engine_s = 0;
+  int64_t stack_bytes = 0, peak_data_bytes = 0, peak_tmp_bytes = 0;
+  long server_peak_kb = 0, client_peak_kb = 0;
+};
+
+Run RunOne(const std::string& inspectd, const std::string& inspectctl, const fs::path& work, const std::string& format,
+           int frames, cv::Size size, const std::vector<std::string>& extra) {
+  Run r;
+  r.format = format;
+  r.frames = frames;
+  const bool jpeg = format == "jpeg";
+  const fs::path images = work / ("images-" + format + "-" + std::to_string(frames));
+  const fs::path data = work / "server-data", tmp = work / "client-tmp", out = work / "result";
+  for (const auto& d : {images, data, tmp, out}) fs::remove_all(d);
+  for (const auto& d : {images, tmp}) fs::create_directories(d);
+
+  // Room for the folder and its upload, with a margin, or the run is not attempted.
+  const double frame_bytes = jpeg ? 0.6 * size.area() : 2.0 * size.area() + 4096;
+  struct statvfs vfs {};
+  statvfs(work.c_str(), &vfs);
+  const double free_bytes = double(vfs.f_bavail) * vfs.f_frsize;
+  if (2.0 * frames * frame_bytes + 8e9 > free_bytes) {
+    r.note = "not run: needs " + std::to_string(int(2.0 * frames * frame_bytes / 1e9)) + " GB + 8 GB margin, " +
+             std::to_string(int(free_bytes / 1e9)) + " GB free";
+    return r;
+  }
+  const auto g0 = Clock::now();
+  {
+    StackGenerator gen(size, frames, jpeg);
+    for (int k = 0; k < frames; ++k) {
+      char name[32];
+      std::snprintf(name, sizeof name, jpeg ? "frame_%04d.jpg" : "frame_%04d.tif", k);
+      const std::vector<int> params =
+          jpeg ? std::vector<int>{cv::IMWRITE_JPEG_QUALITY, 92} : std::vector<int>{cv::IMWRITE_TIFF_COMPRESSION, 1};
+      if (!cv::imwrite((images / name).string(), gen.Frame(k), params)) {
+        r.note = std::string("cannot write ") + name;
+        return r;
+      }
+    }
+  }
+  r.generate_s = Seconds(g0, Clock::now());
+  r.stack_bytes = TreeBytes(images);
+
+  const pid_t server = Spawn({inspectd, "--listen", "127.0.0.1:0", "--data-dir", data.string(), "--no-rig"},
+                             work / "inspectd.out", work / "inspectd.err");
+  if (server < 0) {
+    r.note = "inspectd did not start";
+    return r;
+  }
+  std::string address;
+  for (const auto deadline = Clock::now() + std::chrono::seconds(60); address.empty() && Clock::now() < deadline;) {
+    std::istringstream lines(ReadAll(work / "inspectd.out"));
+    for (std::string line; std::getline(lines, line);) {
+      if (line.rfind("inspectd listening on ", 0) == 0) address = line.substr(22);
+    }
+    if (address.empty()) std::this_thread::sleep_for(std::chrono::milliseconds(50));  // polling, with a deadline
+  }
+  if (address.empty()) {
+    r.note = "inspectd did not announce its address: " + ReadAll(work / "inspectd.err");
+    kill(server, SIGKILL);
+    waitpid(server, nullptr, 0);
+    return r;
+  }
+
+  std::atomic<bool> done{false};
+  std::thread sampler([&] {  // disk use while the run goes on
+    while (!done.load()) {
+      r.peak_data_bytes = std::max(r.peak_data_bytes, TreeBytes(data));
+      r.peak_tmp_bytes = std::max(r.peak_tmp_bytes, TreeBytes(tmp));
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));  // a sampling period, not a wait
+    }
+  });
+  std::vector<std::string> args = {inspectctl, "--server", address, "--json", "reconstruct", "--images",
+                                   images.string(), "--z-step", "1", "--out", out.string()};
+  args.insert(args.end(), extra.begin(), extra.end());
+  // The client's temporary stack folder (hard links) goes to tmp, which is measured.
+  setenv("TMPDIR", tmp.c_str(), 1);
+  const auto c0 = Clock::now();
+  // Through /usr/bin/time: a child spawned from this process would count this process' pages
+  // (the generator's) in its ru_maxrss; time's own child starts small.
+  args.insert(args.begin(), {"/usr/bin/time", "-f", "client_maxrss_kb %M"});
+  const pid_t client = Spawn(args, work / "inspectctl.out", work / "inspectctl.err");
+  int status = 0;
+  if (client > 0) waitpid(client, &status, 0);
+  r.client_s = Seconds(c0, Clock::now());
+  {
+    const std::string err = ReadAll(work / "inspectctl.err");
+    const auto at = err.rfind("client_maxrss_kb ");
+    if (at != std::string::npos) r.client_peak_kb = std::atol(err.c_str() + at + 17);
+  }
+  done = true;
+  sampler.join();
+  r.server_peak_kb = StatusKb(server, "VmHWM");
+  kill(server, SIGTERM);
+  waitpid(server, nullptr, 0);
+
+  r.ok = client > 0 && WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  const std::string text = ReadAll(work / "inspectctl.out");
+  const auto last = text.rfind('{');
+  if (last != std::string::npos) {
+    nlohmann::json j = nlohmann::json::parse(text.substr(text.rfind('\n', text.size() - 2) + 1), nullptr, false);
+    if (!j.is_discarded() && j.contains("job")) {
+      const auto& depth = j["job"]["result"]["depth"];
+      if (depth.contains("engine_seconds")) r.engine_s = depth["engine_seconds"].get<double>();
+    }
+  }
+  if (!r.ok) r.note = "inspectctl failed: " + ReadAll(work / "inspectctl.err").substr(0, 300);
+  fs::remove_all(images);
+  fs::remove_all(data);
+  fs::remove_all(out);
+  return r;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app("large-stack-bench: 24 MP stacks through inspectctl reconstruct --images and inspectd");
+  std::string inspectd, inspectctl, work, formats = "tiff16,jpeg", frame_list = "30,100";
+  int width = 6000, height = 4000;
+  std::vector<std::string> extra;
+  app.add_option("--inspectd", inspectd)->required();
+  app.add_option("--inspectctl", inspectctl)->required();
+  app.add_option("--work", work, "Folder for the frames and the server's data (removed after each run)")->required();
+  app.add_option("--format", formats, "tiff16, jpeg or both (comma-separated)");
+  app.add_option("--frames", frame_list, "Frame counts, comma-separated");
+  app.add_option("--width", width);
+  app.add_option("--height", height);
+  app.add_option("--extra", extra, "More inspectctl reconstruct arguments (e.g. --alignment none)");
+  CLI11_PARSE(app, argc, argv);
+  fs::create_directories(work);
+
+  std::vector<Run> runs;
+  std::vector<int> counts;
+  for (std::stringstream ss(frame_list); ss.good();) {
+    std::string item;
+    std::getline(ss, item, ',');
+    if (!item.empty()) counts.push_back(std::stoi(item));
+  }
+  std::vector<std::string> format_list;
+  for (std::stringstream ss(formats); ss.good();) {
+    std::string item;
+    std::getline(ss, item, ',');
+    if (!item.empty()) format_list.push_back(item);
+  }
+  const double pixels = double(width) * height;
+  const double target_mb = (40.0 * pixels + 500e6) / 1e6;
+  std::printf("frames %dx%d (%.1f MP); server target: peak RSS <= 40 B/px + 500 MB = %.0f MB\n\n", width, height,
+              pixels / 1e6, target_mb);
+  std::printf("| format | frames | stack on disk | generate | client wall | per frame | server reconstruct | server peak RSS | B/px | "
+              "<= target | client peak RSS | peak data dir | peak client tmp | result |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::fflush(stdout);
+  for (const auto& format : format_list) {
+    for (int n : counts) {
+      const Run r = RunOne(inspectd, inspectctl, fs::path(work), format, n, cv::Size(width, height), extra);
+      const double server_mb = r.server_peak_kb / 1024.0;
+      std::printf("| %s | %d | %.2f GB | %.0f s | %.1f s | %.3f s | %.1f s | %.0f MB | %.1f | %s | %.0f MB | %.2f GB | %.3f GB | %s |\n",
+                  r.format == "jpeg" ? "JPEG 8-bit colour" : "TIFF 16-bit grey", r.frames, r.stack_bytes / 1e9,
+                  r.generate_s, r.client_s, r.frames ? r.client_s / r.frames : 0.0, r.engine_s, server_mb,
+                  r.server_peak_kb * 1024.0 / pixels, server_mb * 1.048576 <= target_mb ? "yes" : "NO",
+                  r.client_peak_kb / 1024.0, r.peak_data_bytes / 1e9, r.peak_tmp_bytes / 1e9,
+                  r.ok ? "ok" : r.note.c_str());
+      std::fflush(stdout);
+    }
+  }
+  return 0;
+}
