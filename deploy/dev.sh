@@ -40,6 +40,7 @@ packages=(
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
   libopencv-contrib-dev  # core/sff/dense_depth.cc: cv::ximgproc fast global smoother (dense depth)
   libmosquitto-dev mosquitto mosquitto-clients  # server/plant: MQTT publishing; its tests run a real broker and mosquitto_sub
+  libboost-math-dev  # core/metrology/capability: Student t quantiles of the Type-1 study's bias test
 )
 
 install_missing() {
