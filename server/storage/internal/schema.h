@@ -13,7 +13,9 @@ namespace inspection {
 
 // Version 1: jobs, events, artifacts, calibrations, settings, pins, recipes, results.
 // Version 2: results forwarded by rigs to a site store (results.rig_id, results.rig_sequence).
-inline constexpr int64_t kStoreSchemaVersion = 2;
+// Version 3: reserved for the job queue of a pool (another branch); a no-op here.
+// Version 4: Type-1 gauge studies (studies).
+inline constexpr int64_t kStoreSchemaVersion = 4;
 
 inline Status CheckSchemaVersion(int64_t stored, const std::string& where) {
   if (stored > kStoreSchemaVersion) {
