@@ -53,6 +53,14 @@ StatusOr<Type1StudyScans> RunType1StudyScans(Rig& rig, const Type1StudyPlan& pla
   }
   PlacementReset reset(simulated ? &rig : nullptr);
   std::error_code ec;
+  // The work folder goes with the study, however it ends.
+  struct RemoveFolder {
+    const fs::path& dir;
+    ~RemoveFolder() {
+      std::error_code e;
+      fs::remove_all(dir, e);
+    }
+  } remove_work_dir{work_dir};
   fs::create_directories(work_dir, ec);
   if (ec) return Status::Internal("cannot create " + work_dir.string() + ": " + ec.message());
   for (int i = 0; i < plan.repeats; ++i) {

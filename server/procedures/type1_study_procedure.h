@@ -43,7 +43,7 @@ struct Type1StudyScans {
 };
 
 // Runs plan.repeats scans, each into its own folder below work_dir (removed after its repeat is
-// measured), calling `measure` after each. CANCELLED between frames or repeats once `cancel` is
+// measured; work_dir itself when the study ends), calling `measure` after each. CANCELLED between frames or repeats once `cancel` is
 // set. FAILED_PRECONDITION when plan.repeats is below kMinType1Repeats or the placement fails.
 StatusOr<Type1StudyScans> RunType1StudyScans(Rig& rig, const Type1StudyPlan& plan,
                                              const std::filesystem::path& work_dir,
