@@ -17,5 +17,6 @@ void RegisterCalibrationCommands(CLI::App& app, CliContext& context);  // calibr
 void RegisterSpecimenCommands(CLI::App& app, CliContext& context);     // specimen list|set
 void RegisterRecipeCommands(CLI::App& app, CliContext& context);       // recipe create|update|get|list|delete
 void RegisterResultCommands(CLI::App& app, CliContext& context);       // results list|watch
+void RegisterStudyCommands(CLI::App& app, CliContext& context);        // study type1|list|show
 
 }  // namespace inspection::client::cli

@@ -104,6 +104,11 @@ class InspectionClient {
   // ends OK). Without a stop it runs until the server ends the stream.
   grpc::Status WatchResults(int64_t after_sequence, const std::function<bool(const v1::InspectionResult&)>& on_result);
 
+  // Type-1 gauge studies (inspection_client_study.cc): StartStudy follows the study job like Scan.
+  grpc::Status StartStudy(const v1::StartStudyRequest& request, const EventCallback& on_event, v1::Job* job);
+  grpc::Status GetStudy(const std::string& study_id, v1::Study* study);
+  grpc::Status ListStudies(const v1::ListStudiesRequest& request, v1::ListStudiesResponse* response);
+
   std::shared_ptr<grpc::Channel> channel() const { return channel_; }
 
  private:

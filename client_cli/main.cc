@@ -26,6 +26,7 @@ int Main(int argc, char** argv) {
   RegisterSpecimenCommands(app, context);
   RegisterRecipeCommands(app, context);
   RegisterResultCommands(app, context);
+  RegisterStudyCommands(app, context);
 
   try {
     app.parse(argc, argv);

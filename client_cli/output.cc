@@ -174,6 +174,7 @@ void PrintInspection(const v1::InspectionResult& r) {
     std::cout << verdict(m.verdict());
     if (m.verdict() != v1::VERDICT_OK) std::cout << " (" << m.reason() << ')';
     std::cout << '\n';
+    if (!m.capability_warning().empty()) std::cout << "    warning: " << m.capability_warning() << '\n';
   }
 }
 

@@ -42,6 +42,7 @@ packages=(
   libmosquitto-dev mosquitto mosquitto-clients  # server/plant: MQTT publishing; its tests run a real broker and mosquitto_sub
   openssl  # tests/opcua/make_certs.sh: the OPC UA gateway test's certificates (the gateway itself: Node.js 20 + npm ci)
   libraw-dev  # core/io/raw_frame_decode: camera RAW stack frames (DNG, CR2, NEF, ARW, ...) through LibRaw
+  libboost-math-dev  # core/metrology/capability: Student t quantiles of the Type-1 study's bias test
 )
 
 install_missing() {

@@ -106,6 +106,7 @@ struct SimState {
   std::string specimen_name;
   std::pair<double, double> z_range_um{0.0, 0.0};  // including z_offset_um
   double z_offset_um = 0.0;                        // SetSpecimenZOffsetUm
+  SimulatedPlacement placement;                    // SetSimulatedPlacement
   double default_exposure_us = 10000.0;
   double focus_search_step_um = 0.0;  // from the optics, ScanDefaults
   cv::Mat pattern;
@@ -119,7 +120,18 @@ struct SimState {
   Status LoadSpecimen(const std::string& name) {
     SpecimenGrid grid{options.camera_size, options.pixel_size_um, options.seed};
     INSPECT_ASSIGN_OR_RETURN(Specimen s, MakeSpecimen(name, grid));
-    s.height_um += z_offset_um;
+    if (placement.dx_um != 0.0 || placement.dy_um != 0.0) {
+      // The part moved on the stage: every map of it moves with it (sub-pixel, linear).
+      const cv::Matx23d shift(1, 0, placement.dx_um / options.pixel_size_um, 0, 1,
+                              placement.dy_um / options.pixel_size_um);
+      for (cv::Mat* m : {&s.height_um, &s.reflectance, &s.texture}) {
+        if (m->empty()) continue;
+        cv::Mat moved;
+        cv::warpAffine(*m, moved, shift, m->size(), cv::INTER_LINEAR, cv::BORDER_REFLECT_101);
+        *m = moved;
+      }
+    }
+    s.height_um += z_offset_um + placement.dz_um;
     double lo = 0, hi = 0;
     cv::minMaxLoc(s.height_um, &lo, &hi);
     if (lo < kStageMinUm || hi > kStageMaxUm) {
@@ -314,6 +326,14 @@ class SimulatedRig : public Rig, public SimulationControl {
     if (!st.ok()) s_->z_offset_um = previous;  // the loaded specimen is untouched on error
     return st;
   }
+  Status SetPlacement(const SimulatedPlacement& p) {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    const SimulatedPlacement previous = s_->placement;
+    s_->placement = p;
+    Status st = s_->LoadSpecimen(s_->specimen_name);
+    if (!st.ok()) s_->placement = previous;  // the loaded specimen is untouched on error
+    return st;
+  }
   void SetFaults(const SimulatedFaults& faults) {
     std::lock_guard<std::mutex> lock(s_->mu);
     s_->faults = faults;
@@ -374,6 +394,28 @@ Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults) {
   }
   sim->SetFaults(faults);
   return Status::Ok();
+}
+
+Status SetSimulatedPlacement(Rig& rig, const SimulatedPlacement& placement) {
+  auto* sim = dynamic_cast<SimulatedRig*>(rig.simulation());
+  if (sim == nullptr) return Status::InvalidArgument("rig: not a simulated rig");
+  if (!std::isfinite(placement.dx_um) || !std::isfinite(placement.dy_um) || !std::isfinite(placement.dz_um)) {
+    return Status::InvalidArgument("placement: dx_um, dy_um and dz_um must be finite");
+  }
+  return sim->SetPlacement(placement);
+}
+
+SimulatedPlacement RandomSimulatedPlacement(uint64_t seed, uint64_t draw, double sigma_xy_um, double sigma_z_um) {
+  // Its own stream per draw (not the stage's), so a study's placements do not depend on how many
+  // moves came before.
+  std::seed_seq seq{uint32_t(seed), uint32_t(seed >> 32), uint32_t(draw), uint32_t(draw >> 32), 0x706c6163u};
+  std::mt19937_64 rng(seq);
+  std::normal_distribution<double> unit(0.0, 1.0);
+  SimulatedPlacement p;
+  p.dx_um = sigma_xy_um * unit(rng);
+  p.dy_um = sigma_xy_um * unit(rng);
+  p.dz_um = sigma_z_um * unit(rng);
+  return p;
 }
 
 cv::Mat GroundTruthInCameraGrid(Rig& rig, double z_um) {

@@ -63,6 +63,23 @@ struct SimulatedFaults {
 // INVALID_ARGUMENT when rig is not a simulated rig.
 Status SetSimulatedFaults(Rig& rig, const SimulatedFaults& faults);
 
+// Where the part lies relative to where it was loaded: a lateral shift (um on the specimen, x
+// right and y down in the camera image) and a height offset on top of SetSpecimenZOffsetUm's.
+// Models a part taken off the stage and put back between repeated measurements (a Type-1
+// gauge study). Kept across SetSpecimen; {} = as loaded (the default).
+struct SimulatedPlacement {
+  double dx_um = 0.0;
+  double dy_um = 0.0;
+  double dz_um = 0.0;
+};
+// INVALID_ARGUMENT when rig is neither a simulated rig nor one forwarding simulation() to one,
+// when a value is not finite, or when the height offset leaves the stage travel (the placement
+// is then unchanged).
+Status SetSimulatedPlacement(Rig& rig, const SimulatedPlacement& placement);
+// Draw number `draw` of a random placement: each component normal with standard deviation
+// sigma_xy_um (dx, dy) or sigma_z_um (dz), a pure function of (seed, draw).
+SimulatedPlacement RandomSimulatedPlacement(uint64_t seed, uint64_t draw, double sigma_xy_um, double sigma_z_um);
+
 // SimulationControl::GroundTruthInCameraGridUm of a rig (devices/rig.h); empty when the rig is
 // not simulated.
 cv::Mat GroundTruthInCameraGrid(Rig& rig, double z_um);

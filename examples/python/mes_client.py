@@ -145,6 +145,8 @@ class Mes:
             value = f"{m.value:.4g} {m.unit} U {m.expanded_uncertainty:.2g}" if m.measured else "not measured"
             print(f"  {m.name}: {value}, coverage {m.coverage_percent:.1f} %, "
                   f"{pb.Verdict.Name(m.verdict).replace('VERDICT_', '')} ({m.reason})", flush=True)
+            if m.capability_warning:
+                print(f"    warning: {m.capability_warning}", flush=True)
         if self.args.state:
             with open(self.args.state + ".tmp", "w") as f:
                 f.write(str(result.sequence))

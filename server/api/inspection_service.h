@@ -75,6 +75,11 @@ class InspectionServiceImpl final : public v1::InspectionService::Service {
   grpc::Status ListResults(grpc::ServerContext*, const v1::ListResultsRequest*, v1::ListResultsResponse*) override;
   grpc::Status WatchResults(grpc::ServerContext*, const v1::WatchResultsRequest*,
                             grpc::ServerWriter<v1::InspectionResult>*) override;
+  // Type-1 gauge studies (inspection_service_study.cc).
+  grpc::Status StartStudy(grpc::ServerContext*, const v1::StartStudyRequest*,
+                          grpc::ServerWriter<v1::JobEvent>*) override;
+  grpc::Status GetStudy(grpc::ServerContext*, const v1::GetStudyRequest*, v1::Study*) override;
+  grpc::Status ListStudies(grpc::ServerContext*, const v1::ListStudiesRequest*, v1::ListStudiesResponse*) override;
 
  private:
   void FillRigStatus(v1::RigStatus* status);

@@ -24,13 +24,14 @@ std::string NoRigMessage(std::string_view method);
 // Recipes live on the rig's server: they are checked against its camera and run by its scans.
 // Inspection results are served: a site replica (--no-rig on the site's PostgreSQL) holds every
 // rig's forwarded results (server/results/result_forwarder.h); a plain pool holds none.
-inline constexpr std::array<std::string_view, 9> kRigOnlyMethods = {
+// Type-1 studies run on the rig (StartStudy refused); stored ones are read anywhere.
+inline constexpr std::array<std::string_view, 10> kRigOnlyMethods = {
     "GetRigStatus", "Calibrate", "Scan", "ResetRig", "CreateRecipe", "UpdateRecipe",
-    "GetRecipe",    "ListRecipes", "DeleteRecipe"};
-inline constexpr std::array<std::string_view, 13> kNoRigServedMethods = {
+    "GetRecipe",    "ListRecipes", "DeleteRecipe", "StartStudy"};
+inline constexpr std::array<std::string_view, 15> kNoRigServedMethods = {
     "Reconstruct",      "WatchJob",       "GetJob",           "ListJobs",  "CancelJob",
     "DownloadArtifact", "GetCalibration", "ListCalibrations", "DeleteJob", "DeleteScan",
-    "PinJob",           "ListResults",    "WatchResults"};
+    "PinJob",           "ListResults",    "WatchResults",     "GetStudy",  "ListStudies"};
 
 class NoRigInspectionService final : public v1::InspectionService::Service {
  public:
@@ -102,6 +103,17 @@ class NoRigInspectionService final : public v1::InspectionService::Service {
   grpc::Status WatchResults(grpc::ServerContext* c, const v1::WatchResultsRequest* r,
                             grpc::ServerWriter<v1::InspectionResult>* w) override {
     return served_->WatchResults(c, r, w);
+  }
+  grpc::Status StartStudy(grpc::ServerContext* c, const v1::StartStudyRequest*,
+                          grpc::ServerWriter<v1::JobEvent>*) override {
+    return Refuse(c, "StartStudy");
+  }
+  grpc::Status GetStudy(grpc::ServerContext* c, const v1::GetStudyRequest* r, v1::Study* o) override {
+    return served_->GetStudy(c, r, o);
+  }
+  grpc::Status ListStudies(grpc::ServerContext* c, const v1::ListStudiesRequest* r,
+                           v1::ListStudiesResponse* o) override {
+    return served_->ListStudies(c, r, o);
   }
 
  private:

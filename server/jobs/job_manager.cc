@@ -32,6 +32,8 @@ const char* IdPrefix(v1::JobKind kind) {
       return "scan";
     case v1::JOB_KIND_CALIBRATE:
       return "cal";
+    case v1::JOB_KIND_STUDY:
+      return "study";
     default:
       return "rec";
   }
@@ -377,8 +379,12 @@ Status JobManager::Admit(v1::JobKind kind) const {
   if (IsRigJob(kind)) {
     // Scans and calibrations never interleave: a scan would use a bundle being replaced, a
     // calibration would find the rig moved.
-    const v1::JobKind other = kind == v1::JOB_KIND_SCAN ? v1::JOB_KIND_CALIBRATE : v1::JOB_KIND_SCAN;
-    auto is_other = [&](const RecordPtr& r) { return r && r->kind() == other; };
+    // A study is scans: it interleaves with scans, never with a calibration.
+    auto scan_like = [](v1::JobKind k) { return k == v1::JOB_KIND_SCAN || k == v1::JOB_KIND_STUDY; };
+    const v1::JobKind other = scan_like(kind) ? v1::JOB_KIND_CALIBRATE : v1::JOB_KIND_SCAN;
+    auto is_other = [&](const RecordPtr& r) {
+      return r && (other == v1::JOB_KIND_SCAN ? scan_like(r->kind()) : r->kind() == other);
+    };
     if (is_other(running_rig_) ||
         std::any_of(rig_queue_.begin(), rig_queue_.end(), [&](const QueuedJob& j) { return is_other(j.record); })) {
       return Status::Aborted(std::string(other == v1::JOB_KIND_SCAN ? "a scan" : "a calibration") +

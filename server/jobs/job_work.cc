@@ -15,7 +15,8 @@ struct Overloaded : Ts... {
 v1::JobKind KindOf(const JobWork& work) {
   return std::visit(Overloaded{[](const ScanWork&) { return v1::JOB_KIND_SCAN; },
                                [](const CalibrateWork&) { return v1::JOB_KIND_CALIBRATE; },
-                               [](const ReconstructWork&) { return v1::JOB_KIND_RECONSTRUCT; }},
+                               [](const ReconstructWork&) { return v1::JOB_KIND_RECONSTRUCT; },
+                               [](const StudyWork&) { return v1::JOB_KIND_STUDY; }},
                     work);
 }
 
@@ -27,6 +28,11 @@ void FillQueuedJob(const JobWork& work, v1::Job* job) {
       job->set_recipe_id(w->recipe->recipe.recipe_id());
       job->set_recipe_version(w->recipe->recipe.version());
     }
+  }
+  if (const auto* w = std::get_if<StudyWork>(&work); w && w->scan.recipe) {
+    job->set_part_id(w->scan.part_id);
+    job->set_recipe_id(w->scan.recipe->recipe.recipe_id());
+    job->set_recipe_version(w->scan.recipe->recipe.version());
   }
   if (const auto* w = std::get_if<ReconstructWork>(&work); w && !w->source_scan_id.empty()) {
     job->mutable_result()->set_scan_id(w->source_scan_id);
@@ -62,6 +68,13 @@ std::string DescribeWork(const JobWork& work) {
                         [&](const ReconstructWork& w) {
                           s << "reconstruction of "
                             << (w.source_scan_id.empty() ? "an uploaded stack" : "scan " + w.source_scan_id);
+                        },
+                        [&](const StudyWork& w) {
+                          s << "type-1 study of " << w.repeats << " repeats";
+                          if (w.scan.recipe) {
+                            s << ", recipe " << w.scan.recipe->recipe.recipe_id() << " v"
+                              << w.scan.recipe->recipe.version();
+                          }
                         }},
              work);
   return s.str();

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -80,7 +81,19 @@ struct ReconstructWork {
   DepthPostProcessOptions postprocess;  // SFF only
 };
 
-using JobWork = std::variant<ScanWork, CalibrateWork, ReconstructWork>;
+// A Type-1 gauge study (server/procedures/type1_study_procedure.h): the recipe's scan repeated
+// on one reference part, measured and judged for capability (server/results/study_result.h).
+struct StudyWork {
+  ScanWork scan;  // the recipe's scan; scan.recipe is set
+  int repeats = 0;
+  std::map<std::string, double> reference_values;  // by measurement name (checked against the recipe)
+  double reposition_xy_um = 0.0;                   // simulated rig: sigma of the placement per repeat
+  double reposition_z_um = 0.0;
+  std::string repositioning_note;  // e.g. "(default)" when the request left them unset
+  uint64_t seed = 1;               // of the simulated placements
+};
+
+using JobWork = std::variant<ScanWork, CalibrateWork, ReconstructWork, StudyWork>;
 
 v1::JobKind KindOf(const JobWork& work);
 

@@ -120,6 +120,7 @@ StatusOr<v1::JobResult> ProcedureRunner::Run(const JobWork& work, const JobConte
                         [&](const ScanWork& w) { return OnRig(rig_, [&] { return RunScan(w, context); }); },
                         [&](const CalibrateWork& w) { return OnRig(rig_, [&] { return RunCalibrate(w, context); }); },
                         [&](const ReconstructWork& w) { return RunReconstruct(w, context); },
+                        [&](const StudyWork& w) { return OnRig(rig_, [&] { return RunStudy(w, context); }); },
                     },
                     work);
 }
@@ -214,6 +215,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
         Inspect(*work.recipe, outcome.depth, outcome.manifest.pixel_size_um, noise, work.part_id, work.station);
     inspection->set_job_id(job_id);
     inspection->set_calibration_id(plan.calibration_id);
+    ApplyStudyWarnings(inspection);
     FillTimings(store_, job_id, started_at, scanned_at, outcome.engine_finish_seconds, inspection);
     // Nanoseconds: TimeUtil::GetCurrentTime keeps whole seconds here, and results a second
     // apart must stay apart for time-range queries.

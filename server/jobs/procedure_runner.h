@@ -33,6 +33,10 @@ class ProcedureRunner final : public JobRunner {
   StatusOr<v1::JobResult> RunScan(const ScanWork& work, const JobContext& context);
   StatusOr<v1::JobResult> RunCalibrate(const CalibrateWork& work, const JobContext& context);
   StatusOr<v1::JobResult> RunReconstruct(const ReconstructWork& work, const JobContext& context);
+  StatusOr<v1::JobResult> RunStudy(const StudyWork& work, const JobContext& context);  // procedure_runner_study.cc
+  // The newest Type-1 study of the inspection's recipe version marks its measurements that were
+  // found not capable (MeasurementResult.capability_warning).
+  void ApplyStudyWarnings(v1::InspectionResult* inspection);
 
   DataStore* store_;
   RigController* rig_;

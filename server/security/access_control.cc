@@ -48,6 +48,10 @@ constexpr MethodRole kMethodRoles[] = {
     {kInspection, "DeleteJob", Role::kAdmin},
     {kInspection, "DeleteScan", Role::kAdmin},
     {kInspection, "PinJob", Role::kAdmin},
+    // Type-1 gauge studies: run by whoever approves the gauge, read by anyone.
+    {kInspection, "StartStudy", Role::kEngineer},
+    {kInspection, "GetStudy", Role::kViewer},
+    {kInspection, "ListStudies", Role::kViewer},
     {kSimulation, "ListSpecimens", Role::kViewer},
     {kSimulation, "SetSpecimen", Role::kEngineer},
 };

@@ -195,6 +195,12 @@ class DataStore {
   // forgets the row. A replica that dies between the two leaves the row for the next sweep.
   virtual StatusOr<std::vector<QueuedWork>> EndedWork() = 0;
   virtual Status ForgetWork(const std::string& job_id) = 0;
+  // Type-1 gauge studies (StartStudy), each stored whole when it ends (replaced when stored again
+  // under its id). GetStudy: NOT_FOUND naming the id. ListStudies: newest first (finish time),
+  // recipe_id empty = any, at most `limit`.
+  virtual Status PutStudy(const v1::Study& study) = 0;
+  virtual StatusOr<v1::Study> GetStudy(const std::string& study_id) = 0;
+  virtual StatusOr<std::vector<v1::Study>> ListStudies(const std::string& recipe_id, int limit) = 0;
 
   virtual Status SetSetting(const std::string& key, const std::string& value) = 0;
   virtual std::string GetSetting(const std::string& key) = 0;

@@ -70,6 +70,14 @@ constexpr const char* kUniqueViolation = "23505";
 // Serialises schema migrations across replicas starting at once (any constant of ours).
 constexpr int64_t kMigrationLockKey = 0x696e73706563;  // "inspec"
 
+// Type-1 gauge studies: one row per study, the Study message whole; self-contained, so it can
+// take another version number.
+constexpr const char* kPostgresStudiesMigration = R"sql(
+    CREATE TABLE IF NOT EXISTS studies (
+      study_id TEXT PRIMARY KEY, recipe_id TEXT NOT NULL, finish_ns BIGINT NOT NULL, study BYTEA NOT NULL);
+    CREATE INDEX IF NOT EXISTS studies_by_recipe ON studies(recipe_id, finish_ns);
+    )sql";
+
 const char* const kPostgresMigrations[] = {
     R"sql(
     CREATE TABLE IF NOT EXISTS jobs (
@@ -112,6 +120,7 @@ const char* const kPostgresMigrations[] = {
       ended INTEGER NOT NULL DEFAULT 0);
     CREATE INDEX work_queue_by_age ON work_queue(enqueue_ns);
     )sql",
+    kPostgresStudiesMigration,
 };
 
 // The database server's clock in nanoseconds: every replica's leases are judged by one clock.
@@ -188,6 +197,9 @@ class PostgresDataStore final : public DataStore {
   StatusOr<std::vector<v1::InspectionResult>> ListResults(const ResultQuery& query) override;
   StatusOr<std::vector<v1::InspectionResult>> ResultsAfter(int64_t after_sequence, int limit) override;
   StatusOr<int64_t> LastResultSequence() override;
+  Status PutStudy(const v1::Study& study) override;
+  StatusOr<v1::Study> GetStudy(const std::string& study_id) override;
+  StatusOr<std::vector<v1::Study>> ListStudies(const std::string& recipe_id, int limit) override;
   Status SetSetting(const std::string& key, const std::string& value) override;
   std::string GetSetting(const std::string& key) override;
   Status EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) override;
@@ -896,6 +908,40 @@ StatusOr<std::unique_ptr<DataStore>> OpenPostgresStore(const fs::path& data_dir,
   auto store = std::make_unique<PostgresDataStore>(data_dir, conn);
   INSPECT_RETURN_IF_ERROR(store->Migrate());
   return std::unique_ptr<DataStore>(std::move(store));
+}
+
+Status PostgresDataStore::PutStudy(const v1::Study& study) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Run("INSERT INTO studies(study_id, recipe_id, finish_ns, study) VALUES($1,$2,$3,$4) "
+      "ON CONFLICT (study_id) DO UPDATE SET recipe_id = EXCLUDED.recipe_id, finish_ns = EXCLUDED.finish_ns, "
+      "study = EXCLUDED.study",
+      {T(study.study_id()), T(study.recipe_id()),
+       I(study.finish_time().seconds() * 1000000000LL + study.finish_time().nanos()), B(study.SerializeAsString())},
+      &s, "PutStudy");
+  return s;
+}
+
+StatusOr<v1::Study> PostgresDataStore::GetStudy(const std::string& study_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT study FROM studies WHERE study_id = $1", {T(study_id)}, &s, "GetStudy");
+  INSPECT_RETURN_IF_ERROR(s);
+  if (r.rows() == 0) return Status::NotFound("study_id '" + study_id + "' not found");
+  v1::Study study;
+  if (!study.ParseFromString(r.Bytes(0, 0))) return Status::DataLoss("study record is corrupt");
+  return study;
+}
+
+StatusOr<std::vector<v1::Study>> PostgresDataStore::ListStudies(const std::string& recipe_id, int limit) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run("SELECT study FROM studies WHERE ($1 = '' OR recipe_id = $1) ORDER BY finish_ns DESC, study_id LIMIT $2",
+                 {T(recipe_id), I(limit)}, &s, "ListStudies");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<v1::Study> out;
+  INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &out, "study"));
+  return out;
 }
 
 }  // namespace inspection

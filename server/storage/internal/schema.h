@@ -14,7 +14,8 @@ namespace inspection {
 // Version 1: jobs, events, artifacts, calibrations, settings, pins, recipes, results.
 // Version 2: results forwarded by rigs to a site store (results.rig_id, results.rig_sequence).
 // Version 3: the reconstruct pool's work queue (work_queue: stored input, lease, heartbeat).
-inline constexpr int64_t kStoreSchemaVersion = 3;
+// Version 4: Type-1 gauge studies (studies).
+inline constexpr int64_t kStoreSchemaVersion = 4;
 
 inline Status CheckSchemaVersion(int64_t stored, const std::string& where) {
   if (stored > kStoreSchemaVersion) {

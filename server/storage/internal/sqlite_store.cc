@@ -94,6 +94,9 @@ class SqliteDataStore final : public DataStore {
   StatusOr<std::vector<v1::InspectionResult>> ListResults(const ResultQuery& query) override;
   StatusOr<std::vector<v1::InspectionResult>> ResultsAfter(int64_t after_sequence, int limit) override;
   StatusOr<int64_t> LastResultSequence() override;
+  Status PutStudy(const v1::Study& study) override;
+  StatusOr<v1::Study> GetStudy(const std::string& study_id) override;
+  StatusOr<std::vector<v1::Study>> ListStudies(const std::string& recipe_id, int limit) override;
   Status SetSetting(const std::string& key, const std::string& value) override;
   std::string GetSetting(const std::string& key) override;
   Status EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) override;
@@ -121,6 +124,14 @@ class SqliteDataStore final : public DataStore {
                    // the multi-statement transactions below atomic)
   sqlite3* db_ = nullptr;
 };
+
+// Type-1 gauge studies: one row per study, the Study message whole; self-contained, so it can
+// take another version number.
+constexpr const char* kSqliteStudiesMigration = R"sql(
+    CREATE TABLE IF NOT EXISTS studies (
+      study_id TEXT PRIMARY KEY, recipe_id TEXT NOT NULL, finish_ns INTEGER NOT NULL, study BLOB NOT NULL);
+    CREATE INDEX IF NOT EXISTS studies_by_recipe ON studies(recipe_id, finish_ns);
+  )sql";
 
 // Schema versions of the SQLite backend; index i migrates version i to i + 1. Version 1 is the
 // layout every database made before versioning has (CREATE ... IF NOT EXISTS keeps it), so such
@@ -165,6 +176,7 @@ const char* const kSqliteMigrations[] = {
       ended INTEGER NOT NULL DEFAULT 0);
     CREATE INDEX work_queue_by_age ON work_queue(enqueue_ns);
   )sql",
+    kSqliteStudiesMigration,
 };
 static_assert(std::size(kSqliteMigrations) == kStoreSchemaVersion, "one migration per schema version");
 
@@ -841,6 +853,36 @@ StatusOr<std::vector<QueuedWork>> SqliteDataStore::EndedWork() {
     w.job_id = st.ColumnText(0);
     w.stack_dir = st.ColumnText(1);
     out.push_back(std::move(w));
+Status SqliteDataStore::PutStudy(const v1::Study& study) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "INSERT OR REPLACE INTO studies(study_id, recipe_id, finish_ns, study) VALUES(?,?,?,?)");
+  st.Text(1, study.study_id())
+      .Text(2, study.recipe_id())
+      .Int(3, study.finish_time().seconds() * 1000000000LL + study.finish_time().nanos())
+      .Blob(4, study.SerializeAsString());
+  if (st.Step() != SQLITE_DONE) return DbError(db_, "PutStudy");
+  return Status::Ok();
+}
+
+StatusOr<v1::Study> SqliteDataStore::GetStudy(const std::string& study_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT study FROM studies WHERE study_id = ?");
+  st.Text(1, study_id);
+  if (st.Step() != SQLITE_ROW) return Status::NotFound("study_id '" + study_id + "' not found");
+  v1::Study s;
+  if (!s.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("study record is corrupt");
+  return s;
+}
+
+StatusOr<std::vector<v1::Study>> SqliteDataStore::ListStudies(const std::string& recipe_id, int limit) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT study FROM studies WHERE (?1 = '' OR recipe_id = ?1) ORDER BY finish_ns DESC, study_id LIMIT ?2");
+  st.Text(1, recipe_id).Int(2, limit);
+  std::vector<v1::Study> out;
+  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
+    v1::Study s;
+    if (!s.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("study record is corrupt");
+    out.push_back(std::move(s));
   }
   return out;
 }

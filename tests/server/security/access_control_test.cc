@@ -39,6 +39,9 @@ TEST(AccessControlTest, RoleTableFollowsTheIssueLadder) {
   EXPECT_EQ(RequiredRole(Rpc("CreateRecipe")), Role::kEngineer);
   EXPECT_EQ(RequiredRole(Rpc("ResetRig")), Role::kAdmin);
   EXPECT_EQ(RequiredRole(Rpc("DeleteJob")), Role::kAdmin);
+  EXPECT_EQ(RequiredRole(Rpc("StartStudy")), Role::kEngineer);  // approving a gauge
+  EXPECT_EQ(RequiredRole(Rpc("GetStudy")), Role::kViewer);
+  EXPECT_EQ(RequiredRole(Rpc("ListStudies")), Role::kViewer);
   // A method nobody classified has no rule, and Authorize refuses it even to an admin.
   EXPECT_FALSE(RequiredRole(Rpc("SomeFutureRpc")).has_value());
   EXPECT_FALSE(RequiredRole("Scan").has_value());  // bare names are not what gRPC routes by

@@ -256,7 +256,7 @@ TEST_P(DataStoreTest, ASchemaNewerThanThisBinaryIsRefusedNamingBothVersions) {
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(s.status().message().find("schema version 7"), std::string::npos) << s.status().message();
-  EXPECT_NE(s.status().message().find("newer than this inspectd knows (3)"), std::string::npos) << s.status().message();
+  EXPECT_NE(s.status().message().find("newer than this inspectd knows (4)"), std::string::npos) << s.status().message();
 }
 
 // The pool's work queue (schema version 3): leases, takeover after expiry, completion only by
