@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # One entry point for a fresh Debian 12 machine (README.md "Quick start"):
-#   deploy/dev.sh demo   install what is missing, build only inspectd and inspectctl (build-demo/),
+#   deploy/dev.sh demo   install what is missing of its short package list (demo_packages), build
+#                        only inspectd and inspectctl (build-demo/),
 #                        start inspectd on the simulated rig with a shiny specimen (cutter),
 #                        calibrate, scan under the default AUTO illumination with a recipe, and
 #                        print the mode chosen and why, the valid pixels, the error against the
 #                        simulated ground truth, the verdict, the files and the report
-#   deploy/dev.sh test   install what is missing, build, run the whole test suite, run every
+#   deploy/dev.sh test   install what is missing of the whole list (packages), build, run the
+#                        whole test suite, run every
 #                        libFuzzer target for FUZZ_SECONDS from its committed corpus (merged back,
 #                        minimised, into tests/fuzz/corpus/), then build and run the unit tests
 #                        again under AddressSanitizer + UBSan. With CI=true a test that cannot run
@@ -43,17 +45,29 @@ packages=(
   openssl  # tests/opcua/make_certs.sh: the OPC UA gateway test's certificates (the gateway itself: Node.js 20 + npm ci)
   libraw-dev  # core/io/raw_frame_decode: camera RAW stack frames (DNG, CR2, NEF, ARW, ...) through LibRaw
   libboost-math-dev  # core/metrology/capability: Student t quantiles of the Type-1 study's bias test
+  prometheus-cpp-dev  # server/http/metrics_registry: the /metrics families and their text exposition
 )
 
-install_missing() {
+# What `demo` needs, and no more: configuring with INSPECT_BUILD_TESTS=OFF INSPECT_BUILD_BENCH=OFF
+# (what CMakeLists.txt then requires), building inspectd and inspectctl, and running them on the
+# simulated rig. No test-only package (GoogleTest, benchmark, PostgreSQL server, mosquitto broker,
+# Prometheus, Chromium, gwyddion, clang, umockdev, kubectl).
+demo_packages=(
+  build-essential cmake pkg-config
+  python3  # cmake/check_rooms.py: the room check every configuration defines
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
+  libopencv-dev libeigen3-dev libsuitesparse-dev  # core (libopencv-dev brings the contrib ximgproc)
+  libaravis-dev libusb-1.0-0-dev  # devices/: the real drivers are built in the demo too (see demo())
+  libspdlog-dev libcli11-dev nlohmann-json3-dev libtiff-dev libzip-dev libsqlite3-dev libssl-dev
+  libdeflate-dev zlib1g-dev libraw-dev libboost-math-dev  # core/io: RAW frames; core/metrology: t quantiles
+  libcpp-httplib-dev libpq-dev libmosquitto-dev prometheus-cpp-dev  # server/: HTTP port, PostgreSQL client, MQTT, metrics
+)
+
+install_missing() {  # packages...: installs those not yet installed
   local missing=()
-  for p in "${packages[@]}"; do
+  for p in "$@"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
   done
-  # deploy/validate_manifests.sh (ctest deploy_manifests) needs kubectl kustomize. Debian's
-  # kubernetes-client ships /usr/bin/kubectl and conflicts with an upstream kubectl package, so it
-  # is installed only when no kubectl is on PATH.
-  command -v kubectl >/dev/null || missing+=(kubernetes-client)
   if ((${#missing[@]})); then
     echo "== installing: ${missing[*]}"
     local sudo=""
@@ -180,7 +194,15 @@ test_all() {
 }
 
 case "$mode" in
-  demo) install_missing; demo ;;
-  test) install_missing; test_all ;;
+  demo) install_missing "${demo_packages[@]}"; demo ;;
+  test)
+    # deploy/validate_manifests.sh (ctest deploy_manifests) needs kubectl kustomize. Debian's
+    # kubernetes-client ships /usr/bin/kubectl and conflicts with an upstream kubectl package, so
+    # it is installed only when no kubectl is on PATH.
+    extra=()
+    command -v kubectl >/dev/null || extra=(kubernetes-client)
+    install_missing "${packages[@]}" "${extra[@]}"
+    test_all
+    ;;
   *) echo "usage: $0 demo|test" >&2; exit 2 ;;
 esac

@@ -399,18 +399,10 @@ std::string Md5Hex(const void* data, size_t size) {
   return hex;
 }
 
-namespace {
-
-// CRC-32 of a PNG chunk (ISO 3309, as PNG spec 5.5 defines it), by zlib.
-uint32_t Crc32(const uint8_t* p, size_t n) { return uint32_t(crc32_z(0L, p, n)); }
-
-void PutBigEndian32(std::string* out, uint32_t v) {
-  for (int i = 3; i >= 0; --i) out->push_back(char(uint8_t(v >> (8 * i))));
-}
-
-std::string XmlEscape(const std::string& s) {
+std::string XmlEscape(std::string_view text) {
   std::string out;
-  for (char c : s) {
+  out.reserve(text.size());
+  for (char c : text) {
     switch (c) {
       case '&':
         out += "&amp;";
@@ -425,13 +417,22 @@ std::string XmlEscape(const std::string& s) {
         out += "&quot;";
         break;
       case '\'':
-        out += "&apos;";
+        out += "&#39;";
         break;
       default:
         out += c;
     }
   }
   return out;
+}
+
+namespace {
+
+// CRC-32 of a PNG chunk (ISO 3309, as PNG spec 5.5 defines it), by zlib.
+uint32_t Crc32(const uint8_t* p, size_t n) { return uint32_t(crc32_z(0L, p, n)); }
+
+void PutBigEndian32(std::string* out, uint32_t v) {
+  for (int i = 3; i >= 0; --i) out->push_back(char(uint8_t(v >> (8 * i))));
 }
 
 std::string FormatDouble(double v) {

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <opencv2/core.hpp>
 #include <string>
+#include <string_view>
 
 #include "core/util/status.h"
 
@@ -64,5 +65,10 @@ DepthPng16Scaling ChooseDepthPng16Scaling(const cv::Mat& depth_um);
 
 // MD5 (RFC 1321) of a byte buffer as 32 lower-case hex digits, as x3p records it.
 std::string Md5Hex(const void* data, size_t size);
+
+// Text for XML or HTML element content and attribute values: & < > " ' as character references
+// (&#39; for the apostrophe, which XML and every HTML version read). The x3p comment and the
+// HTML report's text (server/results) both use it.
+std::string XmlEscape(std::string_view text);
 
 }  // namespace inspection

@@ -12,6 +12,8 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/sff/internal/depth_plane_kernel.h"
+
 namespace inspection {
 namespace {
 
@@ -32,58 +34,6 @@ void CoordinateStats(int len, int r, std::vector<double>* mean, std::vector<doub
     const double n = 2.0 * r + 1.0;
     (*mean)[size_t(p)] = s / n;
     (*var)[size_t(p)] = std::max(s2 / n - (s / n) * (s / n), 0.0);
-  }
-}
-
-#if defined(__clang__) || !defined(__x86_64__)
-#define INSPECT_PLANE_KERNEL
-#else
-#define INSPECT_PLANE_KERNEL __attribute__((target_clones("avx2", "default")))
-#endif
-
-// The window sums of FitLocalDepthPlanes, one plane array per quantity so that the row loops
-// vectorise (with the NaN test as a select, not a branch): the same operations in the same
-// order as the per-pixel loops they replaced, so the sums are the same to the last bit.
-struct PlaneSums {
-  double* q[5];  // d, d^2, x d, y d, NaN count
-};
-
-// Adds (sign +1) or removes (-1) one depth row to the column sums.
-INSPECT_PLANE_KERNEL void AddDepthRow(const float* __restrict s, int w, double centre, double cx0, double yc,
-                                      double sign, double* __restrict c0, double* __restrict c1,
-                                      double* __restrict c2, double* __restrict c3, double* __restrict c4) {
-  for (int x = 0; x < w; ++x) {
-    // Both sides computed, then selected: no branch, so the loop vectorises (a NaN or inf
-    // depth's d is computed and dropped).
-    const double v = s[x], dv = v - centre;
-    const bool finite = v - v == 0.0;  // std::isfinite (inf - inf and NaN - NaN are NaN)
-    const double d = finite ? dv : 0.0;
-    c0[x] += sign * d;
-    c1[x] += sign * d * d;
-    c2[x] += sign * (x - cx0) * d;
-    c3[x] += sign * yc * d;
-    c4[x] += finite ? 0.0 : sign;
-  }
-}
-
-// One output row from the prefix sums over the extended row (lo at x, hi at x + 2r + 1);
-// mean_xc: the window's mean x relative to the image centre, my the same for y.
-INSPECT_PLANE_KERNEL void PlaneRow(const PlaneSums& prefix, int w, int r, double n, const double* __restrict mean_xc,
-                                   const double* __restrict var_x, double my, double vy, float* __restrict o,
-                                   float* __restrict sx, float* __restrict sy) {
-  const double *p0 = prefix.q[0], *p1 = prefix.q[1], *p2 = prefix.q[2], *p3 = prefix.q[3], *p4 = prefix.q[4];
-  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
-  const int span = 2 * r + 1;
-  for (int x = 0; x < w; ++x) {
-    const bool holes = p4[x + span] - p4[x] > 0.5;
-    const double m = (p0[x + span] - p0[x]) / n;
-    const double var_d = (p1[x + span] - p1[x]) / n - m * m;
-    const double cx = (p2[x + span] - p2[x]) / n - mean_xc[x] * m;
-    const double cy = (p3[x + span] - p3[x]) / n - my * m;
-    const double res = var_d - cx * cx / var_x[x] - cy * cy / vy;
-    o[x] = holes ? inf : float(std::sqrt(std::max(res, 0.0)));
-    sx[x] = holes ? nan : float(cx / var_x[x]);
-    sy[x] = holes ? nan : float(cy / vy);
   }
 }
 
@@ -143,6 +93,8 @@ Status FitLocalDepthPlanes(const cv::Mat& raw_depth_um, int radius_px, LocalDept
   std::vector<int> xmap(size_t(w + 2 * r));  // extended position -> mirrored column
   for (int i = 0; i < w + 2 * r; ++i) xmap[size_t(i)] = cv::borderInterpolate(i - r, w, kBorder);
 
+  // The row kernels: per instruction set, picked at run time (core/sff/internal/depth_plane_kernel.h).
+  const depth_plane_kernel::PlaneKernels& kernel = depth_plane_kernel::PickPlaneKernels();
   // mean_x relative to the image centre, as the sums' x is.
   std::vector<double> mean_xc(size_t(w), 0.0);
   for (int x = 0; x < w; ++x) mean_xc[size_t(x)] = mean_x[size_t(x)] - cx0;
@@ -152,10 +104,10 @@ Status FitLocalDepthPlanes(const cv::Mat& raw_depth_um, int radius_px, LocalDept
       [&](const cv::Range& band) {
         const size_t ext = size_t(w + 2 * r + 1);
         std::vector<double> col(size_t(kQ) * w, 0.0), prefix(size_t(kQ) * ext, 0.0);
-        PlaneSums c, p;
+        depth_plane_kernel::PlaneSums c, p;
         for (int q = 0; q < kQ; ++q) c.q[q] = &col[size_t(q) * w], p.q[q] = &prefix[size_t(q) * ext];
         auto add_row = [&](int row, double sign) {
-          AddDepthRow(raw_depth_um.ptr<float>(row), w, centre, cx0, row - cy0, sign, c.q[0], c.q[1], c.q[2], c.q[3],
+          kernel.add_depth_row(raw_depth_um.ptr<float>(row), w, centre, cx0, row - cy0, sign, c.q[0], c.q[1], c.q[2], c.q[3],
                       c.q[4]);
         };
         for (int k = band.start - r; k <= band.start + r; ++k) add_row(cv::borderInterpolate(k, h, kBorder), 1.0);
@@ -178,7 +130,7 @@ Status FitLocalDepthPlanes(const cv::Mat& raw_depth_um, int radius_px, LocalDept
               p4[i + 1] = p4[i] + c4[xi];
             }
           }
-          PlaneRow(p, w, r, n, mean_xc.data(), var_x.data(), mean_y[size_t(y)] - cy0, var_y[size_t(y)],
+          kernel.plane_row(p, w, r, n, mean_xc.data(), var_x.data(), mean_y[size_t(y)] - cy0, var_y[size_t(y)],
                    out.ptr<float>(y), plane->slope_x.ptr<float>(y), plane->slope_y.ptr<float>(y));
         }
       },

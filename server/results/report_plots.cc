@@ -9,6 +9,8 @@
 #include <limits>
 #include <utility>
 
+#include "core/io/depth_export.h"
+
 namespace inspection {
 namespace {
 
@@ -120,32 +122,8 @@ std::vector<std::pair<int, int>> FiniteRuns(const v1::ProfileResult& p, int n) {
 
 }  // namespace
 
-std::string HtmlEscape(std::string_view text) {
-  std::string out;
-  out.reserve(text.size());
-  for (char c : text) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      case '\'':
-        out += "&#39;";
-        break;
-      default:
-        out += c;
-    }
-  }
-  return out;
-}
+// One escaping for the x3p comment and the report (core/io/depth_export.h).
+std::string HtmlEscape(std::string_view text) { return XmlEscape(text); }
 
 std::string FormatFixed(double value, int decimals) {
   return ToChars(value, std::chars_format::fixed, std::clamp(decimals, 0, 12));
