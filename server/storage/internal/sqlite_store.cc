@@ -853,6 +853,10 @@ StatusOr<std::vector<QueuedWork>> SqliteDataStore::EndedWork() {
     w.job_id = st.ColumnText(0);
     w.stack_dir = st.ColumnText(1);
     out.push_back(std::move(w));
+  }
+  return out;
+}
+
 Status SqliteDataStore::PutStudy(const v1::Study& study) {
   std::lock_guard<std::mutex> lock(mu_);
   Stmt st(db_, "INSERT OR REPLACE INTO studies(study_id, recipe_id, finish_ns, study) VALUES(?,?,?,?)");
