@@ -51,9 +51,10 @@ struct ChainRegistrationOptions {
   // Most stacks do not move, and their decision should cost next to nothing: a quick pass first
   // registers at most quick_max_pairs pairs of frames `stride` apart (the chain still spans the
   // stack, so motion anywhere accumulates into it) on frames shrunk to quick_max_side_px, one
-  // pyramid level fewer. When it calls the stack still (the same test and floor) that is the
-  // answer; otherwise (moving, a pair failing or out of line) the full chain runs as if it had
-  // not. What the quick pass cannot see is one frame out of line between two it samples.
+  // pyramid level fewer. When its accumulated transforms move no corner by min_motion_px that
+  // is the answer (still); otherwise (more motion, a pair failing or out of line) the full chain
+  // runs as if it had not and decides with the still test. What the quick pass cannot see is
+  // one frame out of line between two it samples.
   bool quick_still_check = true;
   int quick_max_side_px = 256;
   int quick_max_pairs = 12;
