@@ -109,6 +109,40 @@ json ProtoJson(const google::protobuf::Message& message) {
 
 void PrintJsonLine(const json& j) { std::cout << j.dump() << '\n' << std::flush; }
 
+void PrintAlignment(const v1::DepthSummary& d) {
+  // Never silent: whatever ran (also none, and why the default fell back to it), how the
+  // transforms were found and each frame's transform, applied or (still stack) not.
+  if (d.alignment() == v1::FRAME_ALIGNMENT_UNSPECIFIED) return;
+  const v1::AlignmentDetail& a = d.alignment_detail();
+  if (d.alignment() == v1::FRAME_ALIGNMENT_NONE) {
+    std::cout << "alignment: none";
+    if (!a.fallback_reason().empty()) std::cout << " (the default fell back to none: " << a.fallback_reason() << ')';
+    std::cout << '\n';
+    return;
+  }
+  const char* name = d.alignment() == v1::FRAME_ALIGNMENT_ESTIMATE ? "estimate" : "calibrated";
+  const std::string method = a.method().empty() ? std::string() : ", method " + a.method();
+  if (a.still()) {
+    std::cout << Format("alignment: %s%s, still: frames used as captured (measured scale change up to %.3f %%, "
+                        "shift up to %.2f px",
+                        name, method.c_str(), d.alignment_max_scale_change_percent(), d.alignment_max_shift_px());
+    if (a.still_threshold() > 0.0) {
+      std::cout << Format(", corner motion %.2f px, still statistic %.2f against %.2f", a.max_corner_displacement_px(),
+                          a.still_statistic(), a.still_threshold());
+    }
+    std::cout << ")\n";
+  } else {
+    std::cout << Format("alignment: %s, scale change up to %.2f %%, shift up to %.2f px, seen by every frame %.1f %%%s\n",
+                        name, d.alignment_max_scale_change_percent(), d.alignment_max_shift_px(),
+                        d.alignment_seen_percent(), method.c_str());
+  }
+  for (const v1::FrameTransform& f : a.frames()) {
+    std::cout << Format("  frame %d%s: scale %.5f, rotation %.4f deg, shift %.2f, %.2f px\n", f.frame(),
+                        f.frame() == a.reference_frame() ? " (reference)" : "", f.scale(), f.rotation_deg(),
+                        f.shift_x_px(), f.shift_y_px());
+  }
+}
+
 void PrintDepthSummary(const v1::DepthSummary& d) {
   // pixel_size_um 0: the stack had no scale (an image folder without --pixel-size).
   const std::string scale =
@@ -142,12 +176,7 @@ void PrintDepthSummary(const v1::DepthSummary& d) {
       std::cout << Format(", threshold %.2f", d.isff_fast_threshold());
     std::cout << Format(", frames searched %.0f %%", 100.0 * d.frames_searched_fraction()) << '\n';
   }
-  // Lateral alignment: shown when frames were aligned.
-  if (d.alignment() == v1::FRAME_ALIGNMENT_ESTIMATE || d.alignment() == v1::FRAME_ALIGNMENT_CALIBRATED) {
-    std::cout << "alignment: " << (d.alignment() == v1::FRAME_ALIGNMENT_ESTIMATE ? "estimate" : "calibrated")
-              << Format(", scale change up to %.2f %%, shift up to %.2f px, seen by every frame %.1f %%\n",
-                        d.alignment_max_scale_change_percent(), d.alignment_max_shift_px(), d.alignment_seen_percent());
-  }
+  PrintAlignment(d);
   if (d.consistency_rejected_percent() > 0.0 || d.filled_percent() > 0.0) {
     std::cout << Format("post-processing: %.1f %% rejected by the depth consistency check, %.1f %% filled\n",
                         d.consistency_rejected_percent(), d.filled_percent());

@@ -62,6 +62,9 @@ void PrintJsonLine(const json& j);
 
 // "depth: WxH px ...", and the error against ground truth when the server had one.
 void PrintDepthSummary(const v1::DepthSummary& d);
+// The alignment line of a depth summary (none and the default's fallback reason included) and
+// one line per frame with its transform.
+void PrintAlignment(const v1::DepthSummary& d);
 // "inspection: recipe R v2, part P, station S: NOT_OK", then one line per measurement: name,
 // parameter, value and unit, U (k = 2), coverage, verdict, and the reason when not OK.
 void PrintInspection(const v1::InspectionResult& inspection);

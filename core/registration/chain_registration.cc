@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 
@@ -23,6 +24,9 @@ Status ChainRegistrationOptions::Validate() const {
   }
   if (!(max_pair_outlier_px > 0)) return Status::InvalidArgument("max_pair_outlier_px must be > 0");
   if (!(min_motion_px >= 0)) return Status::InvalidArgument("min_motion_px must be >= 0");
+  if (quick_max_side_px < 32) return Status::InvalidArgument("quick_max_side_px must be >= 32");
+  if (quick_max_pairs < 3) return Status::InvalidArgument("quick_max_pairs must be >= 3");
+  if (threads < 0) return Status::InvalidArgument("threads must be >= 0");
   return Status::Ok();
 }
 
@@ -65,10 +69,31 @@ std::vector<cv::Mat> GradientPyramid(const cv::Mat& frame, double f, const Chain
     small = grey;
   }
   if (o.gradient_sigma_px > 0) cv::GaussianBlur(small, small, cv::Size(), o.gradient_sigma_px);
-  cv::Mat gx, gy, mag;
-  cv::Sobel(small, gx, CV_32F, 1, 0);
-  cv::Sobel(small, gy, CV_32F, 0, 1);
-  cv::magnitude(gx, gy, mag);
+  using Image = ChainRegistrationOptions::Image;
+  cv::Mat mag;
+  if (o.image == Image::kGradient || o.image == Image::kNormalisedGradient) {
+    cv::Mat gx, gy;
+    cv::Sobel(small, gx, CV_32F, 1, 0);
+    cv::Sobel(small, gy, CV_32F, 0, 1);
+    cv::magnitude(gx, gy, mag);
+  } else {
+    mag = small;
+  }
+  if (o.image == Image::kNormalisedGradient) {
+    cv::Mat local;
+    cv::GaussianBlur(mag, local, cv::Size(), o.normalise_sigma_px);
+    cv::Scalar mean = cv::mean(local);
+    cv::divide(mag, local + 1e-3 * (mean[0] + 1e-6), mag);
+  } else if (o.image == Image::kNormalisedIntensity) {
+    cv::Mat mu, sq, var;
+    cv::GaussianBlur(mag, mu, cv::Size(), o.normalise_sigma_px);
+    cv::GaussianBlur(mag.mul(mag), sq, cv::Size(), o.normalise_sigma_px);
+    var = sq - mu.mul(mu);
+    cv::max(var, 0.0, var);
+    cv::sqrt(var, var);
+    cv::Scalar mean = cv::mean(var);
+    cv::divide(mag - mu, var + 1e-2 * (mean[0] + 1e-6), mag);
+  }
   std::vector<cv::Mat> levels{mag};
   for (int k = 1; k < o.pyramid_levels && levels.back().cols >= 64 && levels.back().rows >= 64; ++k) {
     cv::Mat down;
@@ -140,6 +165,165 @@ double Median(std::vector<double> v) {
   return v[m];
 }
 
+// One chain of frames (indices idx, in order) registered pair by pair at working factor f.
+struct ChainPass {
+  std::vector<cv::Matx23d> pair;   // full resolution, pair[j]: frame idx[j-1] -> idx[j] (pair[0] identity)
+  std::vector<double> correlation;  // pair[0]: 1
+  int failures = 0;
+  std::string failed;  // "a->b (...)" of the failed pairs
+};
+
+std::string FrameSizeError(int i, cv::Size got, cv::Size want) {
+  return "frame " + std::to_string(i) + " is " + std::to_string(got.width) + "x" + std::to_string(got.height) +
+         ", frame 0 is " + std::to_string(want.width) + "x" + std::to_string(want.height) +
+         ": a stack's frames must have one size";
+}
+
+// Registers pairs j in [begin, end) of idx (pair j: idx[j-1] -> idx[j]), each started from the
+// previous pair's result (the run's first from the identity). `first` is idx[begin-1]'s pyramid
+// when the caller has it (else it is loaded).
+Status RunPairs(const std::function<StatusOr<cv::Mat>(int)>& load, const std::vector<int>& idx, size_t begin,
+                size_t end, cv::Size size, double f, const ChainRegistrationOptions& o,
+                std::vector<cv::Mat> first, ChainPass* pass) {
+  std::vector<cv::Mat> previous = std::move(first);
+  if (previous.empty()) {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(idx[begin - 1]));
+    if (frame.size() != size) return Status::InvalidArgument(FrameSizeError(idx[begin - 1], frame.size(), size));
+    previous = GradientPyramid(frame, f, o);
+  }
+  cv::Matx23d start = Identity();  // working-size coordinates
+  for (size_t j = begin; j < end; ++j) {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(idx[j]));
+    if (frame.channels() != 1) return Status::InvalidArgument("frame " + std::to_string(idx[j]) + " is not grey");
+    if (frame.size() != size) return Status::InvalidArgument(FrameSizeError(idx[j], frame.size(), size));
+    std::vector<cv::Mat> current = GradientPyramid(frame, f, o);
+    cv::Matx23d w;
+    double rho = 0;
+    bool ok = RegisterPair(previous, current, start, o, &w, &rho);
+    if ((!ok || rho < o.min_correlation) && start != Identity()) {
+      double rho_identity = 0;
+      cv::Matx23d w_identity;
+      if (RegisterPair(previous, current, Identity(), o, &w_identity, &rho_identity) &&
+          rho_identity > (ok ? rho : -1.0)) {
+        ok = true, w = w_identity, rho = rho_identity;
+      }
+    }
+    if (!ok || rho < o.min_correlation) {
+      pass->pair[j] = cv::Matx23d::zeros();  // marks the failure for RunChain
+      pass->correlation[j] = ok ? rho : 0.0;
+    } else {
+      pass->pair[j] = ToFullResolution(w, f);
+      pass->correlation[j] = rho;
+      start = w;
+    }
+    previous = std::move(current);
+  }
+  return Status::Ok();
+}
+
+// The chain over idx at factor f with `levels` pyramid levels, cut into runs over threads.
+Status RunChain(const std::function<StatusOr<cv::Mat>(int)>& load, const std::vector<int>& idx, cv::Size size,
+                double f, const ChainRegistrationOptions& o, const std::vector<cv::Mat>& first_pyramid,
+                ChainPass* pass) {
+  const size_t m = idx.size() - 1;
+  pass->pair.assign(idx.size(), Identity());
+  pass->correlation.assign(idx.size(), 1.0);
+  int threads = o.threads == 0 ? std::max(1, cv::getNumberOfCPUs()) : o.threads;
+  threads = int(std::min<size_t>(size_t(std::max(1, threads)), std::max<size_t>(1, m / 4)));  // runs of >= 4 pairs
+  std::vector<ChainPass> parts(size_t(threads), *pass);
+  std::vector<Status> status(size_t(threads), Status::Ok());
+  auto run = [&](int t) {
+    const size_t begin = 1 + m * size_t(t) / size_t(threads), end = 1 + m * size_t(t + 1) / size_t(threads);
+    status[size_t(t)] = RunPairs(load, idx, begin, end, size, f, o, t == 0 ? first_pyramid : std::vector<cv::Mat>(),
+                                 &parts[size_t(t)]);
+  };
+  if (threads == 1) {
+    run(0);
+  } else {
+    cv::parallel_for_(cv::Range(0, threads), [&](const cv::Range& r) {
+      for (int t = r.start; t < r.end; ++t) run(t);
+    }, threads);
+  }
+  for (int t = 0; t < threads; ++t) INSPECT_RETURN_IF_ERROR(status[size_t(t)]);
+  for (int t = 0; t < threads; ++t) {
+    const size_t begin = 1 + m * size_t(t) / size_t(threads), end = 1 + m * size_t(t + 1) / size_t(threads);
+    for (size_t j = begin; j < end; ++j) {
+      pass->pair[j] = parts[size_t(t)].pair[j];
+      pass->correlation[j] = parts[size_t(t)].correlation[j];
+      if (pass->pair[j] == cv::Matx23d::zeros()) {
+        pass->pair[j] = Identity();
+        ++pass->failures;
+        if (pass->failed.size() < 200) {
+          pass->failed += (pass->failed.empty() ? "" : ", ") + std::to_string(idx[j - 1]) + "->" +
+                          std::to_string(idx[j]) +
+                          (pass->correlation[j] > 0 ? " (correlation " + std::to_string(pass->correlation[j]).substr(0, 5) + ")"
+                                                     : " (did not converge)");
+        }
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+// Pairs whose corner motion is far from the median pair's ("a->b, ..."; empty when none).
+std::string Outliers(const std::vector<std::array<double, 8>>& d, const std::vector<int>& idx,
+                     const ChainRegistrationOptions& o) {
+  std::string outliers;
+  const size_t m = d.size();
+  for (int k = 0; k < 8; ++k) {
+    std::vector<double> v;
+    for (const auto& e : d) v.push_back(e[size_t(k)]);
+    const double med = Median(v);
+    std::vector<double> dev;
+    for (double x : v) dev.push_back(std::abs(x - med));
+    const double limit = o.max_pair_outlier_px + 6 * 1.4826 * Median(dev);
+    for (size_t j = 0; j < m; ++j) {
+      const std::string name = std::to_string(idx[j]) + "->" + std::to_string(idx[j + 1]);
+      if (std::abs(v[j] - med) > limit && outliers.find(name) == std::string::npos && outliers.size() < 200) {
+        outliers += (outliers.empty() ? "" : ", ") + name;
+      }
+    }
+  }
+  return outliers;
+}
+
+// Still test: is the mean pair motion distinguishable from zero given the pairs' spread? The
+// pairs' noise from successive differences (von Neumann's mean square successive difference): a
+// stack's motion varies smoothly from pair to pair (non-linear breathing), so the plain spread of
+// the pairs would count that variation as noise and hide a moving stack.
+double StillStatistic(const std::vector<std::array<double, 8>>& d) {
+  const int m = int(d.size());
+  double statistic = 0;
+  for (int k = 0; k < 8; ++k) {
+    double mean = 0, mssd = 0;
+    for (const auto& e : d) mean += e[size_t(k)];
+    mean /= m;
+    for (int j = 1; j < m; ++j) mssd += std::pow(d[size_t(j)][size_t(k)] - d[size_t(j - 1)][size_t(k)], 2);
+    const double sd = std::sqrt(mssd / (2.0 * std::max(1, m - 1)));
+    const double se = sd / std::sqrt(double(m));
+    const double t = se > 0 ? std::abs(mean) / se : (mean != 0 ? 1e9 : 0.0);
+    statistic = std::max(statistic, t);
+  }
+  return statistic;
+}
+
+// Pair transforms of the chain over idx composed onto idx[ref]: idx[j]'s frame_from_reference.
+std::vector<cv::Matx23d> Accumulate(const std::vector<cv::Matx23d>& pair, size_t ref) {
+  std::vector<cv::Matx23d> out(pair.size(), Identity());
+  for (size_t j = ref + 1; j < pair.size(); ++j) out[j] = Compose(pair[j], out[j - 1]);
+  for (size_t j = ref; j-- > 0;) out[j] = Compose(Invert(pair[j + 1]), out[j + 1]);
+  return out;
+}
+
+double MaxCorner(const std::vector<cv::Matx23d>& t, cv::Size size) {
+  double worst = 0;
+  for (const cv::Matx23d& m : t) {
+    const auto c = CornerDisplacement(m, size);
+    for (size_t k = 0; k < 8; k += 2) worst = std::max(worst, std::hypot(c[k], c[k + 1]));
+  }
+  return worst;
+}
+
 }  // namespace
 
 StatusOr<ChainRegistration> RegisterChain(const std::function<StatusOr<cv::Mat>(int)>& load, int n,
@@ -154,112 +338,91 @@ StatusOr<ChainRegistration> RegisterChain(const std::function<StatusOr<cv::Mat>(
   r.reference_frame = (n - 1) / 2;
   r.pair.assign(size_t(n), Identity());
   r.pair_correlation.assign(size_t(n), 1.0);
-  cv::Size size;
-  double f = 1.0;
-  std::vector<cv::Mat> previous;
-  std::string failed;
-  int failures = 0;
-  cv::Matx23d start = Identity();  // working-size coordinates
-  for (int i = 0; i < n; ++i) {
-    INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(i));
-    if (frame.channels() != 1) return Status::InvalidArgument("frame " + std::to_string(i) + " is not grey");
-    if (i == 0) {
-      size = frame.size();
-      if (size.width < 32 || size.height < 32) {
-        return Status::InvalidArgument("alignment needs frames of at least 32x32 px (frame 0 is " +
-                                       std::to_string(size.width) + "x" + std::to_string(size.height) + ")");
-      }
-      f = std::min(1.0, double(options.max_side_px) / std::max(size.width, size.height));
-    } else if (frame.size() != size) {
-      return Status::InvalidArgument("frame " + std::to_string(i) + " is " + std::to_string(frame.cols) + "x" +
-                                     std::to_string(frame.rows) + ", frame 0 is " + std::to_string(size.width) + "x" +
-                                     std::to_string(size.height) + ": a stack's frames must have one size");
-    }
-    std::vector<cv::Mat> current = GradientPyramid(frame, f, options);
-    if (i > 0) {
-      cv::Matx23d w;
-      double rho = 0;
-      bool ok = RegisterPair(previous, current, start, options, &w, &rho);
-      if ((!ok || rho < options.min_correlation) && start != Identity()) {
-        double rho_identity = 0;
-        cv::Matx23d w_identity;
-        if (RegisterPair(previous, current, Identity(), options, &w_identity, &rho_identity) &&
-            rho_identity > (ok ? rho : -1.0)) {
-          ok = true, w = w_identity, rho = rho_identity;
-        }
-      }
-      if (!ok || rho < options.min_correlation) {
-        ++failures;
-        if (failed.size() < 200) {
-          failed += (failed.empty() ? "" : ", ") + std::to_string(i - 1) + "->" + std::to_string(i) +
-                    (ok ? " (correlation " + std::to_string(rho).substr(0, 5) + ")" : " (did not converge)");
-        }
-      } else {
-        r.pair[size_t(i)] = ToFullResolution(w, f);
-        r.pair_correlation[size_t(i)] = rho;
-        start = w;
-      }
-    }
-    previous = std::move(current);
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat frame0, load(0));
+  if (frame0.channels() != 1) return Status::InvalidArgument("frame 0 is not grey");
+  const cv::Size size = frame0.size();
+  if (size.width < 32 || size.height < 32) {
+    return Status::InvalidArgument("alignment needs frames of at least 32x32 px (frame 0 is " +
+                                   std::to_string(size.width) + "x" + std::to_string(size.height) + ")");
   }
-  if (registered_pairs) *registered_pairs = n - 1 - failures;
-  if (failures > 0) {
-    return Status::FailedPrecondition("alignment could not register " + std::to_string(failures) + " of " +
-                                      std::to_string(n - 1) + " neighbouring frame pairs: " + failed +
-                                      " (too featureless or unrelated; --alignment none reconstructs unaligned)");
+  const double f = std::min(1.0, double(options.max_side_px) / std::max(size.width, size.height));
+  const int m = n - 1;
+
+  // Quick pass: sampled frames, smaller working size; its "still" is the answer.
+  ChainRegistrationOptions quick = options;
+  quick.pyramid_levels = std::max(1, options.pyramid_levels - 1);
+  const double fq = std::min(f, double(options.quick_max_side_px) / std::max(size.width, size.height));
+  const int stride = (m + options.quick_max_pairs - 1) / std::max(1, options.quick_max_pairs);
+  if (options.quick_still_check && (stride > 1 || fq < f)) {
+    std::vector<int> idx;
+    for (int i = 0; i < n; i += stride) idx.push_back(i);
+    if (idx.back() != n - 1) idx.push_back(n - 1);
+    ChainPass pass;
+    INSPECT_RETURN_IF_ERROR(RunChain(load, idx, size, fq, quick, GradientPyramid(frame0, fq, quick), &pass));
+    if (pass.failures == 0 && idx.size() >= 4) {
+      std::vector<std::array<double, 8>> d;
+      for (size_t j = 1; j < idx.size(); ++j) d.push_back(CornerDisplacement(pass.pair[j], size));
+      if (Outliers(d, idx, options).empty()) {
+        const double statistic = StillStatistic(d);
+        const double threshold = StudentTQuantile(options.still_false_positive_rate / 16.0, int(d.size()) - 1);
+        // The sampled frame nearest the middle is the quick chain's reference.
+        size_t ref = 0;
+        for (size_t j = 0; j < idx.size(); ++j)
+          if (std::abs(idx[j] - r.reference_frame) < std::abs(idx[ref] - r.reference_frame)) ref = j;
+        const std::vector<cv::Matx23d> sampled = Accumulate(pass.pair, ref);
+        const double corner = MaxCorner(sampled, size);
+        // Only the floor decides here: the quick pass's few, noisier pairs give the t-test little
+        // power, and a stack it cannot tell from still at several px of accumulated motion is
+        // for the full chain to decide.
+        if (corner < options.min_motion_px) {
+          r.still = true;
+          r.quick = true;
+          r.quick_stride = stride;
+          r.still_statistic = statistic;
+          r.still_threshold = threshold;
+          r.max_corner_displacement_px = corner;
+          // Per frame: the sampled frames' transforms, interpolated between them.
+          r.frame_from_reference.assign(size_t(n), Identity());
+          for (size_t j = 0; j + 1 < idx.size(); ++j) {
+            for (int i = idx[j]; i <= idx[j + 1]; ++i) {
+              const double t = double(i - idx[j]) / double(idx[j + 1] - idx[j]);
+              r.frame_from_reference[size_t(i)] = sampled[j] * (1 - t) + sampled[j + 1] * t;
+            }
+          }
+          if (registered_pairs) *registered_pairs = m;
+          return r;
+        }
+      }
+    }
+    r.quick_stride = stride;
   }
 
-  // Pairs against each other: corner displacements per pair.
-  const int m = n - 1;
+  std::vector<int> all(static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) all[size_t(i)] = i;
+  ChainPass pass;
+  INSPECT_RETURN_IF_ERROR(RunChain(load, all, size, f, options, GradientPyramid(frame0, f, options), &pass));
+  if (registered_pairs) *registered_pairs = m - pass.failures;
+  if (pass.failures > 0) {
+    return Status::FailedPrecondition("alignment could not register " + std::to_string(pass.failures) + " of " +
+                                      std::to_string(m) + " neighbouring frame pairs: " + pass.failed +
+                                      " (too featureless or unrelated; --alignment none reconstructs unaligned)");
+  }
+  r.pair = pass.pair;
+  r.pair_correlation = pass.correlation;
+
   std::vector<std::array<double, 8>> d;
   for (int i = 1; i < n; ++i) d.push_back(CornerDisplacement(r.pair[size_t(i)], size));
-  std::string outliers;
-  for (int k = 0; k < 8; ++k) {
-    std::vector<double> v;
-    for (const auto& e : d) v.push_back(e[size_t(k)]);
-    const double med = Median(v);
-    std::vector<double> dev;
-    for (double x : v) dev.push_back(std::abs(x - med));
-    const double limit = options.max_pair_outlier_px + 6 * 1.4826 * Median(dev);
-    for (int j = 0; j < m; ++j) {
-      const std::string name = std::to_string(j) + "->" + std::to_string(j + 1);
-      if (std::abs(v[size_t(j)] - med) > limit && outliers.find(name) == std::string::npos && outliers.size() < 200) {
-        outliers += (outliers.empty() ? "" : ", ") + name;
-      }
-    }
-  }
+  const std::string outliers = Outliers(d, all, options);
   if (!outliers.empty()) {
     return Status::FailedPrecondition("alignment: frame pairs " + outliers +
                                       " disagree with the rest of the chain (their motion is far from the other "
                                       "pairs'; a frame out of line or mis-registered)");
   }
-  // Still test: is the mean pair motion distinguishable from zero given the pairs' spread?
   r.still_threshold = StudentTQuantile(options.still_false_positive_rate / 16.0, m - 1);
-  // The pairs' noise from successive differences (von Neumann's mean square successive
-  // difference): a stack's motion varies smoothly from pair to pair (non-linear breathing), so the
-  // plain spread of the pairs would count that variation as noise and hide a moving stack.
-  for (int k = 0; k < 8; ++k) {
-    double mean = 0, mssd = 0;
-    for (const auto& e : d) mean += e[size_t(k)];
-    mean /= m;
-    for (int j = 1; j < m; ++j) mssd += std::pow(d[size_t(j)][size_t(k)] - d[size_t(j - 1)][size_t(k)], 2);
-    const double sd = std::sqrt(mssd / (2.0 * std::max(1, m - 1)));
-    const double se = sd / std::sqrt(double(m));
-    const double t = se > 0 ? std::abs(mean) / se : (mean != 0 ? 1e9 : 0.0);
-    r.still_statistic = std::max(r.still_statistic, t);
-  }
+  r.still_statistic = StillStatistic(d);
   r.still = r.still_statistic < r.still_threshold;
-
-  r.frame_from_reference.assign(size_t(n), Identity());
-  for (int i = r.reference_frame + 1; i < n; ++i)
-    r.frame_from_reference[size_t(i)] = Compose(r.pair[size_t(i)], r.frame_from_reference[size_t(i - 1)]);
-  for (int i = r.reference_frame - 1; i >= 0; --i)
-    r.frame_from_reference[size_t(i)] = Compose(Invert(r.pair[size_t(i + 1)]), r.frame_from_reference[size_t(i + 1)]);
-  for (const cv::Matx23d& t : r.frame_from_reference)
-    for (size_t k = 0; k < 8; k += 2) {
-      const auto c = CornerDisplacement(t, size);
-      r.max_corner_displacement_px = std::max(r.max_corner_displacement_px, std::hypot(c[k], c[k + 1]));
-    }
+  r.frame_from_reference = Accumulate(r.pair, size_t(r.reference_frame));
+  r.max_corner_displacement_px = MaxCorner(r.frame_from_reference, size);
   if (r.max_corner_displacement_px < options.min_motion_px) r.still = true;
   return r;
 }

@@ -20,8 +20,18 @@ struct ChainRegistrationOptions {
   int max_side_px = 512;
   int pyramid_levels = 3;  // 1..5, each halves the working size
   // Gaussian smoothing before the gradient magnitude (px of the working size): the gradient
-  // magnitude of neighbours at different defocus differs mostly in its finest detail.
+  // magnitude of neighbours at different defocus differs mostly in its finest detail. 3 px with
+  // the normalised gradient below called fewer still stacks of the simulated rig moving and put
+  // the PCB stack within 0.131 % / 1.05 px of ORB + RANSAC, but does not converge on 8 px pairs
+  // (chain_registration_test's 12 % / 150 px stack): not the default yet.
   double gradient_sigma_px = 1.5;
+  // What ECC registers: the gradient magnitude, the smoothed intensity, or either divided by its
+  // local mean / standard deviation (contrast-normalised over normalise_sigma_px of the working
+  // size), so that the frame's sharp band, which moves across a tilted or stepped surface from
+  // frame to frame, does not weigh more than the rest.
+  enum class Image { kGradient, kIntensity, kNormalisedGradient, kNormalisedIntensity };
+  Image image = Image::kGradient;
+  double normalise_sigma_px = 8.0;
   int max_iterations = 30;        // ECC iterations per level
   double epsilon = 1e-4;          // ECC convergence
   double min_correlation = 0.5;   // ECC correlation of a registered pair; below = not registered
@@ -38,6 +48,21 @@ struct ChainRegistrationOptions {
   // up to 0.3 px accumulated over 40 frames) that no statistic on the pairs can tell from motion,
   // and a warp that small costs more in resampling than it corrects.
   double min_motion_px = 1.0;
+  // Most stacks do not move, and their decision should cost next to nothing: a quick pass first
+  // registers at most quick_max_pairs pairs of frames `stride` apart (the chain still spans the
+  // stack, so motion anywhere accumulates into it) on frames shrunk to quick_max_side_px, one
+  // pyramid level fewer. When its accumulated transforms move no corner by min_motion_px that
+  // is the answer (still); otherwise (more motion, a pair failing or out of line) the full chain
+  // runs as if it had not and decides with the still test. What the quick pass cannot see is
+  // one frame out of line between two it samples.
+  bool quick_still_check = true;
+  int quick_max_side_px = 256;
+  int quick_max_pairs = 12;
+  // Frames prepared and pairs registered at once (0 = all hardware threads; 1 = in order, two
+  // frames in memory, load called once per frame in order). With more, load must be
+  // thread-safe: the chain is cut into contiguous runs, each started from the identity, and a
+  // run's first frame is loaded by its run and by the run before.
+  int threads = 1;
   Status Validate() const;
 };
 
@@ -51,9 +76,14 @@ struct ChainRegistration {
   double still_statistic = 0.0;                   // max |mean| / standard error over the corner coordinates
   double still_threshold = 0.0;                   // the statistic's critical value at the stated rate
   double max_corner_displacement_px = 0.0;        // of the accumulated transforms
+  // The quick pass decided (still): frame_from_reference holds its transforms for the frames it
+  // sampled, interpolated between them; pair and pair_correlation stay identity / 1.
+  bool quick = false;
+  int quick_stride = 0;  // frames apart in the quick pass (0: it did not run)
 };
 
-// load(i), i in [0, n): frame i (CV_8UC1, CV_16UC1 or CV_32FC1), called once per frame in order.
+// load(i), i in [0, n): frame i (CV_8UC1, CV_16UC1 or CV_32FC1), called in order (options.threads
+// 1): the quick pass's frames, then, unless it called the stack still, every frame once more.
 // INVALID_ARGUMENT: fewer than 3 frames, frames smaller than 32x32 px or of different sizes (naming
 // the frame); FAILED_PRECONDITION naming the frame pairs that could not be registered (featureless,
 // unrelated) or disagree with the chain.

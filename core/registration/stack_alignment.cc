@@ -368,6 +368,7 @@ StatusOr<StackAligner> StackAligner::FromTransforms(const std::vector<cv::Matx23
   a.warps_ = warps;
   a.figures_.still = !warps;
   a.figures_.frame_from_reference = a.maps_;
+  a.figures_.frame_size = frame_size;
   if (!a.warps_) {
     a.seen_.setTo(255);
     a.figures_.seen_by_every_frame_percent = 100.0;

@@ -119,8 +119,15 @@ struct AlignmentFigures {
   // Set when the default alignment fell back to none, and why (the CLI prints it).
   std::string fallback_reason;
   bool still = false;  // the transforms were measured and found indistinguishable from none
-  // Each frame's transform, reference grid -> frame pixels (empty for none).
+  // Chain only (ChainRegistration): the still test's statistic and critical value, and the
+  // largest corner displacement of the accumulated transforms (px).
+  double still_statistic = 0.0;
+  double still_threshold = 0.0;
+  double max_corner_displacement_px = 0.0;
+  // Each frame's transform, reference grid -> frame pixels (empty for none), and the frame size
+  // its similarity figures are taken about (SimilarityOf about the image centre).
   std::vector<cv::Matx23d> frame_from_reference;
+  cv::Size frame_size;
 };
 
 class StackAligner {

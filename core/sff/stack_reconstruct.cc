@@ -45,10 +45,11 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
       };
       // A rig's scan has metric z from the stage: the linear-in-z focus-breathing model is the
       // right prior there. An imported stack's z is nominal: a chain of neighbour registrations
-      // assumes nothing about it, but only when asked for (a.chain_for_imported_stacks) until the
-      // server, CLI and report carry its figures and its default no longer fails stacks the
-      // linear estimate reconstructs.
-      if (!a.chain_for_imported_stacks || !manifest.illumination.empty()) {
+      // assumes nothing about it (a.chain_for_imported_stacks).
+      // The default (fall_back_to_none) keeps the linear estimate for now: on still stacks of the
+      // simulated rig's tilted specimens the chain's still test calls 6 of 25 moving
+      // (docs/alignment.md), and an explicit request is the user's choice.
+      if (!a.chain_for_imported_stacks || a.fall_back_to_none || !manifest.illumination.empty()) {
         StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
         if (!estimate.ok()) {
           const StatusCode code = estimate.status().code();
@@ -65,28 +66,43 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
         if (figures) figures->fallback_reason = "a stack of fewer than 3 frames is not registered";
         return std::optional<StackAligner>();
       }
+      INSPECT_ASSIGN_OR_RETURN(cv::Mat first, source.grey(0));
+      if (a.fall_back_to_none && (first.cols < 32 || first.rows < 32)) {
+        // No measurement of motion is possible on frames this small: the default says so and
+        // reconstructs them as they are; an explicit request fails in RegisterChain.
+        if (figures) {
+          figures->fallback_reason = "frames of " + std::to_string(first.cols) + "x" + std::to_string(first.rows) +
+                                     " px are too small to register (alignment needs at least 32x32 px)";
+        }
+        return std::optional<StackAligner>();
+      }
       int registered_pairs = 0;
-      StatusOr<ChainRegistration> chain = RegisterChain(load, int(z_um.size()), a.chain, &registered_pairs);
+      // Frames a thread-safe source holds in memory (a.options.threads != 1, as for the linear
+      // estimate) register in runs concurrently.
+      ChainRegistrationOptions chain_options = a.chain;
+      if (a.options.threads != 1) chain_options.threads = a.options.threads;
+      StatusOr<ChainRegistration> chain = RegisterChain(load, int(z_um.size()), chain_options, &registered_pairs);
       if (!chain.ok()) {
-        // The default (not an explicit request) reconstructs unaligned when the chain cannot be
-        // registered, and says so in figures->fallback_reason (the job result and the CLI print it).
-        if (a.fall_back_to_none && chain.status().code() == StatusCode::kFailedPrecondition) {
-          if (figures) {
-            figures->fallback_reason = (registered_pairs == 0 ? "no frame pair could be registered: "
-                                                              : "the frame chain could not be registered: ") +
-                                       chain.status().message();
-          }
+        // The default (not an explicit request) reconstructs unaligned only when no pair
+        // registered (a featureless stack: no evidence of motion either way), and says so in
+        // figures->fallback_reason (the job result and the CLI print it). A stack some of whose
+        // pairs register may move: aligning it wrongly or not at all would both smear the depth
+        // map, so the job fails naming the pairs (--alignment none is the user's choice).
+        if (a.fall_back_to_none && chain.status().code() == StatusCode::kFailedPrecondition && registered_pairs == 0) {
+          if (figures) figures->fallback_reason = "no frame pair could be registered: " + chain.status().message();
           return std::optional<StackAligner>();
         }
         return chain.status();
       }
-      INSPECT_ASSIGN_OR_RETURN(cv::Mat first, source.grey(0));
       INSPECT_ASSIGN_OR_RETURN(StackAligner aligner,
                                StackAligner::FromTransforms(chain->frame_from_reference, chain->reference_frame,
                                                             a.alignment, first.size(), !chain->still));
       if (figures) {
         *figures = aligner.figures();
         figures->method = "chain";
+        figures->still_statistic = chain->still_statistic;
+        figures->still_threshold = chain->still_threshold;
+        figures->max_corner_displacement_px = chain->max_corner_displacement_px;
       }
       return std::optional<StackAligner>(std::move(aligner));
     }

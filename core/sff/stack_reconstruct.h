@@ -31,8 +31,9 @@ struct StackFolderAlignment {
   // kEstimate only: when no frame pair registers at all (a featureless stack: no evidence of
   // motion either way), reconstruct unaligned instead of failing (the server's default for
   // imported stacks; an explicit request fails). figures->alignment then says kNone and
-  // figures->fallback_reason why, naming the pairs; likewise when the chain cannot be registered.
-  // An explicit request fails instead, naming the frames.
+  // figures->fallback_reason why, naming the pairs; likewise (chain) for frames under 32x32 px or
+  // fewer than 3 frames. A chain some of whose pairs register but which cannot be aligned (pairs
+  // failing or disagreeing) fails either way, naming the pairs.
   bool fall_back_to_none = false;
   StackAlignmentOptions options;
   // kEstimate: imported stacks (a folder's z is nominal; stack.json names no illumination) are
@@ -41,8 +42,8 @@ struct StackFolderAlignment {
   // model estimated from its frames, as kCalibrated uses the calibrated one.
   ChainRegistrationOptions chain;
   // kEstimate on a stack whose stack.json names no illumination (imported): the chain instead
-  // of the linear-in-z estimate. Off by default (see stack_reconstruct.cc).
-  bool chain_for_imported_stacks = false;
+  // of the linear-in-z estimate (false: the linear-in-z estimate for every stack).
+  bool chain_for_imported_stacks = true;
 };
 
 // manifest: as read by ReadStackManifest(dir). on_frame may be empty. cancel is polled before

@@ -32,7 +32,32 @@ void FillPostProcess(const DepthPostProcessFigures& f, v1::DepthSummary* d) {
   d->set_filled_percent(100.0 * f.filled_fraction);
 }
 
-// The lateral alignment that ran and its figures (DepthSummary 22..25).
+// How the alignment was found, the still decision, the default's fallback reason and every
+// frame's transform (DepthSummary.alignment_detail).
+void FillAlignmentDetail(const AlignmentFigures& a, v1::AlignmentDetail* out) {
+  out->set_method(a.method);
+  out->set_still(a.still);
+  out->set_fallback_reason(a.fallback_reason);
+  out->set_reference_frame(a.reference_frame);
+  out->set_still_statistic(a.still_statistic);
+  out->set_still_threshold(a.still_threshold);
+  out->set_max_corner_displacement_px(a.max_corner_displacement_px);
+  const cv::Point2d centre((a.frame_size.width - 1) * 0.5, (a.frame_size.height - 1) * 0.5);
+  for (size_t i = 0; i < a.frame_from_reference.size(); ++i) {
+    const cv::Matx23d& m = a.frame_from_reference[i];
+    const SimilarityTransform t = SimilarityOf(m, centre);
+    v1::FrameTransform* f = out->add_frames();
+    f->set_frame(int(i));
+    f->set_scale(t.scale);
+    f->set_rotation_deg(t.rotation_rad * 180.0 / CV_PI);
+    f->set_shift_x_px(t.shift_x_px);
+    f->set_shift_y_px(t.shift_y_px);
+    for (int r = 0; r < 2; ++r)
+      for (int c = 0; c < 3; ++c) f->add_affine(m(r, c));
+  }
+}
+
+// The lateral alignment that ran and its figures (DepthSummary 22..25, alignment_detail).
 void FillAlignment(const AlignmentFigures& a, v1::DepthSummary* d) {
   switch (a.alignment) {
     case FrameAlignment::kNone:
@@ -48,6 +73,7 @@ void FillAlignment(const AlignmentFigures& a, v1::DepthSummary* d) {
   d->set_alignment_max_scale_change_percent(a.max_scale_change_percent);
   d->set_alignment_max_shift_px(a.max_shift_px);
   d->set_alignment_seen_percent(a.seen_by_every_frame_percent);
+  FillAlignmentDetail(a, d->mutable_alignment_detail());
 }
 
 }  // namespace

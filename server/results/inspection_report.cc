@@ -212,6 +212,36 @@ std::string Row(const std::string& key, const std::string& value_html) {
   return "<tr><th>" + key + "</th><td>" + value_html + "</td></tr>";
 }
 
+// The frame alignment that ran: none (with the default's fallback reason), or how the transforms
+// were found, still or warped, and each frame's transform in a nested table.
+std::string AlignmentRow(const v1::DepthSummary& d) {
+  if (d.alignment() == v1::FRAME_ALIGNMENT_UNSPECIFIED) return "";
+  const v1::AlignmentDetail& a = d.alignment_detail();
+  std::string text = HtmlEscape(EnumShortName(v1::FrameAlignment_Name(d.alignment()), "FRAME_ALIGNMENT_"));
+  if (d.alignment() == v1::FRAME_ALIGNMENT_NONE) {
+    if (!a.fallback_reason().empty()) text += " (the default fell back to none: " + HtmlEscape(a.fallback_reason()) + ")";
+    return Row("Frame alignment", text);
+  }
+  if (!a.method().empty()) text += " (" + HtmlEscape(a.method()) + ")";
+  text += a.still() ? ": still, frames used as captured; measured max scale change "
+                    : ": max scale change ";
+  text += FormatFixed(d.alignment_max_scale_change_percent(), 3) + " %, max shift " +
+          FormatFixed(d.alignment_max_shift_px(), 2) + " px, seen by all " + FormatFixed(d.alignment_seen_percent(), 1) +
+          " %";
+  if (a.frames_size() > 0) {
+    text += "<table class=\"alignment-frames\"><tr><th>frame</th><th>scale</th><th>rotation (°)</th>"
+            "<th>shift x (px)</th><th>shift y (px)</th></tr>";
+    for (const v1::FrameTransform& f : a.frames()) {
+      text += "<tr><td>" + std::to_string(f.frame()) + (f.frame() == a.reference_frame() ? " (reference)" : "") +
+              "</td><td class=\"num\">" + FormatFixed(f.scale(), 5) + "</td><td class=\"num\">" +
+              FormatFixed(f.rotation_deg(), 4) + "</td><td class=\"num\">" + FormatFixed(f.shift_x_px(), 2) +
+              "</td><td class=\"num\">" + FormatFixed(f.shift_y_px(), 2) + "</td></tr>";
+    }
+    text += "</table>";
+  }
+  return Row("Frame alignment", text);
+}
+
 std::string OrDash(const std::string& text) { return text.empty() ? "—" : HtmlEscape(text); }
 
 std::string Seconds(double s) { return FormatFixed(s, s < 10 ? 2 : 1) + " s"; }
@@ -281,13 +311,7 @@ std::string ScanMetadataTable(const v1::DepthSummary& d, const cv::Mat& depth_um
     html += Row("Frame noise σ", FormatSignificant(d.frame_noise_sigma(), 4) + " grey levels");
   if (d.frames_searched_fraction() > 0)
     html += Row("Frames searched per pixel", FormatFixed(100.0 * d.frames_searched_fraction(), 1) + " %");
-  if (d.alignment() != v1::FRAME_ALIGNMENT_UNSPECIFIED) {
-    html +=
-        Row("Frame alignment", HtmlEscape(EnumShortName(v1::FrameAlignment_Name(d.alignment()), "FRAME_ALIGNMENT_")) +
-                                   ": max scale change " + FormatFixed(d.alignment_max_scale_change_percent(), 3) +
-                                   " %, max shift " + FormatFixed(d.alignment_max_shift_px(), 2) + " px, seen by all " +
-                                   FormatFixed(d.alignment_seen_percent(), 1) + " %");
-  }
+  html += AlignmentRow(d);
   if (d.has_z_range_search()) {
     const v1::ZRangeSearchResult& z = d.z_range_search();
     html += Row("Automatic z range",

@@ -6,7 +6,19 @@
 //                                 renderer of its own (band-limited noise surface, per-pixel
 //                                 depth-dependent Gaussian defocus, sensor noise; no devices/sim code)
 //   chain-evaluate drift <count> <px> [seed]  detection rate on the same renderer's stacks drifting px in total
+//   chain-evaluate renderers <count> [seed]  the still test on still and moving stacks of four
+//                                 renderers sharing no code: the simulated rig (devices/sim), the
+//                                 natural-scene renderer (devices/sim/natural_scene), the lens
+//                                 renderer (chain_lens_renderer.h) and the noise renderer above;
+//                                 a table of stacks warped (false positives) and moving ones detected
+//   chain-evaluate speed [frames] [width] [height]  what the alignment costs against the engine in
+//                                 the same run: a still and a moving stack of the lens renderer,
+//                                 reconstructed with alignment none and with the default estimate
+#include <atomic>
 #include <chrono>
+#include <cstdlib>
+#include <functional>
+#include <memory>
 #include <cstdio>
 #include <filesystem>
 #include <opencv2/calib3d.hpp>
@@ -18,6 +30,10 @@
 
 #include "core/registration/chain_registration.h"
 #include "core/registration/frame_registration.h"
+#include "core/sff/stack_reconstruct.h"
+#include "devices/sim/natural_scene.h"
+#include "devices/sim/simulated_rig.h"
+#include "tests/bench/chain_lens_renderer.h"
 
 using namespace inspection;
 
@@ -68,6 +84,8 @@ std::vector<cv::Mat> RenderStack(unsigned seed, int n, cv::Size size, double dri
   return frames;
 }
 
+ChainRegistrationOptions ChainOptionsFromEnvironment();
+
 int Pcb(const std::string& dir) {
   std::vector<std::filesystem::path> files;
   for (const auto& e : std::filesystem::directory_iterator(dir))
@@ -77,7 +95,7 @@ int Pcb(const std::string& dir) {
   for (const auto& f : files) grey.push_back(cv::imread(f.string(), cv::IMREAD_GRAYSCALE));
   const int n = int(grey.size());
   const auto t0 = std::chrono::steady_clock::now();
-  auto r = RegisterChain([&](int i) -> StatusOr<cv::Mat> { return grey[size_t(i)]; }, n, {});
+  auto r = RegisterChain([&](int i) -> StatusOr<cv::Mat> { return grey[size_t(i)]; }, n, ChainOptionsFromEnvironment());
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!r.ok()) {
     std::printf("chain failed: %s\n", r.status().ToString().c_str());
@@ -153,6 +171,246 @@ int Rate(int count, double drift_px, unsigned seed_base) {
   return 0;
 }
 
+// ---- renderers: false positives on still stacks and detection on moving ones, per renderer.
+
+// Motion applied to a stack: total scale change, shift (x, y px) and rotation over the stack.
+struct Motion {
+  double scale = 0, sx = 0, sy = 0, rot = 0;
+  bool any() const { return scale != 0 || sx != 0 || sy != 0 || rot != 0; }
+};
+
+// Frames resampled as a camera moving by `m` (non-linear in the frame index) would see them;
+// for renderers without motion of their own (the noise already in the frames moves with them).
+void Move(std::vector<cv::Mat>* frames, const Motion& m) {
+  if (!m.any()) return;
+  const int n = int(frames->size());
+  const cv::Point2d c(((*frames)[0].cols - 1) * 0.5, ((*frames)[0].rows - 1) * 0.5);
+  for (int k = 0; k < n; ++k) {
+    const double u = double(k) / (n - 1);
+    SimilarityTransform t;
+    t.scale = 1 + m.scale * std::pow(u, 1.3);
+    t.rotation_rad = m.rot * u;
+    t.shift_x_px = m.sx * u;
+    t.shift_y_px = m.sy * u;
+    cv::Mat out;
+    cv::warpAffine((*frames)[size_t(k)], out, FrameFromReference(t, c), (*frames)[size_t(k)].size(),
+                   cv::INTER_CUBIC | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT_101);
+    (*frames)[size_t(k)] = out;
+  }
+}
+
+StatusOr<std::vector<cv::Mat>> RigStack(unsigned seed, const Motion& m) {
+  cv::RNG rng(seed * 7919u + 3u);
+  SimulatedRigOptions o;
+  static const char* kSpecimens[] = {"skew5", "skew10", "step1um", "wedge", "chamfer", "cutter", "lens", "coin"};
+  o.seed = seed;
+  o.camera_size = cv::Size(320 + 32 * rng.uniform(0, 8), 240 + 24 * rng.uniform(0, 8));
+  // Rig motion is its own: magnification and drift per 100 um of z (the scan's span is
+  // 60..200 um, so scale/100 um = m.scale over ~100 um).
+  o.focus_breathing_percent_per_100um = 100.0 * m.scale;
+  o.lateral_drift_x_px_per_100um = m.sx;
+  o.lateral_drift_y_px_per_100um = m.sy;
+  std::unique_ptr<Rig> rig;
+  for (int tries = 0; tries < 6; ++tries) {
+    o.specimen = kSpecimens[(seed + unsigned(tries)) % 8];
+    auto r = CreateSimulatedRig(o);
+    if (r.ok()) {
+      rig = std::move(r).value();
+      break;
+    }
+  }
+  if (!rig) return Status::Internal("no simulated specimen could be created");
+  const ScanDefaults d = rig->scan_defaults();
+  INSPECT_RETURN_IF_ERROR(rig->projector().ShowUniform(128));
+  std::vector<cv::Mat> frames;
+  for (double z = d.z_start_um; z <= d.z_end_um + 1e-9 && frames.size() < 60; z += d.z_step_um) {
+    INSPECT_RETURN_IF_ERROR(rig->stage().MoveTo(z));
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, rig->camera().Capture());
+    frames.push_back(f);
+  }
+  return frames;
+}
+
+StatusOr<std::vector<cv::Mat>> NaturalStack(unsigned seed, const Motion& m) {
+  cv::RNG rng(seed * 104729u + 5u);
+  NaturalSceneOptions o;
+  o.seed = seed;
+  o.size = cv::Size(320 + 32 * rng.uniform(0, 8), 240 + 24 * rng.uniform(0, 8));
+  o.frames = 8 + rng.uniform(0, 33);
+  o.colour = false;
+  INSPECT_ASSIGN_OR_RETURN(NaturalScene s, RenderNaturalScene(o));
+  Move(&s.frames, m);
+  return s.frames;
+}
+
+StatusOr<std::vector<cv::Mat>> LensStackOf(unsigned seed, const Motion& m) {
+  cv::RNG rng(seed * 15485863u + 11u);
+  chain_bench::LensStackOptions o;
+  o.seed = seed;
+  o.size = cv::Size(320 + 32 * rng.uniform(0, 10), 240 + 24 * rng.uniform(0, 10));
+  o.frames = 8 + rng.uniform(0, 33);
+  o.scale_total = m.scale;
+  o.shift_x_total_px = m.sx;
+  o.shift_y_total_px = m.sy;
+  o.rotation_total_rad = m.rot;
+  return chain_bench::RenderLensStack(o).frames;
+}
+
+StatusOr<std::vector<cv::Mat>> NoiseStack(unsigned seed, const Motion& m) {
+  cv::RNG rng(seed * 7919u);
+  const int n = 8 + rng.uniform(0, 33);
+  const cv::Size size(320 + 32 * rng.uniform(0, 10), 240 + 24 * rng.uniform(0, 10));
+  std::vector<cv::Mat> frames = RenderStack(seed, n, size, 0.0);
+  Move(&frames, m);
+  return frames;
+}
+
+// CHAIN_IMAGE = gradient | intensity | ngradient | nintensity, CHAIN_SIGMA, CHAIN_NORM_SIGMA:
+// the registration's image, for comparing them on the same stacks.
+ChainRegistrationOptions ChainOptionsFromEnvironment() {
+  ChainRegistrationOptions o;
+  if (const char* e = std::getenv("CHAIN_IMAGE")) {
+    const std::string v = e;
+    using Image = ChainRegistrationOptions::Image;
+    o.image = v == "intensity" ? Image::kIntensity
+              : v == "ngradient" ? Image::kNormalisedGradient
+              : v == "nintensity" ? Image::kNormalisedIntensity
+                                  : Image::kGradient;
+  }
+  if (const char* e = std::getenv("CHAIN_SIGMA")) o.gradient_sigma_px = std::atof(e);
+  if (const char* e = std::getenv("CHAIN_NORM_SIGMA")) o.normalise_sigma_px = std::atof(e);
+  if (const char* e = std::getenv("CHAIN_QUICK")) o.quick_still_check = std::atoi(e) != 0;
+  return o;
+}
+
+struct Tally {
+  int stacks = 0, moving = 0, failed = 0;
+  double worst_ratio = 0, seconds = 0;
+};
+
+void Decide(const std::function<StatusOr<std::vector<cv::Mat>>(unsigned, const Motion&)>& render, unsigned seed,
+            const Motion& m, Tally* t, const char* name) {
+  auto frames = render(seed, m);
+  ++t->stacks;
+  if (!frames.ok()) {
+    ++t->failed;
+    std::printf("  %s seed %u: render failed: %s\n", name, seed, frames.status().ToString().c_str());
+    return;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  auto r = RegisterChain([&](int i) -> StatusOr<cv::Mat> { return (*frames)[size_t(i)]; }, int(frames->size()),
+                         ChainOptionsFromEnvironment());
+  t->seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!r.ok()) {
+    ++t->failed;
+    std::printf("  %s seed %u (%zu frames%s): %s\n", name, seed, frames->size(), m.any() ? ", moving" : ", still",
+                r.status().ToString().c_str());
+    return;
+  }
+  t->worst_ratio = std::max(t->worst_ratio, r->still_statistic / r->still_threshold);
+  if (!r->still) ++t->moving;
+  if (!r->still && !m.any()) {
+    std::printf("  %s seed %u (%zu frames): still stack warped: statistic %.2f threshold %.2f corner %.2f px\n", name,
+                seed, frames->size(), r->still_statistic, r->still_threshold, r->max_corner_displacement_px);
+  }
+  if (r->still && m.any()) {
+    std::printf("  %s seed %u (%zu frames): moving stack called still: statistic %.2f threshold %.2f corner %.2f px\n",
+                name, seed, frames->size(), r->still_statistic, r->still_threshold, r->max_corner_displacement_px);
+  }
+}
+
+int Renderers(int count, unsigned seed_base) {
+  struct Renderer {
+    const char* name;
+    std::function<StatusOr<std::vector<cv::Mat>>(unsigned, const Motion&)> render;
+  };
+  const std::vector<Renderer> renderers = {
+      {"simulated rig", RigStack}, {"natural scene", NaturalStack}, {"lens (own)", LensStackOf}, {"noise (own)", NoiseStack}};
+  // Small: a few px at the corners over the stack; typical: a focus rail's breathing and drift.
+  // The rig's motion is per 100 um of z (its scans span ~60..200 um).
+  const Motion small{0.002, 2.0, -1.0, 0.0}, typical{0.03, 30.0, -12.0, 0.002};
+  std::printf("| renderer | still stacks | warped (false positive) | still failed | max statistic/threshold | "
+              "small motion detected | typical motion detected | moving failed | s per stack |\n|---|---|---|---|---|---|---|---|---|\n");
+  std::fflush(stdout);
+  std::vector<std::string> rows;
+  const char* only = std::getenv("CHAIN_RENDERER");  // a substring of the renderer's name
+  for (const Renderer& r : renderers) {
+    if (only && std::string(r.name).find(only) == std::string::npos) continue;
+    Tally still, little, big;
+    for (int i = 0; i < count; ++i) {
+      const unsigned seed = seed_base + unsigned(i);
+      Decide(r.render, seed, Motion{}, &still, r.name);
+      if (std::getenv("CHAIN_STILL_ONLY")) continue;
+      Decide(r.render, seed, small, &little, r.name);
+      Decide(r.render, seed, typical, &big, r.name);
+    }
+    char row[512];
+    std::snprintf(row, sizeof row, "| %s | %d | %d (%.1f %%) | %d | %.2f | %d/%d | %d/%d | %d | %.2f |", r.name,
+                  still.stacks, still.moving, 100.0 * still.moving / std::max(1, still.stacks), still.failed,
+                  still.worst_ratio, little.moving, little.stacks, big.moving, big.stacks, little.failed + big.failed,
+                  (still.seconds + little.seconds + big.seconds) / std::max(1, 3 * count));
+    rows.push_back(row);
+    std::printf("%s\n", row);
+    std::fflush(stdout);
+  }
+  std::printf("\nseeds %u..%u; small motion: scale 0.2 %%, shift (2, -1) px over the stack (rig: per 100 um of z); "
+              "typical: scale 3 %%, shift (30, -12) px, rotation 2 mrad (rig: no rotation)\n",
+              seed_base, seed_base + unsigned(count) - 1);
+  for (const auto& row : rows) std::printf("%s\n", row.c_str());
+  return 0;
+}
+
+// ---- speed: the alignment decision and the warp against the engine, same run.
+
+int Speed(int n, cv::Size size) {
+  std::printf("lens renderer, %d x %dx%d, 8-bit grey, frames in memory\n", n, size.width, size.height);
+  std::printf("| stack | engine, alignment none (s) | default estimate (s) | chain registration alone (s) | extra | decision |\n|---|---|---|---|---|---|\n");
+  for (int moving = 0; moving < 2; ++moving) {
+    chain_bench::LensStackOptions o;
+    o.size = size;
+    o.frames = n;
+    o.seed = 77;
+    if (moving) o.scale_total = 0.03, o.shift_x_total_px = 30, o.shift_y_total_px = -12;
+    const chain_bench::LensStack s = chain_bench::RenderLensStack(o);
+    StackManifest manifest;
+    for (int i = 0; i < n; ++i) manifest.frames.push_back({"frame_" + std::to_string(i) + ".png", double(i), 0.0, ""});
+    StackFrameSource source;
+    source.frame = [&](int i) -> StatusOr<cv::Mat> { return s.frames[size_t(i)]; };
+    const std::atomic<bool> cancel{false};
+    SffOptions sff;
+    StackFolderAlignment none, estimate;
+    estimate.alignment = FrameAlignment::kEstimate;
+    estimate.fall_back_to_none = true;
+    estimate.options.threads = 0;  // as the server runs it on frames held in memory
+    double t_none = 1e9, t_est = 1e9, t_chain = 1e9;
+    AlignmentFigures figures;
+    for (int rep = 0; rep < 2; ++rep) {  // best of two, alternating
+      auto t0 = std::chrono::steady_clock::now();
+      auto a = ReconstructStackFrames(manifest, source, sff, {}, cancel, none, nullptr);
+      t_none = std::min(t_none, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      t0 = std::chrono::steady_clock::now();
+      auto b = ReconstructStackFrames(manifest, source, sff, {}, cancel, estimate, &figures);
+      t_est = std::min(t_est, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      t0 = std::chrono::steady_clock::now();
+      ChainRegistrationOptions chain = estimate.chain;
+      chain.threads = 0;
+      auto c = RegisterChain([&](int i) -> StatusOr<cv::Mat> { return s.frames[size_t(i)]; }, n, chain);
+      t_chain = std::min(t_chain, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      if (!a.ok() || !b.ok() || !c.ok()) {
+        std::printf("failed: %s %s %s\n", a.status().ToString().c_str(), b.status().ToString().c_str(),
+                    c.status().ToString().c_str());
+        return 1;
+      }
+    }
+    std::printf("| %s | %.3f | %.3f | %.3f | %+.1f %% | %s, max scale change %.3f %%, max shift %.2f px |\n",
+                moving ? "moving (3 %, 30/-12 px)" : "still", t_none, t_est, t_chain, 100.0 * (t_est - t_none) / t_none,
+                figures.still ? "still" : (figures.alignment == FrameAlignment::kNone ? "none" : "warped"),
+                figures.max_scale_change_percent, figures.max_shift_px);
+    std::fflush(stdout);
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -160,6 +418,13 @@ int main(int argc, char** argv) {
   if (mode == "pcb" && argc > 2) return Pcb(argv[2]);
   if (mode == "still" && argc > 2) return Rate(std::atoi(argv[2]), 0.0, argc > 3 ? unsigned(std::atoi(argv[3])) : 1000u);
   if (mode == "drift" && argc > 3) return Rate(std::atoi(argv[2]), std::atof(argv[3]), argc > 4 ? unsigned(std::atoi(argv[4])) : 1000u);
-  std::fprintf(stderr, "usage: chain-evaluate pcb <dir> | still <count> | drift <count> <px>\n");
+  if (mode == "renderers" && argc > 2) return Renderers(std::atoi(argv[2]), argc > 3 ? unsigned(std::atoi(argv[3])) : 9000u);
+  if (mode == "speed") {
+    return Speed(argc > 2 ? std::atoi(argv[2]) : 60,
+                 cv::Size(argc > 3 ? std::atoi(argv[3]) : 1600, argc > 4 ? std::atoi(argv[4]) : 1200));
+  }
+  std::fprintf(stderr,
+               "usage: chain-evaluate pcb <dir> | still <count> | drift <count> <px> | renderers <count> [seed] | "
+               "speed [frames] [width] [height]\n");
   return 2;
 }

@@ -2,6 +2,9 @@
 // breathes 2 %/100 um and drifts laterally; `reconstruct --scan-id ID --alignment estimate`
 // prints the estimated alignment; `--alignment calibrated` without the focus_breathing step is
 // FAILED_PRECONDITION naming it (exit 4); an unknown value exits 2.
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
 #include "tests/client_cli/cli_fixture.h"
 
 namespace inspection::testing {
@@ -47,6 +50,62 @@ TEST_F(CliAlignmentTest, ReconstructEstimatesCalibratedNeedsTheStepUnknownIsUsag
   r = Run({"reconstruct", "--scan-id", scan_id, "--alignment", "sideways", "--out", (work_ / "u").string()});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("--alignment"), std::string::npos) << r.err;
+}
+
+// A plain image folder of n frames: a smooth random texture shifted by (shift_px, -shift_px / 2)
+// * i / (n - 1) (featureless: flat grey, only sensor noise), defocus varying with the frame.
+void WriteImages(const fs::path& dir, int n, double shift_px, bool textured) {
+  fs::create_directories(dir);
+  const cv::Size size(256, 192);
+  cv::Mat scene(size, CV_32F);
+  cv::RNG rng(21);
+  rng.fill(scene, cv::RNG::NORMAL, 0.0, 1.0);
+  cv::GaussianBlur(scene, scene, cv::Size(0, 0), 2.0);
+  cv::normalize(scene, scene, 40, 216, cv::NORM_MINMAX);
+  if (!textured) scene.setTo(128);
+  for (int i = 0; i < n; ++i) {
+    const double u = double(i) / (n - 1);
+    cv::Mat f;
+    cv::warpAffine(scene, f, cv::Matx23d(1, 0, shift_px * u, 0, 1, -0.5 * shift_px * u), size,
+                   cv::INTER_CUBIC | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT_101);
+    cv::GaussianBlur(f, f, cv::Size(0, 0), 0.7 + 1.2 * std::abs(u - 0.4));
+    cv::Mat noise(size, CV_32F);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.0);
+    cv::Mat out;
+    cv::Mat(f + noise).convertTo(out, CV_8U);
+    ASSERT_TRUE(cv::imwrite((dir / ("img" + std::to_string(i) + ".png")).string(), out));
+  }
+}
+
+TEST_F(CliAlignmentTest, ImageFolderPrintsTheChainPerFrameAndTheDefaultsFallback) {
+  StartServer();
+  WriteImages(work_ / "moving", 9, 16.0, true);
+  CliResult r = Run({"reconstruct", "--images", (work_ / "moving").string(), "--z-step", "5", "--alignment",
+                     "estimate", "--out", (work_ / "m").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("alignment: estimate, scale change up to "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(", method chain\n"), std::string::npos) << r.out;
+  // One line per frame; the last frame is 16 * (8 - 4) / 8 = 8 px right and 4 px up of the
+  // reference (frame 4): its transform maps reference pixels to frame pixels, so x - 8, y + 4.
+  EXPECT_NE(r.out.find("  frame 4 (reference): scale 1.00000, rotation 0.0000 deg, shift 0.00, 0.00 px\n"),
+            std::string::npos)
+      << r.out;
+  const size_t last = r.out.find("  frame 8: scale ");
+  ASSERT_NE(last, std::string::npos) << r.out;
+  const std::string line = r.out.substr(last, r.out.find('\n', last) - last);
+  const size_t shift_at = line.find("shift ");
+  ASSERT_NE(shift_at, std::string::npos) << line;
+  double sx = 0, sy = 0;
+  ASSERT_EQ(std::sscanf(line.c_str() + shift_at, "shift %lf, %lf px", &sx, &sy), 2) << line;
+  EXPECT_NEAR(sx, -8.0, 0.3) << line;
+  EXPECT_NEAR(sy, 4.0, 0.3) << line;
+
+  WriteImages(work_ / "flat", 6, 0.0, false);
+  r = Run({"reconstruct", "--images", (work_ / "flat").string(), "--z-step", "5", "--out", (work_ / "f").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("alignment: none (the default fell back to none: "),
+            std::string::npos)
+      << r.out;
 }
 
 }  // namespace

@@ -8,8 +8,10 @@
 #include <cmath>
 #include <filesystem>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/io/stack.h"
+#include "core/registration/frame_registration.h"
 #include "tests/server/server_fixture.h"
 
 namespace inspection::testing {
@@ -65,6 +67,57 @@ class AlignmentApiTest : public ServerTest {
     EXPECT_TRUE(WriteStackManifest(dir, m).ok());
     return dir;
   }
+
+  // An imported stack (stack.json names no illumination) of n frames of a smooth random texture:
+  // frame i's grid is the scene's scaled by 1 + scale_total * u^1.3 and shifted by (sx, sy) * u,
+  // u = i / (n - 1), defocus blur 0.7 .. 2.2 px varying with i, sensor noise. truth[i]: reference
+  // (middle) grid -> frame i. out_of_line >= 0: that frame shows an unrelated texture.
+  fs::path WriteImportedStack(const std::string& name, int n, double scale_total, double sx, double sy,
+                              std::vector<cv::Matx23d>* truth, int out_of_line = -1) {
+    const cv::Size size(320, 240);
+    const fs::path dir = UniqueTempDir(name);
+    auto texture = [&](unsigned seed) {
+      cv::Mat t(size, CV_32F);
+      cv::RNG rng(seed);
+      rng.fill(t, cv::RNG::NORMAL, 0.0, 1.0);
+      cv::GaussianBlur(t, t, cv::Size(0, 0), 2.0);
+      cv::Scalar mean, sd;
+      cv::meanStdDev(t, mean, sd);
+      return cv::Mat(128.0 + (t - mean[0]) * (40.0 / sd[0]));
+    };
+    const cv::Mat scene = texture(11), other = texture(12);
+    const cv::Point2d c((size.width - 1) * 0.5, (size.height - 1) * 0.5);
+    std::vector<cv::Matx23d> world;  // frame pixel -> scene position
+    for (int i = 0; i < n; ++i) {
+      const double u = double(i) / (n - 1);
+      SimilarityTransform t;
+      t.scale = 1.0 + scale_total * std::pow(u, 1.3);
+      t.shift_x_px = sx * u;
+      t.shift_y_px = sy * u;
+      world.push_back(FrameFromReference(t, c));
+    }
+    const int ref = (n - 1) / 2;
+    StackManifest m;
+    m.pixel_size_um = 1.0;
+    cv::RNG rng(5);
+    if (truth) truth->clear();
+    for (int i = 0; i < n; ++i) {
+      if (truth) truth->push_back(Compose(Invert(world[size_t(i)]), world[size_t(ref)]));
+      cv::Mat f;
+      cv::warpAffine(i == out_of_line ? other : scene, f, world[size_t(i)], size, cv::INTER_CUBIC | cv::WARP_INVERSE_MAP,
+                     cv::BORDER_REFLECT_101);
+      cv::GaussianBlur(f, f, cv::Size(0, 0), 0.7 + 1.5 * std::abs(double(i - n / 3)) / n);
+      cv::Mat noise(size, CV_32F);
+      rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.0);
+      cv::Mat out;
+      cv::Mat(f + noise).convertTo(out, CV_8U);
+      const std::string file = "frame_" + std::to_string(i) + ".png";
+      EXPECT_TRUE(cv::imwrite((dir / file).string(), out));
+      m.frames.push_back({file, 10.0 * i, 1000.0, ""});
+    }
+    EXPECT_TRUE(WriteStackManifest(dir, m).ok());
+    return dir;
+  }
 };
 
 TEST_F(AlignmentApiTest, ScanRequestsNameTheAlignmentField) {
@@ -112,9 +165,81 @@ TEST_F(AlignmentApiTest, FramesTooSmallOrFeaturelessFailAnExplicitEstimateButNot
   ASSERT_TRUE(s.ok()) << s.error_message();
   EXPECT_EQ(job.result().depth().alignment(), v1::FRAME_ALIGNMENT_NONE);
   EXPECT_DOUBLE_EQ(job.result().depth().alignment_seen_percent(), 100.0);
+  EXPECT_FALSE(job.result().depth().alignment_detail().fallback_reason().empty())
+      << job.result().depth().alignment_detail().DebugString();
+  EXPECT_EQ(job.result().depth().alignment_detail().frames_size(), 0);
   s = client_->ReconstructUpload(tiny, plain, nullptr, &job);
   ASSERT_TRUE(s.ok()) << s.error_message();
   EXPECT_EQ(job.result().depth().alignment(), v1::FRAME_ALIGNMENT_NONE);
+  EXPECT_FALSE(job.result().depth().alignment_detail().fallback_reason().empty())
+      << job.result().depth().alignment_detail().DebugString();
+}
+
+TEST_F(AlignmentApiTest, ImportedStacksAreRegisteredAsAChainAndReportEveryFrame) {
+  // Moving: 4 % scale change (non-linear in the frame index), 18 / -9 px shift over 11 frames.
+  std::vector<cv::Matx23d> truth;
+  const fs::path moving = WriteImportedStack("moving", 11, 0.04, 18.0, -9.0, &truth);
+  v1::Job job;
+  v1::ReconstructStart estimate;
+  estimate.mutable_options()->set_alignment(v1::FRAME_ALIGNMENT_ESTIMATE);
+  grpc::Status s = client_->ReconstructUpload(moving, estimate, nullptr, &job);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  const v1::DepthSummary& d = job.result().depth();
+  EXPECT_EQ(d.alignment(), v1::FRAME_ALIGNMENT_ESTIMATE);
+  const v1::AlignmentDetail& a = d.alignment_detail();
+  EXPECT_EQ(a.method(), "chain");
+  EXPECT_FALSE(a.still());
+  EXPECT_TRUE(a.fallback_reason().empty()) << a.fallback_reason();
+  EXPECT_EQ(a.reference_frame(), 5);
+  EXPECT_GT(a.still_statistic(), a.still_threshold());
+  ASSERT_EQ(a.frames_size(), 11);
+  const cv::Point2d c(159.5, 119.5);
+  double worst_scale = 0, worst_shift = 0;
+  for (int i = 0; i < 11; ++i) {
+    const v1::FrameTransform& f = a.frames(i);
+    EXPECT_EQ(f.frame(), i);
+    ASSERT_EQ(f.affine_size(), 6);
+    const SimilarityTransform t = SimilarityOf(truth[size_t(i)], c);
+    worst_scale = std::max(worst_scale, std::abs(f.scale() / t.scale - 1));
+    worst_shift = std::max(worst_shift, std::hypot(f.shift_x_px() - t.shift_x_px, f.shift_y_px() - t.shift_y_px));
+    EXPECT_NEAR(f.affine(2), truth[size_t(i)](0, 2), 0.5) << "frame " << i;
+    EXPECT_NEAR(f.affine(5), truth[size_t(i)](1, 2), 0.5) << "frame " << i;
+  }
+  std::printf("moving imported stack: worst scale error %.4f %%, worst shift error %.3f px\n", 100 * worst_scale,
+              worst_shift);
+  EXPECT_LT(worst_scale, 0.001);
+  EXPECT_LT(worst_shift, 0.5);
+  EXPECT_NEAR(d.alignment_max_scale_change_percent(), 100 * (SimilarityOf(truth[10], c).scale - 1), 0.1);
+  EXPECT_LT(d.alignment_seen_percent(), 100.0);
+
+  // Still: the same scene without motion is decided still, frames used as captured (every
+  // pixel seen), and its measured transforms are still reported.
+  const fs::path still = WriteImportedStack("still", 11, 0.0, 0.0, 0.0, nullptr);
+  s = client_->ReconstructUpload(still, estimate, nullptr, &job);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  EXPECT_EQ(job.result().depth().alignment(), v1::FRAME_ALIGNMENT_ESTIMATE);
+  EXPECT_TRUE(job.result().depth().alignment_detail().still()) << job.result().depth().alignment_detail().DebugString();
+  EXPECT_EQ(job.result().depth().alignment_detail().method(), "chain");
+  EXPECT_DOUBLE_EQ(job.result().depth().alignment_seen_percent(), 100.0);
+  EXPECT_LT(job.result().depth().alignment_detail().max_corner_displacement_px(), 1.0);
+  EXPECT_EQ(job.result().depth().alignment_detail().frames_size(), 11);
+
+  // Moving with one frame out of line: the estimate does not fall back silently; the job fails
+  // naming the pairs of that frame, and --alignment none is the user's explicit choice.
+  const fs::path broken = WriteImportedStack("broken", 11, 0.04, 18.0, -9.0, nullptr, 6);
+  s = client_->ReconstructUpload(broken, estimate, nullptr, &job);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << s.error_message();
+  EXPECT_NE(s.error_message().find("options.alignment"), std::string::npos) << s.error_message();
+  EXPECT_NE(s.error_message().find("5->6"), std::string::npos) << s.error_message();
+  EXPECT_NE(s.error_message().find("6->7"), std::string::npos) << s.error_message();
+  EXPECT_EQ(job.state(), v1::JOB_STATE_FAILED);
+  EXPECT_TRUE(job.result().artifacts().empty());
+  v1::ReconstructStart none;
+  none.mutable_options()->set_alignment(v1::FRAME_ALIGNMENT_NONE);
+  s = client_->ReconstructUpload(broken, none, nullptr, &job);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  EXPECT_EQ(job.result().depth().alignment(), v1::FRAME_ALIGNMENT_NONE);
+  EXPECT_TRUE(job.result().depth().alignment_detail().fallback_reason().empty());
 }
 
 TEST_F(AlignmentApiTest, CalibratedScansAndEstimatedReconstructionsReportTheirAlignment) {

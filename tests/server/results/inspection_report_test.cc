@@ -383,5 +383,49 @@ TEST(InspectionReport, MapWithoutDepthStillRenders) {
   EXPECT_FALSE(FigureImage(html, "depth-preview").empty());
 }
 
+// The frame alignment row: the chain's transforms per frame, a still stack, and the default's
+// fallback to none with its reason.
+TEST(InspectionReport, AlignmentRowNamesTheMethodEachFramesTransformAndAnyFallback) {
+  InspectionReportInput in = SmallInput(v1::VERDICT_OK);
+  v1::DepthSummary& d = in.depth;
+  d.set_alignment(v1::FRAME_ALIGNMENT_ESTIMATE);
+  d.set_alignment_max_scale_change_percent(2.5);
+  d.set_alignment_max_shift_px(12.25);
+  d.set_alignment_seen_percent(91.5);
+  v1::AlignmentDetail* a = d.mutable_alignment_detail();
+  a->set_method("chain");
+  a->set_reference_frame(1);
+  for (int i = 0; i < 3; ++i) {
+    v1::FrameTransform* f = a->add_frames();
+    f->set_frame(i);
+    f->set_scale(1.0 + 0.0125 * (i - 1));
+    f->set_rotation_deg(0.5 * (i - 1));
+    f->set_shift_x_px(6.25 * (i - 1));
+    f->set_shift_y_px(-3.0 * (i - 1));
+  }
+  std::string html = Render(in);
+  EXPECT_NE(html.find("<tr><th>Frame alignment</th><td>ESTIMATE (chain): max scale change 2.500 %, max shift 12.25 px, "
+                      "seen by all 91.5 %"),
+            std::string::npos);
+  EXPECT_NE(html.find("<tr><td>0</td><td class=\"num\">0.98750</td><td class=\"num\">-0.5000</td><td "
+                      "class=\"num\">-6.25</td><td class=\"num\">3.00</td></tr>"),
+            std::string::npos)
+      << html.substr(html.find("Frame alignment"), 800);
+  EXPECT_NE(html.find("<tr><td>1 (reference)</td><td class=\"num\">1.00000</td>"), std::string::npos);
+
+  a->set_still(true);
+  html = Render(in);
+  EXPECT_NE(html.find("ESTIMATE (chain): still, frames used as captured; measured max scale change 2.500 %"),
+            std::string::npos);
+
+  d.set_alignment(v1::FRAME_ALIGNMENT_NONE);
+  d.clear_alignment_detail();
+  d.mutable_alignment_detail()->set_fallback_reason("no frame pair could be registered: <featureless>");
+  html = Render(in);
+  EXPECT_NE(html.find("<tr><th>Frame alignment</th><td>NONE (the default fell back to none: no frame pair could be "
+                      "registered: &lt;featureless&gt;)</td></tr>"),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace inspection

@@ -1,0 +1,171 @@
+// chain-evaluate's own renderer (chain_lens_renderer.h).
+#include "tests/bench/chain_lens_renderer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+namespace chain_bench {
+
+namespace {
+
+constexpr int kLevels = 7;
+
+cv::Matx23d SimilarityAbout(double scale, double rot, double tx, double ty, cv::Point2d c) {
+  const double a = scale * std::cos(rot), b = scale * std::sin(rot);
+  // p' = c + [a -b; b a] (p - c) + t
+  return cv::Matx23d(a, -b, c.x - a * c.x + b * c.y + tx, b, a, c.y - b * c.x - a * c.y + ty);
+}
+
+cv::Matx23d Inverse(const cv::Matx23d& m) {
+  cv::Matx23d out;
+  cv::invertAffineTransform(m, out);
+  return out;
+}
+
+cv::Matx23d After(const cv::Matx23d& a, const cv::Matx23d& b) {  // a(b(p))
+  const cv::Matx33d A(a(0, 0), a(0, 1), a(0, 2), a(1, 0), a(1, 1), a(1, 2), 0, 0, 1);
+  const cv::Matx33d B(b(0, 0), b(0, 1), b(0, 2), b(1, 0), b(1, 1), b(1, 2), 0, 0, 1);
+  const cv::Matx33d C = A * B;
+  return cv::Matx23d(C(0, 0), C(0, 1), C(0, 2), C(1, 0), C(1, 1), C(1, 2));
+}
+
+cv::Mat Albedo(cv::Size size, cv::RNG& rng) {
+  cv::Mat a(size, CV_32F, cv::Scalar(0.0));
+  const int gratings = rng.uniform(2, 7);
+  cv::Mat xs(size, CV_32F), ys(size, CV_32F);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) xs.at<float>(y, x) = float(x), ys.at<float>(y, x) = float(y);
+  for (int g = 0; g < gratings; ++g) {
+    const double th = rng.uniform(0.0, CV_PI), f = rng.uniform(0.02, 0.3) * 2 * CV_PI, ph = rng.uniform(0.0, 6.3);
+    cv::Mat arg = xs * std::cos(th) * f + ys * std::sin(th) * f + ph, s(size, CV_32F);
+    for (int y = 0; y < size.height; ++y)
+      for (int x = 0; x < size.width; ++x) s.at<float>(y, x) = std::sin(arg.at<float>(y, x));
+    a += s * rng.uniform(0.02, 0.12);
+  }
+  const int ellipses = rng.uniform(40, 401);
+  const double scale = std::max(size.width, size.height) / 480.0;
+  for (int e = 0; e < ellipses; ++e) {
+    const cv::Point c(rng.uniform(0, size.width), rng.uniform(0, size.height));
+    const cv::Size axes(int(scale * rng.uniform(2, 40)), int(scale * rng.uniform(2, 40)));
+    cv::ellipse(a, c, axes, rng.uniform(0.0, 180.0), 0, 360, cv::Scalar(rng.uniform(-0.35, 0.35)), cv::FILLED,
+                cv::LINE_AA);
+  }
+  for (int l = rng.uniform(3, 12); l > 0; --l) {
+    cv::line(a, {rng.uniform(0, size.width), rng.uniform(0, size.height)},
+             {rng.uniform(0, size.width), rng.uniform(0, size.height)}, cv::Scalar(rng.uniform(-0.4, 0.4)),
+             rng.uniform(1, 4), cv::LINE_AA);
+  }
+  // Contrast drawn per seed (some scenes low-contrast), mean ~0.45.
+  cv::Scalar mean, sd;
+  cv::meanStdDev(a, mean, sd);
+  const double contrast = rng.uniform(0.03, 0.2);
+  a = (a - mean[0]) * (contrast / std::max(1e-6, sd[0])) + rng.uniform(0.3, 0.6);
+  cv::max(a, 0.01, a);
+  cv::min(a, 1.0, a);
+  return a;
+}
+
+cv::Mat Depth(cv::Size size, int n, cv::RNG& rng) {
+  cv::Mat d(size, CV_32F);
+  const double gx = rng.uniform(-1.0, 1.0), gy = rng.uniform(-1.0, 1.0);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x)
+      d.at<float>(y, x) = float(gx * x / size.width + gy * y / size.height);
+  for (int r = rng.uniform(2, 6); r > 0; --r) {
+    const int w = rng.uniform(size.width / 8, size.width / 2), h = rng.uniform(size.height / 8, size.height / 2);
+    const cv::Rect box(rng.uniform(0, size.width - w), rng.uniform(0, size.height - h), w, h);
+    d(box) += rng.uniform(-0.8, 0.8);
+  }
+  double lo, hi;
+  cv::minMaxLoc(d, &lo, &hi);
+  return (d - lo) * ((n - 1) * 0.8 / std::max(1e-6, hi - lo)) + (n - 1) * 0.1;
+}
+
+}  // namespace
+
+LensStack RenderLensStack(const LensStackOptions& o) {
+  cv::RNG rng(o.seed * 2654435761u + 17u);
+  const cv::Size size = o.size;
+  const int n = std::max(3, o.frames);
+  const double blur = o.blur_px_per_frame > 0 ? o.blur_px_per_frame : rng.uniform(0.4, 1.5);
+  const double full_well = o.full_well > 0 ? o.full_well : rng.uniform(2000.0, 20000.0);
+  const cv::Mat albedo = Albedo(size, rng);
+  const cv::Mat depth = Depth(size, n, rng);
+
+  // Pyramid levels of the albedo, each brought back to full size.
+  std::vector<cv::Mat> level(kLevels);
+  level[0] = albedo;
+  for (int j = 1; j < kLevels; ++j) {
+    std::vector<cv::Mat> down{albedo};
+    for (int k = 0; k < j; ++k) {
+      cv::Mat d;
+      cv::pyrDown(down.back(), d);
+      down.push_back(d);
+    }
+    cv::Mat up = down.back();
+    for (int k = j - 1; k >= 0; --k) {
+      cv::Mat u;
+      cv::pyrUp(up, u, down[size_t(k)].size());
+      up = u;
+    }
+    level[size_t(j)] = up;
+  }
+  // Fixed across frames: vignetting and pixel gain.
+  cv::Mat gain(size, CV_32F);
+  rng.fill(gain, cv::RNG::NORMAL, 1.0, o.prnu);
+  const double half_diag = 0.5 * std::hypot(size.width, size.height);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      const double r = std::hypot(x - 0.5 * size.width, y - 0.5 * size.height) / half_diag;
+      const double c = std::cos(std::atan(0.6 * r));
+      gain.at<float>(y, x) *= float(c * c * c * c);
+    }
+
+  const int ref = (n - 1) / 2;
+  const cv::Point2d centre((size.width - 1) * 0.5, (size.height - 1) * 0.5);
+  std::vector<cv::Matx23d> world;  // frame px -> scene px
+  for (int k = 0; k < n; ++k) {
+    const double u = double(k) / (n - 1);
+    world.push_back(SimilarityAbout(1.0 + o.scale_total * std::pow(u, 1.4), o.rotation_total_rad * u,
+                                    o.shift_x_total_px * u, o.shift_y_total_px * u, centre));
+  }
+  const bool moving = o.scale_total != 0 || o.rotation_total_rad != 0 || o.shift_x_total_px != 0 ||
+                      o.shift_y_total_px != 0;
+  LensStack out;
+  cv::Mat sharp(size, CV_32F), noise(size, CV_32F), read(size, CV_32F);
+  for (int k = 0; k < n; ++k) {
+    // Per pixel: the pyramid level of its blur radius, blended between the two neighbours.
+    for (int y = 0; y < size.height; ++y) {
+      const float* d = depth.ptr<float>(y);
+      float* s = sharp.ptr<float>(y);
+      for (int x = 0; x < size.width; ++x) {
+        const double r = blur * std::abs(d[x] - k);
+        const double l = std::min(kLevels - 1.001, std::log2(1.0 + r / 1.8));
+        const int j = int(l);
+        const double w = l - j;
+        s[x] = float((1 - w) * level[size_t(j)].at<float>(y, x) + w * level[size_t(j + 1)].at<float>(y, x));
+      }
+    }
+    cv::Mat frame = sharp;
+    if (moving) {
+      cv::warpAffine(sharp, frame, world[size_t(k)], size, cv::INTER_CUBIC | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT_101);
+    }
+    const double exposure = 1.0 + rng.uniform(-0.01, 0.01);
+    cv::Mat electrons = frame.mul(gain) * (full_well * exposure);
+    cv::Mat sd;
+    cv::sqrt(cv::max(electrons, 0.0), sd);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.0);
+    rng.fill(read, cv::RNG::NORMAL, 0.0, o.read_noise_electrons);
+    cv::Mat e = electrons + noise.mul(sd) + read;
+    cv::Mat v = cv::max(e * (1.0 / full_well), 0.0);
+    cv::pow(v, 1.0 / 2.2, v);
+    cv::Mat out8;
+    v.convertTo(out8, CV_8U, 255.0);
+    out.frames.push_back(out8);
+    out.frame_from_reference.push_back(After(Inverse(world[size_t(k)]), world[size_t(ref)]));
+  }
+  return out;
+}
+
+}  // namespace chain_bench
