@@ -124,7 +124,7 @@ TEST(StudyStoreMigrationTest, AVersionTwoSqliteDatabaseGainsTheStudiesTable) {
   }
   sqlite3* db = nullptr;
   ASSERT_EQ(sqlite3_open((dir / "inspection.db").c_str(), &db), SQLITE_OK);
-  ASSERT_EQ(sqlite3_exec(db, "DROP TABLE studies; DELETE FROM schema_version WHERE version > 2", nullptr, nullptr,
+  ASSERT_EQ(sqlite3_exec(db, "DROP TABLE studies; DROP TABLE work_queue; DELETE FROM schema_version WHERE version > 2", nullptr, nullptr,
                          nullptr),
             SQLITE_OK);
   sqlite3_close(db);
