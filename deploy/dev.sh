@@ -40,6 +40,7 @@ packages=(
   zlib1g-dev  # core/io/depth_export: crc32 of the PNG chunks (OpenSSL EVP from libssl-dev: the x3p MD5)
   prometheus chromium chromium-driver python3-selenium  # tests/ops: real Prometheus scrape, dashboard in Chromium
   clang-15  # tests/fuzz: libFuzzer targets (-fsanitize=fuzzer,address,undefined)
+  libomp-15-dev  # tests/fuzz: clang links LibRaw's OpenMP (libraw_r.pc -fopenmp) against libomp
   libopencv-contrib-dev  # core/sff/dense_depth.cc: cv::ximgproc fast global smoother (dense depth)
   libmosquitto-dev mosquitto mosquitto-clients  # server/plant: MQTT publishing; its tests run a real broker and mosquitto_sub
   openssl  # tests/opcua/make_certs.sh: the OPC UA gateway test's certificates (the gateway itself: Node.js 20 + npm ci)
