@@ -25,9 +25,12 @@ float FrameIndexOf(double d, const std::vector<double>& z) {
   const auto before = [&](double a, double b) { return up ? a < b : a > b; };
   if (!before(z[0], d)) return 0.f;
   if (!before(d, z[size_t(n - 1)])) return float(n - 1);
-  int k = 0;
-  while (k + 1 < n - 1 && !before(d, z[size_t(k + 1)])) ++k;
-  return float(k + (d - z[size_t(k)]) / (z[size_t(k + 1)] - z[size_t(k)]));
+  int lo = 0, hi = n - 1;  // z[lo] <= d < z[hi] in stack order
+  while (hi - lo > 1) {
+    const int mid = (lo + hi) / 2;
+    (before(d, z[size_t(mid)]) ? hi : lo) = mid;
+  }
+  return float(lo + (d - z[size_t(lo)]) / (z[size_t(hi)] - z[size_t(lo)]));
 }
 
 // One candidate pixel and the levels of its two layers: the occluder, the surface behind.
