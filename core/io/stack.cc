@@ -31,6 +31,119 @@ Status CheckRelativeFile(const std::string& file, size_t index) {
   return Status::Ok();
 }
 
+const char* const kAlignmentNames[] = {"none", "estimate", "calibrated"};
+const char* const kAlignmentMethods[] = {"", "model", "chain"};
+
+// A finite number at j[key] (required); errors name "alignment.<at><key>".
+Status AlignmentNumber(const json& j, const std::string& at, const char* key, double* out) {
+  if (!j.contains(key) || !j[key].is_number()) return Invalid("alignment." + at + key + " is missing or not a number");
+  *out = j[key].get<double>();
+  if (!std::isfinite(*out)) return Invalid("alignment." + at + key + " must be finite");
+  return Status::Ok();
+}
+
+// stack.json "alignment" (StackAlignmentRecord): types, names and ranges, and one transform per
+// frame when there are transforms. frame_count: the manifest's frames.
+StatusOr<StackAlignmentRecord> ParseAlignmentRecord(const json& j, size_t frame_count) {
+  if (!j.is_object()) return Invalid("alignment must be an object");
+  StackAlignmentRecord r;
+  if (!j.contains("alignment") || !j["alignment"].is_string()) return Invalid("alignment.alignment is missing or not a string");
+  r.alignment = j["alignment"].get<std::string>();
+  if (std::find(std::begin(kAlignmentNames), std::end(kAlignmentNames), r.alignment) == std::end(kAlignmentNames)) {
+    return Invalid("alignment.alignment '" + r.alignment + "' is not one of none, estimate, calibrated");
+  }
+  if (j.contains("method")) {
+    if (!j["method"].is_string()) return Invalid("alignment.method must be a string");
+    r.method = j["method"].get<std::string>();
+    if (std::find(std::begin(kAlignmentMethods), std::end(kAlignmentMethods), r.method) == std::end(kAlignmentMethods)) {
+      return Invalid("alignment.method '" + r.method + "' is not one of model, chain or empty");
+    }
+  }
+  if (j.contains("still")) {
+    if (!j["still"].is_boolean()) return Invalid("alignment.still must be true or false");
+    r.still = j["still"].get<bool>();
+  }
+  if (j.contains("fallback_reason")) {
+    if (!j["fallback_reason"].is_string()) return Invalid("alignment.fallback_reason must be a string");
+    r.fallback_reason = j["fallback_reason"].get<std::string>();
+  }
+  if (j.contains("reference_frame")) {
+    if (!j["reference_frame"].is_number_integer()) return Invalid("alignment.reference_frame must be an integer");
+    const int64_t ref = j["reference_frame"].get<int64_t>();
+    if (ref < 0 || ref >= int64_t(frame_count)) {
+      return Invalid("alignment.reference_frame " + std::to_string(ref) + " is not a frame of the stack (0.." +
+                     std::to_string(frame_count - 1) + ")");
+    }
+    r.reference_frame = int(ref);
+  }
+  const std::pair<const char*, double*> figures[] = {
+      {"max_scale_change_percent", &r.max_scale_change_percent},
+      {"max_shift_px", &r.max_shift_px},
+      {"seen_by_every_frame_percent", &r.seen_by_every_frame_percent},
+      {"max_corner_displacement_px", &r.max_corner_displacement_px}};
+  for (const auto& [key, out] : figures) {
+    if (!j.contains(key)) continue;
+    INSPECT_RETURN_IF_ERROR(AlignmentNumber(j, "", key, out));
+    if (*out < 0) return Invalid(std::string("alignment.") + key + " must be >= 0");
+  }
+  if (!j.contains("frames")) return r;
+  if (!j["frames"].is_array()) return Invalid("alignment.frames must be an array");
+  const json& frames = j["frames"];
+  if (!frames.empty() && frames.size() != frame_count) {
+    return Invalid("alignment.frames has " + std::to_string(frames.size()) + " transforms for " +
+                   std::to_string(frame_count) + " frames (one per frame, or none)");
+  }
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const json& f = frames[i];
+    const std::string at = "frames[" + std::to_string(i) + "].";
+    if (!f.is_object()) return Invalid("alignment.frames[" + std::to_string(i) + "] must be an object");
+    StackFrameTransform t;
+    if (!f.contains("frame") || !f["frame"].is_number_integer() || f["frame"].get<int64_t>() != int64_t(i)) {
+      return Invalid("alignment." + at + "frame must be " + std::to_string(i) + " (z order)");
+    }
+    t.frame = int(i);
+    INSPECT_RETURN_IF_ERROR(AlignmentNumber(f, at, "scale", &t.scale));
+    if (!(t.scale > 0)) return Invalid("alignment." + at + "scale must be > 0");
+    INSPECT_RETURN_IF_ERROR(AlignmentNumber(f, at, "rotation_deg", &t.rotation_deg));
+    INSPECT_RETURN_IF_ERROR(AlignmentNumber(f, at, "shift_x_px", &t.shift_x_px));
+    INSPECT_RETURN_IF_ERROR(AlignmentNumber(f, at, "shift_y_px", &t.shift_y_px));
+    if (!f.contains("affine") || !f["affine"].is_array() || f["affine"].size() != 6) {
+      return Invalid("alignment." + at + "affine must be an array of 6 numbers (row-major 2x3)");
+    }
+    for (size_t k = 0; k < 6; ++k) {
+      const json& v = f["affine"][k];
+      if (!v.is_number() || !std::isfinite(v.get<double>())) {
+        return Invalid("alignment." + at + "affine[" + std::to_string(k) + "] must be a finite number");
+      }
+      t.affine[k] = v.get<double>();
+    }
+    r.frames.push_back(t);
+  }
+  return r;
+}
+
+json AlignmentRecordJson(const StackAlignmentRecord& r) {
+  json j = {{"alignment", r.alignment},
+            {"method", r.method},
+            {"still", r.still},
+            {"reference_frame", r.reference_frame},
+            {"max_scale_change_percent", r.max_scale_change_percent},
+            {"max_shift_px", r.max_shift_px},
+            {"seen_by_every_frame_percent", r.seen_by_every_frame_percent},
+            {"max_corner_displacement_px", r.max_corner_displacement_px}};
+  if (!r.fallback_reason.empty()) j["fallback_reason"] = r.fallback_reason;
+  j["frames"] = json::array();
+  for (const StackFrameTransform& t : r.frames) {
+    j["frames"].push_back({{"frame", t.frame},
+                           {"scale", t.scale},
+                           {"rotation_deg", t.rotation_deg},
+                           {"shift_x_px", t.shift_x_px},
+                           {"shift_y_px", t.shift_y_px},
+                           {"affine", t.affine}});
+  }
+  return j;
+}
+
 }  // namespace
 
 std::string FrameFileFormat(std::string_view file) {
@@ -154,6 +267,9 @@ StatusOr<StackManifest> ParseStackManifest(const std::string& json_text) {
   Status mono = CheckMonotonicZ(z);
   if (!mono.ok()) return Invalid(mono.message());
   INSPECT_RETURN_IF_ERROR(CheckOneFrameFormat(m));
+  if (j.contains("alignment") && !j["alignment"].is_null()) {
+    INSPECT_ASSIGN_OR_RETURN(m.alignment, ParseAlignmentRecord(j["alignment"], m.frames.size()));
+  }
   return m;
 }
 
@@ -214,6 +330,7 @@ Status WriteStackManifest(const fs::path& dir, const StackManifest& m) {
     jr["refine_frames"] = search_frames(r->refine_frames);
     j["z_range_search"] = std::move(jr);
   }
+  if (m.alignment) j["alignment"] = AlignmentRecordJson(*m.alignment);
   const fs::path tmp = dir / (std::string(kStackManifestName) + ".tmp");
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);

@@ -11,12 +11,17 @@
 //   { "format": "inspection-stack", "version": 1, "pixel_size_um": 0.74,
 //     "frames": [ { "file": "frame_0000.png", "z_um": 0.0, "exposure_us": 8000,
 //                   "pattern": "uniform:128" }, ... ],
-//     "bit_depth": 8, "specimen": "skew5", "calibration_id": "", "illumination": "STD" }
+//     "bit_depth": 8, "specimen": "skew5", "calibration_id": "", "illumination": "STD",
+//     "alignment": { "alignment": "calibrated", "method": "model", "still": false, ... } }
+// "alignment" (optional; StackAlignmentRecord): the lateral alignment the stack was reconstructed
+// with and each frame's transform, written by a scan; read back and checked, not re-applied (the
+// frames stay as captured; a reconstruction chooses its own alignment).
 // Frames are listed in acquisition order; z_um must be strictly monotonic (either direction,
 // steps need not be uniform). "pattern" names what the projector showed for that frame.
 // "pixel_size_um" is optional: without it the scale is unknown (StackManifest::pixel_size_um 0).
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <opencv2/core.hpp>
 #include <optional>
@@ -58,6 +63,33 @@ struct ZRangeSearchRecord {
   double search_seconds = 0.0;  // the sweep and its analysis, wall time
 };
 
+// One frame's lateral transform onto the reference frame's grid (stack.json "alignment.frames"),
+// as a similarity about the image centre (p_frame = c + scale R(rotation) (p_ref - c) + shift)
+// and the full affine matrix the frame is resampled with (reference grid px -> frame px).
+struct StackFrameTransform {
+  int frame = 0;  // index in the stack, z order
+  double scale = 1.0;
+  double rotation_deg = 0.0;
+  double shift_x_px = 0.0;
+  double shift_y_px = 0.0;
+  std::array<double, 6> affine{1.0, 0.0, 0.0, 0.0, 1.0, 0.0};  // row-major 2x3
+};
+
+// The lateral alignment of the stack (core/registration/stack_alignment.h AlignmentFigures, as
+// the job result's AlignmentDetail names it): stack.json "alignment".
+struct StackAlignmentRecord {
+  std::string alignment = "none";  // "none", "estimate" or "calibrated"
+  std::string method;              // "model" (linear in z), "chain" (neighbour pairs), "" (none)
+  bool still = false;              // measured, and indistinguishable from no motion: not warped
+  std::string fallback_reason;     // the default fell back to none, and why
+  int reference_frame = 0;         // the frame whose grid the others are warped onto
+  double max_scale_change_percent = 0.0;
+  double max_shift_px = 0.0;
+  double seen_by_every_frame_percent = 100.0;
+  double max_corner_displacement_px = 0.0;
+  std::vector<StackFrameTransform> frames;  // every frame's, z order; empty for none
+};
+
 struct StackManifest {
   int version = 1;
   double pixel_size_um = 0.0;  // lateral size of one camera pixel on the specimen; 0 = unknown
@@ -70,6 +102,7 @@ struct StackManifest {
   std::string illumination_decision;
   std::vector<StackFrame> frames;
   std::optional<ZRangeSearchRecord> z_range_search;  // automatic z range only
+  std::optional<StackAlignmentRecord> alignment;     // written by scans; absent in older stacks
 };
 
 inline constexpr const char* kStackManifestName = "stack.json";

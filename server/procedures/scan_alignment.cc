@@ -34,4 +34,31 @@ StatusOr<cv::Mat> AlignScanFrame(const std::optional<StackAligner>& aligner, con
   return aligner->Warp(frame, index);
 }
 
+StackAlignmentRecord AlignmentRecordOf(const AlignmentFigures& a) {
+  StackAlignmentRecord r;
+  r.alignment = FrameAlignmentName(a.alignment);
+  r.method = a.method;
+  r.still = a.still;
+  r.fallback_reason = a.fallback_reason;
+  r.reference_frame = a.reference_frame;
+  r.max_scale_change_percent = a.max_scale_change_percent;
+  r.max_shift_px = a.max_shift_px;
+  r.seen_by_every_frame_percent = a.seen_by_every_frame_percent;
+  r.max_corner_displacement_px = a.max_corner_displacement_px;
+  const cv::Point2d centre((a.frame_size.width - 1) * 0.5, (a.frame_size.height - 1) * 0.5);
+  for (size_t i = 0; i < a.frame_from_reference.size(); ++i) {
+    const cv::Matx23d& m = a.frame_from_reference[i];
+    const SimilarityTransform t = SimilarityOf(m, centre);
+    StackFrameTransform f;
+    f.frame = int(i);
+    f.scale = t.scale;
+    f.rotation_deg = t.rotation_rad * 180.0 / CV_PI;
+    f.shift_x_px = t.shift_x_px;
+    f.shift_y_px = t.shift_y_px;
+    for (int k = 0; k < 6; ++k) f.affine[size_t(k)] = m(k / 3, k % 3);
+    r.frames.push_back(f);
+  }
+  return r;
+}
+
 }  // namespace inspection

@@ -7,6 +7,7 @@
 #include <optional>
 
 #include "core/calibration/calibration_bundle.h"
+#include "core/io/stack.h"
 #include "core/registration/stack_alignment.h"
 #include "server/procedures/scan_procedure.h"
 
@@ -20,5 +21,10 @@ StatusOr<std::optional<StackAligner>> CreateScanAligner(const ScanPlan& plan, co
 
 // The frame as the engine gets it: warped when there is an aligner (errors name the frame).
 StatusOr<cv::Mat> AlignScanFrame(const std::optional<StackAligner>& aligner, const cv::Mat& frame, int index);
+
+// What stack.json records of the alignment (StackManifest::alignment): the figures and each
+// frame's transform, as the job result's AlignmentDetail names them. A scan without an aligner
+// records alignment "none" with no transforms (pass a default AlignmentFigures).
+StackAlignmentRecord AlignmentRecordOf(const AlignmentFigures& figures);
 
 }  // namespace inspection

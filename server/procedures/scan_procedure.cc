@@ -334,6 +334,8 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
   }
   out.images_acquired = recorder.acquisitions();
   const auto t1 = Clock::now();
+  // The stored frames stay as captured; stack.json says how the engine saw them.
+  m.alignment = AlignmentRecordOf(aligner ? aligner->figures() : AlignmentFigures{});
   INSPECT_RETURN_IF_ERROR(WriteStackManifest(stack_dir, m));
   if (engine.sff) {
     INSPECT_ASSIGN_OR_RETURN(DepthResult raw, engine.sff->Finish());

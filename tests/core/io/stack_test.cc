@@ -108,6 +108,114 @@ TEST_F(StackTest, MissingPixelSizeIsUnknownScaleAndBadOneNamesTheField) {
   EXPECT_EQ(back->pixel_size_um, 0.0);
 }
 
+// stack.json "alignment": written with every figure and transform, read back bit for bit
+// (JSON numbers round-trip doubles); a manifest without it reads as before (no record).
+TEST_F(StackTest, AlignmentRecordRoundTrips) {
+  StackManifest m = WriteFrames(3);
+  auto plain = ReadStackManifest(dir_);
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  EXPECT_FALSE(plain->alignment.has_value());
+
+  StackAlignmentRecord r;
+  r.alignment = "estimate";
+  r.method = "chain";
+  r.still = false;
+  r.reference_frame = 1;
+  r.max_scale_change_percent = 1.2345678901234;
+  r.max_shift_px = 3.25;
+  r.seen_by_every_frame_percent = 97.5;
+  r.max_corner_displacement_px = 4.0625;
+  r.fallback_reason = "";
+  for (int i = 0; i < 3; ++i) {
+    StackFrameTransform t;
+    t.frame = i;
+    t.scale = 1.0 + 0.01 * (i - 1) + 1e-9;
+    t.rotation_deg = -0.1 * i;
+    t.shift_x_px = 2.5 * (i - 1);
+    t.shift_y_px = -1.0 / 3.0 * i;
+    t.affine = {t.scale, 1e-4 * i, t.shift_x_px, -1e-4 * i, t.scale, t.shift_y_px};
+    r.frames.push_back(t);
+  }
+  m.alignment = r;
+  ASSERT_TRUE(WriteStackManifest(dir_, m).ok());
+  auto back = ReadStackManifest(dir_);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  ASSERT_TRUE(back->alignment.has_value());
+  const StackAlignmentRecord& b = *back->alignment;
+  EXPECT_EQ(b.alignment, "estimate");
+  EXPECT_EQ(b.method, "chain");
+  EXPECT_FALSE(b.still);
+  EXPECT_EQ(b.reference_frame, 1);
+  EXPECT_EQ(b.max_scale_change_percent, r.max_scale_change_percent);
+  EXPECT_EQ(b.max_shift_px, 3.25);
+  EXPECT_EQ(b.seen_by_every_frame_percent, 97.5);
+  EXPECT_EQ(b.max_corner_displacement_px, 4.0625);
+  EXPECT_TRUE(b.fallback_reason.empty());
+  ASSERT_EQ(b.frames.size(), 3u);
+  for (size_t i = 0; i < 3; ++i) {
+    EXPECT_EQ(b.frames[i].frame, int(i));
+    EXPECT_EQ(b.frames[i].scale, r.frames[i].scale);
+    EXPECT_EQ(b.frames[i].rotation_deg, r.frames[i].rotation_deg);
+    EXPECT_EQ(b.frames[i].shift_x_px, r.frames[i].shift_x_px);
+    EXPECT_EQ(b.frames[i].shift_y_px, r.frames[i].shift_y_px);
+    EXPECT_EQ(b.frames[i].affine, r.frames[i].affine);
+  }
+
+  // A still stack: the transforms stay recorded (what was measured), still says they were not applied.
+  r.still = true;
+  r.alignment = "none";
+  r.method = "";
+  r.frames.clear();
+  r.fallback_reason = "no frame pair could be registered";
+  m.alignment = r;
+  ASSERT_TRUE(WriteStackManifest(dir_, m).ok());
+  back = ReadStackManifest(dir_);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  EXPECT_EQ(back->alignment->alignment, "none");
+  EXPECT_TRUE(back->alignment->still);
+  EXPECT_EQ(back->alignment->fallback_reason, "no frame pair could be registered");
+  EXPECT_TRUE(back->alignment->frames.empty());
+}
+
+TEST_F(StackTest, BadAlignmentRecordNamesTheField) {
+  const std::string frames =
+      R"("frames":[{"file":"a.png","z_um":0},{"file":"b.png","z_um":1},{"file":"c.png","z_um":2}])";
+  const std::string t0 = R"({"frame":0,"scale":1,"rotation_deg":0,"shift_x_px":0,"shift_y_px":0,"affine":[1,0,0,0,1,0]})";
+  const std::string t1 = R"({"frame":1,"scale":1,"rotation_deg":0,"shift_x_px":0,"shift_y_px":0,"affine":[1,0,0,0,1,0]})";
+  const std::string t2 = R"({"frame":2,"scale":1,"rotation_deg":0,"shift_x_px":0,"shift_y_px":0,"affine":[1,0,0,0,1,0]})";
+  auto ok = ParseStackManifest("{" + frames + R"(,"alignment":{"alignment":"calibrated","method":"model","frames":[)" +
+                               t0 + "," + t1 + "," + t2 + "]}}");
+  ASSERT_TRUE(ok.ok()) << ok.status().ToString();
+  EXPECT_EQ(ok->alignment->frames.size(), 3u);
+  const std::pair<std::string, std::string> cases[] = {
+      {R"("alignment":[])", "alignment must be an object"},
+      {R"("alignment":{})", "alignment.alignment is missing"},
+      {R"("alignment":{"alignment":"warp"})", "alignment.alignment 'warp'"},
+      {R"("alignment":{"alignment":"none","method":"affine"})", "alignment.method 'affine'"},
+      {R"("alignment":{"alignment":"none","still":1})", "alignment.still"},
+      {R"("alignment":{"alignment":"none","reference_frame":3})", "alignment.reference_frame 3"},
+      {R"("alignment":{"alignment":"none","max_shift_px":-1})", "alignment.max_shift_px must be >= 0"},
+      {R"("alignment":{"alignment":"estimate","frames":[)" + t0 + "," + t1 + "]}", "alignment.frames has 2 transforms for 3 frames"},
+      {R"("alignment":{"alignment":"estimate","frames":[)" + t0 + "," + t2 + "," + t1 + "]}",
+       "alignment.frames[1].frame must be 1"},
+      {R"("alignment":{"alignment":"estimate","frames":[)" + t0 + "," + t1 + R"(,{"frame":2,"scale":0})" + "]}",
+       "alignment.frames[2].scale must be > 0"},
+      {R"("alignment":{"alignment":"estimate","frames":[)" + t0 + "," + t1 +
+           R"(,{"frame":2,"scale":1,"rotation_deg":0,"shift_x_px":0,"shift_y_px":0,"affine":[1,0,0,0,1]})" + "]}",
+       "alignment.frames[2].affine must be an array of 6"},
+      {R"("alignment":{"alignment":"estimate","frames":[)" + t0 + "," + t1 +
+           R"(,{"frame":2,"scale":1,"rotation_deg":0,"shift_x_px":0,"shift_y_px":0,"affine":[1,0,0,0,1,"x"]})" + "]}",
+       "alignment.frames[2].affine[5]"},
+  };
+  for (const auto& [json, expected] : cases) {
+    auto m = ParseStackManifest("{" + frames + "," + json + "}");
+    ASSERT_FALSE(m.ok()) << json;
+    EXPECT_EQ(m.status().code(), StatusCode::kInvalidArgument) << json;
+    EXPECT_NE(m.status().message().find("stack.json: " + expected), std::string::npos)
+        << json << " -> " << m.status().ToString();
+  }
+}
+
 TEST_F(StackTest, FewerThanThreeFramesIsRejected) {
   auto m = ParseStackManifest(R"({"pixel_size_um":1,"frames":[{"file":"a.png","z_um":0},{"file":"b.png","z_um":1}]})");
   ASSERT_FALSE(m.ok());

@@ -111,6 +111,25 @@ TEST_P(StackAlignmentScanTest, AlignmentRestoresTheUnperturbedAccuracy) {
   EXPECT_EQ(calibrated->alignment.alignment, FrameAlignment::kCalibrated);
   const DepthErrorStats ec = Score(calibrated->depth, calibrated->ground_truth_um);
   Print("calibrated", ec, &calibrated->alignment);
+  // stack.json names what the engine saw: the calibrated model and every frame's transform;
+  // the unaligned scan says none.
+  auto written = ReadStackManifest(dir_ / "calibrated");
+  ASSERT_TRUE(written.ok()) << written.status().ToString();
+  ASSERT_TRUE(written->alignment.has_value());
+  EXPECT_EQ(written->alignment->alignment, "calibrated");
+  EXPECT_EQ(written->alignment->method, "model");
+  EXPECT_FALSE(written->alignment->still);
+  EXPECT_EQ(written->alignment->max_scale_change_percent, calibrated->alignment.max_scale_change_percent);
+  ASSERT_EQ(written->alignment->frames.size(), written->frames.size());
+  for (size_t i = 0; i < written->frames.size(); ++i) {
+    for (int k = 0; k < 6; ++k) {
+      EXPECT_EQ(written->alignment->frames[i].affine[size_t(k)], calibrated->alignment.frame_from_reference[i](k / 3, k % 3));
+    }
+  }
+  auto written_none = ReadStackManifest(dir_ / "none");
+  ASSERT_TRUE(written_none.ok() && written_none->alignment.has_value());
+  EXPECT_EQ(written_none->alignment->alignment, "none");
+  EXPECT_TRUE(written_none->alignment->frames.empty());
 
   // The stored (unaligned) stack, reconstructed with an estimate from its own frames.
   auto manifest = ReadStackManifest(dir_ / "none");
