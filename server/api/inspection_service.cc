@@ -164,7 +164,7 @@ grpc::Status InspectionServiceImpl::Reconstruct(
   StackFrameDecodeFn decode_stored;              // empty: the frames decode from `dir`
   if (Status s = CheckFreeSpaceReserve(store_->data_dir(), options_.min_free_bytes); !s.ok()) return Grpc(s);
   if (source->upload) {
-    upload = std::make_shared<OwnedFolder>(store_->uploads_dir() / NewId("upload"));
+    upload = store_->NewUploadFolder("upload");  // held: other replicas' sweeps leave it
     dir = upload->path();
     UploadDecoding decoding(dir, options_.reconstruct);
     Status received = ReceiveUpload(stream, *source, dir, options_.max_upload_bytes, &decoding);

@@ -258,8 +258,13 @@ Status JobManager::Start() {
   if (pool()) {
     if (options_.pool.workers < 1) return Status::InvalidArgument("pool workers must be >= 1");
     if (options_.pool.lease < std::chrono::milliseconds(300)) return Status::InvalidArgument("pool lease must be >= 300 ms");
+    writer_thread_ = std::thread([this] { PoolWriter(); });
     for (int i = 0; i < options_.pool.workers; ++i) pool_threads_.emplace_back([this] { PoolWorker(); });
+    // Two leases, and never under 2 s: a folder's time may have a coarse grain on a shared volume.
+    upload_sweeper_ = std::make_unique<OrphanUploadSweeper>(
+        store_, std::max(std::chrono::milliseconds(2000), 2 * options_.pool.lease));
     heartbeat_thread_ = std::thread([this] { PoolHeartbeat(); });
+    upload_keeper_thread_ = std::thread([this] { KeepUploadsAlive(); });
     spdlog::info("reconstruct pool: worker {} ({} at once, lease {} ms)", worker_id_, options_.pool.workers,
                  options_.pool.lease.count());
   } else {
@@ -290,6 +295,15 @@ void JobManager::Shutdown() {
   for (std::thread& t : pool_threads_) t.join();
   pool_threads_.clear();
   if (heartbeat_thread_.joinable()) heartbeat_thread_.join();
+  if (upload_keeper_thread_.joinable()) upload_keeper_thread_.join();
+  if (writer_thread_.joinable()) {
+    {
+      std::lock_guard<std::mutex> lock(write_mu_);
+      writer_stop_ = true;  // after the workers: what they queued is written first
+    }
+    write_cv_.notify_all();
+    writer_thread_.join();
+  }
 }
 
 StatusOr<std::shared_ptr<JobRecord>> JobManager::Submit(v1::JobKind kind, const std::string& request_id,
@@ -745,25 +759,32 @@ void JobManager::PoolWorker() {
 
 void JobManager::RunPoolJob(const QueuedWork& claimed) {
   const std::string& id = claimed.job_id;
-  auto job = store_->GetJob(id);
-  auto events = job.ok() ? store_->Events(id) : StatusOr<std::vector<v1::JobEvent>>(job.status());
-  if (!events.ok()) {
-    // Its lease runs out and a worker takes it again once the store answers.
-    spdlog::error("pool: job {} taken but not readable: {}", id, events.status().ToString());
-    return;
-  }
   RecordPtr r;
   std::optional<JobWork> work;
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (auto it = pool_followers_.find(id); it != pool_followers_.end()) r = it->second.lock();
+  }
+  // A first attempt at a job accepted here: the record streamed to its client is the store's
+  // (nobody else writes a queued job; a cancel comes with the claim), so it is not read again.
+  const bool fresh = r && claimed.attempts == 1 && r->Snapshot().state() == v1::JOB_STATE_QUEUED;
+  StatusOr<v1::Job> job = fresh ? StatusOr<v1::Job>(v1::Job()) : store_->GetJob(id);
+  auto events = job.ok() ? (fresh ? StatusOr<std::vector<v1::JobEvent>>(std::vector<v1::JobEvent>()) : store_->Events(id))
+                         : StatusOr<std::vector<v1::JobEvent>>(job.status());
+  if (!events.ok()) {
+    // Its lease runs out and a worker takes it again once the store answers.
+    spdlog::error("pool: job {} taken but not readable: {}", id, events.status().ToString());
+    return;
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
     if (auto it = pool_hints_.find(id); it != pool_hints_.end()) {
       work = std::move(it->second);
       pool_hints_.erase(it);
     }
     if (r) {
       r->StopFollowing();
-      r->Reload(*job, *events);
+      if (!fresh) r->Reload(*job, *events);
     } else {
       r = std::make_shared<JobRecord>(*job, *events);
     }
@@ -796,9 +817,8 @@ void JobManager::RunPoolJob(const QueuedWork& claimed) {
     if (auto* w = std::get_if<ReconstructWork>(&*work); w && w->upload && w->source_scan_id.empty()) {
       w->upload->Release();  // the stored input: removed below once the job's end is recorded
     }
-    Status s = store_->PutJob(r->MarkRunning());
-    if (!s.ok()) spdlog::error("job {}: cannot persist: {}", id, s.ToString());
-    Emit(r, [&](v1::JobEvent& e) {
+    QueueWrite({r->MarkRunning(), {}});
+    EmitPool(r, [&](v1::JobEvent& e) {
       e.set_phase(v1::JOB_PHASE_PREPARING);
       e.set_message("running on " + worker_id_ + (claimed.attempts > 1 ? ", attempt " + std::to_string(claimed.attempts) : ""));
     });
@@ -810,7 +830,7 @@ void JobManager::RunPoolJob(const QueuedWork& claimed) {
       context.job_id = id;
       context.cancel = &r->cancel_requested;
       context.emit = [this, &r, &disk_full_seen](const EventFill& fill) {
-        Emit(r, fill);
+        EmitPool(r, fill);
         if (options_.disk_full && !disk_full_seen) disk_full_seen = options_.disk_full();
       };
       outcome = runner_->Run(*work, context);
@@ -821,6 +841,9 @@ void JobManager::RunPoolJob(const QueuedWork& claimed) {
     }
     work.reset();  // decoded frames and private folders go before the job ends
   }
+  // The attempt's progress is in the store before its end or hand-back, which number their
+  // event after the stored ones.
+  FlushWrites();
   bool lost, hand_back;
   // The database went away during the run (a write of the job's events or artifacts failed
   // UNAVAILABLE): the job is not the failure, so it is queued again once the database answers.
@@ -954,6 +977,10 @@ void JobManager::PoolHeartbeat() {
         (void)store_->ForgetWork(w.job_id);
       }
     }
+    // Partial uploads of replicas that died while receiving them (no job was created for them).
+    if (auto swept = upload_sweeper_->Sweep(); !swept.ok()) {
+      spdlog::debug("pool: uploads/ not swept: {}", swept.status().ToString());
+    }
     std::lock_guard<std::mutex> lock(mu_);
     const std::set<std::string> held(renewal->held.begin(), renewal->held.end());
     for (const std::string& id : held_before) {
@@ -978,6 +1005,78 @@ void JobManager::PoolHeartbeat() {
       }
     }
     pool_cv_.notify_all();
+  }
+}
+
+void JobManager::EmitPool(const RecordPtr& r, const EventFill& fill) {
+  r->AppendEvent(fill, [&](const v1::JobEvent& e) {
+    // Watchers here are woken at once; the store (watchers elsewhere) follows within a batch. A
+    // replica that dies meanwhile loses progress events only: its job runs again from the start.
+    QueueWrite({std::nullopt, e});
+    if (options_.on_event) options_.on_event(e);
+  });
+}
+
+void JobManager::QueueWrite(PendingWrite w) {
+  {
+    std::lock_guard<std::mutex> lock(write_mu_);
+    pending_writes_.push_back(std::move(w));
+    ++writes_queued_;
+  }
+  write_cv_.notify_all();
+}
+
+void JobManager::FlushWrites() {
+  std::unique_lock<std::mutex> lock(write_mu_);
+  const uint64_t ticket = writes_queued_;
+  write_cv_.wait(lock, [&] { return writes_done_ >= ticket; });
+}
+
+void JobManager::PoolWriter() {
+  for (;;) {
+    std::vector<PendingWrite> batch;
+    {
+      std::unique_lock<std::mutex> lock(write_mu_);
+      write_cv_.wait(lock, [&] { return writer_stop_ || !pending_writes_.empty(); });
+      if (pending_writes_.empty()) return;  // stopping, and everything is written
+      batch.assign(std::make_move_iterator(pending_writes_.begin()), std::make_move_iterator(pending_writes_.end()));
+      pending_writes_.clear();
+    }
+    // In the order queued: a run of events goes as one statement, a job row on its own.
+    std::vector<v1::JobEvent> events;
+    auto write_events = [&] {
+      if (events.empty()) return;
+      Status s = store_->AppendEvents(events);
+      if (!s.ok()) spdlog::error("job {}: cannot persist {} event(s): {}", events.front().job_id(), events.size(), s.ToString());
+      events.clear();
+    };
+    for (PendingWrite& w : batch) {
+      if (!w.job) {
+        events.push_back(std::move(w.event));
+        continue;
+      }
+      write_events();
+      Status s = store_->PutJob(*w.job);
+      if (!s.ok()) spdlog::error("job {}: cannot persist: {}", w.job->job_id(), s.ToString());
+    }
+    write_events();
+    {
+      std::lock_guard<std::mutex> lock(write_mu_);
+      writes_done_ += batch.size();
+    }
+    write_cv_.notify_all();
+  }
+}
+
+void JobManager::KeepUploadsAlive() {
+  // Not on the heartbeat's thread: that one waits for the database, and an upload in progress
+  // must stay visibly alive also while the database is slow or away.
+  const auto period = std::max(std::chrono::milliseconds(100), options_.pool.lease / 3);
+  for (;;) {
+    store_->live_work_folders().TouchAll();
+    std::unique_lock<std::mutex> lock(mu_);
+    pool_cv_.wait_for(lock, period, [&] { return stopping_ && pool_held_.empty(); });
+    if (stopping_ && pool_held_.empty()) return;
   }
 }
 

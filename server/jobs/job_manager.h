@@ -17,6 +17,13 @@
 //    upload's folder on the shared data folder and the stored ReconstructStart). Drain stops
 //    taking work and waits for the running jobs; what is still running then is handed back
 //    (queued again for another replica). Records of jobs running elsewhere follow the store.
+//    A running pool job's progress events (and its RUNNING row) are written to the store by one
+//    thread of their own, in order and in batches, so the engine never waits for a database round
+//    trip; they are all written before the job's end (or its hand-back) is recorded, and its
+//    queue row, record and first or last event are always written in one statement.
+//    Uploads this replica is receiving are kept alive on the shared folder (touched every third
+//    of the lease), and the heartbeat removes uploads/ folders of writers that died mid-upload
+//    (server/storage/work_folders.h: no job refers to them, untouched for two leases).
 // Thread-safe.
 #pragma once
 
@@ -205,6 +212,17 @@ class JobManager {
   void PoolWorker();
   void RunPoolJob(const QueuedWork& claimed);
   void PoolHeartbeat();
+  void KeepUploadsAlive();  // touches this process's upload folders until the manager stops
+  // The pool's store writer (see the top of this file): QueueWrite hands it a record, Flush waits
+  // until everything handed to it so far is written (or failed, logged).
+  struct PendingWrite {
+    std::optional<v1::Job> job;  // set: PutJob; else AppendEvent(event)
+    v1::JobEvent event;
+  };
+  void QueueWrite(PendingWrite w);
+  void FlushWrites();
+  void PoolWriter();
+  void EmitPool(const RecordPtr& r, const EventFill& fill);
   StatusOr<v1::Job> CancelPoolJob(const RecordPtr& r);
   RecordPtr FollowerFor(v1::Job job, std::vector<v1::JobEvent> events);
 
@@ -237,6 +255,14 @@ class JobManager {
   std::atomic<int64_t> pool_queue_depth_{0};
   std::vector<std::thread> pool_threads_;
   std::thread heartbeat_thread_;
+  std::thread upload_keeper_thread_;
+  std::mutex write_mu_;                // guards the members below (never held with mu_)
+  std::condition_variable write_cv_;  // a write was queued or done, or the writer stops
+  std::deque<PendingWrite> pending_writes_;
+  uint64_t writes_queued_ = 0, writes_done_ = 0;
+  bool writer_stop_ = false;
+  std::thread writer_thread_;
+  std::unique_ptr<OrphanUploadSweeper> upload_sweeper_;  // used by the heartbeat thread only
 };
 
 }  // namespace inspection

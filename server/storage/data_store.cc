@@ -30,6 +30,11 @@ std::string RedactDatabaseUrl(const std::string& url) {
   return std::regex_replace(out, query_password, "$1***");
 }
 
+std::shared_ptr<OwnedFolder> DataStore::NewUploadFolder(const std::string& prefix) {
+  const fs::path path = uploads_dir() / NewId(prefix);
+  return std::make_shared<OwnedFolder>(path, live_work_folders_.Hold(path));
+}
+
 Status DataStore::PrepareFolders(bool empty_work_areas) {
   std::error_code ec;
   for (const fs::path& d : {data_dir_, scans_dir(), artifacts_dir(), calibrations_dir(), uploads_dir(), tmp_dir()}) {

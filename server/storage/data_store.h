@@ -8,7 +8,8 @@
 //   artifacts/<job_id>/      result files of a succeeded job; a scan's stack only as stack.zip
 //   scans/<scan_id>/         stack folders of the earlier layout (read in place, deleted)
 //   calibrations/<id>/       calibration bundles
-//   uploads/, tmp/           work areas, emptied at start-up
+//   uploads/, tmp/           work areas, emptied at start-up (SQLite); on a pool's shared folder
+//                            a dead writer's uploads are swept instead (work_folders.h)
 // Thread-safe: each backend keeps one connection guarded by a mutex (writes are small; bulk I/O
 // is outside).
 #pragma once
@@ -22,6 +23,8 @@
 
 #include "core/util/status.h"
 #include "inspection/v1/inspection.pb.h"
+#include "server/storage/owned_folder.h"
+#include "server/storage/work_folders.h"
 
 namespace inspection {
 
@@ -99,6 +102,10 @@ class DataStore {
   std::filesystem::path calibrations_dir() const { return data_dir_ / "calibrations"; }
   std::filesystem::path uploads_dir() const { return data_dir_ / "uploads"; }
   std::filesystem::path tmp_dir() const { return data_dir_ / "tmp"; }
+  // A new folder uploads/<prefix>-<random> (not created yet), removed when the last holder lets
+  // go, and held (work_folders.h) until then or its Release(): another replica's sweep leaves it.
+  std::shared_ptr<OwnedFolder> NewUploadFolder(const std::string& prefix);
+  LiveWorkFolders& live_work_folders() { return live_work_folders_; }
 
   // Inserts or replaces the job row (the Job message is the whole record).
   virtual Status PutJob(const v1::Job& job) = 0;
@@ -111,6 +118,8 @@ class DataStore {
   virtual StatusOr<std::vector<v1::Job>> UnfinishedJobs() = 0;
 
   virtual Status AppendEvent(const v1::JobEvent& event) = 0;
+  // Several events (of any jobs) in one step: all stored, or none.
+  virtual Status AppendEvents(const std::vector<v1::JobEvent>& events) = 0;
   virtual StatusOr<std::vector<v1::JobEvent>> Events(const std::string& job_id) = 0;
 
   virtual Status PutArtifact(const StoredArtifact& artifact) = 0;
@@ -191,6 +200,9 @@ class DataStore {
   virtual StatusOr<int64_t> QueueDepth() = 0;
   // Every job in the queue that has not ended, held or not.
   virtual StatusOr<std::vector<std::string>> QueuedWorkIds() = 0;
+  // The stored input folder (stack_dir, relative to the data directory) of every row of the
+  // queue, ended or not: folders of uploads/ that are jobs' inputs (work_folders.h).
+  virtual StatusOr<std::vector<std::string>> WorkInputDirs() = 0;
   // Ended jobs whose input folder (stack_dir) may still be on the disk: whoever removes it then
   // forgets the row. A replica that dies between the two leaves the row for the next sweep.
   virtual StatusOr<std::vector<QueuedWork>> EndedWork() = 0;
@@ -213,6 +225,7 @@ class DataStore {
 
  private:
   std::filesystem::path data_dir_;
+  LiveWorkFolders live_work_folders_;
 };
 
 // Random id with a readable prefix, e.g. "job-5f3a9c0e1b2d4e6f".

@@ -51,7 +51,7 @@ StatusOr<StoredStack> OpenStoredStack(DataStore& store, const std::string& scan_
     return Status::DataLoss("the stored stack of scan " + scan_id + " is missing on the server");
   }
   const std::string context = "scan " + scan_id;
-  auto folder = std::make_shared<OwnedFolder>(store.uploads_dir() / NewId("stack"));
+  auto folder = store.NewUploadFolder("stack");
   if (frames == StoredFrames::kExtracted) {
     INSPECT_RETURN_IF_ERROR(UnzipToFolder(zip->path, folder->path()).WithContext(context));
     INSPECT_ASSIGN_OR_RETURN(out.manifest, ReadStackManifest(folder->path()));

@@ -74,6 +74,7 @@ class SqliteDataStore final : public DataStore {
   StatusOr<std::vector<v1::Job>> ListJobs(v1::JobKind kind, v1::JobState state, int limit, int64_t before_create_ns) override;
   StatusOr<std::vector<v1::Job>> UnfinishedJobs() override;
   Status AppendEvent(const v1::JobEvent& event) override;
+  Status AppendEvents(const std::vector<v1::JobEvent>& events) override;
   StatusOr<std::vector<v1::JobEvent>> Events(const std::string& job_id) override;
   Status PutArtifact(const StoredArtifact& artifact) override;
   StatusOr<StoredArtifact> GetArtifact(const std::string& artifact_id) override;
@@ -109,6 +110,7 @@ class SqliteDataStore final : public DataStore {
   StatusOr<int64_t> QueueDepth() override;
   StatusOr<std::vector<std::string>> QueuedWorkIds() override;
   StatusOr<std::vector<QueuedWork>> EndedWork() override;
+  StatusOr<std::vector<std::string>> WorkInputDirs() override;
   Status ForgetWork(const std::string& job_id) override;
 
  private:
@@ -305,6 +307,18 @@ Status SqliteDataStore::AppendEvent(const v1::JobEvent& event) {
   st.Text(1, event.job_id()).Int(2, int64_t(event.sequence())).Blob(3, event.SerializeAsString());
   if (st.Step() != SQLITE_DONE) return DbError(db_, "AppendEvent");
   return Status::Ok();
+}
+
+Status SqliteDataStore::AppendEvents(const std::vector<v1::JobEvent>& events) {
+  std::lock_guard<std::mutex> lock(mu_);
+  return InTransaction([&]() -> Status {
+    for (const v1::JobEvent& event : events) {
+      Stmt st(db_, "INSERT OR REPLACE INTO events(job_id, sequence, event) VALUES(?,?,?)");
+      st.Text(1, event.job_id()).Int(2, int64_t(event.sequence())).Blob(3, event.SerializeAsString());
+      if (st.Step() != SQLITE_DONE) return DbError(db_, "AppendEvents");
+    }
+    return Status::Ok();
+  });
 }
 
 StatusOr<std::vector<v1::JobEvent>> SqliteDataStore::Events(const std::string& job_id) {
@@ -842,6 +856,16 @@ StatusOr<std::vector<std::string>> SqliteDataStore::QueuedWorkIds() {
   std::vector<std::string> ids;
   for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) ids.push_back(st.ColumnText(0));
   return ids;
+}
+
+StatusOr<std::vector<std::string>> SqliteDataStore::WorkInputDirs() {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_, "SELECT stack_dir FROM work_queue WHERE stack_dir <> ''");
+  std::vector<std::string> dirs;
+  int rc = st.Step();
+  for (; rc == SQLITE_ROW; rc = st.Step()) dirs.push_back(st.ColumnText(0));
+  if (rc != SQLITE_DONE) return DbError(db_, "WorkInputDirs");
+  return dirs;
 }
 
 StatusOr<std::vector<QueuedWork>> SqliteDataStore::EndedWork() {

@@ -132,6 +132,31 @@ TEST_P(DataStoreTest, EventsComeBackInSequenceOrder) {
   EXPECT_TRUE(store_->Events("job-none")->empty());
 }
 
+TEST_P(DataStoreTest, ABatchOfEventsIsStoredWholeAndReplacesBySequence) {
+  std::vector<v1::JobEvent> batch;
+  for (int seq = 1; seq <= 250; ++seq) {  // more than one statement's rows (200) on PostgreSQL
+    v1::JobEvent e;
+    e.set_job_id(seq % 2 ? "job-a" : "job-b");
+    e.set_sequence(uint64_t((seq + 1) / 2));
+    e.set_message("event " + std::to_string(seq));
+    batch.push_back(e);
+  }
+  ASSERT_TRUE(store_->AppendEvents(batch).ok());
+  auto a = store_->Events("job-a");
+  ASSERT_TRUE(a.ok());
+  ASSERT_EQ(a->size(), 125u);
+  EXPECT_EQ((*a)[0].message(), "event 1");
+  EXPECT_EQ((*a)[124].message(), "event 249");
+  EXPECT_EQ(store_->Events("job-b")->size(), 125u);
+  // The same sequence again replaces (a retried batch changes nothing).
+  batch.resize(1);
+  batch[0].set_message("again");
+  ASSERT_TRUE(store_->AppendEvents(batch).ok());
+  EXPECT_EQ(store_->Events("job-a")->front().message(), "again");
+  EXPECT_EQ(store_->Events("job-a")->size(), 125u);
+  EXPECT_TRUE(store_->AppendEvents({}).ok());
+}
+
 TEST_P(DataStoreTest, ArtifactsOfAKindLeaveRowsAndTheJobsResultTogether) {
   v1::Job job = Job("job-a", v1::JOB_KIND_SCAN, v1::JOB_STATE_SUCCEEDED, 100);
   for (auto [id, kind] : {std::pair{"art-1", v1::ARTIFACT_KIND_DEPTH_TIFF}, std::pair{"art-2", v1::ARTIFACT_KIND_STACK_ZIP}}) {
@@ -346,6 +371,11 @@ TEST_P(DataStoreTest, TheWorkQueueLeasesEachJobToOneWorkerAndOnlyTheHolderEndsIt
   ASSERT_TRUE(store_->ForgetWork("rec-1").ok());  // not ended: kept
   EXPECT_EQ(store_->EndedWork()->size(), 1u);
   EXPECT_EQ(*store_->QueuedWorkIds(), std::vector<std::string>{"rec-1"});
+  // Every row's input folder, ended or not: what the sweep of uploads/ must leave.
+  auto inputs = store_->WorkInputDirs();
+  ASSERT_TRUE(inputs.ok()) << inputs.status().ToString();
+  std::sort(inputs->begin(), inputs->end());
+  EXPECT_EQ(*inputs, (std::vector<std::string>{"uploads/rec-1", "uploads/rec-2"}));
 }
 
 TEST_P(DataStoreTest, AnExpiredLeaseIsTakenOverAndTheEarlierAttemptsArtifactRowsGo) {
