@@ -218,10 +218,16 @@ Run RunOne(const std::string& inspectd, const std::string& inspectctl, const fs:
   }
 
   std::atomic<bool> done{false};
-  std::thread sampler([&] {  // disk use while the run goes on
+  // Disk use while the run goes on, and the server's VmRSS over time (a TSV beside the logs: where
+  // in the job the peak falls, upload, alignment, engine pass or post-processing).
+  std::ofstream rss_log(work / ("server_rss_" + format + "_" + std::to_string(frames) + ".tsv"));
+  rss_log << "seconds\tvmrss_kb\n";
+  const auto s0 = Clock::now();
+  std::thread sampler([&] {
     while (!done.load()) {
       r.peak_data_bytes = std::max(r.peak_data_bytes, TreeBytes(data));
       r.peak_tmp_bytes = std::max(r.peak_tmp_bytes, TreeBytes(tmp));
+      rss_log << Seconds(s0, Clock::now()) << "\t" << StatusKb(server, "VmRSS") << "\n";
       std::this_thread::sleep_for(std::chrono::milliseconds(500));  // a sampling period, not a wait
     }
   });
