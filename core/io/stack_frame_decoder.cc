@@ -90,7 +90,7 @@ void StackFrameDecoder::QueueLocked(int index) {
 
 int64_t StackFrameDecoder::BudgetLocked(int64_t frame_bytes) const {
   if (frame_bytes <= 0 || frame_bytes * int64_t(slots_.size()) <= options_.max_kept_bytes) return options_.max_kept_bytes;
-  const int64_t lookahead = int64_t(kLookaheadFramesPerThread) * std::max<int64_t>(1, int64_t(threads_.size()));
+  const int64_t lookahead = LookaheadFrames();
   return std::min(options_.max_kept_bytes, lookahead * frame_bytes);
 }
 
@@ -99,7 +99,7 @@ void StackFrameDecoder::PrefetchLocked(int after) {
   const StackFrameShape& shape = *slots_[0].shape;
   const int64_t bytes = int64_t(shape.size.area()) * shape.channels * (shape.depth == CV_16U ? 2 : 1);
   const int64_t budget = BudgetLocked(bytes);
-  const int lookahead = kLookaheadFramesPerThread * int(threads_.size());
+  const int lookahead = LookaheadFrames();
   for (int j = after + 1; j < int(slots_.size()) && j <= after + lookahead; ++j) {
     Slot& slot = slots_[size_t(j)];
     if (slot.state != State::kDropped && slot.state != State::kReleased) continue;

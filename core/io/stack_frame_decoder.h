@@ -7,6 +7,7 @@
 // dropped, and decoded again by the consumer when its turn comes (memory stays bounded).
 #pragma once
 
+#include <algorithm>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -40,9 +41,12 @@ struct StackFrameDecoderOptions {
   int threads = 0;  // decode threads; 0 = all hardware threads
   // Decoded frames kept for the consumer, bytes; frames beyond it are decoded again when
   // consumed. The default holds 60 colour frames of 1600 x 1200 at 8 bits. A stack that does
-  // not fit whole keeps only a look-ahead of kLookaheadFramesPerThread frames per decode thread
-  // (at least 2) within it: most of its frames are decoded twice anyway, and 1 GiB of frames
-  // beside the engine's state would be most of the memory of a 24 MP stack.
+  // not fit whole keeps only a look-ahead of kLookaheadFramesPerThread frames per decode thread,
+  // at most kMaxLookaheadFrames in all (the consumer's frame included), within it: most of its
+  // frames are decoded twice anyway, and 1 GiB of frames beside the engine's state would be most
+  // of the memory of a 24 MP stack. Two frames suffice whatever the thread count: a 24 MP frame
+  // decodes in well under a second and the engine takes seconds per frame, while each frame
+  // more costs 2 (16-bit grey) to 3 (8-bit colour) bytes per pixel of the stack's frames.
   int64_t max_kept_bytes = int64_t(1) << 30;
 };
 
@@ -50,6 +54,7 @@ struct StackFrameDecoderOptions {
 class StackFrameDecoder {
  public:
   static constexpr int kLookaheadFramesPerThread = 2;
+  static constexpr int kMaxLookaheadFrames = 2;
 
   // manifest: the stack's frames (Submit by index or by file name). decode empty = decode from
   // `dir` (DecodeStackFrame).
@@ -106,6 +111,10 @@ class StackFrameDecoder {
   void QueueLocked(int index);
   // The budget frames of `frame_bytes` are kept within (max_kept_bytes, or the look-ahead).
   int64_t BudgetLocked(int64_t frame_bytes) const;
+  // Frames a stack beyond the budget keeps decoded (StackFrameDecoderOptions::max_kept_bytes).
+  int LookaheadFrames() const {
+    return std::min(kMaxLookaheadFrames, kLookaheadFramesPerThread * std::max(1, int(threads_.size())));
+  }
   void PrefetchLocked(int after);
   StatusOr<cv::Mat> DecodeOne(int index);
 

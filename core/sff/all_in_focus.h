@@ -10,6 +10,7 @@
 #pragma once
 
 #include <cstddef>
+#include <functional>
 #include <opencv2/core.hpp>
 
 #include "core/sff/sff_engine.h"
@@ -29,6 +30,13 @@ class AllInFocusComposer {
   // so the first of equal maxima wins, as in the engine). Errors name what does not match.
   Status PushFrame(const cv::Mat& frame, const cv::Mat& score);
 
+  // Rows [y0, y1) of a frame's score into *rows (y1 - y0 rows of the frame's width).
+  using ScoreRowsFn = std::function<Status(int y0, int y1, cv::Mat* rows)>;
+  // PushFrame(frame, score) with the score asked for band by band (band_rows >= 1 rows each, in
+  // order), so that no whole-frame score exists: for a 24 MP frame a CV_32SC1 score is 96 MB
+  // beside the composer's 11 bytes per pixel. The same result as PushFrame with the whole score.
+  Status PushFrameInBands(const cv::Mat& frame, const ScoreRowsFn& score_rows, int band_rows);
+
   int frames_pushed() const { return frames_pushed_; }
   // Of frame_type; all zero before the first frame. Shares the composer's pixels: clone to keep
   // it while pushing on.
@@ -40,8 +48,14 @@ class AllInFocusComposer {
 
  private:
   AllInFocusComposer() = default;
+  // Checks of a push: the frame's type and size; a score band's size (count rows), its type and,
+  // once a frame was pushed, that it is the first frame's.
+  Status CheckFrame(const cv::Mat& frame) const;
+  Status CheckScoreRows(const cv::Mat& rows, int count) const;
+  // Rows [y0, y0 + score.rows) of the frame; score's row 0 is frame row y0.
   template <typename P>
-  void Update(const cv::Mat& frame, const cv::Mat& score);
+  void Update(const cv::Mat& frame, const cv::Mat& score, int y0);
+  void FirstRows(const cv::Mat& frame, const cv::Mat& score, int y0);
 
   cv::Mat best_;  // CV_32FC1, or CV_32SC1 for integer scores (exact: no rounding of int32 sums)
   cv::Mat image_;
@@ -49,6 +63,11 @@ class AllInFocusComposer {
   int score_type_ = -1;
   int frames_pushed_ = 0;
 };
+
+// Rows [y0, y1) of FocusScore(grey, ...) bit for bit, computed from those rows and a halo where
+// the measure allows it (FocusMeasureIsRowLocal, core/sff/focus_measure.h; the integer Tenengrad
+// of 8-bit frames is exact too), else from the whole frame's score.
+Status FocusScoreRows(const cv::Mat& grey, FocusMeasure measure, int window_px, int y0, int y1, cv::Mat* rows);
 
 // The focus map the SFF engine compares for this grey frame (CV_8UC1 / CV_16UC1, e.g. a colour
 // frame's luminance from core/io/colour.h): the engine's integer Tenengrad kernel for 8-bit frames

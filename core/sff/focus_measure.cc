@@ -81,6 +81,21 @@ std::vector<double> ChebyshevPolynomial(int m, int n_points) {
   return t;
 }
 
+bool FocusMeasureIsRowLocal(FocusMeasure measure) {
+  switch (measure) {
+    case FocusMeasure::kTenengrad:
+    case FocusMeasure::kModifiedLaplacian:
+    case FocusMeasure::kSumModifiedLaplacian:
+    case FocusMeasure::kGreyLevelVariance:
+      return true;
+    case FocusMeasure::kHelmliMean:
+    case FocusMeasure::kChebyshevMoments:
+    case FocusMeasure::kGreyLevelLocalVariance:
+      break;
+  }
+  return false;
+}
+
 int IlluminationPower(FocusMeasure measure) {
   switch (measure) {
     case FocusMeasure::kModifiedLaplacian:

@@ -42,6 +42,21 @@ namespace inspection {
 //                         eq. 3.15 whose mean is the one of the centre's window.
 Status ComputeFocusMeasure(const cv::Mat& frame, FocusMeasure measure, int window_px, cv::Mat* focus);
 
+// Whether rows [y0, y1) of the focus map of `measure` (and of its NormaliseFocusByIllumination)
+// can be computed from frame rows [y0 - FocusMeasureHaloRows, y1 + FocusMeasureHaloRows) alone,
+// bit for bit equal to the whole-frame map's rows, on CV_8UC1 / CV_16UC1 frames. True where every
+// step is exact or per pixel: Tenengrad, the (sum) modified Laplacian and the grey-level variance
+// take integer grey values through integer-valued Sobel / second differences and OpenCV's box
+// filter, whose float input is summed in double, exactly (sums of integers below 2^53), so the
+// running sums do not depend on the row they start from. False for the Helmli mean (its floor
+// is the whole frame's mean), the local variance (its box filters sum non-integer values: the
+// rounding depends on where the running sum starts) and the Chebyshev moments (not verified).
+// Why: the streaming engine computes the map in row bands, so its full-frame float temporaries
+// (about 28 bytes per pixel for Tenengrad) become band-sized.
+bool FocusMeasureIsRowLocal(FocusMeasure measure);
+// Rows a band needs on each side: the derivative's radius (1) plus the window's (window_px / 2).
+inline int FocusMeasureHaloRows(int window_px) { return window_px / 2 + 1; }
+
 // How a measure of `measure` scales with the illumination: a frame lit s times brighter has a
 // focus map s^power times larger. 2 for Tenengrad, SML and the variances, 1 for the modified
 // Laplacian, 0 for the scale-free ratios (Helmli mean, Chebyshev moments).

@@ -34,7 +34,7 @@ struct DepthResult {
 // Gaussian interpolation (the scan default: exact int32 F_max, 16-bit float codes of the other
 // focus values, truncated-float sums; details in core/sff/sff_state.h), and there Finish writes
 // the result into the state's own buffers, so it adds no memory. Other measures, 16-bit frames
-// and the line fit keep exact 32-bit state: 28 + 12 j bytes (j = 1, or linefit_half_width),
+// and the line fit keep exact 32-bit state: 24 + 12 j bytes (j = 1, or linefit_half_width),
 // plus the result (9 or 10 bytes per pixel) at Finish.
 //
 // Speed: 8-bit frames with Tenengrad run through a fused integer kernel (Sobel, squares, window
@@ -44,8 +44,11 @@ struct DepthResult {
 // each tile across the chunk, so the state is streamed through memory once per 8 frames (the
 // chunk's frames are held by reference meanwhile; at most 7 frames wait, and Finish processes
 // them); ReconstructInMemory runs each tile across all frames so its state stays in cache.
-// Other measures, 16-bit frames and illumination_invariant compute the whole-frame focus map
-// (core/sff/focus_measure.h) and share the same state update. inspect-bench measures it
+// Other measures, 16-bit frames and illumination_invariant compute the focus map of
+// core/sff/focus_measure.h and share the same state update; the map is computed in row bands
+// over options.threads threads where the measure allows it bit for bit (FocusMeasureIsRowLocal:
+// Tenengrad, the modified Laplacians, the grey-level variance), so that only band-sized float
+// temporaries exist, else for the whole frame. inspect-bench measures it
 // (tests/bench/inspect_bench.cc).
 // Implementation: core/sff/sff_engine.cc (Create), sff_compact_engine.cc (the scan default),
 // sff_exact_engine.cc (every other case), sff_batch.cc (ReconstructInMemory).

@@ -3,7 +3,8 @@
 // Tenengrad with maximum / Gaussian interpolation (that case: sff_compact_engine.cc).
 // Per frame: the fused Tenengrad kernel over tiles (8-bit Tenengrad, line fit), or the whole
 // focus map of core/sff/focus_measure.h (normalised by the light with illumination_invariant) and the
-// same state update over row bands (all others).
+// same state update over row bands (all others): computed band by band where the measure allows it
+// bit for bit (FocusMeasureIsRowLocal), so that no full-frame float temporaries exist.
 #include <algorithm>
 #include <atomic>
 #include <string>
@@ -44,19 +45,28 @@ class ExactEngine final : public SffEngine {
         const int tw = std::min(kTileW, size_.width - x0), th = std::min(kTileH, size_.height - y0);
         FusedTileFrame(frame, k, x0, y0, tw, th, options_.window_px, scratch_[size_t(worker)], state_, x0, y0);
       });
+    } else if (FocusMeasureIsRowLocal(options_.focus_measure)) {
+      // The focus map band by band (each band's rows plus a halo), on the engine's threads: the
+      // float temporaries of the map (about 28 bytes per pixel for a whole frame) are band-sized,
+      // and the state update follows each band while it is in cache. Same values bit for bit.
+      const int bands = (size_.height + kFocusBandRows - 1) / kFocusBandRows;
+      const int halo = FocusMeasureHaloRows(options_.window_px);
+      std::vector<Status> errors(size_t(bands), Status::Ok());
+      ParallelFor(bands, threads_, [&](int b, int) {
+        const int y_begin = b * kFocusBandRows, y_end = std::min(size_.height, y_begin + kFocusBandRows);
+        const int h0 = std::max(0, y_begin - halo), h1 = std::min(size_.height, y_end + halo);
+        cv::Mat focus;
+        errors[size_t(b)] = FocusOf(frame.rowRange(h0, h1), &focus);
+        if (errors[size_t(b)].ok()) UpdateExactRowsFromFocus(state_, k, focus, h0, frame, y_begin, y_end);
+      });
+      for (const Status& e : errors) INSPECT_RETURN_IF_ERROR(e.WithContext("frame " + std::to_string(k)));
     } else {
       cv::Mat focus;
-      INSPECT_RETURN_IF_ERROR(ComputeFocusMeasure(frame, options_.focus_measure, options_.window_px, &focus)
-                                  .WithContext("frame " + std::to_string(k)));
-      if (options_.illumination_invariant) {
-        INSPECT_RETURN_IF_ERROR(
-            NormaliseFocusByIllumination(frame, options_.focus_measure, options_.window_px, &focus)
-                .WithContext("frame " + std::to_string(k)));
-      }
+      INSPECT_RETURN_IF_ERROR(FocusOf(frame, &focus).WithContext("frame " + std::to_string(k)));
       const int bands = std::min(size_.height, threads_ * 4);
       ParallelFor(bands, threads_, [&](int b, int) {
         const int y_begin = size_.height * b / bands, y_end = size_.height * (b + 1) / bands;
-        UpdateExactRowsFromFocus(state_, k, focus, frame, y_begin, y_end);
+        UpdateExactRowsFromFocus(state_, k, focus, 0, frame, y_begin, y_end);
       });
     }
     z_.push_back(z_um);
@@ -83,6 +93,20 @@ class ExactEngine final : public SffEngine {
   size_t state_bytes() const override { return state_.Bytes(); }
 
  private:
+  // Rows per band of the banded focus map: 128 rows of a 6000 px frame keep a band's float
+  // temporaries near 25 MB per thread, and the halo (window_px / 2 + 1 rows each side) adds
+  // under 10 % of recomputed rows for windows up to 9 px.
+  static constexpr int kFocusBandRows = 128;
+
+  // The (illumination-normalised) focus map of frame (or of a band of it).
+  Status FocusOf(const cv::Mat& frame, cv::Mat* focus) const {
+    INSPECT_RETURN_IF_ERROR(ComputeFocusMeasure(frame, options_.focus_measure, options_.window_px, focus));
+    if (options_.illumination_invariant) {
+      INSPECT_RETURN_IF_ERROR(NormaliseFocusByIllumination(frame, options_.focus_measure, options_.window_px, focus));
+    }
+    return Status::Ok();
+  }
+
   SffOptions options_;
   cv::Size size_;
   int type_;

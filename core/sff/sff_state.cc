@@ -48,7 +48,8 @@ size_t FinishExactSpan(const StatePlanes<T, P>& st, size_t off, int count, const
   double zw[2 * kMaxJ + 1], fw[2 * kMaxJ + 1];
   for (int x = 0; x < count; ++x) {
     const size_t i = off + x;
-    const int m = st.idx[i];
+    const uint32_t w = st.idx_aif[i];
+    const int m = st.IndexOf(w);
     const int before = std::min(J, m), after = std::min(J, n - 1 - m);
     const double best = ToFloat(st.best[i]);
     zw[before] = z[m];
@@ -85,7 +86,7 @@ size_t FinishExactSpan(const StatePlanes<T, P>& st, size_t off, int count, const
     } else {
       depth[x] = std::numeric_limits<float>::quiet_NaN();
     }
-    aif[x] = P(st.aif[i]);
+    aif[x] = P(st.GreyOf(w));
   }
   return valid;
 }

@@ -25,7 +25,7 @@ inline float ToFloat(int32_t v) { return float(v); }
 inline float ToFloat(float v) { return v; }
 
 // ---- Exact state: every case but the compact one below ----
-// Planes (structure of arrays), so that the update loops vectorise; 28 + 12 j bytes per pixel.
+// Planes (structure of arrays), so that the update loops vectorise; 24 + 12 j bytes per pixel.
 // Used by the line fit (j = linefit_half_width neighbours each side) and by every measure
 // other than 8-bit Tenengrad (j = 1).
 // T: focus value type (int32_t exact for the fused 8-bit Tenengrad, float otherwise).
@@ -35,13 +35,19 @@ struct StatePlanes {
   int width = 0, height = 0, j = 1;
   bool simd = true;  // AVX2 row kernels (when the CPU has AVX2) or the portable ones
   std::vector<T> best;
-  std::vector<int32_t> idx;
+  // Frame index of the maximum (bits 16-31; < 65535 frames, CheckPush) | the all-in-focus grey
+  // value (bits 0-15, P is 8 or 16 bits): one 32-bit lane, so the row loops vectorise with the
+  // same width as the float planes, and 4 bytes per pixel less than two planes.
+  std::vector<uint32_t> idx_aif;
   std::vector<T> before[kMaxJ], after[kMaxJ], ring[kMaxJ];  // F(m-1-i), F(m+1+i), F(k-1-i)
   std::vector<T> last2;                                     // F(k-2)
   // Sum of F; sum of squared second differences t_k = F_k - 2 F_(k-1) + F_(k-2) over the curve,
   // and over the (up to three) t_k that involve the current maximum (excluded at the end).
   std::vector<float> sum, curv_all, curv_excl;
-  std::vector<int32_t> aif;  // 32-bit lanes like the rest, so one vectorised loop updates all
+
+  static SFF_INLINE int32_t IndexOf(uint32_t w) { return int32_t(w >> 16); }
+  static SFF_INLINE uint32_t GreyOf(uint32_t w) { return w & 0xFFFFu; }
+  static SFF_INLINE uint32_t Pack(int32_t index, uint32_t grey) { return (uint32_t(index) << 16) | grey; }
 
   void Allocate(int w, int h, int jj, bool use_simd) {
     simd = use_simd && CpuHasAvx2();
@@ -50,7 +56,7 @@ struct StatePlanes {
     j = jj;
     const size_t n = size_t(w) * h;
     best.assign(n, T(0));
-    idx.assign(n, 0);
+    idx_aif.assign(n, 0u);
     for (int i = 0; i < jj; ++i) {
       before[i].assign(n, T(0));
       after[i].assign(n, T(0));
@@ -60,10 +66,9 @@ struct StatePlanes {
     sum.assign(n, 0.f);
     curv_all.assign(n, 0.f);
     curv_excl.assign(n, 0.f);
-    aif.assign(n, 0);
   }
   size_t Bytes() const {
-    size_t b = (best.size() + last2.size()) * sizeof(T) + (idx.size() + aif.size()) * 4 +
+    size_t b = (best.size() + last2.size()) * sizeof(T) + idx_aif.size() * 4 +
                (sum.size() + curv_all.size() + curv_excl.size()) * 4;
     for (int i = 0; i < kMaxJ; ++i) b += (before[i].size() + after[i].size() + ring[i].size()) * sizeof(T);
     return b;
@@ -83,7 +88,7 @@ size_t FinishExactSpan(const StatePlanes<T, P>& st, size_t off, int count, const
                        const SffOptions& o, DepthOutputs& out, int ox, int oy);
 
 // ---- Compact state: the fused 8-bit Tenengrad path with one neighbour each side ----
-// (maximum and Gaussian interpolation, the scan default): 23 bytes per pixel instead of 40.
+// (maximum and Gaussian interpolation, the scan default): 23 bytes per pixel instead of 36.
 //  - F_max exact (int32): the running maximum compares exactly.
 //  - The four curve samples the fit and the second differences need, F(k-1), F(k-2), F(m-1) and
 //    F(m+1), as 16-bit codes of F + 1 (5 exponent and 11 mantissa bits, truncated): relative

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/sff/all_in_focus.h"
+#include "core/sff/focus_measure.h"
 #include "core/io/colour.h"
 
 namespace inspection {
@@ -18,6 +19,9 @@ StatusOr<cv::Mat> StackFrameSource::grey(int index) const {
 }
 
 namespace {
+
+// Rows per band of a colour frame's focus score (the composer's; the engine has its own).
+constexpr int kScoreBandRows = 256;
 
 // The aligner for the folder's frames, or nullopt when the frames are used as they are.
 StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& source, const StackManifest& manifest,
@@ -166,9 +170,13 @@ StatusOr<DepthResult> ReconstructStackFrames(const StackManifest& manifest, cons
         INSPECT_ASSIGN_OR_RETURN(c, aligner->Warp(c, i));
       }
       INSPECT_ASSIGN_OR_RETURN(frame, LuminanceOf(c));
-      cv::Mat score;
-      INSPECT_RETURN_IF_ERROR(FocusScore(frame, options.focus_measure, options.window_px, &score).WithContext(name));
-      INSPECT_RETURN_IF_ERROR(colour->PushFrame(c, score).WithContext(name));
+      // The score in row bands where the measure allows it bit for bit: a whole 24 MP score is
+      // 96 MB beside the engine and the composer.
+      const int band_rows = FocusMeasureIsRowLocal(options.focus_measure) ? kScoreBandRows : frame.rows;
+      auto score_rows = [&](int y0, int y1, cv::Mat* rows) {
+        return FocusScoreRows(frame, options.focus_measure, options.window_px, y0, y1, rows);
+      };
+      INSPECT_RETURN_IF_ERROR(colour->PushFrameInBands(c, score_rows, band_rows).WithContext(name));
     } else if (aligner) {
       INSPECT_ASSIGN_OR_RETURN(frame, aligner->Warp(frame, i));
     }

@@ -3,7 +3,7 @@
 // generated on the fly into a folder on disk (a tilted textured plane: each frame's columns
 // taken from one of a few precomputed defocus levels, so generation costs a copy per frame),
 // then the client uploads the folder. Measured per run: the server's and the client's peak RSS
-// (VmHWM of the server before it stops, ru_maxrss of the client), wall time of the client from
+// (VmHWM of the server before it stops, ru_maxrss of the client), the server's CPU time, wall time of the client from
 // start to downloaded result, time per frame, and the largest disk use of the server's data
 // directory and the client's temporary folder during the run (sampled), against the stack's size.
 // Prints one Markdown table (docs: tests/bench/large_stack_output.md).
@@ -58,6 +58,23 @@ int64_t TreeBytes(const fs::path& dir) {
     }
   }
   return total;
+}
+
+// User + system CPU seconds of a live process (/proc/<pid>/stat fields 14 and 15): on a machine
+// shared with other builds wall time per frame says little, CPU time per frame says whether the
+// work is linear in the frame count.
+double CpuSeconds(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto close = text.rfind(')');  // the command name may hold spaces
+  if (close == std::string::npos) return -1.0;
+  std::istringstream fields(text.substr(close + 2));
+  std::string f;
+  double ticks = 0;
+  for (int i = 3; i <= 15 && fields >> f; ++i) {
+    if (i >= 14) ticks += std::stod(f);
+  }
+  return ticks / double(sysconf(_SC_CLK_TCK));
 }
 
 long StatusKb(pid_t pid, const char* key) {
@@ -156,6 +173,7 @@ struct Run {
   double generate_s = 0, client_s = 0, engine_s = 0;
   int64_t stack_bytes = 0, peak_data_bytes = 0, peak_tmp_bytes = 0;
   long server_peak_kb = 0, client_peak_kb = 0;
+  double server_cpu_s = 0;  // inspectd's user + system CPU over the whole run
 };
 
 Run RunOne(const std::string& inspectd, const std::string& inspectctl, const fs::path& work, const std::string& format,
@@ -218,10 +236,16 @@ Run RunOne(const std::string& inspectd, const std::string& inspectctl, const fs:
   }
 
   std::atomic<bool> done{false};
-  std::thread sampler([&] {  // disk use while the run goes on
+  // Disk use while the run goes on, and the server's VmRSS over time (a TSV beside the logs: where
+  // in the job the peak falls, upload, alignment, engine pass or post-processing).
+  std::ofstream rss_log(work / ("server_rss_" + format + "_" + std::to_string(frames) + ".tsv"));
+  rss_log << "seconds\tvmrss_kb\n";
+  const auto s0 = Clock::now();
+  std::thread sampler([&] {
     while (!done.load()) {
       r.peak_data_bytes = std::max(r.peak_data_bytes, TreeBytes(data));
       r.peak_tmp_bytes = std::max(r.peak_tmp_bytes, TreeBytes(tmp));
+      rss_log << Seconds(s0, Clock::now()) << "\t" << StatusKb(server, "VmRSS") << "\n";
       std::this_thread::sleep_for(std::chrono::milliseconds(500));  // a sampling period, not a wait
     }
   });
@@ -246,6 +270,7 @@ Run RunOne(const std::string& inspectd, const std::string& inspectctl, const fs:
   done = true;
   sampler.join();
   r.server_peak_kb = StatusKb(server, "VmHWM");
+  r.server_cpu_s = CpuSeconds(server);
   kill(server, SIGTERM);
   waitpid(server, nullptr, 0);
 
@@ -301,17 +326,20 @@ int main(int argc, char** argv) {
   const double target_mb = (40.0 * pixels + 500e6) / 1e6;
   std::printf("frames %dx%d (%.1f MP); server target: peak RSS <= 40 B/px + 500 MB = %.0f MB\n\n", width, height,
               pixels / 1e6, target_mb);
-  std::printf("| format | frames | stack on disk | generate | client wall | per frame | server reconstruct | server peak RSS | B/px | "
-              "<= target | client peak RSS | peak data dir | peak client tmp | result |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("| format | frames | stack on disk | generate | client wall | per frame | server reconstruct | server CPU | "
+              "CPU per frame | server peak RSS | B/px | <= target | client peak RSS | peak data dir | peak client tmp | "
+              "result |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   std::fflush(stdout);
   for (const auto& format : format_list) {
     for (int n : counts) {
       const Run r = RunOne(inspectd, inspectctl, fs::path(work), format, n, cv::Size(width, height), extra);
       const double server_mb = r.server_peak_kb / 1024.0;
-      std::printf("| %s | %d | %.2f GB | %.0f s | %.1f s | %.3f s | %.1f s | %.0f MB | %.1f | %s | %.0f MB | %.2f GB | %.3f GB | %s |\n",
+      std::printf("| %s | %d | %.2f GB | %.0f s | %.1f s | %.3f s | %.1f s | %.1f s | %.3f s | %.0f MB | %.1f | %s | "
+                  "%.0f MB | %.2f GB | %.3f GB | %s |\n",
                   r.format == "jpeg" ? "JPEG 8-bit colour" : "TIFF 16-bit grey", r.frames, r.stack_bytes / 1e9,
-                  r.generate_s, r.client_s, r.frames ? r.client_s / r.frames : 0.0, r.engine_s, server_mb,
+                  r.generate_s, r.client_s, r.frames ? r.client_s / r.frames : 0.0, r.engine_s, r.server_cpu_s,
+                  r.frames ? r.server_cpu_s / r.frames : 0.0, server_mb,
                   r.server_peak_kb * 1024.0 / pixels, server_mb * 1.048576 <= target_mb ? "yes" : "NO",
                   r.client_peak_kb / 1024.0, r.peak_data_bytes / 1e9, r.peak_tmp_bytes / 1e9,
                   r.ok ? "ok" : r.note.c_str());

@@ -77,11 +77,12 @@ void UpdateExactRowFrames(StatePlanes<int32_t, uint8_t>& st, size_t off, int n, 
                           const int32_t* vol_row, size_t slot_stride, const uint8_t* const* pix_rows);
 
 // Exact state of the other measures: frame k's focus map (CV_32FC1, core/sff/focus_measure.h) and
-// pixels over rows y_begin .. y_end-1.
-void UpdateExactRowsFromFocus(StatePlanes<float, uint8_t>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
-                              int y_begin, int y_end);
-void UpdateExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
-                              int y_begin, int y_end);
+// pixels over rows y_begin .. y_end-1. The map may cover only a band of the frame: its row 0 is
+// frame row focus_y0 (0 for a whole-frame map).
+void UpdateExactRowsFromFocus(StatePlanes<float, uint8_t>& st, int k, const cv::Mat& focus, int focus_y0,
+                              const cv::Mat& frame, int y_begin, int y_end);
+void UpdateExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k, const cv::Mat& focus, int focus_y0,
+                              const cv::Mat& frame, int y_begin, int y_end);
 
 // Compact state: frames k_begin .. k_end-1 over the n pixels of a state row at off (frame 0 on
 // the Reset state initialises it): the focus value of frame k at x is
@@ -113,10 +114,10 @@ struct TenengradKernels {
                                 TenengradScratch& sc, int32_t* vol, const cv::Mat* next);
   static void ExactRowFrames(StatePlanes<int32_t, uint8_t>& st, size_t off, int n, int k_begin, int k_end,
                              const int32_t* vol_row, size_t slot_stride, const uint8_t* const* pix_rows);
-  static void ExactRowsFromFocus(StatePlanes<float, uint8_t>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
-                                 int y_begin, int y_end);
-  static void ExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
-                                 int y_begin, int y_end);
+  static void ExactRowsFromFocus(StatePlanes<float, uint8_t>& st, int k, const cv::Mat& focus, int focus_y0,
+                                 const cv::Mat& frame, int y_begin, int y_end);
+  static void ExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k, const cv::Mat& focus, int focus_y0,
+                                 const cv::Mat& frame, int y_begin, int y_end);
   // Tenengrad map of a whole 8-bit frame (CV_32SC1 out, allocated): ComputeTenengradU8.
   static void TenengradMap(const cv::Mat& frame, int window_px, cv::Mat* out);
   // Portable (the scalar reference), AVX2 (blocks of 8) and AVX-512 (blocks of 16): pixels

@@ -30,14 +30,12 @@ template <typename T, typename P>
 SFF_INLINE SFF_TARGET void InitRow(StatePlanes<T, P>& s, size_t off, const T* __restrict f, const P* __restrict pix,
                                    int n) {
   T* __restrict best = s.best.data() + off;
-  int32_t* __restrict idx = s.idx.data() + off;
+  uint32_t* __restrict idx_aif = s.idx_aif.data() + off;
   float* __restrict sum = s.sum.data() + off;
-  int32_t* __restrict aif = s.aif.data() + off;
   for (int x = 0; x < n; ++x) {
     best[x] = f[x];
-    idx[x] = 0;
+    idx_aif[x] = uint32_t(pix[x]);  // index 0
     sum[x] = ToFloat(f[x]);
-    aif[x] = pix[x];
   }
   std::fill_n(s.curv_all.data() + off, n, 0.f);
   std::fill_n(s.curv_excl.data() + off, n, 0.f);
@@ -74,7 +72,7 @@ SFF_INLINE SFF_TARGET void AddCurveStats(float fv, float t2, bool new_max, int32
 // goes to curv_all and, when t_k involves the maximum (m is k-2, k-1 or k: new max), to curv_excl.
 template <typename T>
 SFF_TARGET __attribute__((noinline)) void StatsRow(int n, int k, const T* __restrict f, const T* __restrict best,
-                                                   const int32_t* __restrict idx, const T* __restrict last,
+                                                   const uint32_t* __restrict idx_aif, const T* __restrict last,
                                                    const T* __restrict last2, float* __restrict sum,
                                                    float* __restrict curv_all, float* __restrict curv_excl) {
   if (k < 2) {
@@ -86,7 +84,8 @@ SFF_TARGET __attribute__((noinline)) void StatsRow(int n, int k, const T* __rest
     const T v = f[x];
     // In float: for wide windows 2 F overflows int32.
     const float t = (ToFloat(v) - ToFloat(last[x])) - (ToFloat(last[x]) - ToFloat(last2[x]));
-    AddCurveStats(ToFloat(v), t * t, v > best[x], idx[x], km1, km2, sum[x], curv_all[x], curv_excl[x]);
+    AddCurveStats(ToFloat(v), t * t, v > best[x], int32_t(idx_aif[x] >> 16), km1, km2, sum[x], curv_all[x],
+                  curv_excl[x]);
   }
 }
 
@@ -95,24 +94,25 @@ SFF_TARGET __attribute__((noinline)) void StatsRow(int n, int k, const T* __rest
 template <typename T, typename P>
 SFF_TARGET __attribute__((noinline)) void UpdateRowJ1(int n, int k, float curv_scale, const T* __restrict f,
                                                       const P* __restrict pix, T* __restrict best,
-                                                      int32_t* __restrict idx, T* __restrict prev, T* __restrict next,
-                                                      T* __restrict last, T* __restrict last2, int32_t* __restrict aif,
+                                                      uint32_t* __restrict idx_aif, T* __restrict prev,
+                                                      T* __restrict next, T* __restrict last, T* __restrict last2,
                                                       float* __restrict sum, float* __restrict curv_all,
                                                       float* __restrict curv_excl) {
-  const int32_t kk = k, km1 = k - 1, km2 = k - 2;
+  const int32_t km1 = k - 1, km2 = k - 2;
+  const uint32_t k_bits = uint32_t(k) << 16;
   for (int x = 0; x < n; ++x) {
     const T v = f[x], b = best[x], l = last[x], l2 = last2[x];
-    const int32_t id = idx[x];
+    const uint32_t w = idx_aif[x];
+    const int32_t id = int32_t(w >> 16);
     const float t = (ToFloat(v) - ToFloat(l)) - (ToFloat(l) - ToFloat(l2));  // float: 2 F overflows int32
     AddCurveStats(ToFloat(v), curv_scale * (t * t), v > b, id, km1, km2, sum[x], curv_all[x], curv_excl[x]);
     const bool gt = v > b;
     const T nx = next[x], pv = prev[x];
-    const int32_t a = aif[x], p = pix[x];
+    const uint32_t p = k_bits | uint32_t(pix[x]);
     next[x] = gt ? T(0) : (id == km1 ? v : nx);
     prev[x] = gt ? l : pv;
     best[x] = gt ? v : b;
-    idx[x] = gt ? kk : id;
-    aif[x] = gt ? p : a;
+    idx_aif[x] = gt ? p : w;
     last2[x] = l;
     last[x] = v;
   }
@@ -123,13 +123,13 @@ template <typename T, typename P>
 SFF_TARGET void UpdateRowGeneral(StatePlanes<T, P>& s, size_t off, int k, const T* f, const P* pix, int n) {
   const int J = s.j;
   // Curve statistics of frame k >= 1, before the maximum is updated: sum, second differences.
-  StatsRow(n, k, f, s.best.data() + off, s.idx.data() + off, s.ring[0].data() + off, s.last2.data() + off,
+  StatsRow(n, k, f, s.best.data() + off, s.idx_aif.data() + off, s.ring[0].data() + off, s.last2.data() + off,
            s.sum.data() + off, s.curv_all.data() + off, s.curv_excl.data() + off);
   for (int x = 0; x < n; ++x) {
     const size_t i = off + x;
     const T v = f[x];
     const bool gt = v > s.best[i];
-    const int dist = k - int(s.idx[i]);
+    const int dist = k - s.IndexOf(s.idx_aif[i]);
     for (int j = 0; j < J; ++j) {
       if (gt) {
         s.before[j][i] = s.ring[j][i];
@@ -140,8 +140,7 @@ SFF_TARGET void UpdateRowGeneral(StatePlanes<T, P>& s, size_t off, int k, const 
     }
     if (gt) {
       s.best[i] = v;
-      s.idx[i] = k;
-      s.aif[i] = pix[x];
+      s.idx_aif[i] = s.Pack(k, uint32_t(pix[x]));
     }
     s.last2[i] = s.ring[0][i];
     for (int j = J - 1; j > 0; --j) s.ring[j][i] = s.ring[j - 1][i];
@@ -156,9 +155,9 @@ SFF_TARGET inline void UpdateRow(StatePlanes<T, P>& s, size_t off, int k, const 
   } else if (s.j == 1) {
     // The hot path (maximum and Gaussian interpolation).
     const float curv_scale = k >= 2 ? 1.f : 0.f;
-    UpdateRowJ1<T, P>(n, k, curv_scale, f, pix, s.best.data() + off, s.idx.data() + off, s.before[0].data() + off,
-                      s.after[0].data() + off, s.ring[0].data() + off, s.last2.data() + off, s.aif.data() + off,
-                      s.sum.data() + off, s.curv_all.data() + off, s.curv_excl.data() + off);
+    UpdateRowJ1<T, P>(n, k, curv_scale, f, pix, s.best.data() + off, s.idx_aif.data() + off, s.before[0].data() + off,
+                      s.after[0].data() + off, s.ring[0].data() + off, s.last2.data() + off, s.sum.data() + off,
+                      s.curv_all.data() + off, s.curv_excl.data() + off);
   } else {
     UpdateRowGeneral(s, off, k, f, pix, n);
   }
@@ -286,10 +285,10 @@ struct CopySink {
 };
 
 template <typename P>
-SFF_TARGET void ExactRowsFromFocusImpl(StatePlanes<float, P>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
-                                       int y_begin, int y_end) {
+SFF_TARGET void ExactRowsFromFocusImpl(StatePlanes<float, P>& st, int k, const cv::Mat& focus, int focus_y0,
+                                       const cv::Mat& frame, int y_begin, int y_end) {
   for (int y = y_begin; y < y_end; ++y)
-    UpdateRow(st, size_t(y) * st.width, k, focus.ptr<float>(y), frame.ptr<P>(y), st.width);
+    UpdateRow(st, size_t(y) * st.width, k, focus.ptr<float>(y - focus_y0), frame.ptr<P>(y), st.width);
 }
 
 }  // namespace inspection::sff_internal::SFF_ISA_NS
@@ -322,16 +321,16 @@ SFF_TARGET void TenengradKernels<SFF_ISA>::ExactRowFrames(StatePlanes<int32_t, u
 
 template <>
 SFF_TARGET void TenengradKernels<SFF_ISA>::ExactRowsFromFocus(StatePlanes<float, uint8_t>& st, int k,
-                                                              const cv::Mat& focus, const cv::Mat& frame, int y_begin,
-                                                              int y_end) {
-  SFF_ISA_NS::ExactRowsFromFocusImpl(st, k, focus, frame, y_begin, y_end);
+                                                              const cv::Mat& focus, int focus_y0, const cv::Mat& frame,
+                                                              int y_begin, int y_end) {
+  SFF_ISA_NS::ExactRowsFromFocusImpl(st, k, focus, focus_y0, frame, y_begin, y_end);
 }
 
 template <>
 SFF_TARGET void TenengradKernels<SFF_ISA>::ExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k,
-                                                              const cv::Mat& focus, const cv::Mat& frame, int y_begin,
-                                                              int y_end) {
-  SFF_ISA_NS::ExactRowsFromFocusImpl(st, k, focus, frame, y_begin, y_end);
+                                                              const cv::Mat& focus, int focus_y0, const cv::Mat& frame,
+                                                              int y_begin, int y_end) {
+  SFF_ISA_NS::ExactRowsFromFocusImpl(st, k, focus, focus_y0, frame, y_begin, y_end);
 }
 
 template <>

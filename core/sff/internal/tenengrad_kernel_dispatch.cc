@@ -37,20 +37,20 @@ void UpdateExactRowFrames(StatePlanes<int32_t, uint8_t>& st, size_t off, int n, 
     Portable::ExactRowFrames(st, off, n, k_begin, k_end, vol_row, slot_stride, pix_rows);
 }
 
-void UpdateExactRowsFromFocus(StatePlanes<float, uint8_t>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
-                              int y_begin, int y_end) {
+void UpdateExactRowsFromFocus(StatePlanes<float, uint8_t>& st, int k, const cv::Mat& focus, int focus_y0,
+                              const cv::Mat& frame, int y_begin, int y_end) {
   if (st.simd)
-    Avx2::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
+    Avx2::ExactRowsFromFocus(st, k, focus, focus_y0, frame, y_begin, y_end);
   else
-    Portable::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
+    Portable::ExactRowsFromFocus(st, k, focus, focus_y0, frame, y_begin, y_end);
 }
 
-void UpdateExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k, const cv::Mat& focus, const cv::Mat& frame,
-                              int y_begin, int y_end) {
+void UpdateExactRowsFromFocus(StatePlanes<float, uint16_t>& st, int k, const cv::Mat& focus, int focus_y0,
+                              const cv::Mat& frame, int y_begin, int y_end) {
   if (st.simd)
-    Avx2::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
+    Avx2::ExactRowsFromFocus(st, k, focus, focus_y0, frame, y_begin, y_end);
   else
-    Portable::ExactRowsFromFocus(st, k, focus, frame, y_begin, y_end);
+    Portable::ExactRowsFromFocus(st, k, focus, focus_y0, frame, y_begin, y_end);
 }
 
 void UpdateCompactRow(CompactState& st, size_t off, int n, int k_begin, int k_end, int slot0, const int32_t* vol_row,

@@ -4,7 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
 #include <random>
@@ -258,9 +260,8 @@ TEST(FocusMeasureTest, NormalisedByIlluminationIsTheSameForAnyLight) {
   const double s = 1.7;
   const cv::Mat brighter = base * s;
   const std::pair<FocusMeasure, int> expected_power[] = {
-      {FocusMeasure::kModifiedLaplacian, 1},     {FocusMeasure::kSumModifiedLaplacian, 2},
-      {FocusMeasure::kTenengrad, 2},             {FocusMeasure::kGreyLevelVariance, 2},
-      {FocusMeasure::kGreyLevelLocalVariance, 2}, {FocusMeasure::kHelmliMean, 0},
+      {FocusMeasure::kModifiedLaplacian, 1}, {FocusMeasure::kSumModifiedLaplacian, 2},   {FocusMeasure::kTenengrad, 2},
+      {FocusMeasure::kGreyLevelVariance, 2}, {FocusMeasure::kGreyLevelLocalVariance, 2}, {FocusMeasure::kHelmliMean, 0},
       {FocusMeasure::kChebyshevMoments, 0}};
   for (const auto& [fm, power] : expected_power) {
     EXPECT_EQ(IlluminationPower(fm), power) << FocusMeasureName(fm);
@@ -298,6 +299,64 @@ TEST(FocusMeasureTest, NormalisedByIlluminationIsTheSameForAnyLight) {
   EXPECT_EQ(NormaliseFocusByIllumination(base, FocusMeasure::kTenengrad, 7, &wrong).code(),
             StatusCode::kInvalidArgument);
   EXPECT_EQ(NormaliseFocusByIllumination(base, FocusMeasure::kTenengrad, 8, &t).code(), StatusCode::kInvalidArgument);
+}
+
+// The streaming engine computes the focus map in row bands (core/sff/sff_exact_engine.cc): for
+// the row-local measures, rows [y0, y1) of a band's map computed from frame rows widened by
+// FocusMeasureHaloRows must equal the whole frame's rows bit for bit, raw and normalised by the
+// light, for 8- and 16-bit frames of full-range noise (the largest sums), bands touching the top,
+// the bottom or neither, and windows up to the widest. One row less of halo must show.
+TEST(FocusMeasureTest, RowLocalMeasuresInBandsEqualTheWholeFrameBitForBit) {
+  const cv::Size size(61, 97);  // odd width: the filters' vector tails
+  std::mt19937 rng(35);
+  const std::pair<int, int> bands[] = {{0, 1}, {0, 20}, {13, 14}, {20, 57}, {60, 97}, {96, 97}, {0, 97}};
+  for (int type : {CV_8UC1, CV_16UC1}) {
+    cv::Mat frame(size, type);
+    const uint32_t full = type == CV_8UC1 ? 256 : 65536;
+    for (int y = 0; y < size.height; ++y)
+      for (int x = 0; x < size.width; ++x) {
+        if (type == CV_8UC1)
+          frame.at<uint8_t>(y, x) = uint8_t(rng() % full);
+        else
+          frame.at<uint16_t>(y, x) = uint16_t(rng() % full);
+      }
+    for (FocusMeasure fm : {FocusMeasure::kTenengrad, FocusMeasure::kModifiedLaplacian,
+                            FocusMeasure::kSumModifiedLaplacian, FocusMeasure::kGreyLevelVariance}) {
+      ASSERT_TRUE(FocusMeasureIsRowLocal(fm)) << FocusMeasureName(fm);
+      for (int w : {3, 9, 31}) {
+        cv::Mat whole, whole_lit;
+        ASSERT_TRUE(ComputeFocusMeasure(frame, fm, w, &whole).ok());
+        whole_lit = whole.clone();
+        ASSERT_TRUE(NormaliseFocusByIllumination(frame, fm, w, &whole_lit).ok());
+        const int halo = FocusMeasureHaloRows(w);
+        for (const auto& [y0, y1] : bands) {
+          const int h0 = std::max(0, y0 - halo), h1 = std::min(size.height, y1 + halo);
+          cv::Mat band;
+          ASSERT_TRUE(ComputeFocusMeasure(frame.rowRange(h0, h1), fm, w, &band).ok());
+          cv::Mat band_lit = band.clone();
+          ASSERT_TRUE(NormaliseFocusByIllumination(frame.rowRange(h0, h1), fm, w, &band_lit).ok());
+          const size_t row_bytes = size_t(size.width) * sizeof(float);
+          for (int y = y0; y < y1; ++y) {
+            ASSERT_EQ(std::memcmp(whole.ptr<float>(y), band.ptr<float>(y - h0), row_bytes), 0)
+                << FocusMeasureName(fm) << " type " << type << " window " << w << " row " << y;
+            ASSERT_EQ(std::memcmp(whole_lit.ptr<float>(y), band_lit.ptr<float>(y - h0), row_bytes), 0)
+                << FocusMeasureName(fm) << " normalised, type " << type << " window " << w << " row " << y;
+          }
+        }
+      }
+    }
+    // One row of halo less: Tenengrad's band edge row differs (the halo is not oversized).
+    const int w = 9, halo = FocusMeasureHaloRows(w) - 1, y0 = 40, y1 = 50;
+    cv::Mat whole, band;
+    ASSERT_TRUE(ComputeFocusMeasure(frame, FocusMeasure::kTenengrad, w, &whole).ok());
+    ASSERT_TRUE(ComputeFocusMeasure(frame.rowRange(y0 - halo, y1 + halo), FocusMeasure::kTenengrad, w, &band).ok());
+    EXPECT_NE(std::memcmp(whole.ptr<float>(y0), band.ptr<float>(halo), size_t(size.width) * sizeof(float)), 0);
+  }
+  // Not row-local: the Helmli mean's floor is the whole frame's mean; the local variance's and the
+  // Chebyshev moments' sums are not exact.
+  EXPECT_FALSE(FocusMeasureIsRowLocal(FocusMeasure::kHelmliMean));
+  EXPECT_FALSE(FocusMeasureIsRowLocal(FocusMeasure::kGreyLevelLocalVariance));
+  EXPECT_FALSE(FocusMeasureIsRowLocal(FocusMeasure::kChebyshevMoments));
 }
 
 TEST(FocusMeasureTest, RejectsBadWindowAndType) {
