@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "server/storage/data_store.h"
+#include "tests/server/jobs/job_events.h"
 
 namespace inspection {
 namespace {
@@ -149,17 +150,7 @@ class JobManagerTest : public ::testing::Test {
   }
 
   // Follows the job's event stream to its terminal event; returns every event.
-  static std::vector<v1::JobEvent> WaitForEnd(const RecordPtr& r) {
-    std::vector<v1::JobEvent> events;
-    for (;;) {
-      const size_t before = events.size();
-      if (r->EventsSince(before, kDeadline, &events)) return events;
-      if (events.size() == before) {
-        ADD_FAILURE() << "job " << r->job_id() << " did not end";
-        return events;
-      }
-    }
-  }
+  static std::vector<v1::JobEvent> WaitForEnd(const RecordPtr& r) { return WaitForJobEnd(r, kDeadline); }
   static std::vector<v1::JobPhase> Phases(const std::vector<v1::JobEvent>& events) {
     std::vector<v1::JobPhase> phases;
     for (const v1::JobEvent& e : events) phases.push_back(e.phase());

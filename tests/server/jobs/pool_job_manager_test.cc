@@ -25,6 +25,7 @@
 #include "server/http/operations_http.h"
 #include "server/jobs/job_manager.h"
 #include "server/storage/data_store.h"
+#include "tests/server/jobs/job_events.h"
 #include "tests/lib/postgres_server.h"
 // Last: httplib.h pulls in <resolv.h>, whose `_res` macro breaks Eigen's headers.
 #include <httplib.h>
@@ -100,17 +101,7 @@ bool PollUntil(const std::function<bool()>& cond) {
   return cond();
 }
 
-std::vector<v1::JobEvent> WaitForEnd(const RecordPtr& r) {
-  std::vector<v1::JobEvent> events;
-  for (;;) {
-    const size_t before = events.size();
-    if (r->EventsSince(before, kDeadline, &events)) return events;
-    if (events.size() == before) {
-      ADD_FAILURE() << "job " << r->job_id() << " did not end";
-      return events;
-    }
-  }
-}
+std::vector<v1::JobEvent> WaitForEnd(const RecordPtr& r) { return WaitForJobEnd(r, kDeadline); }
 
 class PoolJobManagerTest : public ::testing::Test {
  protected:
