@@ -83,6 +83,7 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
   INSPECT_ASSIGN_OR_RETURN(model.grid, ZGrid::Create(options.z_positions_um));
   model.correlation_px = options.window_px;
   model.stage_u_um = options.stage_repeatability_um / std::sqrt(3.0);
+  model.three_point_peak = options.three_point_peak;
   model.linearity = options.linearity;
   if (model.linearity.characterised_step_um > 0.0) {
     const double step = model.grid.median_step_um();
@@ -197,6 +198,29 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
   return model;
 }
 
+DepthNoiseModel::StageSensitivity DepthNoiseModel::StageSensitivityAt(const ZGrid::Position& p) const {
+  StageSensitivity a;
+  const int frames = int(grid.positions_um().size());
+  const int n = p.fraction < 0.5 ? p.lower : p.lower + 1;  // nearest frame, unclamped
+  if (!three_point_peak || n < 1 || n > frames - 2) {
+    // Maximum / line fit, or a depth at or beyond the grid's end frames (no frame on one side):
+    // the nearest frame's error in full.
+    a.frame[0] = p.nearest;
+    a.weight[0] = -1.0;
+    a.count = 1;
+    return a;
+  }
+  const double x = p.fraction < 0.5 ? p.fraction : p.fraction - 1.0;
+  a.frame[0] = n - 1;
+  a.frame[1] = n;
+  a.frame[2] = n + 1;
+  a.weight[0] = 0.5 * (2.0 * x - 1.0) * (1.0 + x);
+  a.weight[1] = -2.0 * x * x;
+  a.weight[2] = 0.5 * (1.0 + 2.0 * x) * (x - 1.0);
+  a.count = 3;
+  return a;
+}
+
 cv::Mat DepthNoiseModel::SamplePerturbation(const cv::Mat& depth_um, uint64_t seed, int k, int count) const {
   const uint64_t stream = SplitMix(seed ^ SplitMix(uint64_t(k) + 0x1234567ull));
   const int r = correlation_px / 2;
@@ -233,8 +257,12 @@ cv::Mat DepthNoiseModel::SamplePerturbation(const cv::Mat& depth_um, uint64_t se
     for (int col = box.x; col < box.x + box.width; ++col) {
       if (!std::isfinite(z[col]) || !std::isfinite(s[col])) continue;
       const ZGrid::Position p = grid.Locate(z[col]);
-      o[col] = float(double(s[col]) * n[col - box.x] * unit + linearity.At(p.fraction + phase) * p.step_um +
-                     frame_error[p.nearest]);
+      double stage = 0.0;
+      if (half_width > 0.0) {
+        const StageSensitivity a = StageSensitivityAt(p);
+        for (int j = 0; j < a.count; ++j) stage += a.weight[j] * frame_error[a.frame[j]];
+      }
+      o[col] = float(double(s[col]) * n[col - box.x] * unit + linearity.At(p.fraction + phase) * p.step_um + stage);
     }
   }
   return out;

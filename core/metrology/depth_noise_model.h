@@ -24,8 +24,18 @@
 //    uniform phase. For a region at one height it is a common offset (it cancels in form and
 //    roughness), for two heights (a step) it is not.
 // 3. Stage repeatability: each frame's z is off by a uniform +-r (devices: stage
-//    repeatability), shifting the depths whose peak is at that frame alike; modelled as one
-//    error per frame applied to the pixels nearest to it in z.
+//    repeatability), one independent error d_i per frame. A depth interpolated through three
+//    samples (Gaussian eq. 3.30-3.34 or the defocus parabola: both the vertex of a parabola
+//    fitted to a function exactly quadratic in z - h) takes, with x = (h - z_n) / step in
+//    [-1/2, 1/2] from its nearest frame n (linearised, equal steps; independent of the curve's
+//    width), e = a_-1 d_n-1 + a_0 d_n + a_+1 d_n+1 with
+//      a_-1 = (2x - 1)(1 + x) / 2,  a_0 = -2 x^2,  a_+1 = (1 + 2x)(x - 1) / 2   (sum -1),
+//    so a depth at a frame is moved by the mean of its neighbours' errors and one midway by the
+//    mean of its two frames': the rms sensitivity is ~0.7, and neighbouring heights share two
+//    frames, not one. Before, each depth took its nearest frame's error in full (sensitivity 1,
+//    a staircase in height), which made curvature (radius) ~3.5x too uncertain: sphere radius
+//    U 93 um against an RMS deviation of 13 um (tests/bench/uncertainty_evaluate_output.md).
+//    three_point_peak = false (maximum or line fit) keeps the full nearest-frame error.
 #pragma once
 
 #include <cstdint>
@@ -43,6 +53,9 @@ struct DepthNoiseOptions {
   std::vector<double> z_positions_um;  // the stack's frame positions (stack.json frames[].z_um), >= 2
   ZLinearity linearity = ZLinearity::Uncharacterised();
   double stage_repeatability_um = 0.0;  // +- bound of the uniform per-move error (simulated rig: 0.1)
+  // The reconstruction's depth interpolation is a three-point vertex fit (kGaussian or
+  // kDefocusParabola, the default) — see component 3; false for kMaximum / kLineFit.
+  bool three_point_peak = true;
   // Side of the neighbourhood the local sigma averages over; 0 = 8 windows (~64 independent
   // samples per direction, so sigma is known to ~10 %).
   int neighbourhood_px = 0;
@@ -67,6 +80,16 @@ struct DepthNoiseModel {
   ZGrid grid;
   ZLinearity linearity;     // the table in use (maybe the uncharacterised bound, see its source)
   double stage_u_um = 0.0;  // standard uncertainty of one frame's z: r / sqrt 3
+  bool three_point_peak = true;  // DepthNoiseOptions::three_point_peak
+
+  // How a depth at grid position p moves with the z errors of the frames around it (component 3):
+  // depth error = sum_k weight[k] * d(frame[k]), k < count.
+  struct StageSensitivity {
+    int frame[3] = {0, 0, 0};
+    double weight[3] = {0.0, 0.0, 0.0};
+    int count = 0;
+  };
+  StageSensitivity StageSensitivityAt(const ZGrid::Position& p) const;
 
   // Perturbation k (0-based) of a Monte Carlo set of `count` drawn with `seed`: one realisation
   // of all three components on the pixels with depth and a sigma (CV_32FC1, 0 elsewhere). The

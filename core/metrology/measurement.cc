@@ -41,8 +41,20 @@ StatusOr<ArealGroupResult> EvaluateArealGroup(const cv::Mat& depth_um, const cv:
   r.budgets[int(HeightParameter::kSsk)] = MonteCarloBudget(mc[2]);
   r.budgets[int(HeightParameter::kSku)] = MonteCarloBudget(mc[3]);
   const double range = LinearityRangeUm(depth_um, mask, *noise);
-  // Shape parameters: the worst case of a height-dependent error (core/metrology/measurement_uncertainty.h).
-  const double delta_um = HeightDependentErrorBoundUm(depth_um, mask, *noise, range);
+  // The focus window's flattening of curvature, estimated from the map (WindowAveragingError):
+  // an uncorrected systematic error of every moment parameter (Sa, Sq of a 2 um cosine at a
+  // 64 px period: -0.03 um), which the Monte Carlo's error model does not contain.
+  const cv::Mat flattening = WindowAveragingError(depth_um, noise->correlation_px);
+  INSPECT_ASSIGN_OR_RETURN(std::vector<double> unflattened, measure(depth_um - flattening));
+  for (size_t i = 0; i < moments.size(); ++i) {
+    static constexpr HeightParameter kMoment[4] = {HeightParameter::kSa, HeightParameter::kSq, HeightParameter::kSsk,
+                                                   HeightParameter::kSku};
+    AddEstimatedSystematic(r.budgets[int(kMoment[i])],
+                           std::isfinite(unflattened[i]) ? unflattened[i] - moments[i] : 0.0);
+  }
+  // Shape parameters: the worst case of the z-linearity's height-dependent error, whose shape on
+  // a curved surface is not the characterised table's (core/metrology/measurement_uncertainty.h).
+  const double delta_um = 0.5 * range;
   for (const HeightParameter shape : {HeightParameter::kSsk, HeightParameter::kSku}) {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat sign, ShapeParameterSensitivitySign(e.surface_um, shape));
     const size_t out = shape == HeightParameter::kSsk ? 2 : 3;

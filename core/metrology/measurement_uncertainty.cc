@@ -180,12 +180,16 @@ StatusOr<FunctionalCovariance> LinearFunctionalCovariance(const std::vector<cv::
   const Eigen::MatrixXd l = cell_weight * bias;  // n x phases
   cov.linearity = l * l.transpose() / double(kLinearityPhases);
 
-  // Stage: one independent error per frame, shared by the pixels nearest to that frame.
+  // Stage: one independent error per frame, reaching each depth through its peak
+  // interpolation's sensitivity to the frames around it (core/metrology/depth_noise_model.h).
   if (model.stage_u_um > 0.0) {
     const int frames = int(model.grid.positions_um().size());
     Eigen::MatrixXd a = Eigen::MatrixXd::Zero(n, frames);
     for (const Used& u : used) {
-      for (int i = 0; i < n; ++i) a(i, u.pos.nearest) += weights[i].at<double>(u.row, u.col);
+      const DepthNoiseModel::StageSensitivity s = model.StageSensitivityAt(u.pos);
+      for (int k = 0; k < s.count; ++k) {
+        for (int i = 0; i < n; ++i) a(i, s.frame[k]) += s.weight[k] * weights[i].at<double>(u.row, u.col);
+      }
     }
     cov.stage = model.stage_u_um * model.stage_u_um * a * a.transpose();
   }
@@ -234,22 +238,29 @@ StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& d
     return Status::InvalidArgument("depth map and noise model must be CV_32FC1 maps of one size");
   }
   const size_t n = values.size();
-  std::vector<double> sum(n, 0.0), sum2(n, 0.0);
-  std::vector<int> count(n, 0);
+  std::vector<double> sum(n, 0.0), sum2(n, 0.0), sum3(n, 0.0);
+  std::vector<int> count(n, 0), count3(n, 0);
+  std::vector<cv::Mat> draws(options.samples);
+  for (int k = 0; k < options.samples; ++k) draws[k] = model.SamplePerturbation(depth_um, options.seed, k, options.samples);
   for (int k = 0; k < options.samples; ++k) {
-    const cv::Mat perturbed = depth_um + model.SamplePerturbation(depth_um, options.seed, k, options.samples);
-    StatusOr<std::vector<double>> v = measure(perturbed);
+    StatusOr<std::vector<double>> v = measure(depth_um + draws[k]);
     if (!v.ok() || v->size() != n) continue;
+    // The third noise level: a second, independent draw on top (paired with this sample).
+    StatusOr<std::vector<double>> v3 = measure(depth_um + draws[k] + draws[(k + options.samples / 2) % options.samples]);
+    const bool third = v3.ok() && v3->size() == n;
     for (size_t i = 0; i < n; ++i) {
       const double d = (*v)[i] - values[i];  // about the measured value: keeps the sums small
       if (!std::isfinite(d)) continue;
       sum[i] += d;
       sum2[i] += d * d;
       ++count[i];
+      if (third && std::isfinite((*v3)[i])) {
+        sum3[i] += (*v3)[i] - (*v)[i];
+        ++count3[i];
+      }
     }
   }
   std::vector<MonteCarloEstimate> out(n);
-  const double doubling = 1.0 / (std::sqrt(2.0) - 1.0);
   for (size_t i = 0; i < n; ++i) {
     if (!std::isfinite(values[i])) {
       out[i].spread = out[i].bias = out[i].standard_uncertainty = std::nan("");
@@ -263,10 +274,27 @@ StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& d
     const double c = count[i], mean = sum[i] / c;
     out[i].samples = count[i];
     out[i].spread = std::sqrt(std::max(0.0, (sum2[i] - c * mean * mean) / (c - 1.0)));
-    out[i].bias = mean * doubling;
+    const double d2 = count3[i] > 0 ? sum3[i] / count3[i] : std::nan("");
+    out[i].noise_exponent = NoiseBiasExponent(mean, d2, out[i].spread / std::sqrt(c));
+    out[i].bias = mean / (std::pow(2.0, out[i].noise_exponent) - 1.0);
     out[i].standard_uncertainty = std::hypot(out[i].spread, out[i].bias);
   }
   return out;
+}
+
+double NoiseBiasExponent(double d1, double d2, double d1_standard_error) {
+  if (!std::isfinite(d1) || !std::isfinite(d2) || !(std::abs(d1) > 3.0 * d1_standard_error) || d1 == 0.0) return 0.5;
+  // r(p) = (3^p - 2^p) / (2^p - 1) rises from 0.768 at p = 1/2 to 1 at p = 1.
+  const double r = d2 / d1;
+  auto ratio = [](double p) { return (std::pow(3.0, p) - std::pow(2.0, p)) / (std::pow(2.0, p) - 1.0); };
+  if (!(r > ratio(0.5))) return 0.5;
+  if (r >= 1.0) return 1.0;
+  double lo = 0.5, hi = 1.0;
+  for (int it = 0; it < 40; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (ratio(mid) < r ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
 }
 
 cv::Mat WindowAveragingError(const cv::Mat& depth_um, int window_px) {
@@ -362,6 +390,12 @@ void AddHeightDependentBound(UncertaintyBudget& budget, double bound) {
   budget.height_dependent = u;
   const double before = std::isfinite(budget.standard_uncertainty) ? budget.standard_uncertainty : 0.0;
   budget.standard_uncertainty = std::hypot(before, u);
+}
+
+void AddEstimatedSystematic(UncertaintyBudget& budget, double bias) {
+  budget.estimated_systematic = bias;
+  const double before = std::isfinite(budget.standard_uncertainty) ? budget.standard_uncertainty : 0.0;
+  budget.standard_uncertainty = std::hypot(before, std::isfinite(bias) ? bias : 0.0);
 }
 
 }  // namespace inspection

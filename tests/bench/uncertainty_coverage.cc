@@ -9,7 +9,9 @@
 // uncharacterised linearity bound for comparison.
 //
 //   uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM]
+//                        [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile]
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -43,8 +45,13 @@ struct Args {
   int samples = 32;
   std::string only;          // run only specimens whose short name contains this
   bool residual_profile = false;  // print the mean depth error against the true height per specimen
+  bool components = false;        // print the mean budget components per specimen and measurement
   double z_step_um = 0.0;         // scans' z step (0 = the rig's default)
   double cal_step_um = 0.0;       // z step of the linearity characterisation (0 = the rig's default)
+  // "tuning": the six specimens the model was tuned on; "heldout": other scenes (steps of several
+  // heights on tilted planes, sinusoids of other amplitudes and periods, other sphere and
+  // cylinder radii, random rough surfaces), never looked at while tuning; "all": both.
+  std::string scene_set = "tuning";
 };
 
 struct Case {
@@ -80,7 +87,7 @@ MeasurementSpec Spec(MeasurementKind kind, RegionOfInterest roi) {
   return s;
 }
 
-std::vector<Case> Cases(const Args& a, const fs::path& work, double px, int border) {
+std::vector<Case> TuningCases(const Args& a, const fs::path& work, double px, int border) {
   const int w = a.camera.width, h = a.camera.height, b = border;
   const RegionOfInterest inner = RegionOfInterest::Rectangle(b, b, w - 2 * b, h - 2 * b);
   std::vector<Case> cases;
@@ -157,6 +164,124 @@ std::vector<Case> Cases(const Args& a, const fs::path& work, double px, int bord
   return cases;
 }
 
+// Scenes of the held-out set (not used while tuning the model).
+std::vector<Case> HeldOutCases(const Args& a, const fs::path& work, double px, int border) {
+  const int w = a.camera.width, h = a.camera.height, b = border;
+  const double field = w * px, cx = 0.5 * w * px, cy = 0.5 * h * px;
+  const RegionOfInterest inner = RegionOfInterest::Rectangle(b, b, w - 2 * b, h - 2 * b);
+  std::vector<Case> cases;
+  // Steps of 0.5 and 3 um on planes tilted 0.2 deg along x and 0.15 deg along y.
+  for (const double height : {0.5, 3.0}) {
+    const double sx = std::tan(0.2 * kPi / 180.0), sy = std::tan(0.15 * kPi / 180.0);
+    char name[32];
+    std::snprintf(name, sizeof name, "tstep%.1f", height);
+    const std::string scene = test_scenes::WriteUserScene(
+        work / "scenes", name, a.camera, px,
+        [&](double x, double y) { return 204.0 + sx * (x - cx) + sy * (y - cy) + (x > cx ? height : 0.0); },
+        201 + unsigned(height * 10));
+    Case c{scene, {}};
+    const RegionOfInterest left = RegionOfInterest::Rectangle(b, b, w / 2 - 12 - b, h - 2 * b);
+    const RegionOfInterest right = RegionOfInterest::Rectangle(w / 2 + 12, b, w / 2 - 12 - b, h - 2 * b);
+    MeasurementSpec step = Spec(MeasurementKind::kStepHeight, right);
+    step.reference_roi = left;
+    c.specs.push_back({"step_height", step});
+    MeasurementSpec sep = step;
+    sep.step.fit = StepHeightFit::kSeparatePlanes;
+    c.specs.push_back({"step_height(sep)", sep});
+    c.specs.push_back({"Sa", Spec(MeasurementKind::kSa, right)});
+    c.specs.push_back({"Sq", Spec(MeasurementKind::kSq, left)});
+    c.specs.push_back({"tilt", Spec(MeasurementKind::kTilt, left)});
+    cases.push_back(c);
+  }
+  // Sinusoids: 0.7 um amplitude, 3 periods along y; 3 um amplitude, 6 periods along x.
+  struct Sine {
+    const char* name;
+    double amplitude_um, periods;
+    bool along_x;
+  };
+  for (const Sine& sine : {Sine{"sine07y", 0.7, 3.0, false}, Sine{"sine3x", 3.0, 6.0, true}}) {
+    const double lambda_px = (sine.along_x ? w : h) / sine.periods;
+    const std::string scene = test_scenes::WriteUserScene(
+        work / "scenes", sine.name, a.camera, px,
+        [&](double x, double y) {
+          return 206.0 + sine.amplitude_um * std::sin(2 * kPi * (sine.along_x ? x : y) / (lambda_px * px));
+        },
+        211 + unsigned(sine.periods));
+    Case c{scene, {}};
+    const int whole = int(std::floor((sine.along_x ? w - 2 * b : h - 2 * b) / lambda_px)) * int(std::lround(lambda_px));
+    const RegionOfInterest periods = sine.along_x ? RegionOfInterest::Rectangle(b, b, whole, h - 2 * b)
+                                                  : RegionOfInterest::Rectangle(b, b, w - 2 * b, whole);
+    for (MeasurementKind k : {MeasurementKind::kSa, MeasurementKind::kSq, MeasurementKind::kSz, MeasurementKind::kSsk,
+                              MeasurementKind::kSku}) {
+      c.specs.push_back({MeasurementKindName(k), Spec(k, periods)});
+    }
+    cases.push_back(c);
+  }
+  // Sphere R = 5 fields (concave: a bowl), cylinder R = 6 fields with its axis along x.
+  {
+    const double rs = 5 * field;
+    const std::string sphere = test_scenes::WriteUserScene(
+        work / "scenes", "bowl", a.camera, px,
+        [&](double x, double y) {
+          return 200.0 - std::sqrt(rs * rs - (x - cx) * (x - cx) - (y - cy) * (y - cy)) + rs;
+        },
+        221);
+    Case c{sphere, {}};
+    c.specs.push_back({"radius", Spec(MeasurementKind::kRadius, inner)});
+    cases.push_back(c);
+    const double rc = 6 * field;
+    const std::string cyl = test_scenes::WriteUserScene(
+        work / "scenes", "cylx", a.camera, px,
+        [&](double, double y) { return 200.0 + std::sqrt(rc * rc - (y - cy) * (y - cy)) - (rc - 10.0); }, 222);
+    Case k{cyl, {}};
+    MeasurementSpec r = Spec(MeasurementKind::kRadius, inner);
+    r.form.model = FormModel::kCylinder;
+    k.specs.push_back({"radius", r});
+    cases.push_back(k);
+  }
+  // Random rough surfaces: 24 cosines of random direction, wavelength 20..90 px and phase, Sq
+  // ~0.6 and ~1.5 um; Sa..Sku against the same measurement on the truth over the same region.
+  for (const double sq_um : {0.6, 1.5}) {
+    std::mt19937_64 rng(unsigned(1000 * sq_um) + 77);
+    std::uniform_real_distribution<double> angle(0.0, kPi), wl(20.0, 90.0), phase(0.0, 2 * kPi);
+    struct Wave {
+      double kx, ky, ph, amp;
+    };
+    std::vector<Wave> waves;
+    for (int i = 0; i < 24; ++i) {
+      const double t = angle(rng), l = wl(rng) * px;
+      waves.push_back({2 * kPi * std::cos(t) / l, 2 * kPi * std::sin(t) / l, phase(rng), sq_um * std::sqrt(2.0 / 24.0)});
+    }
+    char name[32];
+    std::snprintf(name, sizeof name, "rough%.1f", sq_um);
+    const std::string scene = test_scenes::WriteUserScene(
+        work / "scenes", name, a.camera, px,
+        [&](double x, double y) {
+          double z = 206.0;
+          for (const Wave& v : waves) z += v.amp * std::cos(v.kx * x + v.ky * y + v.ph);
+          return z;
+        },
+        231 + unsigned(sq_um * 10));
+    Case c{scene, {}};
+    for (MeasurementKind k : {MeasurementKind::kSa, MeasurementKind::kSq, MeasurementKind::kSsk, MeasurementKind::kSku,
+                              MeasurementKind::kSz}) {
+      c.specs.push_back({MeasurementKindName(k), Spec(k, inner)});
+    }
+    cases.push_back(c);
+  }
+  return cases;
+}
+
+std::vector<Case> Cases(const Args& a, const fs::path& work, double px, int border) {
+  std::vector<Case> out;
+  if (a.scene_set == "tuning" || a.scene_set == "all") out = TuningCases(a, work, px, border);
+  if (a.scene_set == "heldout" || a.scene_set == "all") {
+    std::vector<Case> h = HeldOutCases(a, work, px, border);
+    out.insert(out.end(), h.begin(), h.end());
+  }
+  return out;
+}
+
 struct Tally {
   std::vector<double> dev, u;
   void Add(double d, double uu) {
@@ -197,10 +322,14 @@ int main(int argc, char** argv) {
       a.cal_step_um = std::atof(argv[++i]);
     else if (arg == "--residual-profile")
       a.residual_profile = true;
+    else if (arg == "--scenes" && i + 1 < argc)
+      a.scene_set = argv[++i];
+    else if (arg == "--components")
+      a.components = true;
     else if (arg == "--camera" && i + 1 < argc &&
              std::sscanf(argv[++i], "%dx%d", &a.camera.width, &a.camera.height) == 2) {
     } else {
-      std::fprintf(stderr, "usage: uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM]\n");
+      std::fprintf(stderr, "usage: uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM] [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile]\n");
       return 2;
     }
   }
@@ -251,6 +380,9 @@ int main(int argc, char** argv) {
   std::map<std::string, std::pair<double, double>> profile_range;
   std::map<std::string, Tally> by_case, by_case_unchar;  // "specimen|label"
   std::map<std::string, std::string> truth_of;
+  // Mean of each budget component (k = 1) per case: random, linearity, stage, other, MC spread,
+  // |noise bias|, height-dependent, |estimated systematic| (NaN components count as 0).
+  std::map<std::string, std::array<double, 8>> components;
   double scan_s = 0, measure_s = 0;
   int scans = 0, failures = 0;
   for (int seed = a.first_seed; seed < a.first_seed + a.seeds; ++seed) {
@@ -319,6 +451,13 @@ int main(int argc, char** argv) {
         if (!std::isfinite(truth[i]->value)) continue;  // e.g. Ssk of a perfect plane (Sq = 0)
         const double dev = measured[i]->value - truth[i]->value;
         by_case[key].Add(dev, measured[i]->uncertainty.standard_uncertainty);
+        {
+          const UncertaintyBudget& b = measured[i]->uncertainty;
+          const double parts[8] = {b.random, b.linearity, b.stage, b.other, b.monte_carlo_spread,
+                                   std::abs(b.noise_bias), b.height_dependent, std::abs(b.estimated_systematic)};
+          auto& acc = components[key];
+          for (int j = 0; j < 8; ++j) acc[j] += std::isfinite(parts[j]) ? parts[j] : 0.0;
+        }
         by_case_unchar[key].Add(measured_unchar[i]->value - truth[i]->value,
                                 measured_unchar[i]->uncertainty.standard_uncertainty);
         char buf[64];
@@ -396,6 +535,18 @@ int main(int argc, char** argv) {
     const double median = n % 2 ? ratio[n / 2] : 0.5 * (ratio[n / 2 - 1] + ratio[n / 2]);
     std::printf("  %-14s %5d %8.1f%% %14.3f %11.4g %11.4g %+11.4g\n", param.c_str(), n, 100.0 * t.Covered() / n,
                 median, mean_u, std::sqrt(rms), bias);
+  }
+  if (a.components) {
+    std::printf("\nmean budget components (k = 1) per specimen and measurement:\n  %-10s %-17s %10s %10s %10s %10s %10s %10s %10s %10s\n",
+                "specimen", "measurement", "random", "linearity", "stage", "other", "MC spread", "|MC bias|",
+                "height-dep", "|flatten|");
+    for (const auto& [key, acc] : components) {
+      const double n = double(by_case[key].dev.size());
+      const size_t bar = key.find('|');
+      std::printf("  %-10s %-17s", key.substr(0, bar).c_str(), key.substr(bar + 1).c_str());
+      for (double v : acc) std::printf(" %10.4g", v / n);
+      std::printf("\n");
+    }
   }
   if (failures) std::printf("measurement failures: %d\n", failures);
   for (const auto& [specimen, bins] : profile) {

@@ -86,6 +86,7 @@ DepthNoiseModel Known(const cv::Mat& depth, double sigma, int window, const Dept
   m.grid = *ZGrid::Create(o.z_positions_um);
   m.linearity = o.linearity;
   m.stage_u_um = o.stage_repeatability_um / std::sqrt(3.0);
+  m.three_point_peak = o.three_point_peak;
   return m;
 }
 
@@ -139,14 +140,24 @@ TEST(MeasurementUncertaintyTest, LinearityAndStageTermsMatchTheirClosedForms) {
   ASSERT_TRUE(cov.ok()) << cov.status().ToString();
   const double expected = std::pow(0.04 * 5.0, 2) * (1.0 - std::cos(2 * kPi * 0.2));
   EXPECT_NEAR(cov->linearity(0, 0), expected, 0.01 * expected);  // piecewise-linear table, 64 phases
-  // Both heights are nearest to the frame at 200 um: the stage error cancels.
-  EXPECT_NEAR(cov->stage(0, 0), 0.0, 1e-15);
+  // Stage, through the three-point peak's sensitivities (core/metrology/depth_noise_model.h):
+  // a depth at the frame at 200 um takes -(d195 + d205) / 2; one at 201 um (x = 0.2)
+  // -0.36 d195 - 0.08 d200 - 0.56 d205. The step's coefficients 0.14, -0.08, -0.06 give
+  // var = 0.0296 (0.1 / sqrt 3)^2.
+  EXPECT_NEAR(cov->stage(0, 0), 0.0296 * 0.01 / 3.0, 1e-12);
   EXPECT_NEAR(cov->random(0, 0), 0.0, 1e-15);
-  // Heights 5 um apart use different frames: var = 2 (0.1 / sqrt 3)^2; the linearity is common.
+  // Heights 5 um apart, both at a frame: -(d195 + d205) / 2 against -(d200 + d210) / 2, four
+  // frames at +-1/2: var = (0.1 / sqrt 3)^2; the linearity is common.
   z(cv::Rect(50, 0, 50, 40)).setTo(205.0f);
   auto cov2 = LinearFunctionalCovariance({w}, z, m);
   ASSERT_TRUE(cov2.ok());
-  EXPECT_NEAR(cov2->stage(0, 0), 2.0 * 0.01 / 3.0, 1e-12);
+  EXPECT_NEAR(cov2->stage(0, 0), 0.01 / 3.0, 1e-12);
+  // With a maximum or line-fit interpolation each depth takes its nearest frame's error in full.
+  o.three_point_peak = false;
+  const DepthNoiseModel nearest = Known(z, 0.0, 7, o);
+  auto cov3 = LinearFunctionalCovariance({w}, z, nearest);
+  ASSERT_TRUE(cov3.ok());
+  EXPECT_NEAR(cov3->stage(0, 0), 2.0 * 0.01 / 3.0, 1e-12);
   EXPECT_NEAR(cov2->linearity(0, 0), 0.0, 1e-12);
 }
 
