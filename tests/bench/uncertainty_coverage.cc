@@ -174,7 +174,7 @@ std::vector<Case> HeldOutCases(const Args& a, const fs::path& work, double px, i
   for (const double height : {0.5, 3.0}) {
     const double sx = std::tan(0.2 * kPi / 180.0), sy = std::tan(0.15 * kPi / 180.0);
     char name[32];
-    std::snprintf(name, sizeof name, "tstep%.1f", height);
+    std::snprintf(name, sizeof name, "tstep%02d", int(std::lround(height * 10)));
     const std::string scene = test_scenes::WriteUserScene(
         work / "scenes", name, a.camera, px,
         [&](double x, double y) { return 204.0 + sx * (x - cx) + sy * (y - cy) + (x > cx ? height : 0.0); },
@@ -253,7 +253,7 @@ std::vector<Case> HeldOutCases(const Args& a, const fs::path& work, double px, i
       waves.push_back({2 * kPi * std::cos(t) / l, 2 * kPi * std::sin(t) / l, phase(rng), sq_um * std::sqrt(2.0 / 24.0)});
     }
     char name[32];
-    std::snprintf(name, sizeof name, "rough%.1f", sq_um);
+    std::snprintf(name, sizeof name, "rough%02d", int(std::lround(sq_um * 10)));
     const std::string scene = test_scenes::WriteUserScene(
         work / "scenes", name, a.camera, px,
         [&](double x, double y) {
@@ -512,30 +512,33 @@ int main(int argc, char** argv) {
               all_cov, all_n, 100.0 * all_cov_u / all_n);
   // Sharpness beside coverage: a U much wider than the deviations covers them and decides nothing.
   // For a Gaussian error with U = 2u the median |dev| / U is ~0.34.
-  std::map<std::string, Tally> pooled;
-  for (const auto& [key, t] : by_case) {
-    Tally& p = pooled[key.substr(key.find('|') + 1, key.find('(') == std::string::npos
-                                                        ? std::string::npos
-                                                        : key.find('(') - key.find('|') - 1)];
-    for (size_t i = 0; i < t.dev.size(); ++i) p.Add(t.dev[i], t.u[i]);
-  }
-  std::printf("\nper parameter, all specimens (U = 2u):\n  %-14s %5s %9s %14s %11s %11s %11s\n", "parameter", "n",
-              "coverage", "median|d|/U", "mean U", "RMS dev", "bias");
-  for (const auto& [param, t] : pooled) {
-    const int n = int(t.dev.size());
-    std::vector<double> ratio;
-    double mean_u = 0, rms = 0, bias = 0;
-    for (int i = 0; i < n; ++i) {
-      ratio.push_back(std::abs(t.dev[i]) / (2.0 * t.u[i]));
-      mean_u += 2.0 * t.u[i] / n;
-      rms += t.dev[i] * t.dev[i] / n;
-      bias += t.dev[i] / n;
+  auto print_pooled = [](const std::map<std::string, Tally>& cases, const char* title) {
+    std::map<std::string, Tally> pooled;
+    for (const auto& [key, t] : cases) {
+      const std::string label = key.substr(key.find('|') + 1);
+      Tally& p = pooled[label.substr(0, label.find('('))];
+      for (size_t i = 0; i < t.dev.size(); ++i) p.Add(t.dev[i], t.u[i]);
     }
-    std::sort(ratio.begin(), ratio.end());
-    const double median = n % 2 ? ratio[n / 2] : 0.5 * (ratio[n / 2 - 1] + ratio[n / 2]);
-    std::printf("  %-14s %5d %8.1f%% %14.3f %11.4g %11.4g %+11.4g\n", param.c_str(), n, 100.0 * t.Covered() / n,
-                median, mean_u, std::sqrt(rms), bias);
-  }
+    std::printf("\nper parameter, all specimens, %s (U = 2u):\n  %-14s %5s %9s %14s %11s %11s %11s\n", title,
+                "parameter", "n", "coverage", "median|d|/U", "mean U", "RMS dev", "bias");
+    for (const auto& [param, t] : pooled) {
+      const int n = int(t.dev.size());
+      std::vector<double> ratio;
+      double mean_u = 0, rms = 0, bias = 0;
+      for (int i = 0; i < n; ++i) {
+        ratio.push_back(std::abs(t.dev[i]) / (2.0 * t.u[i]));
+        mean_u += 2.0 * t.u[i] / n;
+        rms += t.dev[i] * t.dev[i] / n;
+        bias += t.dev[i] / n;
+      }
+      std::sort(ratio.begin(), ratio.end());
+      const double median = n % 2 ? ratio[n / 2] : 0.5 * (ratio[n / 2 - 1] + ratio[n / 2]);
+      std::printf("  %-14s %5d %8.1f%% %14.3f %11.4g %11.4g %+11.4g\n", param.c_str(), n, 100.0 * t.Covered() / n,
+                  median, mean_u, std::sqrt(rms), bias);
+    }
+  };
+  print_pooled(by_case, "characterised linearity");
+  print_pooled(by_case_unchar, "uncharacterised linearity");
   if (a.components) {
     std::printf("\nmean budget components (k = 1) per specimen and measurement:\n  %-10s %-17s %10s %10s %10s %10s %10s %10s %10s %10s\n",
                 "specimen", "measurement", "random", "linearity", "stage", "other", "MC spread", "|MC bias|",
