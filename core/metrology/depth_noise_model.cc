@@ -67,7 +67,33 @@ Status DepthNoiseOptions::Validate() const {
     }
   }
   if (!(linearity_step_tolerance >= 0.0)) return Status::InvalidArgument("linearity_step_tolerance must be >= 0");
+  INSPECT_RETURN_IF_ERROR(verified.Validate());
   return Status::Ok();
+}
+
+Status VerifiedCharacteristics::Validate() const {
+  auto check = [](const std::optional<double>& v, const char* name) -> Status {
+    if (v && !(std::isfinite(*v) && *v >= 0.0)) {
+      return Status::InvalidArgument(std::string("verified.") + name + " must be finite and >= 0");
+    }
+    return Status::Ok();
+  };
+  INSPECT_RETURN_IF_ERROR(check(noise_um, "noise_um"));
+  INSPECT_RETURN_IF_ERROR(check(amplification_u, "amplification_u"));
+  INSPECT_RETURN_IF_ERROR(check(linearity_deviation_um, "linearity_deviation_um"));
+  INSPECT_RETURN_IF_ERROR(check(flatness_um, "flatness_um"));
+  if (amplification && !(std::isfinite(*amplification) && *amplification >= 0.5 && *amplification <= 2.0)) {
+    return Status::InvalidArgument("verified.amplification must be in 0.5..2");
+  }
+  if (amplification_u && !amplification) {
+    return Status::InvalidArgument("verified.amplification_u needs verified.amplification");
+  }
+  return Status::Ok();
+}
+
+double VerifiedCharacteristics::RelativeAmplificationUncertainty() const {
+  if (!amplification) return 0.0;
+  return std::hypot(amplification_u.value_or(0.0), *amplification - 1.0);
 }
 
 StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::Mat& mask,
@@ -112,6 +138,17 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
       model.linearity = ZLinearity::Uncharacterised();
       model.linearity.source +=
           "; the characterisation (" + was + ") does not apply at " + std::to_string(step) + " um steps";
+    }
+  }
+
+  model.relative_amplification_u = options.verified.RelativeAmplificationUncertainty();
+  if (options.verified.linearity_deviation_um && model.linearity.characterised_step_um <= 0.0) {
+    // Not characterised at this step: the verified l_z bounds the deviation instead of +-step / 2.
+    const double step = model.grid.median_step_um(), largest = model.linearity.MaxAbs() * step;
+    const double lz = *options.verified.linearity_deviation_um;
+    if (largest > 0.0 && lz < largest) {
+      for (double& v : model.linearity.bias_of_step) v *= lz / largest;
+      model.linearity.source += "; scaled to the verified l_z " + std::to_string(lz) + " um";
     }
   }
 

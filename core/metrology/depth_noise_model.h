@@ -39,6 +39,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -47,6 +48,33 @@
 #include "core/metrology/z_linearity.h"
 
 namespace inspection {
+
+// Instrument characteristics from an ISO 25178-600 verification of this rig (the server passes
+// those of the rig's latest accepted verification, core/metrology/verification.h; see
+// docs). Each is optional; where one is given it replaces the model's worst-case bound:
+//  - linearity_deviation_um (l_z, um: largest |deviation| of the z response from linear):
+//    where the z linearity is not characterised at the scan's step, the peak-locking sawtooth of
+//    +-step/2 is scaled down to +-l_z (same worst-case shape, verified size; never up).
+//  - amplification (alpha_z) and amplification_u (its standard uncertainty): the height scale
+//    is off by alpha_z - 1 (uncorrected: values are reported as measured) known to u, so every
+//    height-scale value H (step height, Sa, Sq, Sp, Sv, Sz, flatness, volume) gets
+//    u_alpha = sqrt(u^2 + (alpha_z - 1)^2) |H|. Without it the model has no amplification term:
+//    the SFF's z scale is the stage's, whose scale error the verification measures.
+//  - noise_um (N_M) and flatness_um (z_FLT) are carried but not used: the model's random term is
+//    estimated on the specimen's own map (its texture sets it; N_M is that of the verification
+//    flat), and the extremes' bound grows with the region's size, which z_FLT (one region of the
+//    reference flat) does not follow.
+struct VerifiedCharacteristics {
+  std::optional<double> noise_um;                // N_M
+  std::optional<double> amplification;           // alpha_z, dimensionless (1 = ideal)
+  std::optional<double> amplification_u;         // standard uncertainty of alpha_z (needs amplification)
+  std::optional<double> linearity_deviation_um;  // l_z
+  std::optional<double> flatness_um;             // z_FLT
+  // INVALID_ARGUMENT naming the field (negative or non-finite; amplification outside 0.5..2).
+  Status Validate() const;
+  // sqrt(u^2 + (alpha_z - 1)^2), 0 without amplification.
+  double RelativeAmplificationUncertainty() const;
+};
 
 struct DepthNoiseOptions {
   int window_px = 7;                   // SffOptions::window_px of the reconstruction (1..63)
@@ -63,6 +91,7 @@ struct DepthNoiseOptions {
   // it is transferred keeping its bias in um (the interpolation error does not grow as the focus
   // curve is sampled more densely); at a coarser one the uncharacterised bound is used.
   double linearity_step_tolerance = 0.05;
+  VerifiedCharacteristics verified;  // optional (see VerifiedCharacteristics)
   // INVALID_ARGUMENT naming the field.
   Status Validate() const;
 };
@@ -81,6 +110,7 @@ struct DepthNoiseModel {
   ZLinearity linearity;     // the table in use (maybe the uncharacterised bound, see its source)
   double stage_u_um = 0.0;  // standard uncertainty of one frame's z: r / sqrt 3
   bool three_point_peak = true;  // DepthNoiseOptions::three_point_peak
+  double relative_amplification_u = 0.0;  // VerifiedCharacteristics::RelativeAmplificationUncertainty
 
   // How a depth at grid position p moves with the z errors of the frames around it (component 3):
   // depth error = sum_k weight[k] * d(frame[k]), k < count.

@@ -286,6 +286,24 @@ Status MeasurementSpec::Validate(cv::Size image_size, double pixel_size_um, cons
 
 namespace {
 
+// A verified amplification's uncertainty (VerifiedCharacteristics) on height-scale values.
+void AddAmplification(MeasuredValue& v, const DepthNoiseModel& noise) {
+  if (!(noise.relative_amplification_u > 0.0)) return;
+  switch (v.kind) {
+    case MeasurementKind::kSsk:
+    case MeasurementKind::kSku:
+    case MeasurementKind::kTilt:
+    case MeasurementKind::kRadius:
+      return;  // shape ratios; tilt and radius mix the height scale with the lateral one (not verified here)
+    default:
+      break;
+  }
+  const double u = noise.relative_amplification_u * std::abs(v.value);
+  v.uncertainty.amplification = u;
+  const double before = std::isfinite(v.uncertainty.standard_uncertainty) ? v.uncertainty.standard_uncertainty : 0.0;
+  v.uncertainty.standard_uncertainty = std::hypot(before, u);
+}
+
 std::vector<StatusOr<MeasuredValue>> MeasureSpecs(const std::vector<const MeasurementSpec*>& specs,
                                                   const MeasurementContext& context,
                                                   const std::function<std::string(size_t)>& field_of) {
@@ -315,7 +333,9 @@ std::vector<StatusOr<MeasuredValue>> MeasureSpecs(const std::vector<const Measur
       continue;
     }
     if (!IsHeightParameter(spec.kind)) {
-      out.push_back(MeasureNonAreal(spec, context, *regions, field));
+      StatusOr<MeasuredValue> v = MeasureNonAreal(spec, context, *regions, field);
+      if (v.ok() && regions->noise) AddAmplification(*v, *regions->noise);
+      out.push_back(std::move(v));
       continue;
     }
     const std::string key = ArealKey(spec);
@@ -334,6 +354,7 @@ std::vector<StatusOr<MeasuredValue>> MeasureSpecs(const std::vector<const Measur
     MeasuredValue v = Base(spec, *regions);
     v.value = HeightParameterValue(it->second->values, ToHeightParameter(spec.kind));
     v.uncertainty = it->second->budgets[int(ToHeightParameter(spec.kind))];
+    if (regions->noise) AddAmplification(v, *regions->noise);
     out.push_back(std::move(v));
   }
   return out;

@@ -55,6 +55,8 @@ struct UncertaintyBudget {
   // Estimated, uncorrected systematic error (signed), e.g. the focus window's flattening of a
   // curved surface (WindowAveragingError); enters u as |estimated_systematic|.
   double estimated_systematic = std::nan("");
+  // Verified amplification alpha_z (VerifiedCharacteristics): sqrt(u^2 + (alpha_z - 1)^2) |value|.
+  double amplification = std::nan("");
   std::string method;  // "analytic" or "monte-carlo"; empty without a noise model
 };
 

@@ -9,6 +9,7 @@
 #include <cmath>
 
 #include "core/metrology/areal_parameters.h"
+#include "core/metrology/measurement.h"
 #include "tests/core/metrology_surfaces.h"
 
 namespace inspection {
@@ -228,6 +229,82 @@ TEST(MeasurementUncertaintyTest, LinearityCharacterisedAtACoarserStepIsKeptInMic
   auto far = EstimateDepthNoise(plane, cv::Mat(), o);
   ASSERT_TRUE(far.ok()) << far.status().ToString();
   EXPECT_NEAR(far->linearity.MaxAbs(), ZLinearity::Uncharacterised().MaxAbs(), 1e-12);
+}
+
+// A step between two flats, 120 x 80 px at 1 um/px, white noise of 0.02 um, each flat offset by
+// `offset_um` (left +, right -) like a z-linearity error; the step read `gain` times too long.
+StatusOr<MeasuredValue> MeasureNoisyStep(double step_um, double offset_um, double gain,
+                                         const VerifiedCharacteristics& verified) {
+  const cv::Size size(120, 80);
+  cv::Mat z(size, CV_32FC1);
+  cv::RNG rng(25178);
+  rng.fill(z, cv::RNG::NORMAL, 0.0, 0.02);
+  z(cv::Rect(0, 0, 60, 80)) += 200.0 + offset_um;
+  z(cv::Rect(60, 0, 60, 80)) += 200.0 + gain * step_um - offset_um;
+  MeasurementSpec spec;
+  spec.kind = MeasurementKind::kStepHeight;
+  spec.roi = RegionOfInterest::Rectangle(70, 5, 45, 70);
+  spec.reference_roi = RegionOfInterest::Rectangle(5, 5, 45, 70);
+  MeasurementContext ctx;
+  ctx.depth_um = z;
+  ctx.pixel_size_um = 1.0;
+  ctx.noise.window_px = 7;
+  for (int k = 0; k < 40; ++k) ctx.noise.z_positions_um.push_back(150.0 + 5.0 * k);
+  ctx.noise.linearity = ZLinearity::Uncharacterised();
+  ctx.noise.verified = verified;
+  return Measure(spec, ctx);
+}
+
+TEST(VerifiedCharacteristicsTest, VerifiedLinearityDeviationReplacesTheSawtoothBoundAndStillCovers) {
+  // Uncharacterised at 5 um steps, a 1.3 um step carries the +-2.5 um sawtooth: U ~ 4 um. A
+  // verified l_z = 0.05 um scales the same worst-case shape to +-0.05 um; the flats' +-0.03 um
+  // offsets (a 0.06 um short step, within 2 l_z) stay covered.
+  auto bare = MeasureNoisyStep(1.3, 0.03, 1.0, {});
+  VerifiedCharacteristics v;
+  v.linearity_deviation_um = 0.05;
+  auto verified = MeasureNoisyStep(1.3, 0.03, 1.0, v);
+  ASSERT_TRUE(bare.ok() && verified.ok()) << bare.status().ToString() << verified.status().ToString();
+  const double u_bare = 2.0 * bare->uncertainty.standard_uncertainty;
+  const double u_ver = 2.0 * verified->uncertainty.standard_uncertainty;
+  const double dev = verified->value - 1.3;
+  std::printf("step 1.3 um: dev %+.4f, U %.4f uncharacterised, %.4f with l_z 0.05 um\n", dev, u_bare, u_ver);
+  EXPECT_NEAR(dev, -0.06, 0.01);
+  EXPECT_GT(u_bare, 2.0);
+  EXPECT_LT(u_ver, 0.15);      // 0.05 / 2.5 of the sawtooth's part, plus the noise
+  EXPECT_LE(std::abs(dev), u_ver);
+  // Never widened: an l_z above the sawtooth's size leaves it.
+  v.linearity_deviation_um = 10.0;
+  auto wide = MeasureNoisyStep(1.3, 0.03, 1.0, v);
+  ASSERT_TRUE(wide.ok());
+  EXPECT_NEAR(wide->uncertainty.standard_uncertainty, bare->uncertainty.standard_uncertainty, 1e-12);
+}
+
+TEST(VerifiedCharacteristicsTest, VerifiedAmplificationCoversAHeightScaleError) {
+  // A 20 um step (a whole number of 4 steps: the linearity cancels) read 2 % long: 0.4 um, far
+  // outside the random-only U. With alpha_z = 1.02 +- 0.005 verified, u_alpha = 0.0206 x 20.4 um.
+  VerifiedCharacteristics lz;
+  lz.linearity_deviation_um = 0.02;
+  auto without = MeasureNoisyStep(20.0, 0.0, 1.02, lz);
+  VerifiedCharacteristics v = lz;
+  v.amplification = 1.02;
+  v.amplification_u = 0.005;
+  auto with = MeasureNoisyStep(20.0, 0.0, 1.02, v);
+  ASSERT_TRUE(without.ok() && with.ok());
+  const double dev = with->value - 20.0;
+  std::printf("step 20 um x 1.02: dev %+.4f, U %.4f without, %.4f with alpha_z (component %.4f)\n", dev,
+              2.0 * without->uncertainty.standard_uncertainty, 2.0 * with->uncertainty.standard_uncertainty,
+              with->uncertainty.amplification);
+  EXPECT_NEAR(dev, 0.4, 0.01);
+  EXPECT_GT(std::abs(dev), 2.0 * without->uncertainty.standard_uncertainty);
+  EXPECT_NEAR(with->uncertainty.amplification, std::hypot(0.005, 0.02) * with->value, 1e-9);
+  EXPECT_LE(std::abs(dev), 2.0 * with->uncertainty.standard_uncertainty);
+  EXPECT_LT(2.0 * with->uncertainty.standard_uncertainty, 1.0);
+  // Invalid input names the field.
+  VerifiedCharacteristics bad;
+  bad.amplification_u = 0.01;
+  auto b = MeasureNoisyStep(20.0, 0.0, 1.0, bad);
+  ASSERT_FALSE(b.ok());
+  EXPECT_NE(b.status().message().find("verified.amplification_u"), std::string::npos) << b.status().ToString();
 }
 
 }  // namespace
