@@ -64,6 +64,12 @@ namespace inspection {
 //    estimated on the specimen's own map (its texture sets it; N_M is that of the verification
 //    flat), and the extremes' bound grows with the region's size, which z_FLT (one region of the
 //    reference flat) does not follow.
+// Where the server would fill it (not wired yet; core/metrology/verification.h estimates them):
+// server/jobs/procedure_runner.cc (recipe measurement, beside `noise.linearity = bundle->z_linearity`)
+// and server/jobs/procedure_runner_study.cc (the same for studies), from the rig's latest accepted
+// verification: amplification = AmplificationLinearity::alpha_z.value, amplification_u =
+// alpha_z.standard_uncertainty, linearity_deviation_um = l_z_um.value + 2 l_z_um.standard_uncertainty
+// (a bound), noise_um = MeasurementNoise().value, flatness_um = FlatnessDeviation().value.
 struct VerifiedCharacteristics {
   std::optional<double> noise_um;                // N_M
   std::optional<double> amplification;           // alpha_z, dimensionless (1 = ideal)
@@ -82,7 +88,8 @@ struct DepthNoiseOptions {
   ZLinearity linearity = ZLinearity::Uncharacterised();
   double stage_repeatability_um = 0.0;  // +- bound of the uniform per-move error (simulated rig: 0.1)
   // The reconstruction's depth interpolation is a three-point vertex fit (kGaussian or
-  // kDefocusParabola, the default) — see component 3; false for kMaximum / kLineFit.
+  // kDefocusParabola, the default) — see component 3; false for kMaximum / kLineFit (the server
+  // leaves the default: it should set it from plan.sff.interpolation).
   bool three_point_peak = true;
   // Side of the neighbourhood the local sigma averages over; 0 = 8 windows (~64 independent
   // samples per direction, so sigma is known to ~10 %).
