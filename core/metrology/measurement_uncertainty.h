@@ -140,8 +140,13 @@ StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& d
 // over the region's heights (LinearityRangeUm / 2: ~0 for a region at one height) plus the
 // 99th percentile of |WindowAveragingError| over the region. B = the larger change of the value,
 // taken as a uniform bound: standard uncertainty B / sqrt 3 (component height_dependent).
-// Sa and Sq are left to the Monte Carlo: their deviations stayed within its U (coverage 100 %
-// in tests/bench/uncertainty_coverage.cc), and a worst case would only inflate them.
+// Recipe measurements (core/metrology/measurement.cc) now split delta: the flattening is
+// estimated on the map and enters every moment parameter (Sa..Sku) as an estimated systematic
+// (AddEstimatedSystematic, the value's change when the map's WindowAveragingError is removed),
+// and only the linearity half-range stays a worst case for Ssk and Sku: the p99 flattening as a
+// worst case made their U 3-10x wider than their deviations (median |dev|/U 0.02-0.13,
+// tests/bench/uncertainty_evaluate_output.md). HeightDependentErrorBoundUm keeps the combined
+// delta for callers that have no estimate.
 
 // The focus window's flattening of a curved surface: the focus measure sums over the window U
 // (eq. 3.12/3.14, plus the Sobel operator's support), so to second order the depth is the
