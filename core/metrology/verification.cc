@@ -223,36 +223,56 @@ StatusOr<CharacteristicEstimate> LateralAmplification(const cv::Mat& grating_um,
   for (double v : vs) rms += v * v;
   rms = std::sqrt(rms / vs.size());
   const double hysteresis = 0.3 * rms;
-  std::vector<double> rises;
-  double noise_ss = 0.0;
-  bool armed = false;
+  // Rising and falling crossings apart: a residual trend (the detrending of a non-whole number of
+  // periods leaves one) moves the rising ones one way along x and the falling ones the other, so
+  // the mean of their two periods cancels it to first order.
+  std::vector<double> rises, falls;
+  bool armed_rise = false, armed_fall = false;
   for (size_t i = 1; i < xs.size(); ++i) {
-    if (vs[i - 1] < -hysteresis) armed = true;
-    if (armed && vs[i - 1] < 0.0 && vs[i] >= 0.0 && xs[i] - xs[i - 1] == 1.0) {
-      rises.push_back(xs[i - 1] + (-vs[i - 1]) / (vs[i] - vs[i - 1]));
-      armed = false;
+    if (vs[i - 1] < -hysteresis) armed_rise = true;
+    if (vs[i - 1] > hysteresis) armed_fall = true;
+    if (xs[i] - xs[i - 1] != 1.0) continue;
+    const double at = xs[i - 1] + (-vs[i - 1]) / (vs[i] - vs[i - 1]);
+    if (armed_rise && vs[i - 1] < 0.0 && vs[i] >= 0.0) {
+      rises.push_back(at);
+      armed_rise = false;
+    }
+    if (armed_fall && vs[i - 1] > 0.0 && vs[i] <= 0.0) {
+      falls.push_back(at);
+      armed_fall = false;
     }
   }
-  if (rises.size() < 4) return Status::InvalidArgument("grating: fewer than 3 periods along the axis in the field");
-  // Period: least-squares slope of crossing position against crossing number.
-  const int k = int(rises.size());
-  double mi = (k - 1) / 2.0, mr = 0;
-  for (double r : rises) mr += r;
-  mr /= k;
-  double sir = 0, sii = 0;
-  for (int i = 0; i < k; ++i) {
-    sir += (i - mi) * (rises[i] - mr);
-    sii += (i - mi) * (i - mi);
+  if (rises.size() < 4 || falls.size() < 4) {
+    return Status::InvalidArgument("grating: fewer than 3 periods along the axis in the field");
   }
-  const double period_px = sir / sii;
-  for (int i = 0; i < k; ++i) {
-    const double r = rises[i] - (mr + period_px * (i - mi));
-    noise_ss += r * r;
-  }
-  // Residual scatter of the crossings (at least a 1/sqrt(12) px quantisation floor) through the
-  // slope's standard error.
-  const double sigma_px = std::max(std::sqrt(noise_ss / std::max(1, k - 2)), 1.0 / std::sqrt(12.0));
-  const double u_period_px = sigma_px / std::sqrt(sii);
+  // Period: least-squares slope of crossing position against crossing number, per kind.
+  auto slope_of = [](const std::vector<double>& c, double* u) {
+    const int k = int(c.size());
+    const double mi = (k - 1) / 2.0;
+    double mr = 0;
+    for (double r : c) mr += r;
+    mr /= k;
+    double sir = 0, sii = 0;
+    for (int i = 0; i < k; ++i) {
+      sir += (i - mi) * (c[i] - mr);
+      sii += (i - mi) * (i - mi);
+    }
+    const double period = sir / sii;
+    double ss = 0;
+    for (int i = 0; i < k; ++i) {
+      const double r = c[i] - (mr + period * (i - mi));
+      ss += r * r;
+    }
+    // Residual scatter of the crossings (at least a 1/sqrt(12) px quantisation floor) through the
+    // slope's standard error.
+    const double sigma_px = std::max(std::sqrt(ss / std::max(1, k - 2)), 1.0 / std::sqrt(12.0));
+    *u = sigma_px / std::sqrt(sii);
+    return period;
+  };
+  double u_rise = 0, u_fall = 0;
+  const double p_rise = slope_of(rises, &u_rise), p_fall = slope_of(falls, &u_fall);
+  const double period_px = 0.5 * (p_rise + p_fall);
+  const double u_period_px = 0.5 * std::hypot(u_rise, u_fall);
   CharacteristicEstimate e;
   e.value = period_px * pixel_size_um / certified_pitch_um;
   e.standard_uncertainty = u_period_px * pixel_size_um / certified_pitch_um;
