@@ -212,4 +212,65 @@ StatusOr<VerificationRecord> RunVerification(
   return record;
 }
 
+std::string VerificationStateName(VerificationState state) {
+  switch (state) {
+    case VerificationState::kVerified:
+      return "verified";
+    case VerificationState::kDue:
+      return "verification due";
+    case VerificationState::kFailed:
+      return "verification failed";
+  }
+  return "verification due";
+}
+
+InterimCheckResult EvaluateInterimCheck(const VerificationRecord* full, const VerificationRecord& interim,
+                                        double full_age_days, double full_interval_days) {
+  InterimCheckResult out;
+  if (full == nullptr || full->mode != VerificationMode::kFull) {
+    out.state = VerificationState::kDue;
+    out.findings.push_back("no full verification on record");
+    return out;
+  }
+  auto limit = [](const CharacteristicEstimate& a, const CharacteristicEstimate& b) {
+    return 2.0 * std::hypot(a.standard_uncertainty, b.standard_uncertainty);
+  };
+  auto above = [&](const char* name, const CharacteristicEstimate& now, const CharacteristicEstimate& then) {
+    const double l = limit(now, then);
+    if (now.value > then.value + l) {
+      char text[200];
+      std::snprintf(text, sizeof text, "%s %.4g um exceeds the full verification's %.4g um by more than U %.3g um",
+                    name, now.value, then.value, l);
+      out.findings.push_back(text);
+    }
+  };
+  above("N_M", interim.noise_um, full->noise_um);
+  above("z_FLT", interim.flatness_um, full->flatness_um);
+  for (const VerificationStep& step : interim.steps) {
+    const VerificationStep* then = nullptr;
+    for (const VerificationStep& f : full->steps) {
+      if (f.specimen == step.specimen) then = &f;
+    }
+    if (then == nullptr) {
+      out.findings.push_back("step " + step.specimen + ": not in the full verification");
+      continue;
+    }
+    const double l = 2.0 * std::hypot(step.point.measured_u_um, then->point.measured_u_um);
+    const double d = step.point.measured_um - then->point.measured_um;
+    if (std::abs(d) > l) {
+      char text[200];
+      std::snprintf(text, sizeof text, "step %s: %.5g um, %+.3g um from the full verification's (U %.3g um)",
+                    step.specimen.c_str(), step.point.measured_um, d, l);
+      out.findings.push_back(text);
+    }
+  }
+  if (!out.findings.empty()) {
+    out.state = VerificationState::kFailed;
+  } else if (full_interval_days > 0.0 && full_age_days > full_interval_days) {
+    out.state = VerificationState::kDue;
+    out.findings.push_back("the last full verification is older than its interval");
+  }
+  return out;
+}
+
 }  // namespace inspection

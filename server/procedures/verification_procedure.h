@@ -83,4 +83,25 @@ StatusOr<VerificationRecord> RunVerification(
 
 std::string VerificationModeName(VerificationMode mode);  // "full", "interim"
 
+// The rig's verification state after an interim check (docs/verification.md).
+enum class VerificationState {
+  kVerified,  // the interim check agrees with the last full verification
+  kDue,       // no full verification on record, or the last one is older than its interval
+  kFailed,    // an interim characteristic left the limits the last full verification sets
+};
+std::string VerificationStateName(VerificationState state);  // "verified", "verification due", "verification failed"
+
+struct InterimCheckResult {
+  VerificationState state = VerificationState::kVerified;
+  std::vector<std::string> findings;  // one line per characteristic out of its limit, or why due
+};
+
+// Limits from the last full verification `full` (nullptr: none on record -> kDue): the interim
+// check fails when its N_M or z_FLT exceed the full's by more than the combined expanded
+// uncertainty 2 sqrt(u_interim^2 + u_full^2), or when its step's measured height differs from the
+// full verification's measurement of the same measure by more than that (a z scale or offset
+// change). full_age_days > full_interval_days (both days, interval > 0) makes a passing check kDue.
+InterimCheckResult EvaluateInterimCheck(const VerificationRecord* full, const VerificationRecord& interim,
+                                        double full_age_days, double full_interval_days);
+
 }  // namespace inspection

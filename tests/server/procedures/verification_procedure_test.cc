@@ -166,5 +166,36 @@ TEST(VerificationProcedure, CancelledVerificationPutsTheSpecimenBack) {
   EXPECT_FALSE(fs::exists(dir));
 }
 
+TEST(VerificationProcedure, InterimCheckAgainstTheLastFullVerification) {
+  auto full = Verify(SmallRig(), VerificationMode::kFull, "full");
+  ASSERT_TRUE(full.ok()) << full.status().ToString();
+  SimulatedRigOptions same = SmallRig();
+  same.seed = 8;  // other noise, other repeatability draws: the same instrument
+  auto ok = Verify(same, VerificationMode::kInterim, "interim_ok");
+  ASSERT_TRUE(ok.ok()) << ok.status().ToString();
+  InterimCheckResult c = EvaluateInterimCheck(&*full, *ok, 1.0, 30.0);
+  EXPECT_EQ(c.state, VerificationState::kVerified) << (c.findings.empty() ? "" : c.findings[0]);
+  EXPECT_EQ(EvaluateInterimCheck(&*full, *ok, 31.0, 30.0).state, VerificationState::kDue);
+  EXPECT_EQ(EvaluateInterimCheck(nullptr, *ok, 0.0, 30.0).state, VerificationState::kDue);
+
+  SimulatedRigOptions scaled = same;
+  scaled.z_scale_error = 0.005;  // the 10 um step reads 50 nm more
+  auto bad_z = Verify(scaled, VerificationMode::kInterim, "interim_z");
+  ASSERT_TRUE(bad_z.ok());
+  c = EvaluateInterimCheck(&*full, *bad_z, 1.0, 30.0);
+  EXPECT_EQ(c.state, VerificationState::kFailed);
+  ASSERT_EQ(c.findings.size(), 1u);
+  EXPECT_NE(c.findings[0].find("pgr10"), std::string::npos) << c.findings[0];
+
+  SimulatedRigOptions noisy = same;
+  noisy.extra_noise_um = 0.1;
+  auto bad_noise = Verify(noisy, VerificationMode::kInterim, "interim_noise");
+  ASSERT_TRUE(bad_noise.ok());
+  c = EvaluateInterimCheck(&*full, *bad_noise, 1.0, 30.0);
+  EXPECT_EQ(c.state, VerificationState::kFailed);
+  ASSERT_FALSE(c.findings.empty());
+  EXPECT_NE(c.findings[0].find("N_M"), std::string::npos) << c.findings[0];
+}
+
 }  // namespace
 }  // namespace inspection
