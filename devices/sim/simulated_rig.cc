@@ -384,7 +384,13 @@ class SimulatedRig : public Rig, public SimulationControl {
   }
   SimulationControl* simulation() override { return this; }
 
-  std::vector<std::string> specimen_names() const override { return BuiltinSpecimenNames(); }
+  std::vector<std::string> specimen_names() const override {
+    std::vector<std::string> names = BuiltinSpecimenNames();
+    if (s_->options.material_measures) {
+      for (const std::string& n : MaterialMeasureSpecimenNames()) names.push_back(n);
+    }
+    return names;
+  }
   std::string specimen() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
     return s_->specimen_name;

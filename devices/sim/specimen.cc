@@ -363,8 +363,11 @@ StatusOr<double> NumberOr(const nlohmann::json& j, const std::string& key, doubl
 }  // namespace
 
 std::vector<std::string> BuiltinSpecimenNames() {
-  std::vector<std::string> names = {"plane",  "skew5",  "skew10", "step1um", "wedge",
-                                    "chamfer", "cutter", "lens",   "mirror",  "coin"};
+  return {"plane", "skew5", "skew10", "step1um", "wedge", "chamfer", "cutter", "lens", "mirror", "coin"};
+}
+
+std::vector<std::string> MaterialMeasureSpecimenNames() {
+  std::vector<std::string> names;
   for (const MaterialMeasure& m : SimulatedMaterialMeasures()) names.push_back(m.specimen);
   return names;
 }
@@ -399,6 +402,7 @@ StatusOr<Specimen> MakeSpecimen(const std::string& name, const SpecimenGrid& gri
   if (it == builtins.end()) {
     std::string known;
     for (const auto& n : BuiltinSpecimenNames()) known += (known.empty() ? "" : ", ") + n;
+    known += "; material measures: afl, pgr2 .. pgr20, asg4 .. asg40, acg";
     return Status::NotFound("unknown specimen '" + name + "'; built-ins: " + known + "; or file:/path/scene.json");
   }
   return it->second(Grid{grid.camera_size, grid.pixel_size_um, grid.seed});

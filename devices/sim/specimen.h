@@ -48,7 +48,10 @@ struct SpecimenGrid {
   uint64_t seed = 1;  // texture and glints derive from it
 };
 
+// The thesis's specimens above (benchmarks and evaluations iterate these).
 std::vector<std::string> BuiltinSpecimenNames();
+// The material measures' ids (afl, pgr*, asg*, acg); MakeSpecimen builds them too.
+std::vector<std::string> MaterialMeasureSpecimenNames();
 
 // The material measures among the built-ins with their certificates (devices/rig.h).
 std::vector<MaterialMeasure> SimulatedMaterialMeasures();

@@ -4,6 +4,7 @@
 // noise is drawn afresh for every scan.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <opencv2/core.hpp>
 
@@ -57,10 +58,14 @@ TEST(SimMaterialMeasures, RigOffersThemUnlessSwitchedOff) {
   auto rig = CreateSimulatedRig(o);
   ASSERT_TRUE(rig.ok());
   EXPECT_EQ((*rig)->simulation()->material_measures().size(), SimulatedMaterialMeasures().size());
+  const auto names = (*rig)->simulation()->specimen_names();
+  EXPECT_NE(std::find(names.begin(), names.end(), "acg"), names.end());
   o.material_measures = false;
   auto bare = CreateSimulatedRig(o);
   ASSERT_TRUE(bare.ok());
   EXPECT_TRUE((*bare)->simulation()->material_measures().empty());
+  const auto bare_names = (*bare)->simulation()->specimen_names();
+  EXPECT_EQ(std::find(bare_names.begin(), bare_names.end(), "acg"), bare_names.end());
 }
 
 TEST(SimOpticsErrors, ZScaleAndBowChangeWhatTheOpticsShowNotTheTruth) {
