@@ -14,6 +14,23 @@
 
 namespace inspection {
 
+// ISO 25178-70 material measure with its certificate, as the verification of the instrument
+// (ISO 25178-700, server/procedures/verification_procedure.h) scans it.
+enum class MaterialMeasureType {
+  kAfl,  // optical flat: N_M (two repeats) and z_FLT
+  kPgr,  // step height / groove: alpha_z, l_z
+  kAsg,  // sinusoid along x: amplitude transfer, W_R
+  kAcg,  // cross grating: alpha_x, alpha_y
+};
+struct MaterialMeasure {
+  std::string specimen;  // the name the rig selects it by (SimulationControl::SetSpecimen)
+  MaterialMeasureType type = MaterialMeasureType::kAfl;
+  double height_um = 0.0;    // PGR depth, ASG / ACG amplitude (certified); 0 for AFL
+  double height_u_um = 0.0;  // its standard uncertainty (k = 1)
+  double period_um = 0.0;    // ASG period, ACG pitch (certified); 0 otherwise
+  double period_u_um = 0.0;
+};
+
 // Simulation-only view of a rig: ground truth and specimen choice. Real rigs return nullptr
 // from Rig::simulation().
 class SimulationControl {
@@ -41,6 +58,9 @@ class SimulationControl {
   // real rig's configured range. Kept across SetSpecimen. INVALID_ARGUMENT when the shifted
   // specimen leaves the stage travel.
   virtual Status SetSpecimenZOffsetUm(double offset_um) = 0;
+  // The material measures the rig can put under the objective (SetSpecimen by their
+  // `specimen`), with their certificates; empty when it has none.
+  virtual std::vector<MaterialMeasure> material_measures() const { return {}; }
 };
 
 struct ScanDefaults {

@@ -223,36 +223,56 @@ StatusOr<CharacteristicEstimate> LateralAmplification(const cv::Mat& grating_um,
   for (double v : vs) rms += v * v;
   rms = std::sqrt(rms / vs.size());
   const double hysteresis = 0.3 * rms;
-  std::vector<double> rises;
-  double noise_ss = 0.0;
-  bool armed = false;
+  // Rising and falling crossings apart: a residual trend (the detrending of a non-whole number of
+  // periods leaves one) moves the rising ones one way along x and the falling ones the other, so
+  // the mean of their two periods cancels it to first order.
+  std::vector<double> rises, falls;
+  bool armed_rise = false, armed_fall = false;
   for (size_t i = 1; i < xs.size(); ++i) {
-    if (vs[i - 1] < -hysteresis) armed = true;
-    if (armed && vs[i - 1] < 0.0 && vs[i] >= 0.0 && xs[i] - xs[i - 1] == 1.0) {
-      rises.push_back(xs[i - 1] + (-vs[i - 1]) / (vs[i] - vs[i - 1]));
-      armed = false;
+    if (vs[i - 1] < -hysteresis) armed_rise = true;
+    if (vs[i - 1] > hysteresis) armed_fall = true;
+    if (xs[i] - xs[i - 1] != 1.0) continue;
+    const double at = xs[i - 1] + (-vs[i - 1]) / (vs[i] - vs[i - 1]);
+    if (armed_rise && vs[i - 1] < 0.0 && vs[i] >= 0.0) {
+      rises.push_back(at);
+      armed_rise = false;
+    }
+    if (armed_fall && vs[i - 1] > 0.0 && vs[i] <= 0.0) {
+      falls.push_back(at);
+      armed_fall = false;
     }
   }
-  if (rises.size() < 4) return Status::InvalidArgument("grating: fewer than 3 periods along the axis in the field");
-  // Period: least-squares slope of crossing position against crossing number.
-  const int k = int(rises.size());
-  double mi = (k - 1) / 2.0, mr = 0;
-  for (double r : rises) mr += r;
-  mr /= k;
-  double sir = 0, sii = 0;
-  for (int i = 0; i < k; ++i) {
-    sir += (i - mi) * (rises[i] - mr);
-    sii += (i - mi) * (i - mi);
+  if (rises.size() < 4 || falls.size() < 4) {
+    return Status::InvalidArgument("grating: fewer than 3 periods along the axis in the field");
   }
-  const double period_px = sir / sii;
-  for (int i = 0; i < k; ++i) {
-    const double r = rises[i] - (mr + period_px * (i - mi));
-    noise_ss += r * r;
-  }
-  // Residual scatter of the crossings (at least a 1/sqrt(12) px quantisation floor) through the
-  // slope's standard error.
-  const double sigma_px = std::max(std::sqrt(noise_ss / std::max(1, k - 2)), 1.0 / std::sqrt(12.0));
-  const double u_period_px = sigma_px / std::sqrt(sii);
+  // Period: least-squares slope of crossing position against crossing number, per kind.
+  auto slope_of = [](const std::vector<double>& c, double* u) {
+    const int k = int(c.size());
+    const double mi = (k - 1) / 2.0;
+    double mr = 0;
+    for (double r : c) mr += r;
+    mr /= k;
+    double sir = 0, sii = 0;
+    for (int i = 0; i < k; ++i) {
+      sir += (i - mi) * (c[i] - mr);
+      sii += (i - mi) * (i - mi);
+    }
+    const double period = sir / sii;
+    double ss = 0;
+    for (int i = 0; i < k; ++i) {
+      const double r = c[i] - (mr + period * (i - mi));
+      ss += r * r;
+    }
+    // Residual scatter of the crossings (at least a 1/sqrt(12) px quantisation floor) through the
+    // slope's standard error.
+    const double sigma_px = std::max(std::sqrt(ss / std::max(1, k - 2)), 1.0 / std::sqrt(12.0));
+    *u = sigma_px / std::sqrt(sii);
+    return period;
+  };
+  double u_rise = 0, u_fall = 0;
+  const double p_rise = slope_of(rises, &u_rise), p_fall = slope_of(falls, &u_fall);
+  const double period_px = 0.5 * (p_rise + p_fall);
+  const double u_period_px = 0.5 * std::hypot(u_rise, u_fall);
   CharacteristicEstimate e;
   e.value = period_px * pixel_size_um / certified_pitch_um;
   e.standard_uncertainty = u_period_px * pixel_size_um / certified_pitch_um;
@@ -333,6 +353,125 @@ StatusOr<CharacteristicEstimate> TopographicSpatialResolution(std::vector<Transf
     }
   }
   return Status::FailedPrecondition("points: no two sinusoids bracket 50 % amplitude transfer");
+}
+
+StatusOr<CharacteristicEstimate> GrooveDepth(const cv::Mat& map_um, int correlation_px) {
+  INSPECT_RETURN_IF_ERROR(CheckMap(map_um, "map"));
+  if (correlation_px < 1) return Status::InvalidArgument("correlation_px must be >= 1");
+  const int w = map_um.cols;
+  if (w < 18) return Status::InvalidArgument("map must be at least 18 px wide");
+  const double third = w / 3.0, margin = third / 6.0;
+  auto land = [&](int x) {
+    return (x >= margin && x < third - margin) || (x >= 2.0 * third + margin && x < w - margin);
+  };
+  auto bottom = [&](int x) { return x >= third + third / 3.0 && x < 2.0 * third - third / 3.0; };
+  // Plane through the lands.
+  double s[3][3] = {}, r[3] = {};
+  int64_t n_land = 0, n_bottom = 0;
+  for (int y = 0; y < map_um.rows; ++y) {
+    const float* row = map_um.ptr<float>(y);
+    for (int x = 0; x < w; ++x) {
+      if (!std::isfinite(row[x])) continue;
+      if (bottom(x)) ++n_bottom;
+      if (!land(x)) continue;
+      ++n_land;
+      const double v[3] = {1.0, double(x), double(y)};
+      for (int i = 0; i < 3; ++i) {
+        r[i] += v[i] * row[x];
+        for (int j = 0; j < 3; ++j) s[i][j] += v[i] * v[j];
+      }
+    }
+  }
+  if (n_land < 100 || n_bottom < 100) {
+    return Status::InvalidArgument("map: fewer than 100 pixels with depth on the lands or the groove's bottom");
+  }
+  cv::Matx33d a(s[0][0], s[0][1], s[0][2], s[1][0], s[1][1], s[1][2], s[2][0], s[2][1], s[2][2]);
+  cv::Vec3d c;
+  if (!cv::solve(a, cv::Vec3d(r[0], r[1], r[2]), c, cv::DECOMP_SVD)) {
+    return Status::InvalidArgument("map: the lands do not fix a plane");
+  }
+  double land_ss = 0.0, depth_sum = 0.0, depth_ss = 0.0;
+  for (int y = 0; y < map_um.rows; ++y) {
+    const float* row = map_um.ptr<float>(y);
+    for (int x = 0; x < w; ++x) {
+      if (!std::isfinite(row[x])) continue;
+      const double d = c[0] + c[1] * x + c[2] * y - row[x];
+      if (land(x)) land_ss += d * d;
+      if (bottom(x)) {
+        depth_sum += d;
+        depth_ss += d * d;
+      }
+    }
+  }
+  const double depth = depth_sum / double(n_bottom);
+  const double var_land = land_ss / double(n_land);
+  const double var_bottom = std::max(0.0, depth_ss / double(n_bottom) - depth * depth);
+  const double k2 = double(correlation_px) * correlation_px;
+  CharacteristicEstimate e;
+  e.value = depth;
+  e.standard_uncertainty = std::sqrt(var_land / std::max(1.0, n_land / k2) + var_bottom / std::max(1.0, n_bottom / k2));
+  return e;
+}
+
+StatusOr<CharacteristicEstimate> SinusoidFundamentalAlongX(const cv::Mat& map_um, double pixel_size_um,
+                                                           double period_um, int correlation_px) {
+  INSPECT_RETURN_IF_ERROR(CheckMap(map_um, "map"));
+  if (correlation_px < 1) return Status::InvalidArgument("correlation_px must be >= 1");
+  if (!(pixel_size_um > 0.0) || !(period_um > 0.0)) {
+    return Status::InvalidArgument("pixel_size_um and period_um must be > 0");
+  }
+  std::vector<double> xs, prof;
+  for (int x = 0; x < map_um.cols; ++x) {
+    double s = 0;
+    int c = 0;
+    for (int y = 0; y < map_um.rows; ++y) {
+      const float v = map_um.at<float>(y, x);
+      if (std::isfinite(v)) {
+        s += v;
+        ++c;
+      }
+    }
+    if (c < 2) continue;
+    xs.push_back(x);
+    prof.push_back(s / c);
+  }
+  const double period_px = period_um / pixel_size_um;
+  if (xs.size() < 8 || (xs.back() - xs.front()) < 2.0 * period_px) {
+    return Status::InvalidArgument("map: fewer than 2 periods with depth along x");
+  }
+  const int n = int(xs.size());
+  // Least squares of a + b x + c sin + d cos at each trial period; the best fit's amplitude.
+  double best_amp = 0.0, best_rss = std::numeric_limits<double>::infinity();
+  for (double f = 0.85; f <= 1.15 + 1e-9; f += 0.0025) {
+    const double k = 2.0 * CV_PI / (period_px * f);
+    cv::Matx44d a = cv::Matx44d::zeros();
+    cv::Vec4d r(0, 0, 0, 0);
+    for (int i = 0; i < n; ++i) {
+      const double v[4] = {1.0, xs[i], std::sin(k * xs[i]), std::cos(k * xs[i])};
+      for (int p = 0; p < 4; ++p) {
+        r[p] += v[p] * prof[i];
+        for (int q = 0; q < 4; ++q) a(p, q) += v[p] * v[q];
+      }
+    }
+    cv::Vec4d c;
+    if (!cv::solve(a, r, c, cv::DECOMP_SVD)) continue;
+    double rss = 0.0;
+    for (int i = 0; i < n; ++i) {
+      const double e = prof[i] - (c[0] + c[1] * xs[i] + c[2] * std::sin(k * xs[i]) + c[3] * std::cos(k * xs[i]));
+      rss += e * e;
+    }
+    if (rss < best_rss) {
+      best_rss = rss;
+      best_amp = std::hypot(c[2], c[3]);
+    }
+  }
+  CharacteristicEstimate e;
+  e.value = best_amp;
+  // A sinusoid's amplitude from n / correlation_px independent samples of residual scatter s:
+  // u = s sqrt(2 / samples).
+  const double s = std::sqrt(best_rss / std::max(1, n - 4));
+  e.standard_uncertainty = s * std::sqrt(2.0 / std::max(1.0, double(n) / correlation_px));
+  return e;
 }
 
 }  // namespace inspection

@@ -72,4 +72,21 @@ StatusOr<CharacteristicEstimate> TopographicSpatialResolution(std::vector<Transf
 // its linear trend, with its uncertainty from the profile's noise (for TransferPoint).
 StatusOr<CharacteristicEstimate> SinusoidAmplitudeAlongX(const cv::Mat& map_um, int correlation_px);
 
+// Amplitude of the fundamental of a sinusoid along x of nominal period period_um: the mean row
+// profile (linear trend removed) projected onto sin and cos at the period that maximises the
+// projection within +-15 % of the nominal (so a lateral scale error does not leak amplitude),
+// with its uncertainty from the profile's residual noise. Content at other periods (texture
+// artefacts, harmonics) does not count, unlike SinusoidAmplitudeAlongX. INVALID_ARGUMENT for
+// fewer than 2 periods in the field.
+StatusOr<CharacteristicEstimate> SinusoidFundamentalAlongX(const cv::Mat& map_um, double pixel_size_um,
+                                                           double period_um, int correlation_px);
+
+// Depth of a groove (ISO 5436-1 type A1, a PGR measure) running along y through the middle third
+// of the map along x: a least-squares plane through the two lands (the outer thirds, without a
+// sixth of their width next to the groove's edges and the map's border) evaluated under the
+// central third of the groove, minus the groove's depth there, averaged. u: the lands' and the
+// bottom's residual scatter over their independent samples (pixels / correlation_px^2).
+// INVALID_ARGUMENT for a map narrower than 18 px or with fewer than 100 finite pixels in a region.
+StatusOr<CharacteristicEstimate> GrooveDepth(const cv::Mat& map_um, int correlation_px);
+
 }  // namespace inspection

@@ -49,6 +49,20 @@ Status SimulatedRigOptions::Validate() const {
     return Status::InvalidArgument("read_noise_dn must be in [0, 50]");
   }
   if (specimen.empty()) return Status::InvalidArgument("specimen must not be empty");
+  if (!(std::abs(z_scale_error) <= 0.2)) return Status::InvalidArgument("z_scale_error must be in [-0.2, 0.2]");
+  if (!(std::abs(lateral_scale_error_x) <= 0.2)) {
+    return Status::InvalidArgument("lateral_scale_error_x must be in [-0.2, 0.2]");
+  }
+  if (!(std::abs(lateral_scale_error_y) <= 0.2)) {
+    return Status::InvalidArgument("lateral_scale_error_y must be in [-0.2, 0.2]");
+  }
+  if (!(std::abs(flatness_bow_um) <= 100.0)) return Status::InvalidArgument("flatness_bow_um must be in [-100, 100]");
+  if (!(extra_noise_um >= 0.0 && extra_noise_um <= 10.0)) {
+    return Status::InvalidArgument("extra_noise_um must be in [0, 10]");
+  }
+  if (!(extra_noise_correlation_px >= 0.5 && extra_noise_correlation_px <= 50.0)) {
+    return Status::InvalidArgument("extra_noise_correlation_px must be in [0.5, 50]");
+  }
   return LateralOpticsOf(*this).Validate();
 }
 
@@ -92,7 +106,48 @@ ScanDefaults ScanDefaultsFor(std::pair<double, double> z_range_um, double exposu
   return d;
 }
 
+cv::Mat SimulatedDepthNoiseField(const SimulatedRigOptions& options, uint64_t draw) {
+  if (!(options.extra_noise_um > 0.0)) return cv::Mat();
+  cv::Mat n(options.camera_size, CV_32FC1);
+  cv::RNG rng(MixSeed(MixSeed(options.seed, 0x4E4F495345ull), draw) | 1u);
+  rng.fill(n, cv::RNG::NORMAL, 0.0, 1.0);
+  cv::GaussianBlur(n, n, cv::Size(0, 0), options.extra_noise_correlation_px, options.extra_noise_correlation_px,
+                   cv::BORDER_REFLECT);
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(n, mean, stddev);
+  return (n - mean[0]) * (options.extra_noise_um / std::max(stddev[0], 1e-12));
+}
+
 namespace {
+
+// The specimen as an instrument with the options' errors shows it (SimulatedRigOptions):
+// lateral scale about the image centre on every map, then the z scale and the bow on heights.
+void ApplyOpticsErrors(const SimulatedRigOptions& o, Specimen* s) {
+  const cv::Size size = s->height_um.size();
+  const double cx = (size.width - 1) / 2.0, cy = (size.height - 1) / 2.0;
+  if (o.lateral_scale_error_x != 0.0 || o.lateral_scale_error_y != 0.0) {
+    // Camera pixel (c, r) sees the true point ((c - cx) / (1 + ex) + cx, ...): a feature of
+    // length L um spans (1 + ex) L / pixel_size camera pixels.
+    const double sx = 1.0 / (1.0 + o.lateral_scale_error_x), sy = 1.0 / (1.0 + o.lateral_scale_error_y);
+    const cv::Matx23d camera_to_true(sx, 0, cx - sx * cx, 0, sy, cy - sy * cy);
+    for (cv::Mat* m : {&s->height_um, &s->reflectance, &s->texture}) {
+      if (m->empty()) continue;
+      cv::Mat seen;
+      cv::warpAffine(*m, seen, camera_to_true, size, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT_101);
+      *m = seen;
+    }
+  }
+  if (o.z_scale_error != 0.0) s->height_um *= 1.0 + o.z_scale_error;
+  if (o.flatness_bow_um != 0.0) {
+    const double r2_corner = cx * cx + cy * cy;
+    for (int r = 0; r < size.height; ++r) {
+      float* h = s->height_um.ptr<float>(r);
+      for (int c = 0; c < size.width; ++c) {
+        h[c] += float(o.flatness_bow_um * ((c - cx) * (c - cx) + (r - cy) * (r - cy)) / r2_corner);
+      }
+    }
+  }
+}
 
 constexpr double kStageMinUm = 0.0;
 constexpr double kStageMaxUm = 25000.0;
@@ -116,6 +171,19 @@ struct SimState {
   uint64_t frames = 0;
   std::mt19937_64 stage_rng;
   SimulatedFaults faults;
+  cv::Mat truth_height_um;  // the specimen's true surface (with offset and placement), no errors
+  Specimen seen;            // as the optics show it, before the extra noise
+  int64_t noise_draw = 0;   // SimulatedDepthNoiseField draw of the current scan
+
+  // Hands the renderer the seen specimen plus the current noise draw.
+  Status ShowSeen() {
+    Specimen s{seen.name, seen.height_um.clone(), seen.reflectance, seen.texture};
+    if (options.extra_noise_um > 0.0) s.height_um += SimulatedDepthNoiseField(options, uint64_t(noise_draw));
+    if (renderer) return renderer->SetSpecimen(std::move(s));
+    INSPECT_ASSIGN_OR_RETURN(ImageFormationOptions f, ImageFormationOptionsFor(options));
+    INSPECT_ASSIGN_OR_RETURN(renderer, ImageFormation::Create(f, std::move(s)));
+    return Status::Ok();
+  }
 
   Status LoadSpecimen(const std::string& name) {
     SpecimenGrid grid{options.camera_size, options.pixel_size_um, options.seed};
@@ -132,6 +200,8 @@ struct SimState {
       }
     }
     s.height_um += z_offset_um + placement.dz_um;
+    cv::Mat truth = s.height_um.clone();
+    ApplyOpticsErrors(options, &s);
     double lo = 0, hi = 0;
     cv::minMaxLoc(s.height_um, &lo, &hi);
     if (lo < kStageMinUm || hi > kStageMaxUm) {
@@ -139,12 +209,13 @@ struct SimState {
                                      " at z " + std::to_string(lo) + " .. " + std::to_string(hi) +
                                      ", outside the stage travel");
     }
-    if (renderer) {
-      INSPECT_RETURN_IF_ERROR(renderer->SetSpecimen(std::move(s)));
-    } else {
-      INSPECT_ASSIGN_OR_RETURN(ImageFormationOptions f, ImageFormationOptionsFor(options));
-      INSPECT_ASSIGN_OR_RETURN(renderer, ImageFormation::Create(f, std::move(s)));
+    Specimen previous = std::move(seen);
+    seen = std::move(s);
+    if (Status st = ShowSeen(); !st.ok()) {
+      seen = std::move(previous);
+      return st;
     }
+    truth_height_um = truth;
     specimen_name = name;
     z_range_um = {lo, hi};
     // Whole microseconds, like a real camera's exposure register, within the camera's range
@@ -269,6 +340,11 @@ class SimulatedStage : public Stage {
       --s_->faults.stage_move_timeouts;
       return Status::DeadlineExceeded("simulated stage: move timeout (simulated fault)");
     }
+    if (s_->options.extra_noise_um > 0.0 && z_um < s_->stage_z_um - 1e-6) {
+      // A move down starts a new scan: the next draw of the extra depth noise.
+      ++s_->noise_draw;
+      INSPECT_RETURN_IF_ERROR(s_->ShowSeen());
+    }
     const double r = s_->options.stage_repeatability_um;
     std::uniform_real_distribution<double> err(-r, r);
     s_->stage_z_um = z_um + (r > 0.0 ? err(s_->stage_rng) : 0.0);
@@ -308,7 +384,13 @@ class SimulatedRig : public Rig, public SimulationControl {
   }
   SimulationControl* simulation() override { return this; }
 
-  std::vector<std::string> specimen_names() const override { return BuiltinSpecimenNames(); }
+  std::vector<std::string> specimen_names() const override {
+    std::vector<std::string> names = BuiltinSpecimenNames();
+    if (s_->options.material_measures) {
+      for (const std::string& n : MaterialMeasureSpecimenNames()) names.push_back(n);
+    }
+    return names;
+  }
   std::string specimen() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
     return s_->specimen_name;
@@ -341,7 +423,14 @@ class SimulatedRig : public Rig, public SimulationControl {
 
   cv::Mat GroundTruthDepthUm() const override {
     std::lock_guard<std::mutex> lock(s_->mu);
-    return s_->renderer->specimen().height_um.clone();
+    return s_->truth_height_um.clone();
+  }
+  std::vector<MaterialMeasure> material_measures() const override {
+    return s_->options.material_measures ? SimulatedMaterialMeasures() : std::vector<MaterialMeasure>{};
+  }
+  int64_t noise_draw() const {
+    std::lock_guard<std::mutex> lock(s_->mu);
+    return s_->noise_draw;
   }
   StatusOr<cv::Mat> GroundTruthTexture(const cv::Mat& pattern, double exposure_us) const override {
     Specimen flat;
@@ -366,7 +455,7 @@ class SimulatedRig : public Rig, public SimulationControl {
   }
   cv::Mat GroundTruthInCameraGridUm(double z_um) const override {
     std::lock_guard<std::mutex> lock(s_->mu);
-    const cv::Mat& h = s_->renderer->specimen().height_um;
+    const cv::Mat& h = s_->truth_height_um;
     if (!s_->renderer->options().lateral.active()) return h.clone();
     cv::Mat out;
     cv::warpAffine(h, out, s_->renderer->CameraFromSpecimen(z_um), h.size(), cv::INTER_NEAREST, cv::BORDER_REFLECT_101);
@@ -416,6 +505,11 @@ SimulatedPlacement RandomSimulatedPlacement(uint64_t seed, uint64_t draw, double
   p.dy_um = sigma_xy_um * unit(rng);
   p.dz_um = sigma_z_um * unit(rng);
   return p;
+}
+
+int64_t SimulatedNoiseDraw(Rig& rig) {
+  auto* sim = dynamic_cast<SimulatedRig*>(rig.simulation());
+  return sim != nullptr ? sim->noise_draw() : -1;
 }
 
 cv::Mat GroundTruthInCameraGrid(Rig& rig, double z_um) {

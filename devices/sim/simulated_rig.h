@@ -38,6 +38,20 @@ struct SimulatedRigOptions {
   double lateral_drift_x_px_per_100um = 0.0;
   double lateral_drift_y_px_per_100um = 0.0;
   double breathing_reference_z_um = 0.0;
+  // Instrument errors (ISO 25178-600 characteristics) the optics really apply: every specimen
+  // map is shown to the renderer as an instrument with these errors would see it, so depth maps
+  // come out wrong the way a real rig's would. Ground truth (GroundTruthDepthUm) stays the
+  // specimen's true surface. 0 = a perfect instrument (the default). See SimulatedOpticsErrors.
+  double z_scale_error = 0.0;          // heights about z = 0 come out (1 + e) x true: alpha_z = 1 + e
+  double lateral_scale_error_x = 0.0;  // lengths along x come out (1 + e) x true: alpha_x = 1 + e
+  double lateral_scale_error_y = 0.0;
+  double flatness_bow_um = 0.0;  // field curvature: + bow * (r / r_corner)^2, r from the centre
+  // Extra depth noise: a random height field of this standard deviation (Gaussian, correlated
+  // over extra_noise_correlation_px), drawn afresh for every scan (a move down of the stage
+  // starts one: scans sweep upward) from (seed, draw number): SimulatedDepthNoiseField.
+  double extra_noise_um = 0.0;
+  double extra_noise_correlation_px = 3.0;
+  bool material_measures = true;  // false: a rig without the ISO 25178-70 measures (none offered)
 
   Status Validate() const;
 };
@@ -83,6 +97,13 @@ SimulatedPlacement RandomSimulatedPlacement(uint64_t seed, uint64_t draw, double
 // SimulationControl::GroundTruthInCameraGridUm of a rig (devices/rig.h); empty when the rig is
 // not simulated.
 cv::Mat GroundTruthInCameraGrid(Rig& rig, double z_um);
+
+// Draw `draw` (0 = the first scan's) of the extra depth noise field of options: camera size,
+// zero mean, standard deviation options.extra_noise_um (um); empty when that is 0.
+cv::Mat SimulatedDepthNoiseField(const SimulatedRigOptions& options, uint64_t draw);
+// The rig's current extra-noise draw number (scans started so far with noise, 0-based); -1 for a
+// rig that is not simulated.
+int64_t SimulatedNoiseDraw(Rig& rig);
 
 // The renderer settings the simulated rig uses for these options (for serving the same frames
 // elsewhere, e.g. over GigE Vision: build an ImageFormation from them and MakeSpecimen).

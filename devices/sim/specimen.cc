@@ -241,8 +241,53 @@ Specimen Coin(const Grid& g) {
   return s;
 }
 
+// ISO 25178-70 material measures (certified values in SimulatedMaterialMeasures). Textured like
+// the thesis's planes (shape from focus needs texture; real SFF measures are matt for the same
+// reason), reflectance 0.5, each its own texture stream.
+Specimen MeasureFlat(const Grid& g) {  // AFL
+  Specimen s = TexturedPlane(g, "afl", 0.0);
+  s.texture = Texture(g, 11, 0.35, 0.15);
+  return s;
+}
+
+// PGR (ISO 5436-1 type A1): a groove of depth d across the field, its width a third of the
+// field, centred; the lands either side at the base + d.
+Specimen MeasureGroove(const Grid& g, const std::string& name, double depth_um) {
+  Specimen s;
+  s.name = name;
+  const double half_groove = g.width_um() / 6.0;
+  s.height_um = Fill(g, [&](double x, double) { return kBaseHeightUm + (std::abs(x) < half_groove ? 0.0 : depth_um); });
+  s.reflectance = cv::Mat(g.size, CV_32FC1, cv::Scalar(0.5));
+  s.texture = Texture(g, 12 + uint64_t(depth_um * 10), 0.35, 0.15);
+  return s;
+}
+
+// ASG: a sinusoid along x of the given period and amplitude (crests along y).
+Specimen MeasureSinusoid(const Grid& g, const std::string& name, double period_um, double amplitude_um) {
+  Specimen s;
+  s.name = name;
+  const double k = 2.0 * CV_PI / period_um;
+  s.height_um = Fill(g, [&](double x, double) { return kBaseHeightUm + amplitude_um * (1.0 + std::sin(k * x)); });
+  s.reflectance = cv::Mat(g.size, CV_32FC1, cv::Scalar(0.5));
+  s.texture = Texture(g, 40 + uint64_t(period_um), 0.35, 0.15);
+  return s;
+}
+
+// ACG: a cross grating, sinusoids of the same pitch along x and y.
+Specimen MeasureCrossGrating(const Grid& g, double pitch_um, double amplitude_um) {
+  Specimen s;
+  s.name = "acg";
+  const double k = 2.0 * CV_PI / pitch_um;
+  s.height_um = Fill(g, [&](double x, double y) {
+    return kBaseHeightUm + amplitude_um * (2.0 + std::sin(k * x) + std::sin(k * y));
+  });
+  s.reflectance = cv::Mat(g.size, CV_32FC1, cv::Scalar(0.5));
+  s.texture = Texture(g, 90, 0.35, 0.15);
+  return s;
+}
+
 const std::map<std::string, std::function<Specimen(const Grid&)>>& Builtins() {
-  static const auto* builtins = new std::map<std::string, std::function<Specimen(const Grid&)>>{
+  static auto* builtins = new std::map<std::string, std::function<Specimen(const Grid&)>>{
       {"plane", [](const Grid& g) { return TexturedPlane(g, "plane", 0.0); }},
       {"skew5", [](const Grid& g) { return TexturedPlane(g, "skew5", 5.0); }},
       {"skew10", [](const Grid& g) { return TexturedPlane(g, "skew10", 10.0); }},
@@ -254,6 +299,28 @@ const std::map<std::string, std::function<Specimen(const Grid&)>>& Builtins() {
       {"mirror", Mirror},
       {"coin", Coin},
   };
+  static bool measures_added = [] {
+    for (const MaterialMeasure& m : SimulatedMaterialMeasures()) {
+      std::function<Specimen(const Grid&)> make;
+      switch (m.type) {
+        case MaterialMeasureType::kAfl:
+          make = MeasureFlat;
+          break;
+        case MaterialMeasureType::kPgr:
+          make = [m](const Grid& g) { return MeasureGroove(g, m.specimen, m.height_um); };
+          break;
+        case MaterialMeasureType::kAsg:
+          make = [m](const Grid& g) { return MeasureSinusoid(g, m.specimen, m.period_um, m.height_um); };
+          break;
+        case MaterialMeasureType::kAcg:
+          make = [m](const Grid& g) { return MeasureCrossGrating(g, m.period_um, m.height_um); };
+          break;
+      }
+      builtins->emplace(m.specimen, std::move(make));
+    }
+    return true;
+  }();
+  (void)measures_added;
   return *builtins;
 }
 
@@ -299,6 +366,27 @@ std::vector<std::string> BuiltinSpecimenNames() {
   return {"plane", "skew5", "skew10", "step1um", "wedge", "chamfer", "cutter", "lens", "mirror", "coin"};
 }
 
+std::vector<std::string> MaterialMeasureSpecimenNames() {
+  std::vector<std::string> names;
+  for (const MaterialMeasure& m : SimulatedMaterialMeasures()) names.push_back(m.specimen);
+  return names;
+}
+
+std::vector<MaterialMeasure> SimulatedMaterialMeasures() {
+  // Certificates as a calibration laboratory would state them (k = 1): steps 2 nm + 0.05 %,
+  // periods and pitches 0.01 %.
+  std::vector<MaterialMeasure> out;
+  out.push_back({"afl", MaterialMeasureType::kAfl, 0.0, 0.0, 0.0, 0.0});
+  for (double d : {2.0, 5.0, 10.0, 20.0}) {
+    out.push_back({"pgr" + std::to_string(int(d)), MaterialMeasureType::kPgr, d, 0.002 + 0.0005 * d, 0.0, 0.0});
+  }
+  for (double p : {4.0, 6.0, 8.0, 10.0, 12.0, 16.0, 24.0, 40.0}) {
+    out.push_back({"asg" + std::to_string(int(p)), MaterialMeasureType::kAsg, 1.0, 0.002, p, 1e-4 * p});
+  }
+  out.push_back({"acg", MaterialMeasureType::kAcg, 1.0, 0.002, 20.0, 0.002});
+  return out;
+}
+
 StatusOr<Specimen> MakeSpecimen(const std::string& name, const SpecimenGrid& grid) {
   if (grid.camera_size.width < 16 || grid.camera_size.height < 16) {
     return Status::InvalidArgument("camera_size must be at least 16x16");
@@ -314,6 +402,7 @@ StatusOr<Specimen> MakeSpecimen(const std::string& name, const SpecimenGrid& gri
   if (it == builtins.end()) {
     std::string known;
     for (const auto& n : BuiltinSpecimenNames()) known += (known.empty() ? "" : ", ") + n;
+    known += "; material measures: afl, pgr2 .. pgr20, asg4 .. asg40, acg";
     return Status::NotFound("unknown specimen '" + name + "'; built-ins: " + known + "; or file:/path/scene.json");
   }
   return it->second(Grid{grid.camera_size, grid.pixel_size_um, grid.seed});

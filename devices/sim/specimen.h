@@ -15,6 +15,13 @@
 //   mirror   HF-MIRROR: nearly flat mirror, no texture.
 //   coin     HF-COIN: polished coin region: mirror-like flats (saturate) with a weak scratch
 //            texture and a raised relief whose flanks are dark.
+// ISO 25178-70 material measures (certified values: SimulatedMaterialMeasures), textured, matt:
+//   afl      AFL optical flat.
+//   pgr2, pgr5, pgr10, pgr20   PGR groove (ISO 5436-1 A1) of depth 2/5/10/20 um, a third of the
+//            field wide, centred, running along y.
+//   asg4 .. asg40   ASG sinusoid along x, period 4, 6, 8, 10, 12, 16, 24, 40 um, amplitude 1 um
+//            (bracketing the rig's topographic spatial resolution W_R).
+//   acg      ACG cross grating: sinusoids along x and y, pitch 20 um, amplitude 1 um each.
 // User scene: "file:/path/scene.json", see LoadSceneFile.
 #pragma once
 
@@ -24,6 +31,7 @@
 #include <vector>
 
 #include "core/util/status.h"
+#include "devices/rig.h"
 
 namespace inspection {
 
@@ -40,7 +48,13 @@ struct SpecimenGrid {
   uint64_t seed = 1;  // texture and glints derive from it
 };
 
+// The thesis's specimens above (benchmarks and evaluations iterate these).
 std::vector<std::string> BuiltinSpecimenNames();
+// The material measures' ids (afl, pgr*, asg*, acg); MakeSpecimen builds them too.
+std::vector<std::string> MaterialMeasureSpecimenNames();
+
+// The material measures among the built-ins with their certificates (devices/rig.h).
+std::vector<MaterialMeasure> SimulatedMaterialMeasures();
 
 // A built-in id or "file:/path/scene.json". NOT_FOUND for unknown ids (the message lists them).
 StatusOr<Specimen> MakeSpecimen(const std::string& name, const SpecimenGrid& grid);
