@@ -115,6 +115,10 @@ Status WriteReport(const RecipeRun& run, const v1::JobResult& result, const Dept
 
 }  // namespace
 
+bool ThreePointPeak(DepthInterpolation interpolation) {
+  return interpolation == DepthInterpolation::kGaussian || interpolation == DepthInterpolation::kDefocusParabola;
+}
+
 StatusOr<v1::JobResult> ProcedureRunner::Run(const JobWork& work, const JobContext& context) {
   return std::visit(Overloaded{
                         [&](const ScanWork& w) { return OnRig(rig_, [&] { return RunScan(w, context); }); },
@@ -210,6 +214,8 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
     // The rig's characterised z linearity (calibration step z_linearity) when the scan ran at
     // its step; otherwise the peak-locking bound (core/metrology/depth_noise_model.h decides).
     if (bundle && bundle->z_linearity) noise.linearity = *bundle->z_linearity;
+    // The stage error reaches a depth through the interpolation's three samples or in full.
+    noise.three_point_peak = ThreePointPeak(plan.sff.interpolation);
     v1::InspectionResult* inspection = result.mutable_inspection();
     *inspection =
         Inspect(*work.recipe, outcome.depth, outcome.manifest.pixel_size_um, noise, work.part_id, work.station);

@@ -16,8 +16,14 @@
 #include "server/jobs/job_runner.h"
 #include "server/results/result_feed.h"
 #include "server/jobs/rig_controller.h"
+#include "core/sff/sff_options.h"
 
 namespace inspection {
+
+// Whether a depth is interpolated through three focus samples (Gaussian, defocus parabola), so a
+// frame's stage error reaches it through the three-point sensitivities, or taken from the
+// maximum's frame (maximum, line fit) with that frame's error in full (DepthNoiseOptions).
+bool ThreePointPeak(DepthInterpolation interpolation);
 
 class ProcedureRunner final : public JobRunner {
  public:

@@ -66,6 +66,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunStudy(const StudyWork& work, const J
     for (const StackFrame& f : o.manifest.frames) noise.z_positions_um.push_back(f.z_um);
     noise.stage_repeatability_um = rig_->rig().stage().repeatability_um();
     if (bundle && bundle->z_linearity) noise.linearity = *bundle->z_linearity;
+    noise.three_point_peak = ThreePointPeak(plan.scan.sff.interpolation);
     repeats.push_back(Inspect(run, o.depth, o.manifest.pixel_size_um, noise, work.scan.part_id, work.scan.station));
     return Status::Ok();
   };
