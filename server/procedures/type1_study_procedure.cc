@@ -1,5 +1,6 @@
 // RunType1StudyScans: repeated scans of one reference part, re-positioned between repeats.
 #include "server/procedures/type1_study_procedure.h"
+#include "server/procedures/work_folder.h"
 
 #include <spdlog/spdlog.h>
 
@@ -54,15 +55,8 @@ StatusOr<Type1StudyScans> RunType1StudyScans(Rig& rig, const Type1StudyPlan& pla
   PlacementReset reset(simulated ? &rig : nullptr);
   std::error_code ec;
   // The work folder goes with the study, however it ends.
-  struct RemoveFolder {
-    const fs::path& dir;
-    ~RemoveFolder() {
-      std::error_code e;
-      fs::remove_all(dir, e);
-    }
-  } remove_work_dir{work_dir};
-  fs::create_directories(work_dir, ec);
-  if (ec) return Status::Internal("cannot create " + work_dir.string() + ": " + ec.message());
+  WorkFolder work_folder(work_dir);
+  INSPECT_RETURN_IF_ERROR(work_folder.Create());
   for (int i = 0; i < plan.repeats; ++i) {
     if (cancel.load()) return Status::Cancelled("study cancelled before repeat " + std::to_string(i + 1));
     if (simulated) {

@@ -1,6 +1,7 @@
 // RunVerification: the material measures scanned one after another and evaluated with
 // core/metrology/verification.h (ISO 25178-700 procedure, ISO 25178-600 characteristics).
 #include "server/procedures/verification_procedure.h"
+#include "server/procedures/work_folder.h"
 
 #include <spdlog/spdlog.h>
 
@@ -107,16 +108,8 @@ StatusOr<VerificationRecord> RunVerification(
   order.insert(order.end(), sinusoids.begin(), sinusoids.end());
 
   SpecimenReset reset(sim);
-  struct RemoveFolder {
-    const fs::path& dir;
-    ~RemoveFolder() {
-      std::error_code e;
-      fs::remove_all(dir, e);
-    }
-  } remove_work_dir{work_dir};
-  std::error_code ec;
-  fs::create_directories(work_dir, ec);
-  if (ec) return Status::Internal("cannot create " + work_dir.string() + ": " + ec.message());
+  WorkFolder work_folder(work_dir);
+  INSPECT_RETURN_IF_ERROR(work_folder.Create());
 
   const int window = plan.sff.window_px;
   const double px_um = rig.pixel_size_um();
@@ -144,7 +137,8 @@ StatusOr<VerificationRecord> RunVerification(
     const fs::path dir = work_dir / ("scan-" + std::to_string(i + 1));
     StatusOr<ScanOutcome> scanned = RunScan(
         rig, scan, dir, [&](const ScanFrameEvent& e) { if (on_frame) on_frame(e, progress); }, cancel);
-    fs::remove_all(dir, ec);
+    std::error_code ec;
+    fs::remove_all(dir, ec);  // the scan's frames are not kept: only its evaluation is
     if (!scanned.ok()) {
       if (scanned.status().code() == StatusCode::kCancelled) return scanned.status();
       return Status(scanned.status().code(), where + scanned.status().message());
