@@ -960,7 +960,9 @@ void JobManager::PoolHeartbeat() {
       // Only jobs taken before the renewal are judged by it.
       for (const auto& [id, r] : pool_held_) held_before.insert(id);
     }
-    auto renewal = store_->RenewLeases(worker_id_, lease_ms);
+    // Only the jobs running here: a lease this replica holds on anything else (a claim whose
+    // answer was lost, a job taken but not readable) runs out and the job is taken again.
+    auto renewal = store_->RenewLeases(worker_id_, lease_ms, {held_before.begin(), held_before.end()});
     if (!renewal.ok()) {
       if (!reported_error) spdlog::error("pool: cannot renew leases: {} (retrying)", renewal.status().ToString());
       reported_error = true;

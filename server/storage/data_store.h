@@ -183,8 +183,12 @@ class DataStore {
   // PostgreSQL: FOR UPDATE SKIP LOCKED, so workers taking at once never block on or take the same row.
   virtual StatusOr<std::optional<QueuedWork>> ClaimWork(const std::string& worker, int64_t lease_ms,
                                                         const std::vector<std::string>& preferred) = 0;
-  // Extends every lease `worker` holds.
-  virtual StatusOr<LeaseRenewal> RenewLeases(const std::string& worker, int64_t lease_ms) = 0;
+  // Extends the leases `worker` holds on the jobs in `running` (those it is running now) and says
+  // which of them it still holds. A lease on any other job is left to run out: a claim whose
+  // answer never reached the worker (the connection broke after the database ran it) or a job it
+  // took but could not read is then taken again, by any worker, instead of being renewed for ever.
+  virtual StatusOr<LeaseRenewal> RenewLeases(const std::string& worker, int64_t lease_ms,
+                                             const std::vector<std::string>& running) = 0;
   // Ends a job `worker` holds: the ended job and its terminal event are stored and its queue row
   // is marked ended (its input folder to remove: EndedWork). false (nothing written) when the
   // worker no longer holds it: another took it over, or it ended already.

@@ -206,7 +206,8 @@ class PostgresDataStore final : public DataStore {
   Status EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) override;
   StatusOr<std::optional<QueuedWork>> ClaimWork(const std::string& worker, int64_t lease_ms,
                                                 const std::vector<std::string>& preferred) override;
-  StatusOr<LeaseRenewal> RenewLeases(const std::string& worker, int64_t lease_ms) override;
+  StatusOr<LeaseRenewal> RenewLeases(const std::string& worker, int64_t lease_ms,
+                                     const std::vector<std::string>& running) override;
   StatusOr<bool> CompleteWork(const std::string& worker, const v1::Job& ended, const v1::JobEvent& terminal_event) override;
   StatusOr<bool> ReleaseWork(const std::string& worker, const v1::Job& queued, const v1::JobEvent& event) override;
   StatusOr<bool> CancelQueuedWork(const v1::Job& cancelled, const v1::JobEvent& event) override;
@@ -802,12 +803,14 @@ StatusOr<std::optional<QueuedWork>> PostgresDataStore::ClaimWork(const std::stri
   return std::optional<QueuedWork>(std::move(w));
 }
 
-StatusOr<LeaseRenewal> PostgresDataStore::RenewLeases(const std::string& worker, int64_t lease_ms) {
+StatusOr<LeaseRenewal> PostgresDataStore::RenewLeases(const std::string& worker, int64_t lease_ms,
+                                                      const std::vector<std::string>& running) {
   std::lock_guard<std::mutex> lock(mu_);
+  if (running.empty()) return LeaseRenewal{};
   Status s;
   Result r = Run("UPDATE work_queue SET lease_expires_ns = " INSPECT_PG_NOW_NS " + $2::bigint WHERE lease_owner = $1 "
-                 "AND ended = 0 RETURNING job_id, cancel_requested",
-                 {T(worker), I(lease_ms * 1000000)}, &s, "RenewLeases");
+                 "AND ended = 0 AND job_id = ANY($3::text[]) RETURNING job_id, cancel_requested",
+                 {T(worker), I(lease_ms * 1000000), T(TextArray(running))}, &s, "RenewLeases");
   INSPECT_RETURN_IF_ERROR(s);
   LeaseRenewal out;
   for (int i = 0; i < r.rows(); ++i) {

@@ -103,7 +103,8 @@ class SqliteDataStore final : public DataStore {
   Status EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) override;
   StatusOr<std::optional<QueuedWork>> ClaimWork(const std::string& worker, int64_t lease_ms,
                                                 const std::vector<std::string>& preferred) override;
-  StatusOr<LeaseRenewal> RenewLeases(const std::string& worker, int64_t lease_ms) override;
+  StatusOr<LeaseRenewal> RenewLeases(const std::string& worker, int64_t lease_ms,
+                                     const std::vector<std::string>& running) override;
   StatusOr<bool> CompleteWork(const std::string& worker, const v1::Job& ended, const v1::JobEvent& terminal_event) override;
   StatusOr<bool> ReleaseWork(const std::string& worker, const v1::Job& queued, const v1::JobEvent& event) override;
   StatusOr<bool> CancelQueuedWork(const v1::Job& cancelled, const v1::JobEvent& event) override;
@@ -767,20 +768,23 @@ StatusOr<std::optional<QueuedWork>> SqliteDataStore::ClaimWork(const std::string
   return claimed;
 }
 
-StatusOr<LeaseRenewal> SqliteDataStore::RenewLeases(const std::string& worker, int64_t lease_ms) {
+StatusOr<LeaseRenewal> SqliteDataStore::RenewLeases(const std::string& worker, int64_t lease_ms,
+                                                    const std::vector<std::string>& running) {
   std::lock_guard<std::mutex> lock(mu_);
   LeaseRenewal out;
   Status status = InTransaction([&]() -> Status {
-    {
-      Stmt st(db_, "UPDATE work_queue SET lease_expires_ns = ? WHERE lease_owner = ? AND ended = 0");
-      st.Int(1, NowNs() + lease_ms * 1000000).Text(2, worker);
-      if (st.Step() != SQLITE_DONE) return DbError(db_, "RenewLeases");
-    }
-    Stmt st(db_, "SELECT job_id, cancel_requested FROM work_queue WHERE lease_owner = ? AND ended = 0");
-    st.Text(1, worker);
-    for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
-      out.held.push_back(st.ColumnText(0));
-      if (sqlite3_column_int64(st.stmt(), 1) != 0) out.cancel_requested.push_back(st.ColumnText(0));
+    for (const std::string& id : running) {
+      {
+        Stmt st(db_, "UPDATE work_queue SET lease_expires_ns = ? WHERE lease_owner = ? AND ended = 0 AND job_id = ?");
+        st.Int(1, NowNs() + lease_ms * 1000000).Text(2, worker).Text(3, id);
+        if (st.Step() != SQLITE_DONE) return DbError(db_, "RenewLeases");
+      }
+      Stmt st(db_, "SELECT cancel_requested FROM work_queue WHERE lease_owner = ? AND ended = 0 AND job_id = ?");
+      st.Text(1, worker).Text(2, id);
+      if (st.Step() == SQLITE_ROW) {
+        out.held.push_back(id);
+        if (sqlite3_column_int64(st.stmt(), 0) != 0) out.cancel_requested.push_back(id);
+      }
     }
     return Status::Ok();
   });

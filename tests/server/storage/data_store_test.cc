@@ -327,7 +327,11 @@ TEST_P(DataStoreTest, TheWorkQueueLeasesEachJobToOneWorkerAndOnlyTheHolderEndsIt
   EXPECT_EQ(*store_->QueueDepth(), 1);
 
   // The holder renews; another worker cannot end a job it does not hold.
-  auto renewal = store_->RenewLeases("worker-a", 60000);
+  auto renewal = store_->RenewLeases("worker-a", 60000, {"rec-3"});
+  ASSERT_TRUE(renewal.ok());
+  EXPECT_EQ(renewal->held, std::vector<std::string>{"rec-3"});
+  // A job the worker does not hold is not reported as held (nor its lease touched).
+  renewal = store_->RenewLeases("worker-a", 60000, {"rec-3", "rec-1"});
   ASSERT_TRUE(renewal.ok());
   EXPECT_EQ(renewal->held, std::vector<std::string>{"rec-3"});
   v1::Job ended = Job("rec-3", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_SUCCEEDED, 3);
@@ -355,7 +359,7 @@ TEST_P(DataStoreTest, TheWorkQueueLeasesEachJobToOneWorkerAndOnlyTheHolderEndsIt
   v1::Job cancel_held = Job("rec-1", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_CANCELLED, 1);
   EXPECT_FALSE(*store_->CancelQueuedWork(cancel_held, QueueEvent("rec-1", 3, v1::JOB_STATE_CANCELLED)));
   EXPECT_EQ(store_->GetJob("rec-1")->state(), v1::JOB_STATE_QUEUED);
-  renewal = store_->RenewLeases("worker-c", 60000);
+  renewal = store_->RenewLeases("worker-c", 60000, {"rec-1"});
   ASSERT_TRUE(renewal.ok());
   EXPECT_EQ(renewal->cancel_requested, std::vector<std::string>{"rec-1"});
   EXPECT_EQ(*store_->QueuedWorkIds(), std::vector<std::string>{"rec-1"});
@@ -405,6 +409,40 @@ TEST_P(DataStoreTest, AnExpiredLeaseIsTakenOverAndTheEarlierAttemptsArtifactRows
   EXPECT_FALSE(*store_->CompleteWork("worker-dead", ended, QueueEvent("rec-1", 2, v1::JOB_STATE_SUCCEEDED)));
   EXPECT_TRUE(*store_->CompleteWork("worker-b", ended, QueueEvent("rec-1", 2, v1::JOB_STATE_SUCCEEDED)));
   EXPECT_TRUE(store_->QueuedWorkIds()->empty());
+}
+
+// A claim whose answer never reached its worker (the connection broke after the database ran
+// it): the worker does not know it holds the job, so its renewals leave that lease alone and the
+// job is taken again once the lease runs out, instead of being held for ever.
+TEST_P(DataStoreTest, ALeaseTheWorkerDoesNotKnowItHoldsIsNotRenewedAndIsTakenAgain) {
+  for (const std::string id : {"rec-1", "rec-2"}) {
+    ASSERT_TRUE(store_->EnqueueWork(Job(id, v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_QUEUED, id == "rec-1" ? 1 : 2),
+                                    QueueEvent(id, 1, v1::JOB_STATE_QUEUED), Work(id))
+                    .ok());
+  }
+  auto running = store_->ClaimWork("worker-a", 60000, {});  // the job worker-a runs
+  ASSERT_TRUE(running.ok() && running->has_value());
+  ASSERT_EQ((*running)->job_id, "rec-1");
+  auto lost = store_->ClaimWork("worker-a", /*lease_ms=*/1, {});  // its answer "lost"
+  ASSERT_TRUE(lost.ok() && lost->has_value());
+  ASSERT_EQ((*lost)->job_id, "rec-2");
+  // Renewals name only rec-1; poll (with a deadline) until rec-2's 1 ms lease has run out.
+  std::optional<QueuedWork> taken;
+  for (auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+       !taken && std::chrono::steady_clock::now() < deadline;) {
+    auto renewal = store_->RenewLeases("worker-a", 60000, {"rec-1"});
+    ASSERT_TRUE(renewal.ok()) << renewal.status().ToString();
+    EXPECT_EQ(renewal->held, std::vector<std::string>{"rec-1"});
+    auto c = store_->ClaimWork("worker-b", 60000, {});
+    ASSERT_TRUE(c.ok()) << c.status().ToString();
+    taken = *c;
+  }
+  ASSERT_TRUE(taken.has_value()) << "the unknown lease was renewed and never taken over";
+  EXPECT_EQ(taken->job_id, "rec-2");
+  EXPECT_EQ(taken->attempts, 2);
+  EXPECT_FALSE(*store_->CompleteWork("worker-a", Job("rec-2", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_SUCCEEDED, 2),
+                                     QueueEvent("rec-2", 2, v1::JOB_STATE_SUCCEEDED)));
+  EXPECT_EQ(*store_->QueueDepth(), 0);  // rec-1 still held by worker-a, rec-2 by worker-b
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, DataStoreTest, ::testing::Values("sqlite", "postgresql"),
