@@ -4,7 +4,7 @@
 #      killed with -9 mid-job and restarted later (the kill/restart table, every artifact
 #      sha-verified from every replica);
 #   2. throughput with 1 and 2 replicas (each replica's engine, decoding and artifact writing on
-#      one thread: two replicas use two cores without oversubscribing them);
+#      one thread each), with the replicas free on every core and confined to one core each;
 #   3. one rig on SQLite against PostgreSQL: scan and reconstruct latency;
 #   4. faults: the database stopped while a job runs, a SIGTERM drain, a full shared folder;
 #   5. the site feed with its database stopped for 30 s (site_forwarding_outage_test.sh).

@@ -10,7 +10,11 @@
 //     sha256-verified from every replica. Prints the kill/restart table.
 //   pool-bench --bin DIR --scenario throughput [--jobs 40]
 //     The same jobs on 1 and on 2 replicas, each replica's engine, decoding and artifact writing
-//     on one thread (so two replicas use the two cores without oversubscribing them).
+//     on one thread each. Run twice: replicas free to use every core, and each replica confined
+//     to one core of its own (as a Kubernetes pod with a CPU limit of 1). One free replica already
+//     overlaps decoding, the engine and artifact writing on the two cores, so the free run shows
+//     what a second replica adds on the same two cores, the confined run how the pool scales when
+//     each replica brings its own core. Prints each replica's CPU seconds beside the wall time.
 //   pool-bench --bin DIR --scenario latency [--jobs 10]
 //     One rig (simulated) on SQLite and one on PostgreSQL, both up, called in turn: sequential
 //     scans and reconstructions, medians and the median of the per-round ratios.
@@ -21,7 +25,9 @@
 #include <libpq-fe.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sched.h>
 #include <sys/mount.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -128,6 +134,8 @@ struct Process {
   fs::path log;
   pid_t pid = 0;
   int port = 0;
+  int cpu = -1;              // >= 0: the process runs on this core only
+  double cpu_seconds = 0;    // user + system time of the process, read when it is reaped
 
   bool Start() {
     posix_spawn_file_actions_t fa;
@@ -138,7 +146,17 @@ struct Process {
     for (std::string& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
     const size_t before = ReadFile(log).size();
+    // The child inherits the spawning thread's affinity: set it for the spawn, then restore.
+    cpu_set_t saved;
+    const bool pin = cpu >= 0 && sched_getaffinity(0, sizeof saved, &saved) == 0;
+    if (pin) {
+      cpu_set_t one;
+      CPU_ZERO(&one);
+      CPU_SET(cpu, &one);
+      if (sched_setaffinity(0, sizeof one, &one) != 0) std::cerr << name << ": cannot pin to core " << cpu << "\n";
+    }
     const int rc = posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ);
+    if (pin) sched_setaffinity(0, sizeof saved, &saved);
     posix_spawn_file_actions_destroy(&fa);
     if (rc != 0) {
       std::cerr << name << ": cannot start " << args[0] << "\n";
@@ -165,7 +183,9 @@ struct Process {
     if (pid <= 0) return -1;
     kill(pid, SIGTERM);
     int status = 0;
-    waitpid(pid, &status, 0);
+    struct rusage ru {};
+    wait4(pid, &status, 0, &ru);
+    cpu_seconds = double(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) + 1e-6 * double(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
     pid = 0;
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   }
@@ -203,12 +223,14 @@ struct Pool {
   int artifact_threads = 0;
   int lease_s = 3;
   int drain_s = 10;
+  bool pin = false;  // replica i on core i % cores
 
   Process MakeReplica(int i) {
     Process p;
     p.name = "replica " + std::to_string(i + 1);
     p.port = FreePort();
     p.log = work / ("replica-" + std::to_string(i + 1) + ".log");
+    if (pin) p.cpu = i % int(std::max(1u, std::thread::hardware_concurrency()));
     p.args = {inspectd,
               "--no-rig",
               "--listen",
@@ -602,13 +624,21 @@ int ScenarioKill(const Common& c, inspection::testing::PostgresServer& pg, const
   return g_failures == 0 ? 0 : 1;
 }
 
+struct ThroughputRun {
+  double jobs_per_s = 0;
+  double wall_s = 0;
+  std::vector<double> replica_cpu_s;  // each replica's CPU seconds over the run
+};
+
 // Jobs per second with `n` replicas on a fresh database and folder.
-double Throughput(const Common& c, inspection::testing::PostgresServer& pg, const fs::path& work, int n,
-                  const fs::path& stack) {
+ThroughputRun Throughput(const Common& c, inspection::testing::PostgresServer& pg, const fs::path& work, int n,
+                         const fs::path& stack, bool pin) {
+  ThroughputRun run;
   Pool pool;
-  pool.work = work / ("tp-" + std::to_string(n));
+  const std::string tag = std::to_string(n) + (pin ? "_pinned" : "");
+  pool.work = work / ("tp-" + tag);
   fs::create_directories(pool.work);
-  pool.url = pg.CreateDatabase("pool_tp_" + std::to_string(n));
+  pool.url = pg.CreateDatabase("pool_tp_" + tag);
   pool.password_file = pg.PasswordFile();
   pool.password = inspection::testing::PostgresServer::Password();
   pool.inspectd = c.bin + "/inspectd";
@@ -616,27 +646,39 @@ double Throughput(const Common& c, inspection::testing::PostgresServer& pg, cons
   pool.decode_threads = 1;
   pool.artifact_threads = 1;
   pool.lease_s = 30;
-  if (!pool.Start(n)) return 0;
+  pool.pin = pin;
+  if (!pool.Start(n)) return run;
   std::mutex mu;
-  Submitter submitter(&pool, &mu, stack, "pool-tp-");
+  Submitter submitter(&pool, &mu, stack, "pool-tp-" + tag + "-");
   // Enough uploads in flight to keep every replica busy.
   const auto t0 = Clock::now();
   std::vector<Submission> subs = submitter.Run(c.jobs, 2 * n + 2);
-  const double s = Since(t0);
+  run.wall_s = Since(t0);
   for (const Submission& x : subs) CHECK_OR_COUNT(x.succeeded, x.request_id << ": " << x.error);
   pool.StopAll();
-  return c.jobs / s;
+  for (const Process& p : pool.replicas) run.replica_cpu_s.push_back(p.cpu_seconds);
+  run.jobs_per_s = c.jobs / run.wall_s;
+  return run;
 }
 
 int ScenarioThroughput(const Common& c, inspection::testing::PostgresServer& pg, const fs::path& work) {
   const fs::path stack = work / "stack";
   WriteSyntheticStack(stack, c.width, c.height, c.frames);
-  const double one = Throughput(c, pg, work, 1, stack);
-  const double two = Throughput(c, pg, work, 2, stack);
-  std::printf("\n%d jobs of %dx%d px x %d frames; each replica: engine, decode and artifact threads 1\n", c.jobs,
-              c.width, c.height, c.frames);
-  std::printf("| replicas | jobs/s | vs 1 replica |\n|---:|---:|---:|\n");
-  std::printf("| 1 | %.2f | 1.00x |\n| 2 | %.2f | %.2fx |\n", one, two, one > 0 ? two / one : 0.0);
+  std::printf("\n%d jobs of %dx%d px x %d frames; each replica: engine, decode and artifact threads 1; %u cores\n",
+              c.jobs, c.width, c.height, c.frames, std::thread::hardware_concurrency());
+  std::printf("| replicas | placement | wall s | jobs/s | vs 1 replica | replicas' CPU s | replica cores busy |\n"
+              "|---:|---|---:|---:|---:|---:|---:|\n");
+  for (const bool pin : {false, true}) {
+    const ThroughputRun one = Throughput(c, pg, work, 1, stack, pin);
+    const ThroughputRun two = Throughput(c, pg, work, 2, stack, pin);
+    for (const ThroughputRun* r : {&one, &two}) {
+      double cpu = 0;
+      for (double x : r->replica_cpu_s) cpu += x;
+      std::printf("| %zu | %s | %.2f | %.2f | %.2fx | %.1f | %.2f |\n", r->replica_cpu_s.size(),
+                  pin ? "one core each" : "free", r->wall_s, r->jobs_per_s,
+                  one.jobs_per_s > 0 ? r->jobs_per_s / one.jobs_per_s : 0.0, cpu, r->wall_s > 0 ? cpu / r->wall_s : 0.0);
+    }
+  }
   return g_failures == 0 ? 0 : 1;
 }
 
