@@ -76,7 +76,9 @@ bool JobRecord::EventsSince(size_t from, std::chrono::milliseconds timeout, std:
   std::unique_lock<std::mutex> lock(mu_);
   if (follow_store_) {
     // Another replica writes this job's events: its store is the only place they appear.
-    cv_.wait_for(lock, std::min(timeout, follow_poll_), [&] { return events_.size() > from || IsTerminal(job_.state()); });
+    cv_.wait_for(lock, std::min(timeout, follow_poll_),
+                 [&] { return events_.size() > from || IsTerminal(job_.state()) || poked_; });
+    poked_ = false;
     if (events_.size() <= from && !IsTerminal(job_.state()) && follow_store_) {
       lock.unlock();
       Refresh();
@@ -150,6 +152,15 @@ void JobRecord::Follow(DataStore* store, std::chrono::milliseconds poll) {
   std::lock_guard<std::mutex> lock(mu_);
   follow_store_ = store;
   follow_poll_ = poll;
+}
+
+void JobRecord::Poke() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!follow_store_) return;
+    poked_ = true;
+  }
+  cv_.notify_all();
 }
 
 void JobRecord::StopFollowing() {
@@ -259,6 +270,21 @@ Status JobManager::Start() {
     if (options_.pool.workers < 1) return Status::InvalidArgument("pool workers must be >= 1");
     if (options_.pool.lease < std::chrono::milliseconds(300)) return Status::InvalidArgument("pool lease must be >= 300 ms");
     writer_thread_ = std::thread([this] { PoolWriter(); });
+    // Another replica's upload wakes an idle worker here, and its events a watcher here, at once;
+    // the poll stays for notifications lost while the listening connection was down.
+    store_->ListenForChanges([this](DataStore::Change change, const std::string& job_id) {
+      RecordPtr follower;
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (change == DataStore::Change::kWorkQueued) {
+          ++pool_submissions_;
+        } else if (auto it = pool_followers_.find(job_id); it != pool_followers_.end()) {
+          follower = it->second.lock();
+        }
+      }
+      if (change == DataStore::Change::kWorkQueued) work_cv_.notify_all();
+      if (follower) follower->Poke();
+    });
     for (int i = 0; i < options_.pool.workers; ++i) pool_threads_.emplace_back([this] { PoolWorker(); });
     // Two leases, and never under 2 s: a folder's time may have a coarse grain on a shared volume.
     upload_sweeper_ = std::make_unique<OrphanUploadSweeper>(
@@ -287,6 +313,7 @@ void JobManager::Shutdown() {
       q->clear();  // the work goes now, uploads with it
     }
   }
+  if (pool()) store_->ListenForChanges(nullptr);  // no call into this manager after it
   work_cv_.notify_all();
   pool_cv_.notify_all();
   for (const RecordPtr& r : queued) Finish(r, Status::Aborted("the server shut down before the job ran"));

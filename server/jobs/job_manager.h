@@ -88,6 +88,9 @@ class JobRecord {
   // Reads the stored job and its events newer than this record's; false when the store does not
   // answer (the record stays as it was).
   bool Refresh();
+  // The store says this job changed (another replica wrote its events): a waiting watcher reads
+  // them now rather than at its next poll.
+  void Poke();
   // Replaces the record with the stored one (a worker taking the job: others may have run it).
   void Reload(v1::Job job, std::vector<v1::JobEvent> events);
 
@@ -105,6 +108,7 @@ class JobRecord {
   std::chrono::steady_clock::time_point started_;
   DataStore* follow_store_ = nullptr;  // set: the job runs elsewhere
   std::chrono::milliseconds follow_poll_{250};
+  bool poked_ = false;  // Poke() since the last read of the store
 };
 
 // A reconstruct pool's settings (JobManager pool mode, above).
@@ -245,7 +249,7 @@ class JobManager {
   // Pool mode; guarded by mu_ unless atomic.
   std::string worker_id_;
   bool draining_ = false;
-  uint64_t pool_submissions_ = 0;                          // wakes idle workers at a local upload
+  uint64_t pool_submissions_ = 0;  // wakes idle workers at a local upload or another replica's (Change::kWorkQueued)
   std::map<std::string, JobWork> pool_hints_;              // accepted here, frames decoded, not yet taken here
   std::map<std::string, std::weak_ptr<JobRecord>> pool_followers_;  // records streamed to clients here
   std::map<std::string, RecordPtr> pool_held_;             // running here under our lease

@@ -15,6 +15,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -95,6 +96,17 @@ class DataStore {
   // True when other processes write to the same database (PostgreSQL: a pool or a site), so
   // waiting for this process's own writes is not enough to see new rows.
   virtual bool shared() const = 0;
+
+  // What another process sharing the database just did (PostgreSQL LISTEN / NOTIFY): work was
+  // queued or handed back (an idle worker may take it now), or a job's events or end were stored
+  // (a watcher of that job may read them now). A hint only: notifications are lost while the
+  // listening connection is down, so waiters keep polling as well.
+  enum class Change { kWorkQueued, kJobChanged };
+  using ChangeListener = std::function<void(Change change, const std::string& job_id)>;
+  // Calls `listener` on a thread of the store's for every change (also this process's own);
+  // an empty listener stops the calls (it returns after a call in progress ended). A store whose
+  // database no other process shares never calls it.
+  virtual void ListenForChanges(ChangeListener listener) { (void)listener; }
 
   const std::filesystem::path& data_dir() const { return data_dir_; }
   std::filesystem::path scans_dir() const { return data_dir_ / "scans"; }

@@ -628,7 +628,40 @@ struct ThroughputRun {
   double jobs_per_s = 0;
   double wall_s = 0;
   std::vector<double> replica_cpu_s;  // each replica's CPU seconds over the run
+  double client_cpu_s = 0;            // this process (the uploading clients) over the run
+  double postgres_cpu_s = 0;          // every postgres process over the run
 };
+
+double SelfCpuSeconds() {
+  struct rusage ru {};
+  getrusage(RUSAGE_SELF, &ru);
+  return double(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) + 1e-6 * double(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
+}
+
+// CPU seconds of every process named postgres so far (its backends live only as long as their
+// connection, so a run's figure is the difference of two readings plus the backends that ended:
+// close enough while the replicas keep their connections for the whole run).
+double PostgresCpuSeconds() {
+  double total = 0;
+  const double tick = double(sysconf(_SC_CLK_TCK));
+  for (const auto& e : fs::directory_iterator("/proc")) {
+    const std::string pid = e.path().filename().string();
+    if (pid.empty() || !std::all_of(pid.begin(), pid.end(), [](char ch) { return ch >= '0' && ch <= '9'; })) continue;
+    const std::string stat = ReadFile(e.path() / "stat");
+    const size_t open = stat.find('('), close = stat.rfind(')');
+    if (open == std::string::npos || close == std::string::npos) continue;
+    if (stat.substr(open + 1, close - open - 1) != "postgres") continue;
+    std::istringstream rest(stat.substr(close + 2));
+    std::string field;
+    double utime = 0, stime = 0;
+    for (int i = 3; i <= 15 && rest >> field; ++i) {
+      if (i == 14) utime = std::atof(field.c_str());
+      if (i == 15) stime = std::atof(field.c_str());
+    }
+    total += (utime + stime) / tick;
+  }
+  return total;
+}
 
 // Jobs per second with `n` replicas on a fresh database and folder.
 ThroughputRun Throughput(const Common& c, inspection::testing::PostgresServer& pg, const fs::path& work, int n,
@@ -652,8 +685,11 @@ ThroughputRun Throughput(const Common& c, inspection::testing::PostgresServer& p
   Submitter submitter(&pool, &mu, stack, "pool-tp-" + tag + "-");
   // Enough uploads in flight to keep every replica busy.
   const auto t0 = Clock::now();
+  const double self0 = SelfCpuSeconds(), pg0 = PostgresCpuSeconds();
   std::vector<Submission> subs = submitter.Run(c.jobs, 2 * n + 2);
   run.wall_s = Since(t0);
+  run.client_cpu_s = SelfCpuSeconds() - self0;
+  run.postgres_cpu_s = PostgresCpuSeconds() - pg0;
   for (const Submission& x : subs) CHECK_OR_COUNT(x.succeeded, x.request_id << ": " << x.error);
   pool.StopAll();
   for (const Process& p : pool.replicas) run.replica_cpu_s.push_back(p.cpu_seconds);
@@ -666,17 +702,18 @@ int ScenarioThroughput(const Common& c, inspection::testing::PostgresServer& pg,
   WriteSyntheticStack(stack, c.width, c.height, c.frames);
   std::printf("\n%d jobs of %dx%d px x %d frames; each replica: engine, decode and artifact threads 1; %u cores\n",
               c.jobs, c.width, c.height, c.frames, std::thread::hardware_concurrency());
-  std::printf("| replicas | placement | wall s | jobs/s | vs 1 replica | replicas' CPU s | replica cores busy |\n"
-              "|---:|---|---:|---:|---:|---:|---:|\n");
+  std::printf("| replicas | placement | wall s | jobs/s | vs 1 replica | replicas' CPU s | replica cores busy | client CPU s | "
+              "PostgreSQL CPU s |\n|---:|---|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const bool pin : {false, true}) {
     const ThroughputRun one = Throughput(c, pg, work, 1, stack, pin);
     const ThroughputRun two = Throughput(c, pg, work, 2, stack, pin);
     for (const ThroughputRun* r : {&one, &two}) {
       double cpu = 0;
       for (double x : r->replica_cpu_s) cpu += x;
-      std::printf("| %zu | %s | %.2f | %.2f | %.2fx | %.1f | %.2f |\n", r->replica_cpu_s.size(),
+      std::printf("| %zu | %s | %.2f | %.2f | %.2fx | %.1f | %.2f | %.1f | %.1f |\n", r->replica_cpu_s.size(),
                   pin ? "one core each" : "free", r->wall_s, r->jobs_per_s,
-                  one.jobs_per_s > 0 ? r->jobs_per_s / one.jobs_per_s : 0.0, cpu, r->wall_s > 0 ? cpu / r->wall_s : 0.0);
+                  one.jobs_per_s > 0 ? r->jobs_per_s / one.jobs_per_s : 0.0, cpu, r->wall_s > 0 ? cpu / r->wall_s : 0.0,
+                  r->client_cpu_s, r->postgres_cpu_s);
     }
   }
   return g_failures == 0 ? 0 : 1;

@@ -6,11 +6,16 @@
 
 #include <arpa/inet.h>
 #include <libpq-fe.h>
+#include <poll.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <condition_variable>
 #include <cstring>
 #include <mutex>
 #include <optional>
+#include <set>
+#include <thread>
 #include <vector>
 
 #include <spdlog/spdlog.h>
@@ -161,12 +166,97 @@ Status ParseRows(const Result& r, int col, std::vector<M>* out, const char* what
   return Status::Ok();
 }
 
+// Channels of the pool's notifications (payload: the job id).
+constexpr char kWorkChannel[] = "inspectd_work";
+constexpr char kJobChannel[] = "inspectd_job";
+
+// One connection that LISTENs on both channels, on a thread of its own, handing each
+// notification to the listener. Reconnects (once a second) after the server went away; what was
+// notified meanwhile is lost, which the waiters' polling covers.
+class NotificationListener {
+ public:
+  using Connect = std::function<PGconn*()>;
+  NotificationListener(Connect connect, DataStore::ChangeListener listener)
+      : connect_(std::move(connect)), listener_(std::move(listener)), thread_([this] { Run(); }) {}
+  ~NotificationListener() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+
+ private:
+  void Run() {
+    PGconn* conn = nullptr;
+    for (;;) {
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (stop_) break;
+      }
+      if (!conn) {
+        conn = connect_();
+        if (conn && !ListenOn(conn)) {
+          PQfinish(conn);
+          conn = nullptr;
+        }
+        if (!conn) {
+          std::unique_lock<std::mutex> lock(mu_);
+          cv_.wait_for(lock, std::chrono::seconds(1), [&] { return stop_; });
+          continue;
+        }
+      }
+      // Wakes at a notification, or every 200 ms to see whether the store is closing.
+      pollfd fd{PQsocket(conn), POLLIN, 0};
+      if (poll(&fd, 1, 200) < 0 && errno != EINTR) fd.revents = POLLERR;
+      if (fd.revents != 0 && PQconsumeInput(conn) == 0) {
+        spdlog::debug("database: the notification connection broke: {}", OneLine(PQerrorMessage(conn)));
+        PQfinish(conn);
+        conn = nullptr;
+        continue;
+      }
+      while (PGnotify* n = PQnotifies(conn)) {
+        const DataStore::Change change =
+            std::strcmp(n->relname, kWorkChannel) == 0 ? DataStore::Change::kWorkQueued : DataStore::Change::kJobChanged;
+        listener_(change, n->extra ? std::string(n->extra) : std::string());
+        PQfreemem(n);
+      }
+    }
+    if (conn) PQfinish(conn);
+  }
+  static bool ListenOn(PGconn* conn) {
+    const std::string sql = std::string("LISTEN ") + kWorkChannel + "; LISTEN " + kJobChannel;
+    PGresult* r = PQexec(conn, sql.c_str());
+    const bool ok = r && PQresultStatus(r) == PGRES_COMMAND_OK;
+    if (!ok) spdlog::debug("database: LISTEN failed: {}", OneLine(PQerrorMessage(conn)));
+    PQclear(r);
+    return ok;
+  }
+
+  const Connect connect_;
+  const DataStore::ChangeListener listener_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  bool stop_ = false;
+  std::thread thread_;  // last: started once the members it reads exist
+};
+
 class PostgresDataStore final : public DataStore {
  public:
-  PostgresDataStore(fs::path dir, PGconn* conn) : DataStore(std::move(dir)), conn_(conn) {}
-  ~PostgresDataStore() override { PQfinish(conn_); }
+  PostgresDataStore(fs::path dir, PGconn* conn, std::function<PGconn*()> connect)
+      : DataStore(std::move(dir)), conn_(conn), connect_(std::move(connect)) {}
+  ~PostgresDataStore() override {
+    ListenForChanges(nullptr);
+    PQfinish(conn_);
+  }
   const char* backend() const override { return "postgresql"; }
   bool shared() const override { return true; }
+  void ListenForChanges(ChangeListener listener) override {
+    std::lock_guard<std::mutex> lock(listener_mu_);
+    listener_.reset();  // joins its thread: no call runs after this
+    if (listener) listener_ = std::make_unique<NotificationListener>(connect_, std::move(listener));
+  }
   Status Migrate();
 
   Status PutJob(const v1::Job& job) override;
@@ -238,6 +328,9 @@ class PostgresDataStore final : public DataStore {
   std::mutex mu_;  // guards conn_ and in_transaction_: one connection, one statement at a time
   PGconn* conn_;
   bool in_transaction_ = false;
+  const std::function<PGconn*()> connect_;  // a new connection like conn_ (nullptr: cannot)
+  std::mutex listener_mu_;
+  std::unique_ptr<NotificationListener> listener_;
 };
 
 Result PostgresDataStore::Run(const char* sql, const std::vector<Param>& params, Status* error, const char* what,
@@ -395,7 +488,10 @@ Status PostgresDataStore::AppendEvents(const std::vector<v1::JobEvent>& events) 
       params.push_back(I(int64_t(events[i].sequence())));
       params.push_back(B(events[i].SerializeAsString()));
     }
-    sql += " ON CONFLICT (job_id, sequence) DO UPDATE SET event = EXCLUDED.event";
+    // Watchers of these jobs on other replicas read them at once instead of at their next poll.
+    sql = "WITH i AS (" + sql +
+          " ON CONFLICT (job_id, sequence) DO UPDATE SET event = EXCLUDED.event RETURNING job_id) "
+          "SELECT pg_notify('inspectd_job', job_id) FROM (SELECT DISTINCT job_id FROM i) d";
     Status s;
     Run(sql.c_str(), params, &s, "AppendEvents");
     INSPECT_RETURN_IF_ERROR(s);
@@ -766,8 +862,8 @@ Status PostgresDataStore::EnqueueWork(const v1::Job& job, const v1::JobEvent& qu
   Status s;
   Run("WITH j AS (" INSPECT_PG_UPSERT_JOB("SELECT $1::text, $2::integer, $3::integer, $4::text, $5::bigint, '', $6::bytea")
       "), e AS (" INSPECT_PG_UPSERT_EVENT("SELECT $1::text, $7::bigint, $8::bytea")
-      ") INSERT INTO work_queue(job_id, enqueue_ns, input, stack_dir) VALUES($1::text, " INSPECT_PG_NOW_NS
-      ", $9::bytea, $10::text)",
+      "), w AS (INSERT INTO work_queue(job_id, enqueue_ns, input, stack_dir) VALUES($1::text, " INSPECT_PG_NOW_NS
+      ", $9::bytea, $10::text) RETURNING job_id) SELECT pg_notify('inspectd_work', job_id) FROM w",
       {T(job.job_id()), I(job.kind()), I(job.state()), T(job.request_id()), I(CreateNs(job)), B(job.SerializeAsString()),
        I(int64_t(queued_event.sequence())), B(queued_event.SerializeAsString()), B(work.input), T(work.stack_dir)},
       &s, "EnqueueWork");
@@ -832,7 +928,7 @@ StatusOr<bool> PostgresDataStore::CompleteWork(const std::string& worker, const 
                  "lease_owner = $2::text AND ended = 0 RETURNING job_id), "
                  "j AS (" INSPECT_PG_UPSERT_JOB("SELECT $1::text, $3::integer, $4::integer, $5::text, $6::bigint, '', $7::bytea FROM q")
                  "), e AS (" INSPECT_PG_UPSERT_EVENT("SELECT $1::text, $8::bigint, $9::bytea FROM q")
-                 ") SELECT count(*)::bigint FROM q",
+                 ") SELECT count(*)::bigint FROM q CROSS JOIN LATERAL (SELECT pg_notify('inspectd_job', q.job_id)) n",
                  {T(ended.job_id()), T(worker), I(ended.kind()), I(ended.state()), T(ended.request_id()), I(CreateNs(ended)),
                   B(ended.SerializeAsString()), I(int64_t(terminal_event.sequence())), B(terminal_event.SerializeAsString())},
                  &s, "CompleteWork");
@@ -852,7 +948,9 @@ StatusOr<bool> PostgresDataStore::ReleaseWork(const std::string& worker, const v
     INSPECT_RETURN_IF_ERROR(s);
     held = r.rows() > 0;
     if (!held) return Status::Ok();
-    return WriteJobAndEvent(queued, event, "ReleaseWork");
+    INSPECT_RETURN_IF_ERROR(WriteJobAndEvent(queued, event, "ReleaseWork"));
+    Run("SELECT pg_notify('inspectd_work', $1)", {T(queued.job_id())}, &s, "ReleaseWork");  // delivered at COMMIT
+    return s;
   });
   INSPECT_RETURN_IF_ERROR(status);
   return held;
@@ -952,7 +1050,25 @@ StatusOr<std::unique_ptr<DataStore>> OpenPostgresStore(const fs::path& data_dir,
   // they would go to stderr unformatted. Logs stay quiet by default.
   PQsetNoticeProcessor(conn, [](void*, const char* message) { spdlog::debug("database: {}", OneLine(message)); },
                        nullptr);
-  auto store = std::make_unique<PostgresDataStore>(data_dir, conn);
+  // The notification listener's own connection, made with the same parameters.
+  auto connect = [conninfo, password]() -> PGconn* {
+    std::vector<const char*> k = {"dbname", "connect_timeout", "application_name"};
+    std::vector<const char*> v = {conninfo.c_str(), "10", "inspectd-listen"};
+    if (!password.empty()) {
+      k.push_back("password");
+      v.push_back(password.c_str());
+    }
+    k.push_back(nullptr);
+    v.push_back(nullptr);
+    PGconn* c = PQconnectdbParams(k.data(), v.data(), /*expand_dbname=*/1);
+    if (c && PQstatus(c) != CONNECTION_OK) {
+      spdlog::debug("database: the notification connection failed: {}", OneLine(PQerrorMessage(c)));
+      PQfinish(c);
+      c = nullptr;
+    }
+    return c;
+  };
+  auto store = std::make_unique<PostgresDataStore>(data_dir, conn, std::move(connect));
   INSPECT_RETURN_IF_ERROR(store->Migrate());
   return std::unique_ptr<DataStore>(std::move(store));
 }
