@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <functional>
 #include <chrono>
 #include <cmath>
@@ -36,6 +37,7 @@
 #include "core/sff/depth_postprocess.h"
 #include "core/sff/depth_refinement.h"
 #include "core/sff/sff_engine.h"
+#include "core/sff/stack_reconstruct.h"
 #include "core/io/stack.h"
 #include "devices/sim/natural_scene.h"
 
@@ -55,6 +57,7 @@ struct Scene {
   std::vector<cv::Mat> grey;  // what the engine sees (luminance of the colour PNGs)
   std::vector<double> z;      // frame index
   cv::Mat fs_depth;           // focus-stack, frame units (empty if not run)
+  cv::Mat colour_aif;         // the colour all-in-focus image an imported stack gets (stack_reconstruct.h)
   double fs_seconds = 0;
   fs::path dir;
 };
@@ -283,10 +286,17 @@ cv::Mat RunFocusStack(const std::string& exe, const Scene& s, double* seconds) {
     cmd += " '" + (s.dir / name).string() + "'";
   }
   cmd += " > '" + (s.dir / "fs.log").string() + "' 2>&1";
-  const auto t0 = Clock::now();
-  const int rc = std::system(cmd.c_str());
-  *seconds = Seconds(t0);
-  cv::Mat dm = cv::imread((s.dir / "fs_depth.png").string(), cv::IMREAD_GRAYSCALE);
+  // focus-stack (its threads) crashes now and then on a stack it handles on the next run: up to
+  // three attempts, the time of the one that succeeded.
+  int rc = 0;
+  cv::Mat dm;
+  for (int attempt = 0; attempt < 3; ++attempt) {
+    const auto t0 = Clock::now();
+    rc = std::system(cmd.c_str());
+    *seconds = Seconds(t0);
+    dm = rc == 0 ? cv::imread((s.dir / "fs_depth.png").string(), cv::IMREAD_GRAYSCALE) : cv::Mat();
+    if (!dm.empty()) break;
+  }
   if (rc != 0 || dm.empty() || dm.size() != s.truth.depth_frames.size()) {
     std::fprintf(stderr, "focus-stack failed (rc %d), see %s\n", rc, (s.dir / "fs.log").c_str());
     return cv::Mat();
@@ -394,86 +404,288 @@ struct DenseCandidate {
   std::string name;
   bool dense = true;  // else push-pull fill
   DenseDepthOptions dense_options;
+  bool dense_confidence = true;  // DepthPostProcessOptions::dense_confidence
+  // Guide: the colour all-in-focus image, as an imported colour stack has it
+  // (ReconstructStackFolder); false: the engine's grey one.
+  bool colour_guide = true;
 };
+
+const cv::Mat& ColourAllInFocus(Scene& s) {
+  if (s.colour_aif.empty()) {
+    SffOptions o;
+    o.min_confidence = 0.0;
+    const std::atomic<bool> cancel{false};
+    auto m = ReadStackManifest(s.dir);
+    auto r = m.ok() ? ReconstructStackFolder(s.dir, *m, o, nullptr, cancel) : StatusOr<DepthResult>(m.status());
+    if (!r.ok()) {
+      std::fprintf(stderr, "%s: %s\n", s.dir.c_str(), r.status().ToString().c_str());
+      std::exit(1);
+    }
+    s.colour_aif = r->all_in_focus;
+  }
+  return s.colour_aif;
+}
 
 // The product's default post-processing (threshold, consistency) on the default engine, then
 // `c`; returns depth and confidence (inferred pixels keep confidence < min_confidence).
-DepthResult PostProcessed(const Scene& s, const DenseCandidate& c, Cache* cache) {
+DepthResult PostProcessed(const Scene& s, const DenseCandidate& c, Cache* cache, double* seconds = nullptr) {
   const SffOptions d;
-  const DepthResult& raw = Run(s, EngineKey{d.focus_measure, d.window_px, d.interpolation}, cache);
+  DepthResult raw = Run(s, EngineKey{d.focus_measure, d.window_px, d.interpolation}, cache);
+  if (c.dense && c.colour_guide) raw.all_in_focus = ColourAllInFocus(const_cast<Scene&>(s));
   DepthPostProcessOptions o;
   o.dense = c.dense;
   o.dense_options = c.dense_options;
+  o.dense_confidence = c.dense_confidence;
   o.fill_low_confidence = !c.dense;
-  return PostProcessDepth(raw, s.z, d.window_px, o).value();
+  const auto t0 = Clock::now();
+  DepthResult r = PostProcessDepth(raw, s.z, d.window_px, o).value();
+  if (seconds) *seconds += Seconds(t0);
+  return r;
+}
+
+// Where the error at full coverage comes from: RMSE, share of the pixels and share of the summed
+// squared error per region (exclusive, in this order): within 3 px of a depth jump, the image's
+// border band (8..24 px from the edge), untextured (flat paint / sky), textured; and for our map
+// measured vs inferred. Then by decile of our confidence, focus-stack on the same pixels.
+void Diagnose(const std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tuning,
+              const std::vector<const DenseCandidate*>& methods, bool have_fs) {
+  constexpr int kBand = 24;
+  const char* region_names[] = {"edge", "border", "flat", "textured", "measured", "inferred"};
+  constexpr int kRegions = 6, kDeciles = 10;
+  struct Acc {
+    double se[kRegions] = {}, n[kRegions] = {}, total_se = 0, total_n = 0;
+    double dec_se[kDeciles] = {}, dec_n[kDeciles] = {}, dec_fs[kDeciles] = {};
+  };
+  std::vector<Acc> acc(methods.size() + 1);  // last: focus-stack (deciles by the first method's confidence)
+  for (int k = 0; k < n_tuning; ++k) {
+    const Scene& s = scenes[size_t(k)];
+    const cv::Mat& t = s.truth.depth_frames;
+    std::vector<DepthResult> res;
+    for (const DenseCandidate* c : methods) res.push_back(PostProcessed(s, *c, &caches[size_t(k)]));
+    auto Region = [&](int y, int x) {
+      if (s.truth.occlusion_edge.at<uint8_t>(y, x)) return 0;
+      if (std::min({x, y, t.cols - 1 - x, t.rows - 1 - y}) < kBand) return 1;
+      return s.truth.textured.at<uint8_t>(y, x) ? 3 : 2;
+    };
+    for (size_t m = 0; m <= methods.size(); ++m) {
+      if (m == methods.size() && !have_fs) continue;
+      const cv::Mat& depth = m < methods.size() ? res[m].depth_um : s.fs_depth;
+      const cv::Mat& conf = res[m < methods.size() ? m : 0].confidence;
+      // Confidence deciles of this scene (ties broken by scan order).
+      std::vector<std::pair<float, int>> order;
+      for (int y = kBorderPx; y < t.rows - kBorderPx; ++y)
+        for (int x = kBorderPx; x < t.cols - kBorderPx; ++x) order.push_back({-conf.at<float>(y, x), y * t.cols + x});
+      std::stable_sort(order.begin(), order.end(),
+                       [](const auto& a, const auto& b) { return a.first < b.first; });
+      std::vector<int> decile(t.total(), 0);
+      for (size_t i = 0; i < order.size(); ++i) decile[size_t(order[i].second)] = int(i * kDeciles / order.size());
+      Acc& a = acc[m];
+      for (int y = kBorderPx; y < t.rows - kBorderPx; ++y)
+        for (int x = kBorderPx; x < t.cols - kBorderPx; ++x) {
+          const float d = depth.at<float>(y, x);
+          const double e = std::isfinite(d) ? d - t.at<float>(y, x) : 1e3;
+          const double e2 = e * e / n_tuning;
+          const int r = Region(y, x);
+          a.se[r] += e2;
+          a.n[r] += 1.0 / n_tuning;
+          const int mi = conf.at<float>(y, x) >= 0.4f ? 4 : 5;
+          a.se[mi] += e2;
+          a.n[mi] += 1.0 / n_tuning;
+          a.total_se += e2;
+          a.total_n += 1.0 / n_tuning;
+          const int dq = decile[size_t(y * t.cols + x)];
+          a.dec_se[dq] += e2;
+          a.dec_n[dq] += 1.0 / n_tuning;
+        }
+    }
+  }
+  std::printf(
+      "\nDiagnosis on the tuning scenes 0..%d (pooled pixels): RMSE [frames] / share of pixels / share of the "
+      "squared error per region (edge = within 3 px of a depth jump; border = 8..24 px from the image edge; flat = "
+      "untextured; textured = the rest; measured/inferred = our confidence >= / < 0.4, for focus-stack on our first "
+      "method's pixels)\n",
+      n_tuning - 1);
+  std::printf("%-40s %8s", "method", "all");
+  for (const char* r : region_names) std::printf(" %20s", r);
+  std::printf("\n");
+  for (size_t m = 0; m <= methods.size(); ++m) {
+    if (m == methods.size() && !have_fs) continue;
+    const Acc& a = acc[m];
+    std::printf("%-40s %8.3f", m < methods.size() ? methods[m]->name.c_str() : "focus-stack",
+                std::sqrt(a.total_se / a.total_n));
+    for (int r = 0; r < kRegions; ++r) {
+      // focus-stack's measured/inferred split is on the first method's pixels, like its deciles.
+      std::printf("  %6.3f/%4.1f%%/%4.1f%%", a.n[r] ? std::sqrt(a.se[r] / a.n[r]) : NAN, 100 * a.n[r] / a.total_n,
+                  100 * a.se[r] / a.total_se);
+    }
+    std::printf("\n");
+  }
+  std::printf("RMSE by decile of the method's own confidence (1 = most confident 10 %%; focus-stack: by the first "
+              "method's)\n");
+  for (size_t m = 0; m <= methods.size(); ++m) {
+    if (m == methods.size() && !have_fs) continue;
+    const Acc& a = acc[m];
+    std::printf("%-40s", m < methods.size() ? methods[m]->name.c_str() : "focus-stack");
+    for (int q = 0; q < kDeciles; ++q) std::printf(" %6.3f", std::sqrt(a.dec_se[q] / std::max(a.dec_n[q], 1e-30)));
+    std::printf("\n");
+  }
+}
+
+struct HeldOutFigures {
+  double r100 = 0, r50 = 0, ause = 0, f100 = 0, f50 = 0, seconds = 0;
+  std::vector<double> curve = std::vector<double>(kSparseSteps, 0.0);
+};
+
+HeldOutFigures ScoreOn(const std::vector<Scene>& scenes, std::vector<Cache>& caches, int from, int to,
+                       const DenseCandidate& c, bool have_fs) {
+  HeldOutFigures h;
+  const int n = to - from;
+  for (int k = from; k < to; ++k) {
+    const Scene& s = scenes[size_t(k)];
+    const DepthResult r = PostProcessed(s, c, &caches[size_t(k)], &h.seconds);
+    const Sparsification sp = Sparsify(r.depth_um, r.confidence, s.truth);
+    h.r100 += sp.rmse.back() / n;
+    h.r50 += sp.rmse[kSparseSteps / 2 - 1] / n;
+    h.ause += sp.ause / n;
+    for (int j = 0; j < kSparseSteps; ++j) h.curve[size_t(j)] += sp.rmse[size_t(j)] / n;
+    if (have_fs) {
+      h.f100 += Sparsify(s.fs_depth, cv::Mat(), s.truth).rmse.back() / n;
+      // Our most confident half (the same ranking as Sparsify: descending, ties in scan order),
+      // focus-stack scored on it.
+      const cv::Mat& conf = r.confidence;
+      std::vector<std::pair<float, int>> v;
+      for (int y = kBorderPx; y < conf.rows - kBorderPx; ++y)
+        for (int x = kBorderPx; x < conf.cols - kBorderPx; ++x) v.push_back({-conf.at<float>(y, x), y * conf.cols + x});
+      std::stable_sort(v.begin(), v.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+      cv::Mat half(conf.size(), CV_8UC1, cv::Scalar(0));
+      const size_t cut = std::max<size_t>(1, v.size() * (kSparseSteps / 2) / kSparseSteps);
+      for (size_t i = 0; i < cut; ++i) half.data[v[i].second] = 255;
+      h.f50 += Score(s.fs_depth, s.truth, cv::Mat(), half).rmse / n;
+    }
+  }
+  h.seconds /= n;
+  return h;
+}
+
+// The dense step's cost at camera size beside the engine's on the same stack (best of 3
+// alternating rounds, so load on the shared machine hits them alike).
+void TimeDense(const Scene& s) {
+  const cv::Size big(1600, 1200);
+  std::vector<cv::Mat> frames;
+  for (const cv::Mat& f : s.grey) {
+    cv::Mat b;
+    cv::resize(f, b, big, 0, 0, cv::INTER_LINEAR);
+    frames.push_back(b);
+  }
+  SffOptions o;
+  o.min_confidence = 0.0;
+  DenseDepthOptions constant;
+  constant.local_planes = false;
+  constant.robust_iterations = 0;
+  constant.fallback_support = 0.0;
+  std::map<std::string, double> best;
+  auto Time = [&](const std::string& name, auto&& fn) {
+    const auto t0 = Clock::now();
+    fn();
+    const double sec = Seconds(t0);
+    best[name] = best.count(name) ? std::min(best[name], sec) : sec;
+  };
+  for (int round = 0; round < 3; ++round) {
+    StatusOr<DepthResult> r = Status::Internal("not run");
+    Time("engine", [&] { r = SffEngine::ReconstructInMemory(o, frames, s.z); });
+    DepthResult post;
+    DepthPostProcessOptions p;
+    Time("threshold+consistency", [&] { post = PostProcessDepth(*r, s.z, o.window_px, p).value(); });
+    Time("dense constant", [&] { (void)DensifyDepth(post.depth_um, post.confidence, r->all_in_focus, constant).value(); });
+    Time("dense default", [&] {
+      (void)DensifyDepthWithSupport(post.depth_um, post.confidence, r->all_in_focus, DenseDepthOptions{}).value();
+    });
+  }
+  std::printf("\nTiming at %dx%d x %zu frames, best of 3 alternating rounds: engine %.3f s", big.width, big.height,
+              frames.size(), best["engine"]);
+  for (const char* name : {"threshold+consistency", "dense constant", "dense default"})
+    std::printf("; %s %.3f s (%.2fx engine)", name, best[name], best[name] / best["engine"]);
+  std::printf("\n");
 }
 
 int RunHeldOut(std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tuning, bool have_fs) {
-  std::vector<DenseCandidate> cands{{"push-pull fill (--fill)", false, {}}};
-  for (double lambda : {16.0, 64.0, 256.0, 1024.0, 4096.0})
-    for (double sigma : {4.0, 12.0, 32.0}) {
-      DenseCandidate c;
-      c.dense_options.lambda = lambda;
-      c.dense_options.sigma_color = sigma;
-      char name[64];
-      std::snprintf(name, sizeof name, "dense FGS lambda %g sigma %g", lambda, sigma);
-      c.name = name;
-      cands.push_back(c);
+  DenseCandidate baseline{"dense FGS constant (previous default)", true, {}, false, false};
+  baseline.dense_options.local_planes = false;
+  baseline.dense_options.robust_iterations = 0;
+  baseline.dense_options.fallback_support = 0.0;
+  std::vector<DenseCandidate> cands{{"push-pull fill (--fill)", false, {}, false, false}, baseline};
+  // The grid: smoothness x edge scale x model (constant / local planes) x the weakly edge-aware
+  // fallback's hand-over support (0 = none), colour guide as an imported colour stack has it.
+  for (double lambda : {1024.0, 4096.0, 16384.0})
+    for (double sigma : {4.0, 8.0})
+      for (int planes : {0, 1})
+        for (double fb : {0.0, 0.1, 0.3, 0.5, 1.0}) {
+          DenseCandidate c;
+          c.dense_options.lambda = lambda;
+          c.dense_options.sigma_color = sigma;
+          c.dense_options.local_planes = planes;
+          c.dense_options.fallback_support = fb;
+          char name[96];
+          std::snprintf(name, sizeof name, "dense l%g s%g %s fallback %g", lambda, sigma, planes ? "planes" : "const",
+                        fb);
+          c.name = name;
+          cands.push_back(c);
+        }
+  // Tried on the tuning scenes and left off by default (rows kept for the record).
+  for (int variant = 0; variant < 4; ++variant) {
+    DenseCandidate c;
+    if (variant == 0) {
+      c.dense_options.robust_iterations = 2;
+      c.name = "dense default + robust IRLS 2";
+    } else if (variant == 1) {
+      c.dense_options.halo_radius_px = 4;
+      c.name = "dense default + halo suppression r4";
+    } else if (variant == 2) {
+      c.dense_options.keep_measured = false;
+      c.name = "dense default, fitted value everywhere";
+    } else {
+      c.colour_guide = false;
+      c.name = "dense default, grey guide";
     }
-  std::printf("\nTuning scenes 0..%d: RMSE [frames] at 100 %% coverage (mean over scenes)\n", n_tuning - 1);
+    cands.push_back(c);
+  }
+  std::printf("\nTuning scenes 0..%d: RMSE [frames] at 100 %% and 50 %% coverage, AUSE (mean over scenes)\n",
+              n_tuning - 1);
   size_t best = 1;
   double best_rmse = 1e30;
+  const size_t n_grid = cands.size() - 4;  // the chosen one comes from the grid, not the variants after it
   for (size_t i = 0; i < cands.size(); ++i) {
-    double rmse = 0;
-    for (int k = 0; k < n_tuning; ++k) {
-      const DepthResult r = PostProcessed(scenes[k], cands[i], &caches[k]);
-      rmse += Sparsify(r.depth_um, cv::Mat(), scenes[k].truth).rmse.back() / n_tuning;
-    }
-    std::printf("  %-36s %7.3f\n", cands[i].name.c_str(), rmse);
-    if (cands[i].dense && rmse < best_rmse) {
-      best_rmse = rmse;
+    const HeldOutFigures h = ScoreOn(scenes, caches, 0, n_tuning, cands[i], false);
+    std::printf("  %-40s %7.3f %7.3f %7.3f\n", cands[i].name.c_str(), h.r100, h.r50, h.ause);
+    if (cands[i].dense && i < n_grid && h.r100 < best_rmse) {
+      best_rmse = h.r100;
       best = i;
     }
   }
-  std::printf("chosen on the tuning scenes: %s\n", cands[best].name.c_str());
+  std::printf("chosen on the tuning scenes (RMSE at 100 %%, among the grid): %s\n", cands[best].name.c_str());
+  DenseCandidate shipped{"dense default (DenseDepthOptions{})", true, {}, true};
+  DenseCandidate baseline_colour = baseline;
+  baseline_colour.colour_guide = true;
+  baseline_colour.name = "previous default, colour guide";
+  Diagnose(scenes, caches, n_tuning, {&shipped, &baseline, &baseline_colour, &cands[0]}, have_fs);
 
-  const int n_held = int(scenes.size()) - n_tuning;
   std::printf(
       "\nHeld-out scenes %d..%zu (not used for any choice above): RMSE [frames] at 100 %% and 50 %% coverage, "
       "AUSE over 5..100 %%; 50 %% = each method's most confident half by its own confidence; focus-stack has no "
-      "per-pixel confidence, so its 50 %% is on the same pixels as ours (matched pixels)\n",
+      "per-pixel confidence, so its 50 %% is on the same pixels as ours (matched pixels); dense s = the "
+      "post-processing's seconds per scene\n",
       n_tuning, scenes.size() - 1);
-  std::printf("%-36s %8s %8s %8s %8s %8s\n", "method", "RMSE100", "RMSE50", "AUSE", "FS100", "FS50same");
-  DenseCandidate shipped{"dense default (DenseDepthOptions{})", true, {}};
-  for (const DenseCandidate* c : {&cands[best], &shipped, &cands[0]}) {
-    double r100 = 0, r50 = 0, ause = 0, f100 = 0, f50 = 0;
-    std::vector<double> curve(kSparseSteps, 0.0);
-    for (int k = n_tuning; k < int(scenes.size()); ++k) {
-      const Scene& s = scenes[k];
-      const DepthResult r = PostProcessed(s, *c, &caches[k]);
-      const Sparsification sp = Sparsify(r.depth_um, r.confidence, s.truth);
-      r100 += sp.rmse.back() / n_held;
-      r50 += sp.rmse[kSparseSteps / 2 - 1] / n_held;
-      ause += sp.ause / n_held;
-      for (int j = 0; j < kSparseSteps; ++j) curve[j] += sp.rmse[j] / n_held;
-      if (have_fs) {
-        f100 += Sparsify(s.fs_depth, cv::Mat(), s.truth).rmse.back() / n_held;
-        // Our most confident half as a mask, focus-stack scored on it.
-        const cv::Mat& conf = r.confidence;
-        std::vector<float> v;
-        for (int y = kBorderPx; y < conf.rows - kBorderPx; ++y)
-          for (int x = kBorderPx; x < conf.cols - kBorderPx; ++x) v.push_back(conf.at<float>(y, x));
-        std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end(), std::greater<float>());
-        const float cut = v[v.size() / 2];
-        f50 += Score(s.fs_depth, s.truth, cv::Mat(), conf >= cut).rmse / n_held;
-      }
-    }
-    std::printf("%-36s %8.3f %8.3f %8.3f %8.3f %8.3f\n", c->name.c_str(), r100, r50, ause, have_fs ? f100 : NAN,
-                have_fs ? f50 : NAN);
+  std::printf("%-40s %8s %8s %8s %8s %8s %8s\n", "method", "RMSE100", "RMSE50", "AUSE", "FS100", "FS50same", "dense s");
+  for (const DenseCandidate* c : {&cands[best], &shipped, &baseline, &baseline_colour, &cands[0]}) {
+    const HeldOutFigures h = ScoreOn(scenes, caches, n_tuning, int(scenes.size()), *c, have_fs);
+    std::printf("%-40s %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f\n", c->name.c_str(), h.r100, h.r50, h.ause,
+                have_fs ? h.f100 : NAN, have_fs ? h.f50 : NAN, h.seconds);
     std::printf("  sparsification (coverage 10..100 %% step 10):");
-    for (int j = 1; j < kSparseSteps; j += 2) std::printf(" %.3f", curve[j]);
+    for (int j = 1; j < kSparseSteps; j += 2) std::printf(" %.3f", h.curve[size_t(j)]);
     std::printf("\n");
-    if (have_fs) std::printf("  ratio to focus-stack: %.2fx at 100 %%, %.2fx at 50 %% (matched pixels)\n", r100 / f100, r50 / f50);
+    if (have_fs)
+      std::printf("  ratio to focus-stack: %.2fx at 100 %%, %.2fx at 50 %% (matched pixels)\n", h.r100 / h.f100,
+                  h.r50 / h.f50);
   }
   return 0;
 }
@@ -545,6 +757,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
       return 2;
     }
     const int rc = RunHeldOut(scenes, caches, held_out_tuning, have_fs);
+    if (timing) TimeDense(scenes[0]);
     if (keep.empty()) {
       std::error_code ec;
       fs::remove_all(root, ec);
@@ -783,10 +996,18 @@ int RunNaturalEvaluation(int argc, char** argv) {
         Time(name, [&] { (void)RefineDepth(kept, r->confidence, r->all_in_focus, ro).value(); });
       }
       Time("fill guided", [&] { (void)FillDepth(kept, r->confidence, r->all_in_focus, DepthFillOptions{}).value(); });
+      DenseDepthOptions constant;
+      constant.local_planes = false;
+      constant.robust_iterations = 0;
+      constant.fallback_support = 0.0;
+      Time("dense constant", [&] { (void)DensifyDepth(kept, r->confidence, r->all_in_focus, constant).value(); });
+      Time("dense default", [&] {
+        (void)DensifyDepth(kept, r->confidence, r->all_in_focus, DenseDepthOptions{}).value();
+      });
     }
     std::printf("\nTiming at %dx%d x %zu frames, best of 3 alternating rounds (x engine): engine %s %.3f s", big.width,
                 big.height, frames.size(), KeyName(recommended_key).c_str(), best_s["engine"]);
-    for (const char* name : {"consistency", "WM r4", "WM r10", "GF r4", "fill guided"}) {
+    for (const char* name : {"consistency", "WM r4", "WM r10", "GF r4", "fill guided", "dense constant", "dense default"}) {
       std::printf("; %s %.3f s (%.2fx)", name, best_s[name], best_s[name] / best_s["engine"]);
     }
     std::printf("; fill ran on %.1f %% valid pixels\n", 100 * valid_before_fill);

@@ -22,22 +22,55 @@ TEST(DenseDepthTest, FillsEveryPixelAndStopsAtTheGuideEdge) {
   cv::Mat depth(size, CV_32FC1, cv::Scalar(kNan));
   for (int y = 0; y < size.height; y += 8)
     for (int x = 2; x < size.width; x += 8) depth.at<float>(y, x) = x < 48 ? 100.f : 200.f;
-  auto dense = DensifyDepth(depth, cv::Mat(), guide, DenseDepthOptions{});
-  ASSERT_TRUE(dense.ok()) << dense.status().ToString();
-  ASSERT_EQ(cv::countNonZero(*dense == *dense), size.area());
-  double max_left_err = 0, max_right_err = 0;
-  for (int y = 0; y < size.height; ++y)
-    for (int x = 0; x < size.width; ++x) {
-      const double v = dense->at<float>(y, x);
-      if (x < 48) max_left_err = std::max(max_left_err, std::abs(v - 100.0));
-      else max_right_err = std::max(max_right_err, std::abs(v - 200.0));
-    }
-  // Across the edge the guide's colour difference (180 levels, sigma 12) cuts the smoothing.
-  EXPECT_LT(max_left_err, 2.0);
-  EXPECT_LT(max_right_err, 2.0);
-  // Measured pixels keep their values exactly.
-  EXPECT_EQ(dense->at<float>(8, 10), 100.f);
-  EXPECT_EQ(dense->at<float>(8, 50), 200.f);
+  for (const bool fallback : {false, true}) {
+    DenseDepthOptions o;
+    if (!fallback) o.fallback_support = 0.0;
+    auto dense = DensifyDepth(depth, cv::Mat(), guide, o);
+    ASSERT_TRUE(dense.ok()) << dense.status().ToString();
+    ASSERT_EQ(cv::countNonZero(*dense == *dense), size.area());
+    double max_left_err = 0, max_right_err = 0;
+    for (int y = 0; y < size.height; ++y)
+      for (int x = 0; x < size.width; ++x) {
+        const double v = dense->at<float>(y, x);
+        if (x < 48) max_left_err = std::max(max_left_err, std::abs(v - 100.0));
+        else max_right_err = std::max(max_right_err, std::abs(v - 200.0));
+      }
+    // Across the edge the guide's colour difference (180 levels, sigma 4) cuts the smoothing.
+    // With the fallback (default) both fits see the same sparse measurements, r ~ 1, so the
+    // weakly edge-aware fit keeps a share of 1 - 1 / (1 + 0.3^2) = 8 %, which leaks a little
+    // across the edge: 3.6 of the 100 um step measured.
+    EXPECT_LT(max_left_err, fallback ? 5.0 : 2.0);
+    EXPECT_LT(max_right_err, fallback ? 5.0 : 2.0);
+    // Measured pixels keep their values exactly.
+    EXPECT_EQ(dense->at<float>(8, 10), 100.f);
+    EXPECT_EQ(dense->at<float>(8, 50), 200.f);
+  }
+}
+
+// An untextured region walled off by guide edges, with no measurement inside: the background
+// (depth 50) all round it, except one side where a measured foreground strip (depth 10) meets it
+// across a weaker edge. The edge-aware fit alone gives the region the strip's depth (the weakest
+// edge wins); the fallback, seeing the much larger measured background, gives it the
+// background's.
+TEST(DenseDepthTest, FallbackFillsAWalledOffRegionFromItsSurroundings) {
+  const cv::Size size(128, 96);
+  cv::Mat guide(size, CV_8UC1, cv::Scalar(60));
+  cv::Mat depth(size, CV_32FC1, cv::Scalar(50.f));
+  const cv::Rect region(40, 30, 40, 36), strip(80, 30, 6, 36);
+  guide(region).setTo(200);
+  guide(strip).setTo(190);
+  depth(region).setTo(kNan);
+  depth(strip).setTo(10.f);
+  DenseDepthOptions o;
+  o.fallback_support = 0.0;
+  auto edge_only = DensifyDepth(depth, cv::Mat(), guide, o);
+  o.fallback_support = 0.3;
+  auto with_fallback = DensifyDepth(depth, cv::Mat(), guide, o);
+  ASSERT_TRUE(edge_only.ok() && with_fallback.ok());
+  const cv::Point centre(60, 48);
+  // Measured: 10.0 edge-aware only, 40.8 with the fallback (the strip keeps a share).
+  EXPECT_LT(edge_only->at<float>(centre), 12.f);
+  EXPECT_GT(with_fallback->at<float>(centre), 35.f);
 }
 
 // Moderate smoothing (lambda 256, sigma 12): the support stays local, so a hole takes the depths
@@ -67,6 +100,79 @@ TEST(DenseDepthTest, InterpolatesAPlaneAcrossAHole) {
   EXPECT_LT(max_err, 1.5);
 }
 
+// A surface sloping in y, measured only on the left half: the right half (an untextured wall
+// reaching the image edge) must be extrapolated sideways. The constant model averages the rows
+// around each pixel, pulling the top and bottom towards the middle; the local plane carries the
+// slope on.
+TEST(DenseDepthTest, LocalPlanesCarryTheSlopeIntoAnUnmeasuredRegion) {
+  const cv::Size size(96, 64);
+  cv::Mat guide(size, CV_8UC1, cv::Scalar(128));
+  cv::Mat depth(size, CV_32FC1, cv::Scalar(kNan));
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < 48; ++x) depth.at<float>(y, x) = 10.f + 0.4f * y;
+  DenseDepthOptions o = Local();
+  o.local_planes = false;
+  auto constant = DensifyDepth(depth, cv::Mat(), guide, o);
+  o.local_planes = true;
+  auto planes = DensifyDepth(depth, cv::Mat(), guide, o);
+  ASSERT_TRUE(constant.ok() && planes.ok());
+  double err_constant = 0, err_planes = 0;
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 48; x < size.width; ++x) {
+      const double truth = 10.0 + 0.4 * y;
+      err_constant = std::max(err_constant, std::abs(constant->at<float>(y, x) - truth));
+      err_planes = std::max(err_planes, std::abs(planes->at<float>(y, x) - truth));
+    }
+  // 48 px beyond the last measured column the plane, shrunk by the slope's ridge, is 1.6 um off.
+  EXPECT_GT(err_constant, 5.0);
+  EXPECT_LT(err_planes, 2.0);
+}
+
+// Wrong peaks: a plane with 5 % of its measured pixels 30 um off. The robust fit replaces them by
+// the plane (and marks them inferred); the plain fit keeps them (keep_measured) and smears them
+// into the hole.
+TEST(DenseDepthTest, RobustFitRejectsOutliers) {
+  const cv::Size size(64, 64);
+  cv::Mat guide(size, CV_8UC1, cv::Scalar(90));
+  cv::Mat depth(size, CV_32FC1), truth(size, CV_32FC1);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) truth.at<float>(y, x) = depth.at<float>(y, x) = 50.f + 0.2f * x + 0.1f * y;
+  int outliers = 0;
+  for (int y = 0; y < size.height; y += 5)
+    for (int x = (y / 5) % 4; x < size.width; x += 4) {
+      depth.at<float>(y, x) += 30.f;
+      ++outliers;
+    }
+  depth(cv::Rect(24, 24, 16, 16)).setTo(kNan);
+  DenseDepthOptions o = Local();
+  o.local_planes = true;
+  o.robust_iterations = 0;
+  auto plain = DensifyDepthWithSupport(depth, cv::Mat(), guide, o);
+  o.robust_iterations = 3;
+  auto robust = DensifyDepthWithSupport(depth, cv::Mat(), guide, o);
+  ASSERT_TRUE(plain.ok() && robust.ok());
+  auto MaxErr = [&](const cv::Mat& d) {
+    double e = 0;
+    for (int y = 0; y < size.height; ++y)
+      for (int x = 0; x < size.width; ++x) e = std::max(e, double(std::abs(d.at<float>(y, x) - truth.at<float>(y, x))));
+    return e;
+  };
+  EXPECT_GT(MaxErr(plain->depth_um), 29.0);  // the outliers themselves are kept
+  EXPECT_LT(MaxErr(robust->depth_um), 2.0);
+  // The hole and (nearly) all outliers are inferred, every other pixel measured.
+  const int inferred = cv::countNonZero(robust->inferred);
+  EXPECT_LE(inferred, outliers + 16 * 16);
+  EXPECT_GE(inferred, int(0.9 * outliers) + 16 * 16);
+  EXPECT_EQ(cv::countNonZero(plain->inferred), 16 * 16);
+  // Outliers agree little with the fit, the rest well (the Cauchy scale is floored at 1e-3 of
+  // the measured range on this noise-free plane).
+  EXPECT_LT(robust->agreement.at<float>(0, 0), 0.1f);
+  EXPECT_GT(robust->agreement.at<float>(1, 1), 0.5f);
+  // Support: 1 amid the measurements, lower in the hole's centre.
+  EXPECT_GT(robust->support.at<float>(2, 2), 0.5f);
+  EXPECT_LT(robust->support.at<float>(32, 32), robust->support.at<float>(2, 2));
+}
+
 TEST(DenseDepthTest, RejectsBadInputNamingIt) {
   cv::Mat depth(10, 10, CV_32FC1, cv::Scalar(1.f)), guide(10, 10, CV_8UC1, cv::Scalar(0));
   DenseDepthOptions bad;
@@ -74,6 +180,15 @@ TEST(DenseDepthTest, RejectsBadInputNamingIt) {
   auto r = DensifyDepth(depth, cv::Mat(), guide, bad);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.status().ToString().find("dense.lambda"), std::string::npos);
+  DenseDepthOptions bad_robust;
+  bad_robust.robust_iterations = -1;
+  auto rr = DensifyDepth(depth, cv::Mat(), guide, bad_robust);
+  ASSERT_FALSE(rr.ok());
+  EXPECT_NE(rr.status().ToString().find("dense.robust_iterations"), std::string::npos);
+  DenseDepthOptions bad_ridge;
+  bad_ridge.plane_ridge_px = -1;
+  EXPECT_NE(DensifyDepth(depth, cv::Mat(), guide, bad_ridge).status().ToString().find("dense.plane_ridge_px"),
+            std::string::npos);
   auto r2 = DensifyDepth(depth, cv::Mat(), cv::Mat(5, 5, CV_8UC1), DenseDepthOptions{});
   ASSERT_FALSE(r2.ok());
   EXPECT_NE(r2.status().ToString().find("guide"), std::string::npos);
@@ -112,6 +227,19 @@ TEST(DenseDepthTest, PostProcessDenseMarksInferredByConfidence) {
   // depths around it (constant, not linear, extrapolation), pulled towards the wider measured
   // side (x 20..39 against 0..9): 109.2 measured; a nearest-value fill is off by up to 2.5.
   EXPECT_NEAR(r->depth_um.at<float>(15, 15), 107.5f, 2.0f);
+  // dense_confidence: inferred pixels get 0.4 x the fit's support (amid measurements: just
+  // below 0.4), measured ones keep at least 0.4, the part above scaled by their agreement with
+  // the fit.
+  EXPECT_GT(r->confidence.at<float>(15, 15), 0.3f);
+  EXPECT_LT(r->confidence.at<float>(15, 15), 0.4f);
+  EXPECT_GE(r->confidence.at<float>(0, 0), 0.4f);
+  EXPECT_LE(r->confidence.at<float>(0, 0), 0.9f);
+  // dense_confidence off: the engine's confidence as it was.
+  o.dense_confidence = false;
+  auto plain = PostProcessDepth(raw, z, 7, o);
+  ASSERT_TRUE(plain.ok());
+  EXPECT_FLOAT_EQ(plain->confidence.at<float>(0, 0), 0.9f);
+  EXPECT_FLOAT_EQ(plain->confidence.at<float>(15, 15), 0.1f);
 }
 
 }  // namespace
