@@ -284,7 +284,7 @@ TEST_F(SecurityTest, EveryMethodOfEveryServiceHasARuleAndIsRefusedWithoutCredent
       methods.insert(full);
     }
   }
-  EXPECT_EQ(methods.size(), 27u);  // 25 InspectionService + 2 SimulationService
+  EXPECT_EQ(methods.size(), 28u);  // 26 InspectionService + 2 SimulationService
   const std::vector<std::string> ruled = MethodsWithRoles();
   EXPECT_EQ(std::set<std::string>(ruled.begin(), ruled.end()), methods) << "rules for methods no service has";
 
