@@ -56,6 +56,22 @@ TEST_F(CliVerifyTest, VerifyPrintsTheRecordAndStatusTheState) {
   EXPECT_NE(r.out.find("verification: verified\n"), std::string::npos) << r.out;
 }
 
+TEST_F(CliVerifyTest, CalibrationShowListsTheNewestVerificationOfEachMode) {
+  StartServer();
+  v1::CalibrateRequest cal;
+  cal.add_steps(v1::CALIBRATION_STEP_CAMERA_RESPONSE);
+  v1::Job job;
+  ASSERT_TRUE(client_->Calibrate(cal, nullptr, &job).ok());
+  CliResult r = Run({"--quiet", "verify", "--interim"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = Run({"calibration", "show"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  // An interim check without a full verification under the calibration: due.
+  EXPECT_NE(r.out.find("  interim verification ver-"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(": verification due, N_M "), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("  full verification"), std::string::npos) << r.out;
+}
+
 TEST_F(CliVerifyTest, ARigWithoutMaterialMeasuresExitsFourWithOneLine) {
   material_measures_ = false;
   StartServer();
