@@ -54,6 +54,16 @@ int RunShow(const std::string& calibration_id, Session& session) {
   std::cout << "  created " << TimeText(cal.create_time()) << ", format version " << cal.version() << ", job "
             << cal.job_id() << '\n';
   PrintFigures(cal.summary(), "  ");
+  // The newest verification of each mode made under this calibration (inspectctl verify).
+  for (const v1::VerificationRecord* v : {&cal.latest_full_verification(), &cal.latest_interim_verification()}) {
+    if (v->verification_id().empty()) continue;
+    std::cout << "  " << (v->mode() == v1::VERIFICATION_MODE_FULL ? "full" : "interim") << " verification "
+              << v->verification_id() << " at " << TimeText(v->finish_time()) << ": " << VerificationStateText(v->state());
+    for (const v1::VerificationCharacteristic& c : v->characteristics()) {
+      std::cout << Format(", %s %.5g", c.name().c_str(), c.value());
+    }
+    std::cout << '\n';
+  }
   return kExitOk;
 }
 

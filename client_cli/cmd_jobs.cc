@@ -18,7 +18,8 @@ namespace fs = std::filesystem;
 
 const std::map<std::string, v1::JobKind>& Kinds() {
   static const std::map<std::string, v1::JobKind> m = {
-      {"calibrate", v1::JOB_KIND_CALIBRATE}, {"scan", v1::JOB_KIND_SCAN}, {"reconstruct", v1::JOB_KIND_RECONSTRUCT}};
+      {"calibrate", v1::JOB_KIND_CALIBRATE}, {"scan", v1::JOB_KIND_SCAN}, {"reconstruct", v1::JOB_KIND_RECONSTRUCT},
+      {"study", v1::JOB_KIND_STUDY},         {"verify", v1::JOB_KIND_VERIFY}};
   return m;
 }
 

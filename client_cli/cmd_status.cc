@@ -23,6 +23,11 @@ int PrintRigStatus(const v1::RigStatus& rig, const Output& out) {
     std::cout << '\n';
   }
   std::cout << "calibration: " << (rig.active_calibration_id().empty() ? "none" : rig.active_calibration_id()) << '\n';
+  if (rig.verification_state() != v1::VERIFICATION_STATE_UNSPECIFIED) {
+    std::cout << "verification: " << VerificationStateText(rig.verification_state());
+    if (!rig.verification_detail().empty()) std::cout << " (" << rig.verification_detail() << ")";
+    std::cout << '\n';
+  }
   std::cout << "running job: " << (rig.running_job_id().empty() ? "none" : rig.running_job_id()) << ", queue "
             << rig.queued_jobs() << "/" << rig.queue_capacity() << '\n';
   if (rig.simulated()) std::cout << "simulated rig, specimen: " << rig.specimen() << '\n';

@@ -18,5 +18,6 @@ void RegisterSpecimenCommands(CLI::App& app, CliContext& context);     // specim
 void RegisterRecipeCommands(CLI::App& app, CliContext& context);       // recipe create|update|get|list|delete
 void RegisterResultCommands(CLI::App& app, CliContext& context);       // results list|watch
 void RegisterStudyCommands(CLI::App& app, CliContext& context);        // study type1|list|show
+void RegisterVerifyCommand(CLI::App& app, CliContext& context);        // verify
 
 }  // namespace inspection::client::cli

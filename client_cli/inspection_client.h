@@ -108,6 +108,8 @@ class InspectionClient {
   grpc::Status StartStudy(const v1::StartStudyRequest& request, const EventCallback& on_event, v1::Job* job);
   grpc::Status GetStudy(const std::string& study_id, v1::Study* study);
   grpc::Status ListStudies(const v1::ListStudiesRequest& request, v1::ListStudiesResponse* response);
+  // Instrument verification (inspection_client_verify.cc): follows the Verify job like Calibrate.
+  grpc::Status Verify(const v1::VerifyRequest& request, const EventCallback& on_event, v1::Job* job);
 
   std::shared_ptr<grpc::Channel> channel() const { return channel_; }
 

@@ -27,6 +27,7 @@ int Main(int argc, char** argv) {
   RegisterRecipeCommands(app, context);
   RegisterResultCommands(app, context);
   RegisterStudyCommands(app, context);
+  RegisterVerifyCommand(app, context);
 
   try {
     app.parse(argc, argv);

@@ -34,6 +34,19 @@ std::string Short(const std::string& enum_name, const std::string& prefix) {
   return enum_name.rfind(prefix, 0) == 0 ? enum_name.substr(prefix.size()) : enum_name;
 }
 
+std::string VerificationStateText(v1::VerificationState state) {
+  switch (state) {
+    case v1::VERIFICATION_STATE_VERIFIED:
+      return "verified";
+    case v1::VERIFICATION_STATE_DUE:
+      return "verification due";
+    case v1::VERIFICATION_STATE_FAILED:
+      return "verification failed";
+    default:
+      return "unknown";
+  }
+}
+
 const char* CodeName(grpc::StatusCode code) {
   switch (code) {
     case grpc::StatusCode::OK:
@@ -205,6 +218,7 @@ void PrintInspection(const v1::InspectionResult& r) {
     std::cout << '\n';
     if (!m.capability_warning().empty()) std::cout << "    warning: " << m.capability_warning() << '\n';
   }
+  if (!r.verification_warning().empty()) std::cout << "  warning: " << r.verification_warning() << '\n';
 }
 
 void PrintFigures(const v1::CalibrationSummary& summary, const std::string& indent) {

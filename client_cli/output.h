@@ -37,6 +37,8 @@ std::string Format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 std::string Lower(std::string s);
 // Enum names without their prefix: JOB_STATE_SUCCEEDED -> "SUCCEEDED" (Lower() for lists).
 std::string Short(const std::string& enum_name, const std::string& prefix);
+// "verified", "verification due", "verification failed" ("unknown" for UNSPECIFIED).
+std::string VerificationStateText(v1::VerificationState state);
 // "OK", "INVALID_ARGUMENT", ...: the gRPC status name printed in error lines.
 const char* CodeName(grpc::StatusCode code);
 // RFC 3339 to the second; "-" when unset.

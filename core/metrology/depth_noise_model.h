@@ -64,12 +64,10 @@ namespace inspection {
 //    estimated on the specimen's own map (its texture sets it; N_M is that of the verification
 //    flat), and the extremes' bound grows with the region's size, which z_FLT (one region of the
 //    reference flat) does not follow.
-// Where the server would fill it (not wired yet; core/metrology/verification.h estimates them):
-// server/jobs/procedure_runner.cc (recipe measurement, beside `noise.linearity = bundle->z_linearity`)
-// and server/jobs/procedure_runner_study.cc (the same for studies), from the rig's latest accepted
-// verification: amplification = AmplificationLinearity::alpha_z.value, amplification_u =
-// alpha_z.standard_uncertainty, linearity_deviation_um = l_z_um.value + 2 l_z_um.standard_uncertainty
-// (a bound), noise_um = MeasurementNoise().value, flatness_um = FlatnessDeviation().value.
+// The server fills it from the last full verification under the active calibration
+// (server/jobs/rig_verification.h VerifiedFrom, for scans and Type-1 studies): amplification =
+// alpha_z.value, amplification_u = alpha_z.standard_uncertainty, linearity_deviation_um =
+// l_z.value + 2 l_z.standard_uncertainty (a bound), noise_um = N_M, flatness_um = z_FLT.
 struct VerifiedCharacteristics {
   std::optional<double> noise_um;                // N_M
   std::optional<double> amplification;           // alpha_z, dimensionless (1 = ideal)

@@ -13,6 +13,7 @@
 #include "server/api/recipe_scan.h"
 #include "server/api/request_mapping.h"
 #include "server/api/stack_transfer.h"
+#include "server/jobs/rig_verification.h"
 #include "server/security/audit_interceptor.h"
 #include "server/security/call_authorization.h"
 #include "server/storage/data_lifecycle.h"
@@ -70,6 +71,13 @@ grpc::Status StreamJob(grpc::ServerContext* ctx, const std::shared_ptr<JobRecord
 void InspectionServiceImpl::FillRigStatus(v1::RigStatus* st) {
   rig_->FillStatus(st);
   st->set_active_calibration_id(calibrations_->active_id());
+  if (StatusOr<RigVerification> v = ReadRigVerification(*store_, st->active_calibration_id(), CurrentTimestamp());
+      v.ok()) {
+    st->set_verification_state(v->state);
+    st->set_verification_detail(v->detail);
+  } else {
+    st->set_verification_detail("verification records not read: " + v.status().message());
+  }
   st->set_running_job_id(jobs_->running_rig_job());
   st->set_queued_jobs(jobs_->queued_rig_jobs());
   st->set_queue_capacity(jobs_->rig_queue_capacity());
@@ -136,6 +144,30 @@ grpc::Status InspectionServiceImpl::Calibrate(grpc::ServerContext* ctx, const v1
       [&]() -> StatusOr<JobWork> {
         INSPECT_ASSIGN_OR_RETURN(CalibrateWork work, MapCalibrateRequest(*req));
         INSPECT_RETURN_IF_ERROR(rig_->CheckUsable());
+        return JobWork(std::move(work));
+      },
+      who->name);
+  if (!r.ok()) return Grpc(r.status());
+  SetAuditTarget(ctx, (*r)->job_id());
+  return StreamJob(ctx, *r, writer);
+}
+
+grpc::Status InspectionServiceImpl::Verify(grpc::ServerContext* ctx, const v1::VerifyRequest* req,
+                                           grpc::ServerWriter<v1::JobEvent>* writer) {
+  auto who = CallerOf(ctx);
+  if (!who.ok()) return Grpc(who.status());
+  if (Status s = CheckRequestTextLimits(*req); !s.ok()) return Grpc(s);
+  auto r = jobs_->Submit(
+      v1::JOB_KIND_VERIFY, req->request_id(), req->label(),
+      [&]() -> StatusOr<JobWork> {
+        INSPECT_ASSIGN_OR_RETURN(VerifyWork work, MapVerifyRequest(*req));
+        INSPECT_RETURN_IF_ERROR(rig_->CheckUsable());
+        // Refused before it queues; RunVerification checks the mode's measures in full.
+        SimulationControl* sim = rig_->rig().simulation();
+        if (sim == nullptr || sim->material_measures().empty()) {
+          return Status::FailedPrecondition(
+              "material_measures: the rig offers no ISO 25178-70 material measures (AFL, PGR, ASG, ACG) to verify with");
+        }
         return JobWork(std::move(work));
       },
       who->name);
@@ -290,6 +322,13 @@ grpc::Status InspectionServiceImpl::GetCalibration(grpc::ServerContext* ctx, con
   auto c = calibrations_->Get(req->calibration_id());
   if (!c.ok()) return Grpc(c.status());
   *out = *c;
+  for (v1::VerificationMode mode : {v1::VERIFICATION_MODE_FULL, v1::VERIFICATION_MODE_INTERIM}) {
+    auto latest = store_->ListVerifications(out->calibration_id(), mode, 1);
+    if (!latest.ok()) return Grpc(latest.status());
+    if (latest->empty()) continue;
+    *(mode == v1::VERIFICATION_MODE_FULL ? out->mutable_latest_full_verification()
+                                         : out->mutable_latest_interim_verification()) = std::move(latest->front());
+  }
   return grpc::Status::OK;
 }
 

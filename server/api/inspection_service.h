@@ -80,6 +80,8 @@ class InspectionServiceImpl final : public v1::InspectionService::Service {
                           grpc::ServerWriter<v1::JobEvent>*) override;
   grpc::Status GetStudy(grpc::ServerContext*, const v1::GetStudyRequest*, v1::Study*) override;
   grpc::Status ListStudies(grpc::ServerContext*, const v1::ListStudiesRequest*, v1::ListStudiesResponse*) override;
+  // Instrument verification on the material measures (a rig job, docs/verification.md).
+  grpc::Status Verify(grpc::ServerContext*, const v1::VerifyRequest*, grpc::ServerWriter<v1::JobEvent>*) override;
 
  private:
   void FillRigStatus(v1::RigStatus* status);

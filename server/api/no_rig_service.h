@@ -24,10 +24,11 @@ std::string NoRigMessage(std::string_view method);
 // Recipes live on the rig's server: they are checked against its camera and run by its scans.
 // Inspection results are served: a site replica (--no-rig on the site's PostgreSQL) holds every
 // rig's forwarded results (server/results/result_forwarder.h); a plain pool holds none.
-// Type-1 studies run on the rig (StartStudy refused); stored ones are read anywhere.
-inline constexpr std::array<std::string_view, 10> kRigOnlyMethods = {
+// Type-1 studies run on the rig (StartStudy refused); stored ones are read anywhere. So does a
+// verification (Verify refused).
+inline constexpr std::array<std::string_view, 11> kRigOnlyMethods = {
     "GetRigStatus", "Calibrate", "Scan", "ResetRig", "CreateRecipe", "UpdateRecipe",
-    "GetRecipe",    "ListRecipes", "DeleteRecipe", "StartStudy"};
+    "GetRecipe",    "ListRecipes", "DeleteRecipe", "StartStudy", "Verify"};
 inline constexpr std::array<std::string_view, 15> kNoRigServedMethods = {
     "Reconstruct",      "WatchJob",       "GetJob",           "ListJobs",  "CancelJob",
     "DownloadArtifact", "GetCalibration", "ListCalibrations", "DeleteJob", "DeleteScan",
@@ -107,6 +108,9 @@ class NoRigInspectionService final : public v1::InspectionService::Service {
   grpc::Status StartStudy(grpc::ServerContext* c, const v1::StartStudyRequest*,
                           grpc::ServerWriter<v1::JobEvent>*) override {
     return Refuse(c, "StartStudy");
+  }
+  grpc::Status Verify(grpc::ServerContext* c, const v1::VerifyRequest*, grpc::ServerWriter<v1::JobEvent>*) override {
+    return Refuse(c, "Verify");
   }
   grpc::Status GetStudy(grpc::ServerContext* c, const v1::GetStudyRequest* r, v1::Study* o) override {
     return served_->GetStudy(c, r, o);

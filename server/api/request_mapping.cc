@@ -403,6 +403,21 @@ StatusOr<CalibrateWork> MapCalibrateRequest(const v1::CalibrateRequest& req) {
   return work;
 }
 
+StatusOr<VerifyWork> MapVerifyRequest(const v1::VerifyRequest& req) {
+  VerifyWork work;
+  switch (req.mode()) {
+    case v1::VERIFICATION_MODE_UNSPECIFIED:
+    case v1::VERIFICATION_MODE_FULL:
+      work.mode = VerificationMode::kFull;
+      return work;
+    case v1::VERIFICATION_MODE_INTERIM:
+      work.mode = VerificationMode::kInterim;
+      return work;
+    default:
+      return Status::InvalidArgument("mode " + std::to_string(int(req.mode())) + " is not a VerificationMode (FULL or INTERIM)");
+  }
+}
+
 StatusOr<ReconstructSource> MapReconstructSource(const v1::ReconstructStart& start, int64_t max_upload_bytes) {
   INSPECT_ASSIGN_OR_RETURN(ReconstructionSettings rec, MapReconstructionOptions(start.options(), "options"));
   if (rec.method.method == ReconstructionMethod::kIsffGroundTruth) {

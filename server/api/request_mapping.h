@@ -82,6 +82,9 @@ StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& request, const ScanCont
 
 StatusOr<CalibrateWork> MapCalibrateRequest(const v1::CalibrateRequest& request);
 
+// mode: UNSPECIFIED = FULL; another value is INVALID_ARGUMENT naming `mode`.
+StatusOr<VerifyWork> MapVerifyRequest(const v1::VerifyRequest& request);
+
 // Where a Reconstruct request's stack comes from, checked before any byte is received.
 struct ReconstructSource {
   std::string scan_id;             // a stored scan (an id NewId could have made), or

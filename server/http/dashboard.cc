@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "server/http/dashboard_assets.h"
+#include "server/jobs/rig_verification.h"
 
 namespace inspection {
 namespace fs = std::filesystem;
@@ -82,7 +83,15 @@ std::string Dashboard::StatusJson() {
   if (sources_.rig) {
     v1::RigStatus st;
     sources_.rig->FillStatus(&st);
-    if (sources_.calibrations) st.set_active_calibration_id(sources_.calibrations->active_id());
+    if (sources_.calibrations) {
+      st.set_active_calibration_id(sources_.calibrations->active_id());
+      if (StatusOr<RigVerification> v =
+              ReadRigVerification(*sources_.store, st.active_calibration_id(), CurrentTimestamp());
+          v.ok()) {
+        st.set_verification_state(v->state);
+        st.set_verification_detail(v->detail);
+      }
+    }
     st.set_running_job_id(sources_.jobs->running_rig_job());
     st.set_queued_jobs(sources_.jobs->queued_rig_jobs());
     st.set_queue_capacity(sources_.jobs->rig_queue_capacity());

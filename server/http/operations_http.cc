@@ -4,6 +4,7 @@
 #include <httplib.h>
 
 #include "server/http/grpc_metrics_interceptor.h"
+#include "server/jobs/rig_verification.h"
 
 namespace inspection {
 
@@ -23,6 +24,19 @@ std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface> Operation
 std::string OperationsHttp::MetricsText() {
   ScrapeState state;
   if (sources_.rig) state.rig_state = sources_.rig->state();
+  if (sources_.rig && sources_.store && sources_.calibrations) {
+    const google::protobuf::Timestamp now = CurrentTimestamp();
+    if (StatusOr<RigVerification> v = ReadRigVerification(*sources_.store, sources_.calibrations->active_id(), now);
+        v.ok()) {
+      state.verification_state = v->state;
+      if (v->full) {
+        for (const v1::VerificationCharacteristic& c : v->full->characteristics()) {
+          state.verified_characteristics[c.name()] = {c.value(), c.expanded_uncertainty()};
+        }
+        state.full_verification_age_days = DaysBetween(v->full->finish_time(), now);
+      }
+    }
+  }
   if (sources_.jobs) {
     state.queued_rig_jobs = sources_.jobs->queued_rig_jobs();
     state.rig_job_running = !sources_.jobs->running_rig_job().empty();

@@ -27,6 +27,8 @@ const std::vector<double> kEngineBuckets_s = {0.01, 0.025, 0.05, 0.1, 0.25, 0.5,
 
 const v1::RigState kRigStates[] = {v1::RIG_STATE_INITIALIZING, v1::RIG_STATE_READY, v1::RIG_STATE_BUSY,
                                    v1::RIG_STATE_ERROR};
+const v1::VerificationState kVerificationStates[] = {v1::VERIFICATION_STATE_VERIFIED, v1::VERIFICATION_STATE_DUE,
+                                                     v1::VERIFICATION_STATE_FAILED};
 
 }  // namespace
 
@@ -80,7 +82,22 @@ ServerMetrics::ServerMetrics(std::string server_version, std::function<double()>
       build_info_(registry_.AddGauge("inspectd_build_info", "Always 1; the server version as a label.", {"version"})),
       // The reconstruct pool's backlog: replicas to add while it grows.
       queue_depth_(registry_.AddGauge("inspectd_queue_depth",
-                                      "Reconstruct jobs waiting for a replica (the whole pool's on a shared database).")) {
+                                      "Reconstruct jobs waiting for a replica (the whole pool's on a shared database).")),
+      verification_state_(registry_.AddGauge(
+          "inspectd_verification_state",
+          "1 for the rig's instrument verification state under the active calibration (verified, due, failed), "
+          "0 for the others.",
+          {"state"})),
+      verification_value_(registry_.AddGauge(
+          "inspectd_verification_characteristic",
+          "ISO 25178-600 characteristic of the last full verification (N_M, z_FLT, l_z, W_R in um; alpha_z, "
+          "alpha_x, alpha_y dimensionless).",
+          {"characteristic"})),
+      verification_u_(registry_.AddGauge("inspectd_verification_characteristic_expanded_uncertainty",
+                                         "Expanded uncertainty U = 2u of inspectd_verification_characteristic.",
+                                         {"characteristic"})),
+      verification_age_(registry_.AddGauge("inspectd_verification_full_age_days",
+                                           "Days since the last full verification under the active calibration.")) {
   build_info_.Set({std::move(server_version)}, 1);
   now_s_ = now_s ? std::move(now_s) : [] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
@@ -154,6 +171,17 @@ std::string ServerMetrics::Render(const ScrapeState& state) {
   running_jobs_.Set({}, state.rig_job_running ? 1 : 0);
   if (state.data_disk_free_bytes) disk_free_.Set({}, double(*state.data_disk_free_bytes));
   queue_depth_.Set({}, double(state.reconstruct_queue_depth));
+  if (state.verification_state) {
+    for (v1::VerificationState s : kVerificationStates) {
+      verification_state_.Set({EnumLabel(v1::VerificationState_Name(s), "VERIFICATION_STATE_")},
+                              *state.verification_state == s);
+    }
+  }
+  for (const auto& [name, value_u] : state.verified_characteristics) {
+    verification_value_.Set({name}, value_u.first);
+    verification_u_.Set({name}, value_u.second);
+  }
+  if (state.full_verification_age_days) verification_age_.Set({}, *state.full_verification_age_days);
   return registry_.Render();
 }
 

@@ -26,6 +26,12 @@ struct ScrapeState {
   // Reconstruct pool: jobs waiting for a replica (the whole pool's on a shared store), for an
   // autoscaler (inspectd_queue_depth).
   int64_t reconstruct_queue_depth = 0;
+  // Instrument verification under the active calibration (server/jobs/rig_verification.h):
+  // nullopt without a rig or when the records could not be read.
+  std::optional<v1::VerificationState> verification_state;
+  // The last full verification's characteristics by name ("alpha_z", ...): value and U = 2u.
+  std::map<std::string, std::pair<double, double>> verified_characteristics;
+  std::optional<double> full_verification_age_days;
 };
 
 class ServerMetrics {
@@ -65,6 +71,10 @@ class ServerMetrics {
   Counter grpc_calls_;
   Gauge build_info_;
   Gauge queue_depth_;  // inspectd_queue_depth
+  Gauge verification_state_;
+  Gauge verification_value_;
+  Gauge verification_u_;
+  Gauge verification_age_;
 
   // Per unfinished job: when it was queued and whether its wait is counted; for scans, sums
   // over the stack frames that become the last-scan gauges at its end.

@@ -34,6 +34,8 @@ const char* IdPrefix(v1::JobKind kind) {
       return "cal";
     case v1::JOB_KIND_STUDY:
       return "study";
+    case v1::JOB_KIND_VERIFY:
+      return "ver";
     default:
       return "rec";
   }
@@ -426,8 +428,11 @@ Status JobManager::Admit(v1::JobKind kind) const {
     auto is_other = [&](const RecordPtr& r) {
       return r && (other == v1::JOB_KIND_SCAN ? scan_like(r->kind()) : r->kind() == other);
     };
-    if (is_other(running_rig_) ||
-        std::any_of(rig_queue_.begin(), rig_queue_.end(), [&](const QueuedJob& j) { return is_other(j.record); })) {
+    // A verification measures the instrument with whatever bundle is active when it runs, and
+    // changes none: it queues behind either.
+    const bool ordered = kind != v1::JOB_KIND_VERIFY;
+    if (ordered && (is_other(running_rig_) ||
+        std::any_of(rig_queue_.begin(), rig_queue_.end(), [&](const QueuedJob& j) { return is_other(j.record); }))) {
       return Status::Aborted(std::string(other == v1::JOB_KIND_SCAN ? "a scan" : "a calibration") +
                              " is running or queued; scans and calibrations never interleave, retry after it");
     }

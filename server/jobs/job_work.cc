@@ -16,7 +16,8 @@ v1::JobKind KindOf(const JobWork& work) {
   return std::visit(Overloaded{[](const ScanWork&) { return v1::JOB_KIND_SCAN; },
                                [](const CalibrateWork&) { return v1::JOB_KIND_CALIBRATE; },
                                [](const ReconstructWork&) { return v1::JOB_KIND_RECONSTRUCT; },
-                               [](const StudyWork&) { return v1::JOB_KIND_STUDY; }},
+                               [](const StudyWork&) { return v1::JOB_KIND_STUDY; },
+                               [](const VerifyWork&) { return v1::JOB_KIND_VERIFY; }},
                     work);
 }
 
@@ -75,7 +76,8 @@ std::string DescribeWork(const JobWork& work) {
                             s << ", recipe " << w.scan.recipe->recipe.recipe_id() << " v"
                               << w.scan.recipe->recipe.version();
                           }
-                        }},
+                        },
+                        [&](const VerifyWork& w) { s << VerificationModeName(w.mode) << " verification"; }},
              work);
   return s.str();
 }

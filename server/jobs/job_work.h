@@ -21,6 +21,7 @@
 #include "server/procedures/calibration_procedure.h"
 #include "server/results/depth_artifacts.h"
 #include "server/procedures/scan_procedure.h"
+#include "server/procedures/verification_procedure.h"
 
 namespace inspection {
 
@@ -93,7 +94,13 @@ struct StudyWork {
   uint64_t seed = 1;               // of the simulated placements
 };
 
-using JobWork = std::variant<ScanWork, CalibrateWork, ReconstructWork, StudyWork>;
+// Instrument verification on the rig's material measures (server/procedures/verification_procedure.h),
+// stored with the calibration active as it runs.
+struct VerifyWork {
+  VerificationMode mode = VerificationMode::kFull;
+};
+
+using JobWork = std::variant<ScanWork, CalibrateWork, ReconstructWork, StudyWork, VerifyWork>;
 
 v1::JobKind KindOf(const JobWork& work);
 

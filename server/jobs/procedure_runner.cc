@@ -125,6 +125,7 @@ StatusOr<v1::JobResult> ProcedureRunner::Run(const JobWork& work, const JobConte
                         [&](const CalibrateWork& w) { return OnRig(rig_, [&] { return RunCalibrate(w, context); }); },
                         [&](const ReconstructWork& w) { return RunReconstruct(w, context); },
                         [&](const StudyWork& w) { return OnRig(rig_, [&] { return RunStudy(w, context); }); },
+                        [&](const VerifyWork& w) { return OnRig(rig_, [&] { return RunVerify(w, context); }); },
                     },
                     work);
 }
@@ -216,11 +217,14 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
     if (bundle && bundle->z_linearity) noise.linearity = *bundle->z_linearity;
     // The stage error reaches a depth through the interpolation's three samples or in full.
     noise.three_point_peak = ThreePointPeak(plan.sff.interpolation);
+    // The last full verification's alpha_z and l_z replace worst-case bounds (rig_verification.h).
+    const std::string verification_warning = ApplyVerification(&noise);
     v1::InspectionResult* inspection = result.mutable_inspection();
     *inspection =
         Inspect(*work.recipe, outcome.depth, outcome.manifest.pixel_size_um, noise, work.part_id, work.station);
     inspection->set_job_id(job_id);
     inspection->set_calibration_id(plan.calibration_id);
+    inspection->set_verification_warning(verification_warning);
     ApplyStudyWarnings(inspection);
     FillTimings(store_, job_id, started_at, scanned_at, outcome.engine_finish_seconds, inspection);
     // Nanoseconds: TimeUtil::GetCurrentTime keeps whole seconds here, and results a second

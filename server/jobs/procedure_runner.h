@@ -16,6 +16,7 @@
 #include "server/jobs/job_runner.h"
 #include "server/results/result_feed.h"
 #include "server/jobs/rig_controller.h"
+#include "core/metrology/depth_noise_model.h"
 #include "core/sff/sff_options.h"
 
 namespace inspection {
@@ -43,6 +44,14 @@ class ProcedureRunner final : public JobRunner {
   // The newest Type-1 study of the inspection's recipe version marks its measurements that were
   // found not capable (MeasurementResult.capability_warning).
   void ApplyStudyWarnings(v1::InspectionResult* inspection);
+  // procedure_runner_verification.cc: a verification on the material measures, its record stored
+  // with the active calibration when it succeeds.
+  StatusOr<v1::JobResult> RunVerify(const VerifyWork& work, const JobContext& context);
+  // The rig's verification under the active calibration (rig_verification.h): the last full
+  // verification's characteristics into `noise` (the uncertainty model's verified terms), and
+  // the warning a result made now carries (empty while verified). Never fatal: a store that
+  // cannot be read leaves the worst-case bounds and the warning says so.
+  std::string ApplyVerification(DepthNoiseOptions* noise);
 
   DataStore* store_;
   RigController* rig_;

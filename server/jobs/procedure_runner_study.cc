@@ -60,6 +60,9 @@ StatusOr<v1::JobResult> ProcedureRunner::RunStudy(const StudyWork& work, const J
   });
 
   std::vector<v1::InspectionResult> repeats;
+  // The rig's last full verification, read once for every repeat (rig_verification.h).
+  DepthNoiseOptions verified;
+  ApplyVerification(&verified);
   auto measure = [&](int, const ScanOutcome& o) -> Status {
     DepthNoiseOptions noise;
     noise.window_px = plan.scan.sff.window_px;
@@ -67,6 +70,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunStudy(const StudyWork& work, const J
     noise.stage_repeatability_um = rig_->rig().stage().repeatability_um();
     if (bundle && bundle->z_linearity) noise.linearity = *bundle->z_linearity;
     noise.three_point_peak = ThreePointPeak(plan.scan.sff.interpolation);
+    noise.verified = verified.verified;
     repeats.push_back(Inspect(run, o.depth, o.manifest.pixel_size_um, noise, work.scan.part_id, work.scan.station));
     return Status::Ok();
   };

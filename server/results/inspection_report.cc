@@ -407,6 +407,11 @@ StatusOr<std::string> RenderInspectionReport(const InspectionReportInput& input)
           Row("Recipe", OrDash(r.recipe_id()) + " v" + std::to_string(r.recipe_version())) +
           Row("Station", OrDash(r.station())) + Row("Job id", OrDash(r.job_id())) +
           Row("Calibration", r.calibration_id().empty() ? "uncalibrated" : HtmlEscape(r.calibration_id())) +
+          // The rig's instrument verification as the scan ran (docs/verification.md).
+          Row("Instrument verification",
+              "<span id=\"verification\">" +
+                  (r.verification_warning().empty() ? std::string("verified") : HtmlEscape(r.verification_warning())) +
+                  "</span>") +
           Row("Finished", FinishTime(r)) +
           // The server renders the report before the result is stored and numbered, and before
           // its own time is known: rows without a value yet are left out rather than shown as 0.

@@ -89,6 +89,7 @@ v1::InspectionResult Inspect(const RecipeRun& run, const DepthResult& depth, dou
       m->set_measured(true);
       m->set_value(v.value);
       m->set_standard_uncertainty(v.uncertainty.standard_uncertainty);
+      if (std::isfinite(v.uncertainty.amplification)) m->set_amplification_uncertainty(v.uncertainty.amplification);
       m->set_coverage_percent(v.coverage_percent);
       verdict = Judge(v.value, v.uncertainty.standard_uncertainty, v.coverage_percent, plan.tolerance);
       m->set_expanded_uncertainty(verdict.expanded_uncertainty);

@@ -50,6 +50,8 @@ constexpr MethodRole kMethodRoles[] = {
     {kInspection, "PinJob", Role::kAdmin},
     // Type-1 gauge studies: run by whoever approves the gauge, read by anyone.
     {kInspection, "StartStudy", Role::kEngineer},
+    // Instrument verification: the metrologist's (engineer) job; its records are GetCalibration's.
+    {kInspection, "Verify", Role::kEngineer},
     {kInspection, "GetStudy", Role::kViewer},
     {kInspection, "ListStudies", Role::kViewer},
     {kSimulation, "ListSpecimens", Role::kViewer},

@@ -229,6 +229,12 @@ class DataStore {
   virtual Status PutStudy(const v1::Study& study) = 0;
   virtual StatusOr<v1::Study> GetStudy(const std::string& study_id) = 0;
   virtual StatusOr<std::vector<v1::Study>> ListStudies(const std::string& recipe_id, int limit) = 0;
+  // Instrument verification records (Verify), each stored whole when its job succeeds (replaced
+  // when stored again under its id). ListVerifications: the records made under calibration_id
+  // (empty = uncalibrated) of `mode` (UNSPECIFIED = any), newest first (finish time), at most `limit`.
+  virtual Status PutVerification(const v1::VerificationRecord& record) = 0;
+  virtual StatusOr<std::vector<v1::VerificationRecord>> ListVerifications(const std::string& calibration_id,
+                                                                          v1::VerificationMode mode, int limit) = 0;
 
   virtual Status SetSetting(const std::string& key, const std::string& value) = 0;
   virtual std::string GetSetting(const std::string& key) = 0;

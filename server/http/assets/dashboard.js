@@ -78,6 +78,10 @@ async function refreshStatus() {
     if (rig.simulated) facts.push("simulated, specimen " + rig.specimen);
     facts.push("pixel " + fixed(rig.pixelSizeUm, 3, "µm"));
     facts.push("calibration " + (rig.activeCalibrationId || "none"));
+    if (rig.verificationState) {
+      const v = enumName(rig.verificationState, "VERIFICATION_STATE_").toLowerCase();
+      facts.push((v === "verified" ? "verified" : "verification " + v) + (rig.verificationDetail ? " (" + rig.verificationDetail + ")" : ""));
+    }
     facts.push("queue " + rig.queuedJobs + " / " + rig.queueCapacity);
     $("rig-facts").textContent = facts.join(" · ");
   }

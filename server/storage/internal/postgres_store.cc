@@ -83,6 +83,15 @@ constexpr const char* kPostgresStudiesMigration = R"sql(
     CREATE INDEX IF NOT EXISTS studies_by_recipe ON studies(recipe_id, finish_ns);
     )sql";
 
+// Instrument verifications: one row per record, the VerificationRecord message whole, found by
+// the calibration it was made under and its mode.
+constexpr const char* kPostgresVerificationsMigration = R"sql(
+    CREATE TABLE IF NOT EXISTS verifications (
+      verification_id TEXT PRIMARY KEY, calibration_id TEXT NOT NULL, mode INTEGER NOT NULL,
+      finish_ns BIGINT NOT NULL, record BYTEA NOT NULL);
+    CREATE INDEX IF NOT EXISTS verifications_by_calibration ON verifications(calibration_id, mode, finish_ns);
+    )sql";
+
 const char* const kPostgresMigrations[] = {
     R"sql(
     CREATE TABLE IF NOT EXISTS jobs (
@@ -126,6 +135,7 @@ const char* const kPostgresMigrations[] = {
     CREATE INDEX work_queue_by_age ON work_queue(enqueue_ns);
     )sql",
     kPostgresStudiesMigration,
+    kPostgresVerificationsMigration,
 };
 
 // The database server's clock in nanoseconds: every replica's leases are judged by one clock.
@@ -291,6 +301,9 @@ class PostgresDataStore final : public DataStore {
   Status PutStudy(const v1::Study& study) override;
   StatusOr<v1::Study> GetStudy(const std::string& study_id) override;
   StatusOr<std::vector<v1::Study>> ListStudies(const std::string& recipe_id, int limit) override;
+  Status PutVerification(const v1::VerificationRecord& record) override;
+  StatusOr<std::vector<v1::VerificationRecord>> ListVerifications(const std::string& calibration_id,
+                                                                  v1::VerificationMode mode, int limit) override;
   Status SetSetting(const std::string& key, const std::string& value) override;
   std::string GetSetting(const std::string& key) override;
   Status EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) override;
@@ -1104,6 +1117,33 @@ StatusOr<std::vector<v1::Study>> PostgresDataStore::ListStudies(const std::strin
   INSPECT_RETURN_IF_ERROR(s);
   std::vector<v1::Study> out;
   INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &out, "study"));
+  return out;
+}
+
+Status PostgresDataStore::PutVerification(const v1::VerificationRecord& record) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Run("INSERT INTO verifications(verification_id, calibration_id, mode, finish_ns, record) VALUES($1,$2,$3,$4,$5) "
+      "ON CONFLICT (verification_id) DO UPDATE SET calibration_id = EXCLUDED.calibration_id, mode = EXCLUDED.mode, "
+      "finish_ns = EXCLUDED.finish_ns, record = EXCLUDED.record",
+      {T(record.verification_id()), T(record.calibration_id()), I(int64_t(record.mode())),
+       I(record.finish_time().seconds() * 1000000000LL + record.finish_time().nanos()), B(record.SerializeAsString())},
+      &s, "PutVerification");
+  return s;
+}
+
+StatusOr<std::vector<v1::VerificationRecord>> PostgresDataStore::ListVerifications(const std::string& calibration_id,
+                                                                                   v1::VerificationMode mode,
+                                                                                   int limit) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Status s;
+  Result r = Run(
+      "SELECT record FROM verifications WHERE calibration_id = $1 AND ($2 = 0 OR mode = $2) "
+      "ORDER BY finish_ns DESC, verification_id LIMIT $3",
+      {T(calibration_id), I(int64_t(mode)), I(limit)}, &s, "ListVerifications");
+  INSPECT_RETURN_IF_ERROR(s);
+  std::vector<v1::VerificationRecord> out;
+  INSPECT_RETURN_IF_ERROR(ParseRows(r, 0, &out, "verification record"));
   return out;
 }
 

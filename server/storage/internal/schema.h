@@ -15,7 +15,8 @@ namespace inspection {
 // Version 2: results forwarded by rigs to a site store (results.rig_id, results.rig_sequence).
 // Version 3: the reconstruct pool's work queue (work_queue: stored input, lease, heartbeat).
 // Version 4: Type-1 gauge studies (studies).
-inline constexpr int64_t kStoreSchemaVersion = 4;
+// Version 5: instrument verification records (verifications).
+inline constexpr int64_t kStoreSchemaVersion = 5;
 
 inline Status CheckSchemaVersion(int64_t stored, const std::string& where) {
   if (stored > kStoreSchemaVersion) {

@@ -98,6 +98,9 @@ class SqliteDataStore final : public DataStore {
   Status PutStudy(const v1::Study& study) override;
   StatusOr<v1::Study> GetStudy(const std::string& study_id) override;
   StatusOr<std::vector<v1::Study>> ListStudies(const std::string& recipe_id, int limit) override;
+  Status PutVerification(const v1::VerificationRecord& record) override;
+  StatusOr<std::vector<v1::VerificationRecord>> ListVerifications(const std::string& calibration_id,
+                                                                  v1::VerificationMode mode, int limit) override;
   Status SetSetting(const std::string& key, const std::string& value) override;
   std::string GetSetting(const std::string& key) override;
   Status EnqueueWork(const v1::Job& job, const v1::JobEvent& queued_event, const QueuedWork& work) override;
@@ -134,6 +137,15 @@ constexpr const char* kSqliteStudiesMigration = R"sql(
     CREATE TABLE IF NOT EXISTS studies (
       study_id TEXT PRIMARY KEY, recipe_id TEXT NOT NULL, finish_ns INTEGER NOT NULL, study BLOB NOT NULL);
     CREATE INDEX IF NOT EXISTS studies_by_recipe ON studies(recipe_id, finish_ns);
+  )sql";
+
+// Instrument verifications: one row per record, the VerificationRecord message whole, found by
+// the calibration it was made under and its mode.
+constexpr const char* kSqliteVerificationsMigration = R"sql(
+    CREATE TABLE IF NOT EXISTS verifications (
+      verification_id TEXT PRIMARY KEY, calibration_id TEXT NOT NULL, mode INTEGER NOT NULL,
+      finish_ns INTEGER NOT NULL, record BLOB NOT NULL);
+    CREATE INDEX IF NOT EXISTS verifications_by_calibration ON verifications(calibration_id, mode, finish_ns);
   )sql";
 
 // Schema versions of the SQLite backend; index i migrates version i to i + 1. Version 1 is the
@@ -180,6 +192,7 @@ const char* const kSqliteMigrations[] = {
     CREATE INDEX work_queue_by_age ON work_queue(enqueue_ns);
   )sql",
     kSqliteStudiesMigration,
+    kSqliteVerificationsMigration,
 };
 static_assert(std::size(kSqliteMigrations) == kStoreSchemaVersion, "one migration per schema version");
 
@@ -925,6 +938,36 @@ Status SqliteDataStore::ForgetWork(const std::string& job_id) {
   st.Text(1, job_id);
   if (st.Step() != SQLITE_DONE) return DbError(db_, "ForgetWork");
   return Status::Ok();
+}
+
+Status SqliteDataStore::PutVerification(const v1::VerificationRecord& record) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_,
+          "INSERT OR REPLACE INTO verifications(verification_id, calibration_id, mode, finish_ns, record) "
+          "VALUES(?,?,?,?,?)");
+  st.Text(1, record.verification_id())
+      .Text(2, record.calibration_id())
+      .Int(3, int64_t(record.mode()))
+      .Int(4, record.finish_time().seconds() * 1000000000LL + record.finish_time().nanos())
+      .Blob(5, record.SerializeAsString());
+  if (st.Step() != SQLITE_DONE) return DbError(db_, "PutVerification");
+  return Status::Ok();
+}
+
+StatusOr<std::vector<v1::VerificationRecord>> SqliteDataStore::ListVerifications(const std::string& calibration_id,
+                                                                                 v1::VerificationMode mode, int limit) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Stmt st(db_,
+          "SELECT record FROM verifications WHERE calibration_id = ?1 AND (?2 = 0 OR mode = ?2) "
+          "ORDER BY finish_ns DESC, verification_id LIMIT ?3");
+  st.Text(1, calibration_id).Int(2, int64_t(mode)).Int(3, limit);
+  std::vector<v1::VerificationRecord> out;
+  for (int rc = st.Step(); rc == SQLITE_ROW; rc = st.Step()) {
+    v1::VerificationRecord r;
+    if (!r.ParseFromString(st.ColumnBlob(0))) return Status::DataLoss("verification record is corrupt");
+    out.push_back(std::move(r));
+  }
+  return out;
 }
 
 }  // namespace inspection

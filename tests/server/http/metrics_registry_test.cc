@@ -311,5 +311,28 @@ TEST(ServerMetricsTest, FailedJobsCountWithoutResultFiguresAndGrpcCallsByCode) {
   EXPECT_EQ(text.find("inspectd_rig_state{"), std::string::npos) << "no rig, no state series";
 }
 
+TEST(ServerMetricsTest, VerificationStateAndTheLastFullRecordsCharacteristicsAreGauges) {
+  ServerMetrics m("9.9.9", [] { return 0.0; });
+  ScrapeState st;
+  st.rig_state = v1::RIG_STATE_READY;
+  st.verification_state = v1::VERIFICATION_STATE_FAILED;
+  st.verified_characteristics["alpha_z"] = {1.00109, 0.00177};
+  st.verified_characteristics["N_M"] = {0.0786, 0.0072};
+  st.full_verification_age_days = 2.5;
+  const std::string text = m.Render(st);
+  auto has = [&](const std::string& line) {
+    EXPECT_NE(text.find("\n" + line + "\n"), std::string::npos) << line << "\n---\n" << text;
+  };
+  has("inspectd_verification_state{state=\"failed\"} 1");
+  has("inspectd_verification_state{state=\"verified\"} 0");
+  has("inspectd_verification_state{state=\"due\"} 0");
+  has("inspectd_verification_characteristic{characteristic=\"alpha_z\"} 1.00109");
+  has("inspectd_verification_characteristic_expanded_uncertainty{characteristic=\"N_M\"} 0.0072");
+  has("inspectd_verification_full_age_days 2.5");
+  // Without a rig (or records) no state series at all.
+  ServerMetrics none("9.9.9", [] { return 0.0; });
+  EXPECT_EQ(none.Render(ScrapeState{}).find("inspectd_verification_state{"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace inspection

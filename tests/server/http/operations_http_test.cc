@@ -121,6 +121,37 @@ TEST_F(OperationsHttpTest, MetricsAfterAScanCountTheJobFramesAndCalls) {
                       "code=\"INVALID_ARGUMENT\"} 1"));
 }
 
+// The rig's instrument verification on /metrics and the dashboard's status, read from the
+// stored records at scrape time: due until a full verification, then verified with the record's
+// characteristics as gauges.
+TEST_F(OperationsHttpTest, VerificationStateAndCharacteristicsAreScrapedAndShown) {
+  Start();
+  std::string metrics = Get("/metrics");
+  EXPECT_NE(metrics.find("\ninspectd_verification_state{state=\"due\"} 1\n"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("\ninspectd_verification_state{state=\"verified\"} 0\n"), std::string::npos);
+  EXPECT_EQ(metrics.find("inspectd_verification_characteristic{"), std::string::npos) << "none before a full one";
+  Json status = Json::parse(Get("/api/status"));
+  EXPECT_EQ(status["rig"]["verificationState"], "VERIFICATION_STATE_DUE");
+  EXPECT_EQ(status["rig"]["verificationDetail"], "no full verification under the uncalibrated rig");
+
+  v1::Job job;
+  grpc::Status s = client_->Verify(v1::VerifyRequest(), nullptr, &job);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  const v1::VerificationRecord& r = job.result().verification();
+  ASSERT_EQ(r.characteristics_size(), 7);
+  metrics = Get("/metrics");
+  EXPECT_NE(metrics.find("\ninspectd_verification_state{state=\"verified\"} 1\n"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("\ninspectd_verification_state{state=\"due\"} 0\n"), std::string::npos);
+  EXPECT_NE(metrics.find("\ninspectd_verification_characteristic{characteristic=\"alpha_z\"} "), std::string::npos);
+  EXPECT_NE(metrics.find("\ninspectd_verification_characteristic_expanded_uncertainty{characteristic=\"W_R\"} "),
+            std::string::npos);
+  EXPECT_NE(metrics.find("\ninspectd_verification_full_age_days "), std::string::npos);
+  EXPECT_NE(metrics.find("\ninspectd_jobs_total{kind=\"verify\",state=\"succeeded\"} 1\n"), std::string::npos);
+  status = Json::parse(Get("/api/status"));
+  EXPECT_EQ(status["rig"]["verificationState"], "VERIFICATION_STATE_VERIFIED");
+  EXPECT_NE(Get("/dashboard.js").find("VERIFICATION_STATE_"), std::string::npos);
+}
+
 TEST_F(OperationsHttpTest, DashboardServesPageStatusJobsAndPreview) {
   Start();
   const std::string page = Get("/");

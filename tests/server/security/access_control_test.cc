@@ -40,6 +40,7 @@ TEST(AccessControlTest, RoleTableFollowsTheIssueLadder) {
   EXPECT_EQ(RequiredRole(Rpc("ResetRig")), Role::kAdmin);
   EXPECT_EQ(RequiredRole(Rpc("DeleteJob")), Role::kAdmin);
   EXPECT_EQ(RequiredRole(Rpc("StartStudy")), Role::kEngineer);  // approving a gauge
+  EXPECT_EQ(RequiredRole(Rpc("Verify")), Role::kEngineer);      // verifying the instrument
   EXPECT_EQ(RequiredRole(Rpc("GetStudy")), Role::kViewer);
   EXPECT_EQ(RequiredRole(Rpc("ListStudies")), Role::kViewer);
   // A method nobody classified has no rule, and Authorize refuses it even to an admin.

@@ -158,6 +158,13 @@ TEST_F(SecurityTest, ClientCertificatesNameTheCallerAndRolesGateEveryCall) {
   grpc::Status calibrate = WithCert("alice")->Calibrate(v1::CalibrateRequest(), {}, &job);
   EXPECT_EQ(calibrate.error_code(), grpc::StatusCode::PERMISSION_DENIED);
   EXPECT_EQ(calibrate.error_message(), "Calibrate needs role engineer; 'alice' has role operator");
+  // So does an instrument verification: refused before any job is queued.
+  grpc::Status verify = WithCert("alice")->Verify(v1::VerifyRequest(), {}, &job);
+  EXPECT_EQ(verify.error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_EQ(verify.error_message(), "Verify needs role engineer; 'alice' has role operator");
+  verify = WithCert("line3-viewer")->Verify(v1::VerifyRequest(), {}, &job);
+  EXPECT_EQ(verify.error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_EQ(verify.error_message(), "Verify needs role engineer; 'line3-viewer' has role viewer");
 
   // The policy matches a subject alternative name as well as the CN.
   ASSERT_TRUE(WithCert("station 7")->Scan(scan, {}, &job).ok());
@@ -284,7 +291,7 @@ TEST_F(SecurityTest, EveryMethodOfEveryServiceHasARuleAndIsRefusedWithoutCredent
       methods.insert(full);
     }
   }
-  EXPECT_EQ(methods.size(), 27u);  // 25 InspectionService + 2 SimulationService
+  EXPECT_EQ(methods.size(), 28u);  // 26 InspectionService + 2 SimulationService
   const std::vector<std::string> ruled = MethodsWithRoles();
   EXPECT_EQ(std::set<std::string>(ruled.begin(), ruled.end()), methods) << "rules for methods no service has";
 

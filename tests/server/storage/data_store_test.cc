@@ -281,7 +281,7 @@ TEST_P(DataStoreTest, ASchemaNewerThanThisBinaryIsRefusedNamingBothVersions) {
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(s.status().message().find("schema version 7"), std::string::npos) << s.status().message();
-  EXPECT_NE(s.status().message().find("newer than this inspectd knows (4)"), std::string::npos) << s.status().message();
+  EXPECT_NE(s.status().message().find("newer than this inspectd knows (5)"), std::string::npos) << s.status().message();
 }
 
 // The pool's work queue (schema version 3): leases, takeover after expiry, completion only by
@@ -443,6 +443,64 @@ TEST_P(DataStoreTest, ALeaseTheWorkerDoesNotKnowItHoldsIsNotRenewedAndIsTakenAga
   EXPECT_FALSE(*store_->CompleteWork("worker-a", Job("rec-2", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_SUCCEEDED, 2),
                                      QueueEvent("rec-2", 2, v1::JOB_STATE_SUCCEEDED)));
   EXPECT_EQ(*store_->QueueDepth(), 0);  // rec-1 still held by worker-a, rec-2 by worker-b
+
+// Verification records (schema version 5): stored whole, replaced under their id, listed newest
+// first per calibration and mode, kept across a reopen.
+v1::VerificationRecord Verification(const std::string& id, const std::string& calibration, v1::VerificationMode mode,
+                                    int64_t finish_s, double alpha_z) {
+  v1::VerificationRecord r;
+  r.set_verification_id(id);
+  r.set_calibration_id(calibration);
+  r.set_mode(mode);
+  r.mutable_finish_time()->set_seconds(finish_s);
+  r.set_scans(mode == v1::VERIFICATION_MODE_FULL ? 15 : 3);
+  v1::VerificationCharacteristic* c = r.add_characteristics();
+  c->set_name("alpha_z");
+  c->set_value(alpha_z);
+  c->set_standard_uncertainty(0.0009);
+  c->set_expanded_uncertainty(0.0018);
+  v1::VerificationStepPoint* step = r.add_steps();
+  step->set_specimen("pgr10");
+  step->set_certified_um(10.0);
+  step->set_measured_um(9.959);
+  r.set_state(mode == v1::VERIFICATION_MODE_FULL ? v1::VERIFICATION_STATE_VERIFIED : v1::VERIFICATION_STATE_FAILED);
+  if (mode == v1::VERIFICATION_MODE_INTERIM) r.add_findings("pgr10 step: 10.01 um against 9.959 um");
+  return r;
+}
+
+TEST_P(DataStoreTest, VerificationsRoundTripReplaceAndListNewestFirstPerCalibrationAndMode) {
+  ASSERT_TRUE(store_->PutVerification(Verification("ver-a", "cal-1", v1::VERIFICATION_MODE_FULL, 100, 1.001)).ok());
+  ASSERT_TRUE(store_->PutVerification(Verification("ver-b", "cal-1", v1::VERIFICATION_MODE_INTERIM, 200, 1.004)).ok());
+  ASSERT_TRUE(store_->PutVerification(Verification("ver-c", "cal-1", v1::VERIFICATION_MODE_FULL, 300, 1.002)).ok());
+  ASSERT_TRUE(store_->PutVerification(Verification("ver-d", "cal-2", v1::VERIFICATION_MODE_FULL, 400, 0.999)).ok());
+  ASSERT_TRUE(store_->PutVerification(Verification("ver-e", "", v1::VERIFICATION_MODE_FULL, 500, 1.0)).ok());
+
+  auto full = store_->ListVerifications("cal-1", v1::VERIFICATION_MODE_FULL, 10);
+  ASSERT_TRUE(full.ok()) << full.status().ToString();
+  ASSERT_EQ(full->size(), 2u);
+  EXPECT_EQ((*full)[0].verification_id(), "ver-c");
+  EXPECT_EQ((*full)[1].verification_id(), "ver-a");
+  EXPECT_EQ((*full)[0].SerializeAsString(),
+            Verification("ver-c", "cal-1", v1::VERIFICATION_MODE_FULL, 300, 1.002).SerializeAsString());
+  auto any = store_->ListVerifications("cal-1", v1::VERIFICATION_MODE_UNSPECIFIED, 10);
+  ASSERT_TRUE(any.ok());
+  ASSERT_EQ(any->size(), 3u);
+  EXPECT_EQ((*any)[1].verification_id(), "ver-b");
+  EXPECT_EQ((*any)[1].findings(0), "pgr10 step: 10.01 um against 9.959 um");
+  EXPECT_EQ(store_->ListVerifications("cal-1", v1::VERIFICATION_MODE_FULL, 1)->size(), 1u);
+  EXPECT_EQ(store_->ListVerifications("cal-9", v1::VERIFICATION_MODE_UNSPECIFIED, 10)->size(), 0u);
+  auto uncalibrated = store_->ListVerifications("", v1::VERIFICATION_MODE_FULL, 10);
+  ASSERT_TRUE(uncalibrated.ok());
+  ASSERT_EQ(uncalibrated->size(), 1u);
+  EXPECT_EQ((*uncalibrated)[0].verification_id(), "ver-e");
+
+  // Stored again under its id: replaced, not duplicated; and kept across a reopen.
+  ASSERT_TRUE(store_->PutVerification(Verification("ver-c", "cal-1", v1::VERIFICATION_MODE_FULL, 300, 1.003)).ok());
+  Reopen();
+  full = store_->ListVerifications("cal-1", v1::VERIFICATION_MODE_FULL, 10);
+  ASSERT_TRUE(full.ok());
+  ASSERT_EQ(full->size(), 2u);
+  EXPECT_DOUBLE_EQ((*full)[0].characteristics(0).value(), 1.003);
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, DataStoreTest, ::testing::Values("sqlite", "postgresql"),
