@@ -443,6 +443,7 @@ TEST_P(DataStoreTest, ALeaseTheWorkerDoesNotKnowItHoldsIsNotRenewedAndIsTakenAga
   EXPECT_FALSE(*store_->CompleteWork("worker-a", Job("rec-2", v1::JOB_KIND_RECONSTRUCT, v1::JOB_STATE_SUCCEEDED, 2),
                                      QueueEvent("rec-2", 2, v1::JOB_STATE_SUCCEEDED)));
   EXPECT_EQ(*store_->QueueDepth(), 0);  // rec-1 still held by worker-a, rec-2 by worker-b
+}
 
 // Verification records (schema version 5): stored whole, replaced under their id, listed newest
 // first per calibration and mode, kept across a reopen.
