@@ -62,6 +62,23 @@ void FillFrameEvent(v1::JobPhase phase, int index, int count, double z_um, doubl
   e->set_remaining_seconds(e->elapsed_seconds() / done * (count - done));
 }
 
+}  // namespace
+
+void FillFrameProgress(const ScanFrameEvent& f, v1::FrameProgress* fp) {
+  fp->set_frame_index(f.index);
+  fp->set_frame_count(f.count);
+  fp->set_z_um(f.z_um);
+  fp->set_exposure_us(f.exposure_us);
+  fp->set_acquisition_index(f.acquisition);
+  fp->set_stack_frame(f.stack_frame);
+  fp->mutable_statistics()->set_mean_grey(f.statistics.mean_grey);
+  fp->mutable_statistics()->set_stddev_grey(f.statistics.stddev_grey);
+  fp->mutable_statistics()->set_saturated_percent(f.statistics.saturated_percent);
+  fp->mutable_statistics()->set_underexposed_percent(f.statistics.underexposed_percent);
+}
+
+namespace {
+
 // Frames of a scan with an automatic z range, for its progress (RunScan below).
 struct ProgressFrames {
   int coarse_planned = 0;  // the sweep's frames over the whole window (known from its first event)

@@ -21,6 +21,12 @@
 
 namespace inspection {
 
+struct ScanFrameEvent;  // server/procedures/scan_procedure.h
+
+// The FrameProgress of one frame a scan took (index, z, exposure, statistics), as every rig job
+// that scans reports it; the job sets the phase, progress and message around it.
+void FillFrameProgress(const ScanFrameEvent& f, v1::FrameProgress* fp);
+
 // Whether a depth is interpolated through three focus samples (Gaussian, defocus parabola), so a
 // frame's stage error reaches it through the three-point sensitivities, or taken from the
 // maximum's frame (maximum, line fit) with that frame's error in full (DepthNoiseOptions).

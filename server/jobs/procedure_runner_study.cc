@@ -77,17 +77,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunStudy(const StudyWork& work, const J
   auto on_frame = [&](const ScanFrameEvent& f, int repeat) {
     context.emit([&](v1::JobEvent& e) {
       e.set_phase(v1::JOB_PHASE_ACQUIRING);
-      v1::FrameProgress* fp = e.mutable_frame();
-      fp->set_frame_index(f.index);
-      fp->set_frame_count(f.count);
-      fp->set_z_um(f.z_um);
-      fp->set_exposure_us(f.exposure_us);
-      fp->set_acquisition_index(f.acquisition);
-      fp->set_stack_frame(f.stack_frame);
-      fp->mutable_statistics()->set_mean_grey(f.statistics.mean_grey);
-      fp->mutable_statistics()->set_stddev_grey(f.statistics.stddev_grey);
-      fp->mutable_statistics()->set_saturated_percent(f.statistics.saturated_percent);
-      fp->mutable_statistics()->set_underexposed_percent(f.statistics.underexposed_percent);
+      FillFrameProgress(f, e.mutable_frame());
       const double done = repeat + (f.index + 1.0) / std::max(1, f.count);
       e.set_progress(0.95 * done / plan.repeats);
       e.set_remaining_seconds(e.elapsed_seconds() / done * (plan.repeats - done));
