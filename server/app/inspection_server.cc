@@ -58,7 +58,36 @@ StatusOr<std::unique_ptr<AccessControl>> MakeAccessControl(const ServerOptions& 
   return access;
 }
 
+StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeCredentials(const ServerOptions& o) {
+  TransportSecurityOptions tso;
+  tso.tls_cert_file = o.tls_cert_file;
+  tso.tls_key_file = o.tls_key_file;
+  tso.tls_client_ca_file = o.tls_client_ca_file;
+  tso.insecure = o.insecure;
+  tso.reload_interval_s = o.tls_reload_interval_s;
+  return MakeServerCredentials(tso, o.listen_address);
+}
+
 }  // namespace
+
+StatusOr<std::unique_ptr<grpc::Server>> InspectionServer::StartWaitingHealth(const ServerOptions& options,
+                                                                              std::string* address) {
+  INSPECT_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> creds, MakeCredentials(options));
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::ServerBuilder builder;
+  int port = 0;
+  builder.AddListeningPort(options.listen_address, creds, &port);
+  std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
+  if (!server || port == 0) return Status::Unavailable("cannot listen on " + options.listen_address);
+  grpc::HealthCheckServiceInterface* health = server->GetHealthCheckService();
+  health->SetServingStatus("", false);
+  health->SetServingStatus(kRigHealthService, false);
+  if (address) {
+    const std::string& listen = options.listen_address;
+    *address = listen.substr(0, listen.rfind(':') + 1) + std::to_string(port);
+  }
+  return server;
+}
 
 StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const ServerOptions& options,
                                                                     std::unique_ptr<Rig> rig, Status rig_startup) {
@@ -70,14 +99,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   INSPECT_RETURN_IF_ERROR(options.retention.Validate());
   // Who may call, and over what transport: settled before anything starts.
   INSPECT_ASSIGN_OR_RETURN(s->access_, MakeAccessControl(options));
-  TransportSecurityOptions tso;
-  tso.tls_cert_file = options.tls_cert_file;
-  tso.tls_key_file = options.tls_key_file;
-  tso.tls_client_ca_file = options.tls_client_ca_file;
-  tso.insecure = options.insecure;
-  tso.reload_interval_s = options.tls_reload_interval_s;
-  INSPECT_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> creds,
-                           MakeServerCredentials(tso, options.listen_address));
+  INSPECT_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> creds, MakeCredentials(options));
   s->reflection_ = options.reflection.value_or(!s->access_->enabled());
   AuditLogOptions audit;
   audit.path = options.audit_log.empty() ? options.data_dir / "audit" / "audit.jsonl" : options.audit_log;

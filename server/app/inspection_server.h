@@ -87,6 +87,12 @@ class InspectionServer {
                                                            std::unique_ptr<Rig> rig = nullptr,
                                                            Status rig_startup = Status::Ok());
   ~InspectionServer();
+  // While inspectd waits for its database at start-up: a gRPC server on options.listen_address,
+  // with the same transport security, that serves only the standard health service, NOT_SERVING
+  // for "" and kRigHealthService, so probes and load balancers see a replica that is up but not
+  // ready (not a connection refused). Shut it down before Start binds the same address.
+  static StatusOr<std::unique_ptr<grpc::Server>> StartWaitingHealth(const ServerOptions& options,
+                                                                    std::string* address);
 
   int port() const { return port_; }
   int http_port() const { return ops_->port(); }  // 0 without an HTTP port

@@ -133,15 +133,30 @@ int main(int argc, char** argv) {
   }
   // A database server that is not up yet (a pool starting beside its PostgreSQL, a site store
   // restarting) is waited for with backoff, not a crash loop; SIGTERM / SIGINT end the wait.
+  // Meanwhile the gRPC port answers health checks with NOT_SERVING (up, not ready).
+  std::unique_ptr<grpc::Server> waiting_health;
   for (int wait_s = 1;; wait_s = std::min(2 * wait_s, 30)) {
     auto probe = DataStore::Open(opt.data_dir, opt.database);
     if (probe.ok() || probe.status().code() != StatusCode::kUnavailable) break;  // Start reports other errors
     spdlog::warn("{}; retrying in {} s", probe.status().message(), wait_s);
+    if (!waiting_health) {
+      std::string address;
+      auto health = InspectionServer::StartWaitingHealth(opt, &address);
+      if (!health.ok()) {
+        std::cerr << "inspectd: " << health.status().ToString() << "\n";
+        return 1;
+      }
+      waiting_health = std::move(*health);
+      PrintAnnouncement(config.log_format,
+                        "inspectd health on " + address + ": NOT_SERVING until the database is reachable");
+    }
     const timespec timeout{wait_s, 0};
     siginfo_t info;
     const int sig = sigtimedwait(&signals, &info, &timeout);
     if (sig == SIGTERM || sig == SIGINT) return 0;
   }
+  if (waiting_health) waiting_health->Shutdown();  // frees the address for the real server
+  waiting_health.reset();
   auto server = InspectionServer::Start(opt, std::move(rig), rig_startup);
   if (!server.ok()) {
     std::cerr << "inspectd: " << server.status().ToString() << "\n";

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # inspectd on PostgreSQL end to end, with the real binaries and a real private PostgreSQL 15
 # (initdb in a temporary folder, run as the postgres user: PostgreSQL refuses root):
-#  1. the database is down when inspectd starts: inspectd waits with backoff (log lines say so,
-#     no gRPC port yet), and listens once the database is up;
+#  1. the database is down when inspectd starts: inspectd waits with backoff (log lines say so;
+#     its port answers health checks NOT_SERVING, nothing else), and listens once the database is
+#     up (health SERVING);
 #  2. a scan runs; its job is a row in PostgreSQL, not in a SQLite file;
 #  3. inspectd restarted on the same database lists the job and serves its depth artifact;
 #  4. a malformed URL is refused at start with exit 2 and a one-line message naming `database`;
@@ -45,14 +46,24 @@ start_inspectd() {  # LOG
 }
 psql_q() { PGPASSWORD="$password" psql -h 127.0.0.1 -p "$port" -U postgres -d postgres -Atc "$1"; }
 
-# 1. database down at start-up: inspectd waits, then listens.
+# 1. database down at start-up: inspectd waits with its health NOT_SERVING, then listens.
 start_inspectd "$work/inspectd.log"
 wait_for "inspectd to report the database down" 30 grep -q "retrying in" "$work/inspectd.log"
+wait_for "inspectd's waiting health port" 30 grep -q "^inspectd health on .*: NOT_SERVING" "$work/inspectd.log"
 ! grep -q "inspectd listening on" "$work/inspectd.log" || fail "listened before its database was up"
 kill -0 "$pid" || fail "inspectd exited instead of waiting for the database"
+health_addr="$(sed -n 's/^inspectd health on \([^ ]*\): .*/\1/p' "$work/inspectd.log" | head -n1)"
+for service in "" inspection.v1.InspectionService; do  # exit 4: NOT_SERVING (deploy/health_probe.cc)
+  rc=0; "$bin/inspect-health-probe" --addr "$health_addr" --service "$service" --timeout 5 >"$work/probe.txt" 2>&1 || rc=$?
+  [[ $rc -eq 4 ]] || fail "health '$service' while the database is down: probe exit $rc, expected 4 (NOT_SERVING): $(cat "$work/probe.txt")"
+done
 start_pg
 wait_for "inspectd to listen once the database is up" 60 grep -q "inspectd listening on" "$work/inspectd.log"
 addr="$(sed -n 's/^inspectd listening on \([^ ]*\).*/\1/p' "$work/inspectd.log" | head -n1)"
+for service in "" inspection.v1.InspectionService; do
+  rc=0; "$bin/inspect-health-probe" --addr "$addr" --service "$service" --timeout 5 >"$work/probe.txt" 2>&1 || rc=$?
+  [[ $rc -eq 0 ]] || fail "health '$service' once the database is up: probe exit $rc, expected 0 (SERVING): $(cat "$work/probe.txt")"
+done
 
 # 2. a scan; its job is in PostgreSQL.
 "$bin/inspectctl" --server "$addr" scan --out "$work/out" >"$work/scan.txt" 2>&1 || fail "scan: $(cat "$work/scan.txt")"
@@ -80,4 +91,4 @@ rc=0
 [[ $(wc -l <"$work/bad.txt") -eq 1 ]] || fail "malformed URL: expected one line: $(cat "$work/bad.txt")"
 grep -q "^inspectd: database: " "$work/bad.txt" || fail "malformed URL: message does not name database: $(cat "$work/bad.txt")"
 ! grep -rq "$password" "$work/bad.txt" "$work/inspectd.log" "$work/inspectd2.log" || fail "the password appears in inspectd's output"
-echo "PASS: inspectd waited for PostgreSQL, scanned into it, served the job after a restart; bad URL refused"
+echo "PASS: inspectd waited for PostgreSQL (health NOT_SERVING meanwhile), scanned into it, served the job after a restart; bad URL refused"
