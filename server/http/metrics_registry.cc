@@ -66,6 +66,11 @@ double Counter::Value(const LabelValues& labels) const {
 
 void Gauge::Set(const LabelValues& labels, double value) const { family_->Add(LabelsOf(*info_, labels)).Set(value); }
 
+void Gauge::Remove(const LabelValues& labels) const {
+  const prometheus::Labels l = LabelsOf(*info_, labels);
+  if (family_->Has(l)) family_->Remove(&family_->Add(l));
+}
+
 double Gauge::Value(const LabelValues& labels) const {
   const prometheus::Labels l = LabelsOf(*info_, labels);
   return family_->Has(l) ? family_->Add(l).Value() : 0.0;

@@ -61,6 +61,9 @@ class Gauge {
  public:
   void Set(const LabelValues& labels, double value) const;
   double Value(const LabelValues& labels) const;  // 0 for a series never set (not created)
+  // Drops the series (no sample until it is set again): for a value that no longer exists,
+  // which a stale number would misreport. No-op for a series never set.
+  void Remove(const LabelValues& labels) const;
 
  private:
   friend class MetricsRegistry;

@@ -177,11 +177,26 @@ std::string ServerMetrics::Render(const ScrapeState& state) {
                               *state.verification_state == s);
     }
   }
-  for (const auto& [name, value_u] : state.verified_characteristics) {
-    verification_value_.Set({name}, value_u.first);
-    verification_u_.Set({name}, value_u.second);
+  {
+    std::lock_guard<std::mutex> lock(render_mu_);
+    for (const std::string& name : shown_characteristics_) {
+      if (state.verified_characteristics.count(name) == 0) {
+        verification_value_.Remove({name});
+        verification_u_.Remove({name});
+      }
+    }
+    shown_characteristics_.clear();
+    for (const auto& [name, value_u] : state.verified_characteristics) {
+      verification_value_.Set({name}, value_u.first);
+      verification_u_.Set({name}, value_u.second);
+      shown_characteristics_.insert(name);
+    }
+    if (state.full_verification_age_days) {
+      verification_age_.Set({}, *state.full_verification_age_days);
+    } else {
+      verification_age_.Remove({});  // no full verification under the active calibration: no age
+    }
   }
-  if (state.full_verification_age_days) verification_age_.Set({}, *state.full_verification_age_days);
   return registry_.Render();
 }
 

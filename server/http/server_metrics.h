@@ -9,6 +9,7 @@
 #include <map>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <string_view>
 
@@ -88,6 +89,10 @@ class ServerMetrics {
   void ObserveWaitLocked(JobTrack& t, v1::JobKind kind, double elapsed_s);
 
   std::function<double()> now_s_;
+  std::mutex render_mu_;  // guards shown_characteristics_ (concurrent scrapes)
+  // The characteristics whose series the last scrape showed: dropped when the active
+  // calibration has no full verification any more (a recalibration), not left at old values.
+  std::set<std::string> shown_characteristics_;
   std::mutex mu_;  // guards jobs_seen_
   std::map<std::string, JobTrack> jobs_seen_;
 };

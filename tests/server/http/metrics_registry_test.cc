@@ -329,6 +329,23 @@ TEST(ServerMetricsTest, VerificationStateAndTheLastFullRecordsCharacteristicsAre
   has("inspectd_verification_characteristic{characteristic=\"alpha_z\"} 1.00109");
   has("inspectd_verification_characteristic_expanded_uncertainty{characteristic=\"N_M\"} 0.0072");
   has("inspectd_verification_full_age_days 2.5");
+  // A recalibration: no full verification under the new calibration. The old record's values
+  // and age go (no stale numbers), the state says due; a later full record shows again.
+  ScrapeState recalibrated;
+  recalibrated.rig_state = v1::RIG_STATE_READY;
+  recalibrated.verification_state = v1::VERIFICATION_STATE_DUE;
+  const std::string after = m.Render(recalibrated);
+  EXPECT_NE(after.find("\ninspectd_verification_state{state=\"due\"} 1\n"), std::string::npos) << after;
+  EXPECT_EQ(after.find("inspectd_verification_characteristic{"), std::string::npos) << after;
+  EXPECT_EQ(after.find("inspectd_verification_characteristic_expanded_uncertainty{"), std::string::npos) << after;
+  EXPECT_EQ(after.find("\ninspectd_verification_full_age_days "), std::string::npos) << after;
+  recalibrated.verified_characteristics["alpha_z"] = {1.25, 0.0018};  // exact in binary: printed as is
+  recalibrated.full_verification_age_days = 0.1;
+  const std::string again = m.Render(recalibrated);
+  EXPECT_NE(again.find("\ninspectd_verification_characteristic{characteristic=\"alpha_z\"} 1.25\n"), std::string::npos)
+      << again;
+  EXPECT_EQ(again.find("characteristic=\"N_M\""), std::string::npos) << again;
+  EXPECT_NE(again.find("\ninspectd_verification_full_age_days 0.1\n"), std::string::npos) << again;
   // Without a rig (or records) no state series at all.
   ServerMetrics none("9.9.9", [] { return 0.0; });
   EXPECT_EQ(none.Render(ScrapeState{}).find("inspectd_verification_state{"), std::string::npos);
