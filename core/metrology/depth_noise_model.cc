@@ -82,6 +82,9 @@ Status VerifiedCharacteristics::Validate() const {
   INSPECT_RETURN_IF_ERROR(check(amplification_u, "amplification_u"));
   INSPECT_RETURN_IF_ERROR(check(linearity_deviation_um, "linearity_deviation_um"));
   INSPECT_RETURN_IF_ERROR(check(flatness_um, "flatness_um"));
+  if (linearity_step_um && !(std::isfinite(*linearity_step_um) && *linearity_step_um > 0.0)) {
+    return Status::InvalidArgument("verified.linearity_step_um must be finite and > 0");
+  }
   if (amplification && !(std::isfinite(*amplification) && *amplification >= 0.5 && *amplification <= 2.0)) {
     return Status::InvalidArgument("verified.amplification must be in 0.5..2");
   }
@@ -146,7 +149,11 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
     // Not characterised at this step: the verified l_z bounds the deviation instead of +-step / 2.
     const double step = model.grid.median_step_um(), largest = model.linearity.MaxAbs() * step;
     const double lz = *options.verified.linearity_deviation_um;
-    if (largest > 0.0 && lz < largest) {
+    const std::optional<double>& verified_at = options.verified.linearity_step_um;
+    if (verified_at && step > *verified_at * (1.0 + options.linearity_step_tolerance)) {
+      model.linearity.source += "; the verified l_z (at " + std::to_string(*verified_at) +
+                                " um steps) does not apply at " + std::to_string(step) + " um steps";
+    } else if (largest > 0.0 && lz < largest) {
       for (double& v : model.linearity.bias_of_step) v *= lz / largest;
       model.linearity.source += "; scaled to the verified l_z " + std::to_string(lz) + " um";
     }

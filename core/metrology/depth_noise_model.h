@@ -73,6 +73,11 @@ struct VerifiedCharacteristics {
   std::optional<double> amplification;           // alpha_z, dimensionless (1 = ideal)
   std::optional<double> amplification_u;         // standard uncertainty of alpha_z (needs amplification)
   std::optional<double> linearity_deviation_um;  // l_z
+  // The stage step (um) at which l_z was determined; unset: unknown (applied at any step). l_z
+  // applies at this step and at finer ones (its size in um kept, as a characterised linearity's
+  // is: DepthNoiseOptions::linearity_step_tolerance), not at a coarser step, whose interpolation
+  // error it does not bound.
+  std::optional<double> linearity_step_um;
   std::optional<double> flatness_um;             // z_FLT
   // INVALID_ARGUMENT naming the field (negative or non-finite; amplification outside 0.5..2).
   Status Validate() const;

@@ -279,6 +279,33 @@ TEST(VerifiedCharacteristicsTest, VerifiedLinearityDeviationReplacesTheSawtoothB
   EXPECT_NEAR(wide->uncertainty.standard_uncertainty, bare->uncertainty.standard_uncertainty, 1e-12);
 }
 
+TEST(VerifiedCharacteristicsTest, VerifiedLinearityAppliesAtItsOwnStepAndFinerOnesOnly) {
+  // The scans here step 5 um. An l_z verified at 5 um or at 10 um (coarser: its size in um
+  // bounds a finer sampling too) replaces the sawtooth; one verified at 2 um does not bound the
+  // interpolation error of 5 um steps, so U stays the uncharacterised one.
+  auto bare = MeasureNoisyStep(1.3, 0.03, 1.0, {});
+  ASSERT_TRUE(bare.ok()) << bare.status().ToString();
+  VerifiedCharacteristics v;
+  v.linearity_deviation_um = 0.05;
+  for (double at : {5.0, 5.2, 10.0}) {
+    v.linearity_step_um = at;
+    auto r = MeasureNoisyStep(1.3, 0.03, 1.0, v);
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    EXPECT_LT(2.0 * r->uncertainty.standard_uncertainty, 0.15) << "verified at " << at << " um";
+  }
+  for (double at : {2.0, 4.0}) {
+    v.linearity_step_um = at;
+    auto r = MeasureNoisyStep(1.3, 0.03, 1.0, v);
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    EXPECT_NEAR(r->uncertainty.standard_uncertainty, bare->uncertainty.standard_uncertainty, 1e-12)
+        << "verified at " << at << " um";
+  }
+  v.linearity_step_um = 0.0;
+  auto bad = MeasureNoisyStep(1.3, 0.03, 1.0, v);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("verified.linearity_step_um"), std::string::npos) << bad.status().ToString();
+}
+
 TEST(VerifiedCharacteristicsTest, VerifiedAmplificationCoversAHeightScaleError) {
   // A 20 um step (a whole number of 4 steps: the linearity cancels) read 2 % long: 0.4 um, far
   // outside the random-only U. With alpha_z = 1.02 +- 0.005 verified, u_alpha = 0.0206 x 20.4 um.
