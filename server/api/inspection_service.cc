@@ -161,6 +161,7 @@ grpc::Status InspectionServiceImpl::Verify(grpc::ServerContext* ctx, const v1::V
       v1::JOB_KIND_VERIFY, req->request_id(), req->label(),
       [&]() -> StatusOr<JobWork> {
         INSPECT_ASSIGN_OR_RETURN(VerifyWork work, MapVerifyRequest(*req));
+        work.interval_days = options_.verification_interval_days;
         INSPECT_RETURN_IF_ERROR(rig_->CheckUsable());
         // Refused before it queues; RunVerification checks the mode's measures in full.
         SimulationControl* sim = rig_->rig().simulation();

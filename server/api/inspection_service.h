@@ -39,6 +39,8 @@ struct ServiceOptions {
   ResultFeed* results = nullptr;
   // Frames decode while an upload arrives (server/jobs/job_work.h).
   ReconstructPipelineOptions reconstruct;
+  // A full verification's validity (inspectd verification_interval_days).
+  int verification_interval_days = 30;
 };
 
 class InspectionServiceImpl final : public v1::InspectionService::Service {

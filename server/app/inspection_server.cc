@@ -158,6 +158,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   so.min_free_bytes = min_free_bytes;
   so.results = s->results_.get();
   so.reconstruct = options.reconstruct;
+  so.verification_interval_days = options.verification_interval_days;
   s->service_ = std::make_unique<InspectionServiceImpl>(so, s->store_.get(), s->jobs_.get(), s->rig_.get(),
                                                         s->calibrations_.get());
   if (options.no_rig) {

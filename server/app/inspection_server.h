@@ -58,6 +58,8 @@ struct ServerOptions {
   int64_t min_free_mb = 0;
   RetentionPolicy retention;       // enforced by a background sweeper; no limits = no sweeper
   int retention_interval_s = 600;  // how often the sweeper runs
+  // A full instrument verification's validity: its record's next_full_due (rig_verification.h).
+  int verification_interval_days = 30;
   SimulatedRigOptions simulation;  // used when no rig is given to Start
   // Reconstruct only (the scale-out pool): no rig is opened; rig calls answer FAILED_PRECONDITION.
   bool no_rig = false;

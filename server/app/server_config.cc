@@ -198,6 +198,8 @@ const std::vector<ConfigKey>& InspectdConfigKeys() {
       {"retention_keep_last", &C::retention_keep_last,
        "retention: the newest N finished jobs are kept whatever the limits (pinned jobs always are)"},
       {"retention_interval_s", &C::retention_interval_s, "retention: seconds between sweeps"},
+      {"verification_interval_days", &C::verification_interval_days,
+       "days a full instrument verification stays valid; the rig is 'verification due' after them"},
       {"decode_threads", &C::decode_threads,
        "reconstruct: threads decoding a stack's frames as they arrive; 0: all hardware threads"},
       {"decode_budget_mb", &C::decode_budget_mb,
@@ -406,6 +408,9 @@ Status ValidateConfig(const InspectdConfig& c) {
   if (c.retention_interval_s < 1) {
     return bad("retention_interval_s", std::to_string(c.retention_interval_s), "must be >= 1");
   }
+  if (c.verification_interval_days < 1 || c.verification_interval_days > 3650) {
+    return bad("verification_interval_days", std::to_string(c.verification_interval_days), "must be 1..3650");
+  }
   if (c.decode_threads < 0) return bad("decode_threads", std::to_string(c.decode_threads), "must be >= 0");
   if (c.decode_budget_mb < 0) return bad("decode_budget_mb", std::to_string(c.decode_budget_mb), "must be >= 0");
   if (c.artifact_threads < 0) return bad("artifact_threads", std::to_string(c.artifact_threads), "must be >= 0");
@@ -460,6 +465,7 @@ StatusOr<ServerOptions> ToServerOptions(const InspectdConfig& c) {
   o.retention.max_bytes = int64_t(std::min<uint64_t>(c.retention_max_mb, uint64_t(1) << 40) << 20);
   o.retention.keep_last = c.retention_keep_last;
   o.retention_interval_s = c.retention_interval_s;
+  o.verification_interval_days = c.verification_interval_days;
   o.no_rig = c.no_rig;
   o.reconstruct.decode_threads = c.decode_threads;
   o.reconstruct.max_decoded_bytes = int64_t(c.decode_budget_mb) << 20;

@@ -51,6 +51,7 @@ struct InspectdConfig {
   uint64_t retention_max_mb = 0;     // finished jobs' data above this is deleted, oldest first; 0 = none
   int retention_keep_last = 0;       // the newest N finished jobs are always kept
   int retention_interval_s = ServerOptions{}.retention_interval_s;
+  int verification_interval_days = ServerOptions{}.verification_interval_days;  // 1..3650
   // Reconstruction pipeline: decode threads, the decoded frames kept per
   // reconstruction (MiB), artifact files written at once; 0 threads = all hardware threads.
   int decode_threads = ServerOptions{}.reconstruct.decode_threads;

@@ -98,6 +98,9 @@ struct StudyWork {
 // stored with the calibration active as it runs.
 struct VerifyWork {
   VerificationMode mode = VerificationMode::kFull;
+  // A full verification's validity (inspectd verification_interval_days): its record's
+  // next_full_due is its finish time plus this.
+  double interval_days = 30.0;
 };
 
 using JobWork = std::variant<ScanWork, CalibrateWork, ReconstructWork, StudyWork, VerifyWork>;

@@ -62,7 +62,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunStudy(const StudyWork& work, const J
   std::vector<v1::InspectionResult> repeats;
   // The rig's last full verification, read once for every repeat (rig_verification.h).
   DepthNoiseOptions verified;
-  ApplyVerification(&verified);
+  const std::string verification_warning = ApplyVerification(&verified);
   auto measure = [&](int, const ScanOutcome& o) -> Status {
     DepthNoiseOptions noise;
     noise.window_px = plan.scan.sff.window_px;
@@ -124,6 +124,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunStudy(const StudyWork& work, const J
   }
   study.set_capable(capable);
   study.set_repositioning(scans.repositioning + work.repositioning_note);
+  study.set_verification_warning(verification_warning);
   if (StatusOr<v1::Job> job = store_->GetJob(job_id); job.ok()) study.set_owner(job->owner());
   *study.mutable_finish_time() = NowTimestamp();
 

@@ -4,7 +4,10 @@
 // procedure removes its work folder and puts the specimen back however it ends).
 #include <spdlog/spdlog.h>
 
+#include <google/protobuf/util/time_util.h>
+
 #include <algorithm>
+#include <cmath>
 
 #include "server/jobs/procedure_runner.h"
 #include "server/jobs/rig_verification.h"
@@ -60,6 +63,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunVerify(const VerifyWork& work, const
   });
   v1::VerificationRecord record = VerificationRecordProto(evaluated);
   record.set_verification_id(job_id);
+  record.set_z_step_um(plan.z_step_um);
   record.set_calibration_id(calibration_id);
   *record.mutable_finish_time() = CurrentTimestamp();
   if (StatusOr<v1::Job> job = store_->GetJob(job_id); job.ok()) record.set_owner(job->owner());
@@ -69,6 +73,10 @@ StatusOr<v1::JobResult> ProcedureRunner::RunVerify(const VerifyWork& work, const
     JudgeInterim(full.empty() ? nullptr : &full.front(), &record, record.finish_time());
   } else {
     record.set_state(v1::VERIFICATION_STATE_VERIFIED);
+    *record.mutable_next_full_due() =
+        google::protobuf::util::TimeUtil::NanosecondsToTimestamp(
+            google::protobuf::util::TimeUtil::TimestampToNanoseconds(record.finish_time()) +
+            static_cast<int64_t>(std::llround(work.interval_days * 86400.0)) * 1000000000LL);
   }
   if (context.cancel->load()) return Status::Cancelled("verification cancelled while storing");  // a cancel's last chance
   INSPECT_RETURN_IF_ERROR(store_->PutVerification(record));

@@ -38,6 +38,11 @@ std::string Fixed(double v, int digits) {
 
 }  // namespace
 
+double FullIntervalDays(const v1::VerificationRecord& full) {
+  if (!full.has_next_full_due()) return kFullVerificationIntervalDays;  // a record of an older inspectd
+  return DaysBetween(full.finish_time(), full.next_full_due());
+}
+
 google::protobuf::Timestamp CurrentTimestamp() {
   return google::protobuf::util::TimeUtil::NanosecondsToTimestamp(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
@@ -127,7 +132,7 @@ void JudgeInterim(const v1::VerificationRecord* full, v1::VerificationRecord* in
   InterimCheckResult result;
   if (full != nullptr) {
     const VerificationRecord limits = VerificationRecordFromProto(*full);
-    result = EvaluateInterimCheck(&limits, check, DaysBetween(full->finish_time(), now), kFullVerificationIntervalDays);
+    result = EvaluateInterimCheck(&limits, check, DaysBetween(full->finish_time(), now), FullIntervalDays(*full));
     interim->set_full_verification_id(full->verification_id());
   } else {
     result = EvaluateInterimCheck(nullptr, check, 0.0, kFullVerificationIntervalDays);
@@ -163,10 +168,11 @@ StatusOr<RigVerification> ReadRigVerification(DataStore& store, const std::strin
     return out;
   }
   const double age_days = DaysBetween(out.full->finish_time(), now);
-  if (age_days > kFullVerificationIntervalDays) {
+  const double interval_days = FullIntervalDays(*out.full);
+  if (age_days > interval_days) {
     out.state = v1::VERIFICATION_STATE_DUE;
     out.detail = "full verification " + out.full->verification_id() + " is " + Fixed(age_days, 1) +
-                 " days old (interval " + Fixed(kFullVerificationIntervalDays, 0) + " days)";
+                 " days old (interval " + Fixed(interval_days, interval_days < 10 ? 1 : 0) + " days)";
     return out;
   }
   // An interim check decides until the next full verification replaces its limits.
@@ -193,6 +199,7 @@ VerifiedCharacteristics VerifiedFrom(const v1::VerificationRecord& full) {
     v.amplification_u = alpha->standard_uncertainty();
   }
   if (lz) v.linearity_deviation_um = lz->value() + 2.0 * lz->standard_uncertainty();
+  if (lz && full.z_step_um() > 0.0) v.linearity_step_um = full.z_step_um();
   if (nm) v.noise_um = nm->value();
   if (flt) v.flatness_um = flt->value();
   if (!v.Validate().ok()) return {};

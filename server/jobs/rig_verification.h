@@ -17,10 +17,15 @@
 
 namespace inspection {
 
-// A full verification is due again after this long (ISO 25178-700 leaves the interval to the
-// user; a month is the usual interval between full verifications of an areal instrument in
-// production, the interim check in between).
+// A full verification is due again after this long unless inspectd's verification_interval_days
+// says otherwise (ISO 25178-700 leaves the interval to the user; a month is the usual interval
+// between full verifications of an areal instrument in production, the interim check in between).
+// Each full record carries its own next_full_due; a record without one (an older inspectd's) is
+// valid for this long.
 inline constexpr double kFullVerificationIntervalDays = 30.0;
+
+// The validity of `full` in days: next_full_due - finish_time, or kFullVerificationIntervalDays.
+double FullIntervalDays(const v1::VerificationRecord& full);
 
 // The characteristics, values and standard uncertainties with U = 2u, the step and sinusoid
 // points, the mode and the scan count; ids, time, calibration and state are the caller's.
@@ -42,8 +47,8 @@ struct RigVerification {
 // Days between two record times (b - a).
 double DaysBetween(const google::protobuf::Timestamp& a, const google::protobuf::Timestamp& b);
 
-// DUE without a full verification under calibration_id, or when it is older than
-// kFullVerificationIntervalDays at `now`; FAILED (or DUE) as the newest interim check decided
+// DUE without a full verification under calibration_id, or when it is older than its
+// FullIntervalDays at `now`; FAILED (or DUE) as the newest interim check decided
 // when it is newer than the full one; VERIFIED otherwise.
 StatusOr<RigVerification> ReadRigVerification(DataStore& store, const std::string& calibration_id,
                                               const google::protobuf::Timestamp& now);

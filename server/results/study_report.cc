@@ -211,6 +211,11 @@ StatusOr<std::string> RenderStudyReport(const v1::Study& study, const std::strin
           std::to_string(study.repeats()) + " repeats · study " + HtmlEscape(study.study_id()) + "</p>";
   html += "<p>calibration " + HtmlEscape(study.calibration_id().empty() ? "none (uncalibrated)" : study.calibration_id()) +
           " · re-positioning: " + HtmlEscape(study.repositioning()) + "</p>";
+  html += "<p id=\"verification\">instrument verification: " +
+          (study.verification_warning().empty() ? std::string("verified")
+                                                : "<strong class=\"c-nok\">" + HtmlEscape(study.verification_warning()) +
+                                                      "</strong>") +
+          "</p>";
   if (study.has_finish_time()) {
     html += "<p>finished " + HtmlEscape(google::protobuf::util::TimeUtil::ToString(study.finish_time())) + "</p>";
   }

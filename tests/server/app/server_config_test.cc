@@ -55,7 +55,7 @@ TEST(ServerConfig, NamesDerivedFromTheKey) {
   EXPECT_EQ(key->FlagName(), "--auth-token-file");
   EXPECT_EQ(key->EnvironmentName(), "INSPECTD_AUTH_TOKEN_FILE");
   EXPECT_EQ(FindConfigKey("auth-token-file"), nullptr);  // file keys use '_' only
-  EXPECT_EQ(InspectdConfigKeys().size(), 51u);           // every inspectd flag before --config
+  EXPECT_EQ(InspectdConfigKeys().size(), 52u);           // every inspectd flag before --config
 }
 
 TEST(ServerConfig, DatabaseSettingsAreCheckedRedactedAndReachServerOptions) {
@@ -352,6 +352,25 @@ TEST_F(ConfigFileTest, TokenFileReadIntoServerOptions) {
   EXPECT_EQ(o.status().message(), "auth_token_file '" + c.auth_token_file + "' is unreadable or empty");
   c.auth_token_file = (dir_ / "absent").string();
   EXPECT_FALSE(ToServerOptions(c).ok());
+}
+
+TEST(VerificationIntervalConfig, TheIntervalReachesServerOptionsAndBadValuesNameTheKey) {
+  ConfigLayers layers;
+  layers.environment = {{"INSPECTD_VERIFICATION_INTERVAL_DAYS", "7"}};
+  auto r = ResolveInspectdConfig(layers);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  auto o = ToServerOptions(r->config);
+  ASSERT_TRUE(o.ok()) << o.status().ToString();
+  EXPECT_EQ(o->verification_interval_days, 7);
+  EXPECT_EQ(ServerOptions{}.verification_interval_days, 30);
+  for (const char* bad : {"0", "3651"}) {
+    layers.environment = {{"INSPECTD_VERIFICATION_INTERVAL_DAYS", bad}};
+    // Refused as the layers resolve (before any server option exists), naming the key.
+    auto rb = ResolveInspectdConfig(layers);
+    ASSERT_FALSE(rb.ok()) << bad;
+    EXPECT_EQ(rb.status().code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(rb.status().message().find("verification_interval_days"), std::string::npos) << rb.status().message();
+  }
 }
 
 }  // namespace

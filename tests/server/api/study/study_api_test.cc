@@ -164,6 +164,12 @@ TEST_F(StudyApiTest, AStudyIsStoredListedReportedAndWarnsLaterVerdicts) {
   EXPECT_NE(html.str().find("id=\"capability\" class=\"c-nok\">NOT CAPABLE<"), std::string::npos);
   EXPECT_NE(html.str().find("1 um step standard &lt;type A&gt;"), std::string::npos);
   EXPECT_EQ(html.str().find("<script"), std::string::npos);
+  // The rig was never verified: the study says so, in the record and the report, as its scans' results do.
+  EXPECT_EQ(study.verification_warning().rfind("verification due: no full verification under ", 0), 0u)
+      << study.verification_warning();
+  EXPECT_NE(html.str().find("<p id=\"verification\">instrument verification: <strong class=\"c-nok\">" +
+                            study.verification_warning() + "</strong></p>"),
+            std::string::npos);
 
   // A later scan of the recipe: the verdicts stand, the not-capable measurement warns.
   v1::ScanRequest scan;
@@ -173,6 +179,7 @@ TEST_F(StudyApiTest, AStudyIsStoredListedReportedAndWarnsLaterVerdicts) {
   ASSERT_TRUE(client_->Scan(scan, {}, &part).ok());
   const v1::InspectionResult& ins = part.result().inspection();
   ASSERT_EQ(ins.measurements_size(), 2);
+  EXPECT_EQ(ins.verification_warning(), study.verification_warning());
   EXPECT_EQ(ins.measurements(0).capability_warning().empty(), step.capable()) << ins.measurements(0).capability_warning();
   EXPECT_NE(ins.measurements(1).capability_warning().find("gauge not capable (Type-1 study " + job.job_id()),
             std::string::npos)

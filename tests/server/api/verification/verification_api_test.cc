@@ -144,6 +144,11 @@ TEST_F(VerificationApiTest, AFullVerificationIsStoredWithTheCalibrationAndUsedBy
   EXPECT_EQ(full.calibration_id(), cal);
   EXPECT_EQ(full.owner(), "anonymous");
   EXPECT_EQ(full.state(), v1::VERIFICATION_STATE_VERIFIED);
+  // Valid for the server's verification_interval_days (default 30), to the second.
+  ASSERT_TRUE(full.has_next_full_due());
+  EXPECT_EQ(full.next_full_due().seconds() - full.finish_time().seconds(), 30 * 86400);
+  EXPECT_EQ(full.next_full_due().nanos(), full.finish_time().nanos());
+  EXPECT_EQ(full.z_step_um(), 2.0);  // l_z was determined at 2 um steps: it bounds 2 um scans and finer
   EXPECT_EQ(full.scans(), 15);  // afl x 2, pgr2/5/10/20, acg, 8 asg
   EXPECT_GT(frames, 15 * 5);
   EXPECT_EQ(measures, 2 + 4 + 1 + 8);
