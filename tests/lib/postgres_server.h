@@ -10,7 +10,7 @@
 // template cluster (/tmp/inspect-pg-template-<uid>-<binary stamp>, made under a lock and
 // renamed into place whole) and every process copies it into its own folder. Every cluster has
 // the same superuser and password, so a copy is what initdb would have made. When the template
-// cannot be made or copied, the process runs initdb itself.
+// cannot be made or copied, or a copy does not start, the process runs initdb itself.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -63,13 +63,18 @@ class PostgresServer {
       std::ofstream(dir_ + "/pw") << Password() << "\n";
     }
     if (geteuid() == 0) Run("chown postgres " + dir_ + "/pw");
-    if (!CopyTemplate(dir_ + "/data") && !InitDb(dir_ + "/data", dir_ + "/pw", dir_ + "/initdb.log")) {
+    const bool copied = CopyTemplate(dir_ + "/data");
+    if (!copied && !InitDb(dir_ + "/data", dir_ + "/pw", dir_ + "/initdb.log")) {
       ADD_FAILURE() << "initdb failed: see " << dir_ << "/initdb.log";
       return;
     }
-    if (!Run(run_as_ + std::string(kBinDir) + "/pg_ctl -D " + dir_ + "/data -w -l " + dir_ + "/server.log -o \"-k " +
-             dir_ + " -p " + std::to_string(port_) + " -c listen_addresses=127.0.0.1 -c fsync=off\" start > " + dir_ +
-             "/pg_ctl.log 2>&1")) {
+    bool up = Start("/pg_ctl.log");
+    if (!up && copied) {  // a damaged template (a /tmp cleaner?): this process's own initdb instead
+      std::error_code ec;
+      std::filesystem::remove_all(dir_ + "/data", ec);
+      up = InitDb(dir_ + "/data", dir_ + "/pw", dir_ + "/initdb.log") && Start("/pg_ctl.log");
+    }
+    if (!up) {
       ADD_FAILURE() << "pg_ctl start failed: see " << dir_ << "/server.log";
       return;
     }
@@ -120,9 +125,10 @@ class PostgresServer {
   }
   // Stops and starts the server (as a restart of the database host).
   bool Stop() const { return Run(run_as_ + std::string(kBinDir) + "/pg_ctl -D " + dir_ + "/data -w -m fast stop > /dev/null 2>&1"); }
-  bool Start() const {
+  bool Start(const std::string& log = "") const {
     return Run(run_as_ + std::string(kBinDir) + "/pg_ctl -D " + dir_ + "/data -w -l " + dir_ + "/server.log -o \"-k " +
-               dir_ + " -p " + std::to_string(port_) + " -c listen_addresses=127.0.0.1 -c fsync=off\" start > /dev/null 2>&1");
+               dir_ + " -p " + std::to_string(port_) + " -c listen_addresses=127.0.0.1 -c fsync=off\" start > " +
+               (log.empty() ? std::string("/dev/null") : dir_ + log) + " 2>&1");
   }
 
  private:
