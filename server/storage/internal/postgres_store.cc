@@ -7,6 +7,8 @@
 #include <arpa/inet.h>
 #include <libpq-fe.h>
 #include <poll.h>
+#include <sys/eventfd.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -182,19 +184,31 @@ constexpr char kJobChannel[] = "inspectd_job";
 
 // One connection that LISTENs on both channels, on a thread of its own, handing each
 // notification to the listener. Reconnects (once a second) after the server went away; what was
-// notified meanwhile is lost, which the waiters' polling covers.
+// notified meanwhile is lost, which the waiters' polling covers. The thread sleeps in poll() on
+// the connection's socket and an eventfd the destructor signals, so closing a store (every pool
+// replica's shutdown) returns at once instead of waiting out a poll timeout.
 class NotificationListener {
  public:
   using Connect = std::function<PGconn*()>;
   NotificationListener(Connect connect, DataStore::ChangeListener listener)
-      : connect_(std::move(connect)), listener_(std::move(listener)), thread_([this] { Run(); }) {}
+      : connect_(std::move(connect)),
+        listener_(std::move(listener)),
+        wake_fd_(eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)),
+        thread_([this] { Run(); }) {
+    if (wake_fd_ < 0) spdlog::warn("database: eventfd failed ({}): closing the store waits out a 200 ms poll", errno);
+  }
   ~NotificationListener() {
     {
       std::lock_guard<std::mutex> lock(mu_);
       stop_ = true;
     }
     cv_.notify_all();
+    if (wake_fd_ >= 0) {
+      const uint64_t one = 1;
+      [[maybe_unused]] const ssize_t n = write(wake_fd_, &one, sizeof(one));  // cannot fail short of overflow
+    }
     thread_.join();
+    if (wake_fd_ >= 0) close(wake_fd_);
   }
 
  private:
@@ -217,9 +231,13 @@ class NotificationListener {
           continue;
         }
       }
-      // Wakes at a notification, or every 200 ms to see whether the store is closing.
-      pollfd fd{PQsocket(conn), POLLIN, 0};
-      if (poll(&fd, 1, 200) < 0 && errno != EINTR) fd.revents = POLLERR;
+      // Wakes at a notification or when the store is closing (the eventfd); the 200 ms timeout
+      // only matters when there is no eventfd.
+      pollfd fds[2] = {{PQsocket(conn), POLLIN, 0}, {wake_fd_, POLLIN, 0}};
+      const nfds_t nfds = wake_fd_ >= 0 ? 2 : 1;
+      if (poll(fds, nfds, 200) < 0 && errno != EINTR) fds[0].revents = POLLERR;
+      if (fds[1].revents != 0) continue;  // stop_ is set: the loop's check ends it
+      pollfd& fd = fds[0];
       if (fd.revents != 0 && PQconsumeInput(conn) == 0) {
         spdlog::debug("database: the notification connection broke: {}", OneLine(PQerrorMessage(conn)));
         PQfinish(conn);
@@ -249,6 +267,7 @@ class NotificationListener {
   std::mutex mu_;
   std::condition_variable cv_;
   bool stop_ = false;
+  const int wake_fd_;   // eventfd: written once by the destructor; -1 when eventfd failed
   std::thread thread_;  // last: started once the members it reads exist
 };
 
