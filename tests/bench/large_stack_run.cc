@@ -7,9 +7,14 @@
 // start to downloaded result, time per frame, and the largest disk use of the server's data
 // directory and the client's temporary folder during the run (sampled), against the stack's size.
 // Prints one Markdown table (docs: tests/bench/large_stack_output.md).
+// With --interrupt-at F (0 < F < 1) each run is instead an interrupted upload: the client is
+// killed (SIGKILL) once the server holds F of the stack's bytes in uploads/, then the bench prints
+// what the server has (its job list, what is left in uploads/ and when it goes, what is left after
+// a restart) and whether the same upload run again succeeds.
 //
-//   large-stack-bench --inspectd build/bin/inspectd --inspectctl build/bin/inspectctl \
+//   large-stack-bench --inspectd build/bin/inspectd --inspectctl build/bin/inspectctl
 //       --work /work/tmp/large --format tiff16 --frames 30,100 [--width 6000 --height 4000]
+//       [--interrupt-at 0.5]
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
@@ -20,6 +25,7 @@
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -165,6 +171,64 @@ class StackGenerator {
   std::vector<cv::Mat> levels_;
 };
 
+// Writes the stack into `images` (frame_NNNN.tif / .jpg); "" or what failed.
+std::string GenerateStack(const fs::path& images, const std::string& format, int frames, cv::Size size,
+                          double* seconds) {
+  const bool jpeg = format == "jpeg";
+  const auto g0 = Clock::now();
+  StackGenerator gen(size, frames, jpeg);
+  for (int k = 0; k < frames; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, jpeg ? "frame_%04d.jpg" : "frame_%04d.tif", k);
+    const std::vector<int> params =
+        jpeg ? std::vector<int>{cv::IMWRITE_JPEG_QUALITY, 92} : std::vector<int>{cv::IMWRITE_TIFF_COMPRESSION, 1};
+    if (!cv::imwrite((images / name).string(), gen.Frame(k), params)) return std::string("cannot write ") + name;
+  }
+  *seconds = Seconds(g0, Clock::now());
+  return "";
+}
+
+// Starts inspectd on `data` (logs in work/inspectd.out, .err, appended to: a restart keeps the
+// first run's lines) and waits for its address; -1 and *note on failure.
+pid_t StartServer(const std::string& inspectd, const fs::path& data, const fs::path& work, std::string* address,
+                  std::string* note) {
+  const fs::path log = work / "inspectd.out";
+  const std::string before = ReadAll(log);
+  const long lines_before = long(std::count(before.begin(), before.end(), '\n'));
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+  posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, (work / "inspectd.err").c_str(),
+                                   O_WRONLY | O_CREAT | O_APPEND, 0644);
+  std::vector<std::string> storage = {inspectd, "--listen", "127.0.0.1:0", "--data-dir", data.string(), "--no-rig"};
+  std::vector<char*> argv;
+  for (auto& s : storage) argv.push_back(s.data());
+  argv.push_back(nullptr);
+  pid_t server = -1;
+  const int rc = posix_spawn(&server, storage[0].c_str(), &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) {
+    *note = "inspectd did not start: " + std::string(std::strerror(rc));
+    return -1;
+  }
+  address->clear();
+  for (const auto deadline = Clock::now() + std::chrono::seconds(60); address->empty() && Clock::now() < deadline;) {
+    std::istringstream lines(ReadAll(log));
+    long n = 0;
+    for (std::string line; std::getline(lines, line); ++n) {
+      if (n >= lines_before && line.rfind("inspectd listening on ", 0) == 0) *address = line.substr(22);
+    }
+    if (address->empty()) std::this_thread::sleep_for(std::chrono::milliseconds(50));  // polling, with a deadline
+  }
+  if (address->empty()) {
+    *note = "inspectd did not announce its address: " + ReadAll(work / "inspectd.err");
+    kill(server, SIGKILL);
+    waitpid(server, nullptr, 0);
+    return -1;
+  }
+  return server;
+}
+
 struct Run {
   std::string format;
   int frames = 0;
@@ -186,6 +250,7 @@ Run RunOne(const std::string& inspectd, const std::string& inspectctl, const fs:
   const fs::path data = work / "server-data", tmp = work / "client-tmp", out = work / "result";
   for (const auto& d : {images, data, tmp, out}) fs::remove_all(d);
   for (const auto& d : {images, tmp}) fs::create_directories(d);
+  for (const char* log : {"inspectd.out", "inspectd.err"}) fs::remove(work / log);
 
   // Room for the folder and its upload, with a margin, or the run is not attempted.
   const double frame_bytes = jpeg ? 0.6 * size.area() : 2.0 * size.area() + 4096;
@@ -197,44 +262,13 @@ Run RunOne(const std::string& inspectd, const std::string& inspectctl, const fs:
              std::to_string(int(free_bytes / 1e9)) + " GB free";
     return r;
   }
-  const auto g0 = Clock::now();
-  {
-    StackGenerator gen(size, frames, jpeg);
-    for (int k = 0; k < frames; ++k) {
-      char name[32];
-      std::snprintf(name, sizeof name, jpeg ? "frame_%04d.jpg" : "frame_%04d.tif", k);
-      const std::vector<int> params =
-          jpeg ? std::vector<int>{cv::IMWRITE_JPEG_QUALITY, 92} : std::vector<int>{cv::IMWRITE_TIFF_COMPRESSION, 1};
-      if (!cv::imwrite((images / name).string(), gen.Frame(k), params)) {
-        r.note = std::string("cannot write ") + name;
-        return r;
-      }
-    }
-  }
-  r.generate_s = Seconds(g0, Clock::now());
+  r.note = GenerateStack(images, format, frames, size, &r.generate_s);
+  if (!r.note.empty()) return r;
   r.stack_bytes = TreeBytes(images);
 
-  const pid_t server = Spawn({inspectd, "--listen", "127.0.0.1:0", "--data-dir", data.string(), "--no-rig"},
-                             work / "inspectd.out", work / "inspectd.err");
-  if (server < 0) {
-    r.note = "inspectd did not start";
-    return r;
-  }
   std::string address;
-  for (const auto deadline = Clock::now() + std::chrono::seconds(60); address.empty() && Clock::now() < deadline;) {
-    std::istringstream lines(ReadAll(work / "inspectd.out"));
-    for (std::string line; std::getline(lines, line);) {
-      if (line.rfind("inspectd listening on ", 0) == 0) address = line.substr(22);
-    }
-    if (address.empty()) std::this_thread::sleep_for(std::chrono::milliseconds(50));  // polling, with a deadline
-  }
-  if (address.empty()) {
-    r.note = "inspectd did not announce its address: " + ReadAll(work / "inspectd.err");
-    kill(server, SIGKILL);
-    waitpid(server, nullptr, 0);
-    return r;
-  }
-
+  const pid_t server = StartServer(inspectd, data, work, &address, &r.note);
+  if (server < 0) return r;
   std::atomic<bool> done{false};
   // Disk use while the run goes on, and the server's VmRSS over time (a TSV beside the logs: where
   // in the job the peak falls, upload, alignment, engine pass or post-processing).
@@ -291,6 +325,173 @@ Run RunOne(const std::string& inspectd, const std::string& inspectctl, const fs:
   return r;
 }
 
+// What data/uploads holds: "empty" or each entry with its files and bytes.
+std::string UploadsState(const fs::path& data) {
+  std::error_code ec;
+  std::ostringstream out;
+  int entries = 0;
+  for (const auto& e : fs::directory_iterator(data / "uploads", ec)) {
+    int files = 0;
+    for (auto it = fs::recursive_directory_iterator(e.path(), ec); !ec && it != fs::recursive_directory_iterator();
+         it.increment(ec)) {
+      files += it->is_regular_file() ? 1 : 0;
+    }
+    char line[256];
+    std::snprintf(line, sizeof line, "%s%s (%d files, %.3f GB)", entries ? ", " : "", e.path().filename().c_str(), files,
+                  TreeBytes(e.path()) / 1e9);
+    out << line;
+    ++entries;
+  }
+  if (ec && entries == 0) return "no uploads/ folder (" + ec.message() + ")";
+  return entries == 0 ? "empty" : std::to_string(entries) + " entr" + (entries == 1 ? "y: " : "ies: ") + out.str();
+}
+
+// `inspectctl jobs` against the server: "N jobs" and each job's id, state and error.
+std::string JobsSummary(const std::string& inspectctl, const std::string& address, const fs::path& work) {
+  const pid_t p = Spawn({inspectctl, "--server", address, "--json", "jobs"}, work / "jobs.out", work / "jobs.err");
+  int status = 0;
+  if (p > 0) waitpid(p, &status, 0);
+  if (p <= 0 || !WIFEXITED(status) || WEXITSTATUS(status) != 0) return "inspectctl jobs failed: " + ReadAll(work / "jobs.err");
+  const nlohmann::json j = nlohmann::json::parse(ReadAll(work / "jobs.out"), nullptr, false);
+  if (j.is_discarded()) return "inspectctl jobs: no JSON: " + ReadAll(work / "jobs.out");
+  const nlohmann::json jobs = j.value("jobs", nlohmann::json::array());
+  std::string out = std::to_string(jobs.size()) + " job" + (jobs.size() == 1 ? "" : "s");
+  for (const auto& job : jobs) {
+    out += "; " + job.value("job_id", std::string("?")) + " " + job.value("state", std::string("?"));
+    const std::string error = job.value("error_message", std::string());
+    if (!error.empty()) out += " (" + error + ")";
+  }
+  return out;
+}
+
+// The server log's lines from byte `from` on that name the Reconstruct call or uploads/.
+std::string LogLines(const fs::path& log, size_t from) {
+  const std::string text = ReadAll(log);
+  std::istringstream lines(text.size() > from ? text.substr(from) : "");
+  std::string out;
+  for (std::string line; std::getline(lines, line);) {
+    if (line.find("Reconstruct") != std::string::npos || line.find("upload") != std::string::npos ||
+        line.find("job ") != std::string::npos) {
+      out += "    " + line + "\n";
+    }
+  }
+  return out.empty() ? "    (none)\n" : out;
+}
+
+// --interrupt-at: an upload killed part-way (SIGKILL of inspectctl once the server holds
+// `fraction` of the stack's bytes), what the server keeps of it, and the same upload run again.
+void RunInterrupted(const std::string& inspectd, const std::string& inspectctl, const fs::path& work,
+                    const std::string& format, int frames, cv::Size size, const std::vector<std::string>& extra,
+                    double fraction) {
+  std::printf("\n### interrupted upload: %s, %d frames of %dx%d, client killed at %.0f %% of the stack\n\n",
+              format.c_str(), frames, size.width, size.height, 100 * fraction);
+  const bool jpeg = format == "jpeg";
+  const fs::path images = work / ("images-" + format + "-" + std::to_string(frames));
+  const fs::path data = work / "server-data", tmp = work / "client-tmp", out = work / "result";
+  for (const auto& d : {images, data, tmp, out}) fs::remove_all(d);
+  for (const auto& d : {images, tmp}) fs::create_directories(d);
+  for (const char* log : {"inspectd.out", "inspectd.err"}) fs::remove(work / log);
+  const double frame_bytes = jpeg ? 0.6 * size.area() : 2.0 * size.area() + 4096;
+  struct statvfs vfs {};
+  statvfs(work.c_str(), &vfs);
+  if (2.0 * frames * frame_bytes + 8e9 > double(vfs.f_bavail) * vfs.f_frsize) {
+    std::printf("not run: not enough free disk\n");
+    return;
+  }
+  double generate_s = 0;
+  if (std::string e = GenerateStack(images, format, frames, size, &generate_s); !e.empty()) {
+    std::printf("not run: %s\n", e.c_str());
+    return;
+  }
+  const int64_t stack_bytes = TreeBytes(images);
+  std::printf("- stack: %.3f GB in %d files, generated in %.0f s\n", stack_bytes / 1e9, frames, generate_s);
+  std::string address, note;
+  pid_t server = StartServer(inspectd, data, work, &address, &note);
+  if (server < 0) {
+    std::printf("not run: %s\n", note.c_str());
+    return;
+  }
+  std::vector<std::string> args = {inspectctl, "--server", address, "--json", "reconstruct", "--images",
+                                   images.string(), "--z-step", "1", "--out", out.string()};
+  args.insert(args.end(), extra.begin(), extra.end());
+  setenv("TMPDIR", tmp.c_str(), 1);
+  const size_t log_at_start = ReadAll(work / "inspectd.out").size();
+
+  // 1. The upload, killed once the server holds `fraction` of the bytes (sampled every 20 ms).
+  const auto c0 = Clock::now();
+  const pid_t client = Spawn(args, work / "inspectctl.out", work / "inspectctl.err");
+  int status = 0;
+  bool exited = false;
+  int64_t held = 0;
+  while (client > 0 && !exited) {
+    held = TreeBytes(data / "uploads");
+    if (held >= fraction * stack_bytes) break;
+    exited = waitpid(client, &status, WNOHANG) == client;
+    if (!exited) std::this_thread::sleep_for(std::chrono::milliseconds(20));  // a sampling period
+  }
+  if (exited) {
+    std::printf("- the client ended before %.0f %% was uploaded (exit %d): not an interrupted upload\n",
+                100 * fraction, WIFEXITED(status) ? WEXITSTATUS(status) : -1);
+  } else {
+    kill(client, SIGKILL);
+    waitpid(client, &status, 0);
+  }
+  const auto killed = Clock::now();
+  std::printf("- inspectctl killed (SIGKILL) %.1f s after its start, the server then holding %.3f GB (%.1f %%) in "
+              "uploads/\n",
+              Seconds(c0, killed), held / 1e9, 100.0 * held / stack_bytes);
+  std::printf("- uploads/ right after the kill: %s\n", UploadsState(data).c_str());
+  // 2. How long the partial folder stays (sampled every 50 ms, at most 120 s).
+  std::string state = UploadsState(data);
+  while (state != "empty" && Seconds(killed, Clock::now()) < 120) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));  // a sampling period, with a deadline
+    state = UploadsState(data);
+  }
+  std::printf("- uploads/ %.2f s after the kill: %s\n", Seconds(killed, Clock::now()), state.c_str());
+  std::printf("- jobs on the server: %s\n", JobsSummary(inspectctl, address, work).c_str());
+  std::printf("- data dir: %.3f GB (stack %.3f GB)\n", TreeBytes(data) / 1e9, stack_bytes / 1e9);
+  std::printf("- server log for the interrupted call:\n%s", LogLines(work / "inspectd.out", log_at_start).c_str());
+
+  // 3. A restart of the server on the same data dir.
+  kill(server, SIGTERM);
+  waitpid(server, nullptr, 0);
+  std::printf("- uploads/ after the server stopped (SIGTERM): %s\n", UploadsState(data).c_str());
+  server = StartServer(inspectd, data, work, &address, &note);
+  if (server < 0) {
+    std::printf("- restart failed: %s\n", note.c_str());
+    return;
+  }
+  std::printf("- uploads/ after a restart: %s; jobs: %s\n", UploadsState(data).c_str(),
+              JobsSummary(inspectctl, address, work).c_str());
+
+  // 4. The same upload again, in full (the protocol has no resume: it starts from byte 0).
+  args[2] = address;
+  const size_t log_at_rerun = ReadAll(work / "inspectd.out").size();
+  const auto r0 = Clock::now();
+  const pid_t again = Spawn(args, work / "inspectctl.out", work / "inspectctl.err");
+  int again_status = 0;
+  if (again > 0) waitpid(again, &again_status, 0);
+  const bool ok = again > 0 && WIFEXITED(again_status) && WEXITSTATUS(again_status) == 0;
+  std::string job_state = "?";
+  {
+    const std::string text = ReadAll(work / "inspectctl.out");
+    const nlohmann::json j = nlohmann::json::parse(text.substr(text.rfind('\n', text.size() - 2) + 1), nullptr, false);
+    if (!j.is_discarded() && j.contains("job")) job_state = j["job"].value("state", std::string("?"));
+  }
+  std::printf("- the same upload run again: exit %d, job %s, %.1f s%s\n",
+              WIFEXITED(again_status) ? WEXITSTATUS(again_status) : -1, job_state.c_str(), Seconds(r0, Clock::now()),
+              ok ? "" : (": " + ReadAll(work / "inspectctl.err").substr(0, 300)).c_str());
+  std::printf("- server log for the rerun:\n%s", LogLines(work / "inspectd.out", log_at_rerun).c_str());
+  std::printf("- afterwards: uploads/ %s; jobs: %s\n", UploadsState(data).c_str(),
+              JobsSummary(inspectctl, address, work).c_str());
+  kill(server, SIGTERM);
+  waitpid(server, nullptr, 0);
+  std::fflush(stdout);
+  fs::remove_all(images);
+  fs::remove_all(data);
+  fs::remove_all(out);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -298,6 +499,7 @@ int main(int argc, char** argv) {
   std::string inspectd, inspectctl, work, formats = "tiff16,jpeg", frame_list = "30,100";
   int width = 6000, height = 4000;
   std::vector<std::string> extra;
+  double interrupt_at = 0;
   app.add_option("--inspectd", inspectd)->required();
   app.add_option("--inspectctl", inspectctl)->required();
   app.add_option("--work", work, "Folder for the frames and the server's data (removed after each run)")->required();
@@ -306,6 +508,10 @@ int main(int argc, char** argv) {
   app.add_option("--width", width);
   app.add_option("--height", height);
   app.add_option("--extra", extra, "More inspectctl reconstruct arguments (e.g. --alignment none)");
+  app.add_option("--interrupt-at", interrupt_at,
+                 "Instead of the table: kill the client when the server holds this fraction of the upload "
+                 "(0 < f < 1), show what the server keeps, run the upload again")
+      ->check(CLI::Range(0.01, 0.99));
   CLI11_PARSE(app, argc, argv);
   fs::create_directories(work);
 
@@ -321,6 +527,14 @@ int main(int argc, char** argv) {
     std::string item;
     std::getline(ss, item, ',');
     if (!item.empty()) format_list.push_back(item);
+  }
+  if (interrupt_at > 0) {
+    for (const auto& format : format_list) {
+      for (int n : counts) {
+        RunInterrupted(inspectd, inspectctl, fs::path(work), format, n, cv::Size(width, height), extra, interrupt_at);
+      }
+    }
+    return 0;
   }
   const double pixels = double(width) * height;
   const double target_mb = (40.0 * pixels + 500e6) / 1e6;
