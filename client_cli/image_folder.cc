@@ -3,7 +3,12 @@
 #include "client_cli/image_folder.h"
 
 #include <glob.h>
+#include <signal.h>
 #include <stdlib.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
 
 #include <algorithm>
 #include <cctype>
@@ -250,15 +255,46 @@ std::string StackManifestJson(const std::vector<ImageFrame>& frames, std::option
   return j.dump(2) + "\n";
 }
 
+namespace {
+
+// A temporary stack folder names the inspectctl that made it (its pid in kOwnerFile), so that a
+// folder whose inspectctl was killed before it could remove it (SIGKILL, a crash: its destructor
+// never ran) is removed by the next `reconstruct --images` of the same user. Left alone, its hard
+// links become a full second copy of the stack once the user deletes the originals. A folder
+// without the file (an older inspectctl's, or one being created) and one whose process lives (or
+// whose pid was reused) are kept.
+constexpr char kOwnerFile[] = ".inspectctl-owner";
+
+void RemoveStaleStackFolders(const fs::path& tmp) {
+  std::error_code ec;
+  for (auto it = fs::directory_iterator(tmp, ec); !ec && it != fs::directory_iterator(); it.increment(ec)) {
+    const fs::path dir = it->path();
+    if (dir.filename().string().rfind("inspectctl-stack-", 0) != 0) continue;
+    struct stat st {};
+    if (::lstat(dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode) || st.st_uid != ::geteuid()) continue;
+    long pid = 0;
+    std::ifstream owner(dir / kOwnerFile);
+    if (!(owner >> pid) || pid <= 0) continue;
+    if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive, or not ours to ask
+    std::error_code removed;
+    fs::remove_all(dir, removed);  // links and stack.json only, never what they point to
+  }
+}
+
+}  // namespace
+
 grpc::Status StackFolder::Create(const std::vector<ImageFrame>& frames, const std::string& manifest_json,
                                  const fs::path& dir) {
   Remove();
   std::error_code ec;
   if (dir.empty()) {
-    std::string pattern = (fs::temp_directory_path(ec) / "inspectctl-stack-XXXXXX").string();
+    const fs::path tmp = fs::temp_directory_path(ec);
+    if (!ec) RemoveStaleStackFolders(tmp);
+    std::string pattern = (tmp / "inspectctl-stack-XXXXXX").string();
     if (ec || mkdtemp(pattern.data()) == nullptr) return Invalid("--images: cannot create a temporary stack folder");
     path_ = pattern;
     temporary_ = true;
+    std::ofstream(path_ / kOwnerFile) << ::getpid() << "\n";
   } else {
     if (fs::exists(dir, ec)) return Invalid("--keep-stack: " + dir.string() + " already exists");
     if (!fs::create_directories(dir, ec)) return Invalid("--keep-stack: cannot create " + dir.string());

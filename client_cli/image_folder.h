@@ -50,7 +50,8 @@ std::string StackManifestJson(const std::vector<ImageFrame>& frames, std::option
 // A stack folder built from frames: stack.json plus one hard link (else symlink, else copy) per
 // image; the user's files are never modified. A temporary folder (dir empty) is removed by
 // Remove() or the destructor; a folder given as dir (`--keep-stack`) must not exist yet and is
-// kept.
+// kept. Creating a temporary one first removes those of this user's inspectctl processes that
+// died without removing theirs (image_folder.cc: RemoveStaleStackFolders).
 class StackFolder {
  public:
   StackFolder() = default;
