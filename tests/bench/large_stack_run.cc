@@ -240,28 +240,41 @@ struct Run {
   double server_cpu_s = 0;  // inspectd's user + system CPU over the whole run
 };
 
+// The folders of one run, emptied (images and the client's tmp created), and the logs removed;
+// *not_run says why the run is not attempted when the disk lacks room for the folder and its
+// upload with a margin (empty otherwise).
+struct RunFolders {
+  fs::path images, data, tmp, out;
+};
+RunFolders PrepareRun(const fs::path& work, const std::string& format, int frames, cv::Size size,
+                      std::string* not_run) {
+  RunFolders f;
+  f.images = work / ("images-" + format + "-" + std::to_string(frames));
+  f.data = work / "server-data";
+  f.tmp = work / "client-tmp";
+  f.out = work / "result";
+  for (const auto& d : {f.images, f.data, f.tmp, f.out}) fs::remove_all(d);
+  for (const auto& d : {f.images, f.tmp}) fs::create_directories(d);
+  for (const char* log : {"inspectd.out", "inspectd.err"}) fs::remove(work / log);
+  const double frame_bytes = format == "jpeg" ? 0.6 * size.area() : 2.0 * size.area() + 4096;
+  struct statvfs vfs {};
+  statvfs(work.c_str(), &vfs);
+  const double free_bytes = double(vfs.f_bavail) * vfs.f_frsize;
+  if (2.0 * frames * frame_bytes + 8e9 > free_bytes) {
+    *not_run = "not run: needs " + std::to_string(int(2.0 * frames * frame_bytes / 1e9)) + " GB + 8 GB margin, " +
+               std::to_string(int(free_bytes / 1e9)) + " GB free";
+  }
+  return f;
+}
+
 Run RunOne(const std::string& inspectd, const std::string& inspectctl, const fs::path& work, const std::string& format,
            int frames, cv::Size size, const std::vector<std::string>& extra) {
   Run r;
   r.format = format;
   r.frames = frames;
-  const bool jpeg = format == "jpeg";
-  const fs::path images = work / ("images-" + format + "-" + std::to_string(frames));
-  const fs::path data = work / "server-data", tmp = work / "client-tmp", out = work / "result";
-  for (const auto& d : {images, data, tmp, out}) fs::remove_all(d);
-  for (const auto& d : {images, tmp}) fs::create_directories(d);
-  for (const char* log : {"inspectd.out", "inspectd.err"}) fs::remove(work / log);
-
-  // Room for the folder and its upload, with a margin, or the run is not attempted.
-  const double frame_bytes = jpeg ? 0.6 * size.area() : 2.0 * size.area() + 4096;
-  struct statvfs vfs {};
-  statvfs(work.c_str(), &vfs);
-  const double free_bytes = double(vfs.f_bavail) * vfs.f_frsize;
-  if (2.0 * frames * frame_bytes + 8e9 > free_bytes) {
-    r.note = "not run: needs " + std::to_string(int(2.0 * frames * frame_bytes / 1e9)) + " GB + 8 GB margin, " +
-             std::to_string(int(free_bytes / 1e9)) + " GB free";
-    return r;
-  }
+  const RunFolders f = PrepareRun(work, format, frames, size, &r.note);
+  if (!r.note.empty()) return r;
+  const fs::path &images = f.images, &data = f.data, &tmp = f.tmp, &out = f.out;
   r.note = GenerateStack(images, format, frames, size, &r.generate_s);
   if (!r.note.empty()) return r;
   r.stack_bytes = TreeBytes(images);
@@ -385,19 +398,13 @@ void RunInterrupted(const std::string& inspectd, const std::string& inspectctl, 
                     double fraction) {
   std::printf("\n### interrupted upload: %s, %d frames of %dx%d, client killed at %.0f %% of the stack\n\n",
               format.c_str(), frames, size.width, size.height, 100 * fraction);
-  const bool jpeg = format == "jpeg";
-  const fs::path images = work / ("images-" + format + "-" + std::to_string(frames));
-  const fs::path data = work / "server-data", tmp = work / "client-tmp", out = work / "result";
-  for (const auto& d : {images, data, tmp, out}) fs::remove_all(d);
-  for (const auto& d : {images, tmp}) fs::create_directories(d);
-  for (const char* log : {"inspectd.out", "inspectd.err"}) fs::remove(work / log);
-  const double frame_bytes = jpeg ? 0.6 * size.area() : 2.0 * size.area() + 4096;
-  struct statvfs vfs {};
-  statvfs(work.c_str(), &vfs);
-  if (2.0 * frames * frame_bytes + 8e9 > double(vfs.f_bavail) * vfs.f_frsize) {
-    std::printf("not run: not enough free disk\n");
+  std::string not_run;
+  const RunFolders f = PrepareRun(work, format, frames, size, &not_run);
+  if (!not_run.empty()) {
+    std::printf("%s\n", not_run.c_str());
     return;
   }
+  const fs::path &images = f.images, &data = f.data, &tmp = f.tmp, &out = f.out;
   double generate_s = 0;
   if (std::string e = GenerateStack(images, format, frames, size, &generate_s); !e.empty()) {
     std::printf("not run: %s\n", e.c_str());
