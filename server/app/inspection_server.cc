@@ -58,6 +58,12 @@ StatusOr<std::unique_ptr<AccessControl>> MakeAccessControl(const ServerOptions& 
   return access;
 }
 
+// host:port actually bound: the listen address's host with the port the server got.
+std::string BoundAddress(const std::string& listen, int port) {
+  const auto colon = listen.rfind(':');
+  return (colon == std::string::npos ? listen : listen.substr(0, colon)) + ":" + std::to_string(port);
+}
+
 StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeCredentials(const ServerOptions& o) {
   TransportSecurityOptions tso;
   tso.tls_cert_file = o.tls_cert_file;
@@ -82,10 +88,7 @@ StatusOr<std::unique_ptr<grpc::Server>> InspectionServer::StartWaitingHealth(con
   grpc::HealthCheckServiceInterface* health = server->GetHealthCheckService();
   health->SetServingStatus("", false);
   health->SetServingStatus(kRigHealthService, false);
-  if (address) {
-    const std::string& listen = options.listen_address;
-    *address = listen.substr(0, listen.rfind(':') + 1) + std::to_string(port);
-  }
+  if (address) *address = BoundAddress(options.listen_address, port);
   return server;
 }
 
@@ -240,11 +243,7 @@ StatusOr<std::unique_ptr<InspectionServer>> InspectionServer::Start(const Server
   return s;
 }
 
-std::string InspectionServer::address() const {
-  const std::string& a = options_.listen_address;
-  const auto colon = a.rfind(':');
-  return (colon == std::string::npos ? a : a.substr(0, colon)) + ":" + std::to_string(port_);
-}
+std::string InspectionServer::address() const { return BoundAddress(options_.listen_address, port_); }
 
 void InspectionServer::Shutdown() {
   if (shut_down_) return;
