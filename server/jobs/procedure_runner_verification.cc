@@ -73,10 +73,9 @@ StatusOr<v1::JobResult> ProcedureRunner::RunVerify(const VerifyWork& work, const
     JudgeInterim(full.empty() ? nullptr : &full.front(), &record, record.finish_time());
   } else {
     record.set_state(v1::VERIFICATION_STATE_VERIFIED);
+    using google::protobuf::util::TimeUtil;
     *record.mutable_next_full_due() =
-        google::protobuf::util::TimeUtil::NanosecondsToTimestamp(
-            google::protobuf::util::TimeUtil::TimestampToNanoseconds(record.finish_time()) +
-            static_cast<int64_t>(std::llround(work.interval_days * 86400.0)) * 1000000000LL);
+        record.finish_time() + TimeUtil::SecondsToDuration(std::llround(work.interval_days * 86400.0));
   }
   if (context.cancel->load()) return Status::Cancelled("verification cancelled while storing");  // a cancel's last chance
   INSPECT_RETURN_IF_ERROR(store_->PutVerification(record));
