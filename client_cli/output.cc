@@ -194,6 +194,11 @@ void PrintDepthSummary(const v1::DepthSummary& d) {
     std::cout << Format("post-processing: %.1f %% rejected by the depth consistency check, %.1f %% filled\n",
                         d.consistency_rejected_percent(), d.filled_percent());
   }
+  if (d.halo_candidate_percent() > 0.0 || d.halo_reassigned_percent() > 0.0) {
+    std::cout << Format("halo suppression: %.1f %% of the pixels re-examined near depth jumps, %.1f %% moved to the "
+                        "surface behind\n",
+                        d.halo_candidate_percent(), d.halo_reassigned_percent());
+  }
   if (d.has_ground_truth()) {
     std::cout << Format("vs ground truth: RMSE %.3f um, mean |error| %.3f um\n", d.rmse_um(), d.mean_abs_error_um());
   }

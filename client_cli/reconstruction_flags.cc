@@ -110,6 +110,9 @@ void ReconstructionFlags::Add(CLI::App* cmd) {
                   "Depth at every pixel (edge-aware fit of the measured depths; inferred pixels keep "
                   "confidence below the threshold): on | off | auto (default: off)")
       ->check(CLI::IsMember({"on", "off", "auto"}));
+  cmd->add_flag("--halo-suppression", halo_suppression,
+                "SFF: near depth jumps, keep a bright defocused edge's blur from winning over the sharp surface "
+                "behind it (depth and all-in-focus); two more passes over the frames, off by default");
   cmd->add_flag("--fill", fill,
                 "Fill pixels without depth from measured neighbours (interpolated, not measured; off by default)");
 }
@@ -130,6 +133,7 @@ v1::ReconstructionOptions ReconstructionFlags::ToProto() const {
   if (dense == "on") o.set_dense_depth(true);
   if (dense == "off") o.set_dense_depth(false);
   if (illumination_invariant) o.set_illumination_invariant(true);
+  if (halo_suppression) o.set_halo_suppression(true);
   return o;
 }
 

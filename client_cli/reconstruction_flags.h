@@ -27,6 +27,7 @@ struct ReconstructionFlags {
   bool no_consistency = false;                // depth_consistency = false (the server's default is true)
   std::string refinement;                     // none | weighted-median | guided-filter; empty = none
   bool illumination_invariant = false;        // illumination_invariant
+  bool halo_suppression = false;              // halo_suppression
   bool fill = false;                          // fill_low_confidence
   std::string dense = "auto";                 // dense_depth: on | off | auto (unset)
 

@@ -7,6 +7,7 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include "core/io/colour.h"  // LuminanceOf
 #include "core/io/stack.h"  // CheckMonotonicZ
 #include "core/sff/all_in_focus.h"
 #include "core/sff/depth_interpolation.h"
@@ -156,6 +157,10 @@ StatusOr<DepthResult> SuppressHalos(const DepthResult& first, const std::functio
   const int slots = 2 * hw + 1;
   const int side = 2 * options.band_radius_px + 1;
   const int frame_type = first.all_in_focus.type();
+  const int channels = first.all_in_focus.channels();
+  if (frame_type != CV_8UC1 && frame_type != CV_16UC1 && frame_type != CV_8UC3 && frame_type != CV_16UC3) {
+    return Status::InvalidArgument("halo suppression needs an 8- or 16-bit grey or BGR all-in-focus image");
+  }
 
   // The engine's depth in frames, and the confident pixels that define the layers.
   cv::Mat index(size, CV_32FC1), level(size, CV_32SC1);
@@ -179,7 +184,9 @@ StatusOr<DepthResult> SuppressHalos(const DepthResult& first, const std::functio
     if (f.type() != frame_type) return Status::InvalidArgument(name + " differs in type from the all-in-focus image");
     return f.isContinuous() ? f : f.clone();
   };
-  auto measure = [&](const cv::Mat& f, cv::Mat* score_f) -> Status {
+  // Colour frames: focus on their luminance, as the engine measured it (core/io/colour.h).
+  auto measure = [&](const cv::Mat& frame, cv::Mat* score_f) -> Status {
+    INSPECT_ASSIGN_OR_RETURN(cv::Mat f, LuminanceOf(frame));
     cv::Mat score;
     INSPECT_RETURN_IF_ERROR(FocusScore(f, sff.focus_measure, sff.window_px, &score));
     score.convertTo(*score_f, CV_32F);
@@ -247,9 +254,9 @@ StatusOr<DepthResult> SuppressHalos(const DepthResult& first, const std::functio
   if (figures) *figures = {double(candidates.size()) / pixels, 0.0};
   if (candidates.empty()) return out;
 
-  // Pass 2: each candidate's focus and grey values in its two layers' frames.
+  // Pass 2: each candidate's focus and pixel values (every channel) in its two layers' frames.
   std::vector<float> focus(candidates.size() * 2 * slots, -1.f);
-  std::vector<uint16_t> grey(candidates.size() * 2 * slots, 0);
+  std::vector<uint16_t> value(candidates.size() * 2 * slots * size_t(channels), 0);
   for (int i = 0; i < n; ++i) {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat f, load(i));
     INSPECT_RETURN_IF_ERROR(measure(f, &score_f));
@@ -261,7 +268,10 @@ StatusOr<DepthResult> SuppressHalos(const DepthResult& first, const std::functio
         const size_t at = (c * 2 + size_t(l)) * slots + size_t(slot);
         const int p = candidates[c].pixel;
         focus[at] = s[p];
-        grey[at] = frame_type == CV_8UC1 ? f.ptr<uint8_t>()[p] : f.ptr<uint16_t>()[p];
+        for (int ch = 0; ch < channels; ++ch) {
+          const size_t from = size_t(p) * size_t(channels) + size_t(ch);
+          value[at * size_t(channels) + size_t(ch)] = f.depth() == CV_8U ? f.ptr<uint8_t>()[from] : f.ptr<uint16_t>()[from];
+        }
       }
     }
   }
@@ -314,13 +324,17 @@ StatusOr<DepthResult> SuppressHalos(const DepthResult& first, const std::functio
     }
     // All-in-focus: the frame where the occluder is in focus, so its blur does not shine
     // through (its own layer's frame would show the surface sharp but veiled by that blur).
-    const uint16_t g = options.all_in_focus_from_occluder_focus
-                           ? grey[(c * 2) * slots + size_t(hw)]
-                           : grey[(c * 2 + 1) * slots + size_t(std::clamp(m, a, b) - (kb - hw))];
-    if (frame_type == CV_8UC1) {
-      out.all_in_focus.ptr<uint8_t>()[p] = uint8_t(g);
-    } else {
-      out.all_in_focus.ptr<uint16_t>()[p] = g;
+    const size_t at = options.all_in_focus_from_occluder_focus
+                          ? (c * 2) * slots + size_t(hw)
+                          : (c * 2 + 1) * slots + size_t(std::clamp(m, a, b) - (kb - hw));
+    for (int ch = 0; ch < channels; ++ch) {
+      const uint16_t v = value[at * size_t(channels) + size_t(ch)];
+      const size_t to = size_t(p) * size_t(channels) + size_t(ch);
+      if (out.all_in_focus.depth() == CV_8U) {
+        out.all_in_focus.ptr<uint8_t>()[to] = uint8_t(v);
+      } else {
+        out.all_in_focus.ptr<uint16_t>()[to] = v;
+      }
     }
     ++moved;
   }

@@ -29,8 +29,9 @@
 //   occluder is in focus (its blur is then absent; all_in_focus_from_occluder_focus).
 // What it cannot undo: pixels within half the focus window of the edge, whose window holds the
 // sharp edge itself (SFF's edge fattening: the occluder's sharp content is there), and a surface
-// without texture. Opt-in (the engine, Reconstruct and the server do not run it); figures and
-// limits on halo and natural scenes: tests/bench/halo_evaluate_output.md.
+// without texture. Opt-in (ReconstructionOptions.halo_suppression, `--halo-suppression`; on a
+// stack folder: core/sff/stack_halo.h); figures and limits on halo and natural scenes:
+// tests/bench/halo_evaluate_output.md.
 #pragma once
 
 #include <functional>
@@ -87,9 +88,10 @@ struct HaloSuppressionFigures {
 };
 
 // first: the engine's result for the stack with SffOptions::min_confidence 0 (every pixel's
-// unthresholded depth and its confidence). frame(i): grey frame i (CV_8UC1 / CV_16UC1) as the
-// engine measured it (aligned), asked for twice, in z order each time (the peak focus values,
-// then the candidates' focus and grey values). z_um: the frames' positions
+// unthresholded depth and its confidence). frame(i): frame i of the all-in-focus image's type
+// (grey CV_8UC1 / CV_16UC1, or BGR CV_8UC3 / CV_16UC3 measured on its luminance as the engine
+// does) as the engine measured it (aligned), asked for twice, in z order each time (the peak
+// focus values, then the candidates' focus and pixel values). z_um: the frames' positions
 // (strictly monotonic). sff: the engine's options (its focus measure, window and interpolation).
 // Returns first with depth_um and all_in_focus changed at the reassigned pixels (confidence
 // unchanged: the same curve), ready for PostProcessDepth. Errors: INVALID_ARGUMENT naming the

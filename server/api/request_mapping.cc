@@ -221,12 +221,16 @@ StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::Reconstructi
     if (post.dense) {
       return Status::InvalidArgument(field + ".dense_depth applies to SFF only (method " + method_name + ")");
     }
+    if (o.halo_suppression()) {
+      return Status::InvalidArgument(field + ".halo_suppression applies to SFF only (method " + method_name + ")");
+    }
     if (s.illumination_invariant) {
       return Status::InvalidArgument(field + ".illumination_invariant applies to SFF only (method " + method_name +
                                      ")");
     }
   }
   INSPECT_RETURN_IF_ERROR(post.Validate().WithContext(field));
+  if (o.halo_suppression()) out.halo = HaloSuppressionOptions{};
   for (int i = 0; i < o.extra_exports_size(); ++i) {
     INSPECT_ASSIGN_OR_RETURN(DepthExportKind k,
                              MapExtraExport(o.extra_exports(i), field + ".extra_exports[" + std::to_string(i) + "]"));
@@ -375,6 +379,7 @@ StatusOr<ScanWork> MapScanRequest(const v1::ScanRequest& req, const ScanContext&
   INSPECT_RETURN_IF_ERROR(CheckScanAlignment(rec.alignment, context.calibration));
   work.plan.alignment = rec.alignment;
   work.plan.postprocess = rec.postprocess;
+  work.plan.halo = rec.halo;
 
   const int window_px = work.plan.sff.window_px;
   IlluminationMode mode = requested ? *requested : DefaultIlluminationMode(context.calibration, window_px);
@@ -472,6 +477,7 @@ StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start,
   work.extra_exports = std::move(rec.extra_exports);
   work.alignment = rec.alignment;
   work.postprocess = rec.postprocess;
+  work.halo = rec.halo;
   // Dense depth only on request for now (dense_depth = true, --dense on): as the imported-stack
   // default it still loses to focus-stack at full coverage on the held-out natural scenes
   // (tests/bench/natural_heldout_output.md), and the server's upload tests expect NaN where

@@ -17,6 +17,7 @@
 
 #include "core/calibration/calibration_bundle.h"
 #include "core/sff/depth_postprocess.h"
+#include "core/sff/halo_suppression.h"
 #include "core/sff/sff_engine.h"
 #include "core/util/status.h"
 #include "devices/rig.h"
@@ -44,6 +45,8 @@ struct ReconstructionSettings {
   // SFF only (the integral methods refuse the fields): consistency, refinement, fill; the jobs
   // threshold at sff.min_confidence and run the engine with min_confidence 0.
   DepthPostProcessOptions postprocess;
+  // SFF only: halo suppression between the engine and the post-processing (halo_suppression = true).
+  std::optional<HaloSuppressionOptions> halo;
 };
 StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::ReconstructionOptions& options,
                                                           const std::string& field);

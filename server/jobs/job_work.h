@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/sff/depth_postprocess.h"
+#include "core/sff/halo_suppression.h"
 #include "core/sff/sff_engine.h"
 #include "core/io/stack_frame_decoder.h"
 #include "core/registration/stack_alignment.h"
@@ -80,6 +81,7 @@ struct ReconstructWork {
   // not register.
   std::optional<FrameAlignment> alignment;
   DepthPostProcessOptions postprocess;  // SFF only
+  std::optional<HaloSuppressionOptions> halo;  // SFF only: run it before the post-processing
 };
 
 // A Type-1 gauge study (server/procedures/type1_study_procedure.h): the recipe's scan repeated

@@ -14,6 +14,7 @@
 
 #include "core/io/depth_export.h"
 #include "core/io/stack.h"
+#include "core/sff/stack_halo.h"
 #include "server/jobs/result_proto.h"
 #include "server/procedures/z_range_search.h"
 #include "server/results/inspection_report.h"
@@ -218,6 +219,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunScan(const ScanWork& work, const Job
   parts.integral = &outcome.isff;
   parts.alignment = &outcome.alignment;
   parts.postprocess = &outcome.postprocess;
+  parts.halo = outcome.halo ? &*outcome.halo : nullptr;
   parts.illumination = outcome.manifest.illumination;
   parts.illumination_decision = outcome.illumination_decision;
   parts.z_range_search = outcome.manifest.z_range_search ? &*outcome.manifest.z_range_search : nullptr;
@@ -310,6 +312,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   IntegralSffFigures isff;
   AlignmentFigures alignment;
   DepthPostProcessFigures postprocess;
+  std::optional<HaloSuppressionFigures> halo;
   if (work.method.integral()) {
     // The calibration active now; two passes over the frames without per-frame events (and
     // without a cancellation point inside them: ~1 s for 23 frames of 1024 x 768).
@@ -364,6 +367,24 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
       const bool alignment_error = r.status().message().rfind("alignment", 0) == 0;
       return alignment_error ? r.status().WithContext("options.alignment") : r.status();
     }
+    if (work.halo) {
+      // Two more passes over the frames, aligned as the engine saw them: the decoder decodes
+      // released frames again (or the folder is read, on the sequential path).
+      if (context.cancel->load()) return Status::Cancelled("reconstruction cancelled before halo suppression");
+      EmitPhase(context, v1::JOB_PHASE_RECONSTRUCTING, 0.85, "halo suppression: two more passes over the frames");
+      StackFrameSource frames;
+      if (work.decoded) {
+        frames = {[&](int i) { return work.decoded->Frame(i); }, [&](int i) { work.decoded->Release(i); }, {}};
+      } else {
+        frames = {[&](int i) { return DecodeStackFrame(work.stack_dir, m, size_t(i)); }, {}, {}};
+      }
+      HaloSuppressionFigures figures;
+      StatusOr<DepthResult> fixed = SuppressStackHalos(*r, m, frames, alignment, unthresholded, *work.halo, &figures);
+      if (work.decoded) work.decoded->ReleaseAll();
+      if (!fixed.ok()) return fixed.status().WithContext("options.halo_suppression");
+      r = std::move(fixed);
+      halo = figures;
+    }
     DepthPostProcessOptions post = work.postprocess;
     post.min_confidence = work.sff.min_confidence;
     std::vector<double> z_um;
@@ -402,6 +423,7 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   parts.integral = &isff;
   parts.alignment = &alignment;
   parts.postprocess = &postprocess;
+  parts.halo = halo ? &*halo : nullptr;
   *result.mutable_depth() = DepthSummaryProto(parts);
   const auto t_publish = std::chrono::steady_clock::now();
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));

@@ -106,6 +106,10 @@ v1::DepthSummary DepthSummaryProto(const DepthSummaryParts& p) {
   if (p.z_range_search) *d.mutable_z_range_search() = ZRangeSearchProto(*p.z_range_search);
   if (p.alignment) FillAlignment(*p.alignment, &d);
   if (p.postprocess) FillPostProcess(*p.postprocess, &d);
+  if (p.halo) {
+    d.set_halo_candidate_percent(100.0 * p.halo->candidate_fraction);
+    d.set_halo_reassigned_percent(100.0 * p.halo->reassigned_fraction);
+  }
   return d;
 }
 

@@ -9,6 +9,7 @@
 #include "core/io/stack.h"
 #include "core/registration/stack_alignment.h"
 #include "core/sff/depth_postprocess.h"
+#include "core/sff/halo_suppression.h"
 #include "inspection/v1/inspection.pb.h"
 #include "server/procedures/reconstruction_method.h"
 #include "server/results/result_publisher.h"
@@ -30,6 +31,7 @@ struct DepthSummaryParts {
   const IntegralSffFigures* integral = nullptr;  // with `method`
   const AlignmentFigures* alignment = nullptr;
   const DepthPostProcessFigures* postprocess = nullptr;
+  const HaloSuppressionFigures* halo = nullptr;  // when halo suppression ran
   std::string illumination;                            // scans: the mode that ran
   std::string illumination_decision;                   // scans: why, for AUTO
   const ZRangeSearchRecord* z_range_search = nullptr;  // scans with the automatic z range

@@ -8,6 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/io/depth_export.h"
+#include "core/sff/stack_halo.h"
 #include "core/sff/stack_reconstruct.h"
 #include "server/procedures/illumination_auto.h"
 #include "server/procedures/illumination_strategy.h"
@@ -339,6 +340,15 @@ StatusOr<ScanOutcome> RunScan(Rig& rig, const ScanPlan& plan, const fs::path& st
   INSPECT_RETURN_IF_ERROR(WriteStackManifest(stack_dir, m));
   if (engine.sff) {
     INSPECT_ASSIGN_OR_RETURN(DepthResult raw, engine.sff->Finish());
+    if (plan.halo) {
+      // From the frames just written (lossless PNG: the pixels the engine had), aligned as the
+      // engine saw them.
+      StackFrameSource frames{[&](int i) { return DecodeStackFrame(stack_dir, m, size_t(i)); }, {}, {}};
+      HaloSuppressionFigures halo;
+      INSPECT_ASSIGN_OR_RETURN(raw, SuppressStackHalos(raw, m, frames, aligner ? aligner->figures() : AlignmentFigures{}, plan.sff,
+                                                       *plan.halo, &halo));
+      out.halo = halo;
+    }
     DepthPostProcessOptions post = plan.postprocess;
     post.min_confidence = plan.sff.min_confidence;
     INSPECT_ASSIGN_OR_RETURN(out.depth, PostProcessDepth(raw, plan.z_um, plan.sff.window_px, post, &out.postprocess));

@@ -18,6 +18,7 @@
 #include "core/calibration/calibration_bundle.h"
 #include "core/illumination/compensation.h"
 #include "core/sff/depth_postprocess.h"
+#include "core/sff/halo_suppression.h"
 #include "core/sff/z_range_search.h"
 #include "core/io/frame_statistics.h"
 #include "core/sff/sff_engine.h"
@@ -87,6 +88,8 @@ struct ScanPlan {
   // SFF: the engine runs with min_confidence 0 and this makes the map (core/sff/depth_postprocess.h),
   // thresholding at sff.min_confidence (postprocess.min_confidence is not used).
   DepthPostProcessOptions postprocess;
+  // SFF: halo suppression on the stored frames before the post-processing (core/sff/stack_halo.h).
+  std::optional<HaloSuppressionOptions> halo;
 };
 
 // Builds the z positions from start to end (inclusive when end falls on the grid) with step
@@ -127,6 +130,7 @@ struct ScanOutcome {
   // (and so is ground_truth_um); the stack folder keeps the frames as captured.
   AlignmentFigures alignment;
   DepthPostProcessFigures postprocess;  // SFF only
+  std::optional<HaloSuppressionFigures> halo;  // SFF with ScanPlan::halo
 };
 
 // Acquires into stack_dir (created; the caller owns clean-up on failure) and reconstructs.

@@ -10,6 +10,7 @@
 #include <cmath>
 
 #include "core/sff/depth_postprocess.h"
+#include <opencv2/imgproc.hpp>
 
 #include "tests/core/halo_scene_synthetic.h"
 #include "tests/core/sff_synthetic.h"
@@ -160,6 +161,38 @@ TEST(HaloSuppressionTest, FrameOfAnotherSizeNamesTheFrame) {
   auto w = SuppressHalos(*raw, FramesOf(s.frames), s.z_um, Unthresholded(), wrong);
   ASSERT_FALSE(w.ok());
   EXPECT_NE(w.status().message().find("halo_suppression: band_radius_px"), std::string::npos) << w.status().ToString();
+}
+
+// Colour stacks: focus on the luminance, the all-in-focus value taken from every channel of the
+// chosen frame. Grey frames replicated to BGR (luminance = grey exactly) give the grey result.
+TEST(HaloSuppressionTest, ColourFramesGiveTheGreyResultInEveryChannel) {
+  HaloSceneOptions o;
+  o.seed = 3;
+  const HaloScene s = testing_halo::RenderHaloScene(o);
+  auto raw = SffEngine::ReconstructInMemory(Unthresholded(), s.frames, s.z_um);
+  ASSERT_TRUE(raw.ok()) << raw.status().ToString();
+  HaloSuppressionFigures grey_figures, colour_figures;
+  auto grey = SuppressHalos(*raw, FramesOf(s.frames), s.z_um, Unthresholded(), {}, &grey_figures);
+  ASSERT_TRUE(grey.ok()) << grey.status().ToString();
+  std::vector<cv::Mat> bgr(s.frames.size());
+  for (size_t i = 0; i < s.frames.size(); ++i) cv::cvtColor(s.frames[i], bgr[i], cv::COLOR_GRAY2BGR);
+  DepthResult raw_colour = *raw;
+  cv::cvtColor(raw->all_in_focus, raw_colour.all_in_focus, cv::COLOR_GRAY2BGR);
+  auto colour = SuppressHalos(raw_colour, FramesOf(bgr), s.z_um, Unthresholded(), {}, &colour_figures);
+  ASSERT_TRUE(colour.ok()) << colour.status().ToString();
+  ASSERT_GT(grey_figures.reassigned_fraction, 0.01);
+  EXPECT_EQ(colour_figures.reassigned_fraction, grey_figures.reassigned_fraction);
+  EXPECT_EQ(cv::countNonZero(colour->depth_um != grey->depth_um), 0);
+  ASSERT_EQ(colour->all_in_focus.type(), CV_8UC3);
+  std::vector<cv::Mat> channels;
+  cv::split(colour->all_in_focus, channels);
+  for (int c = 0; c < 3; ++c) EXPECT_EQ(cv::norm(channels[size_t(c)], grey->all_in_focus, cv::NORM_INF), 0.0) << c;
+  // A grey frame where the all-in-focus image is colour names the frame.
+  std::vector<cv::Mat> mixed = bgr;
+  mixed[4] = s.frames[4];
+  auto bad = SuppressHalos(raw_colour, FramesOf(mixed), s.z_um, Unthresholded(), {});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("frame 4"), std::string::npos) << bad.status().ToString();
 }
 
 }  // namespace

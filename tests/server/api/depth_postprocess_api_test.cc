@@ -1,5 +1,6 @@
 // SFF post-processing through the real server: ReconstructionOptions
-// depth_consistency (default on), refinement and fill_low_confidence on scans and on stored
+// depth_consistency (default on), refinement, fill_low_confidence (and halo_suppression's refusal
+// with an integral method) on scans and on stored
 // stacks, the DepthSummary figures, and bad input naming the field.
 #include <gtest/gtest.h>
 
@@ -69,6 +70,11 @@ TEST_F(DepthPostProcessApiTest, BadOptionsNameTheFieldAndQueueNothing) {
        "reconstruction.refinement"},
       {[](v1::ReconstructionOptions* o) { o->set_refinement(static_cast<v1::DepthRefinementMethod>(42)); },
        "reconstruction.refinement"},
+      {[](v1::ReconstructionOptions* o) {
+         o->set_method(v1::RECONSTRUCTION_METHOD_ISFF_GT);
+         o->set_halo_suppression(true);
+       },
+       "reconstruction.halo_suppression"},
   };
   for (const Case& c : cases) {
     v1::ScanRequest r;
