@@ -41,26 +41,13 @@ StatusOr<ArealGroupResult> EvaluateArealGroup(const cv::Mat& depth_um, const cv:
   };
   INSPECT_ASSIGN_OR_RETURN(std::vector<MonteCarloEstimate> mc,
                            MonteCarloUncertainty(depth_um, measured, measure, *noise, monte_carlo));
-  // Sa and Sq are reported corrected for their noise bias (GUM 3.2.4, F.2.4.5: a recognised
-  // significant systematic effect is corrected; the correction's own uncertainty,
-  // MonteCarloEstimate::bias_u, stays in u). The noise of a smooth surface raises them by a
-  // nearly deterministic amount (a flat at 5 um steps: Sa +0.050 +- 0.001 um) which, left
-  // uncorrected, dominated U = 2 sqrt(b^2 + s^2): |dev| / U ~0.5 and 100 % coverage on every flat.
-  // Only with a characterised z linearity: otherwise the Monte Carlo draws the linearity's
-  // worst-case prior, whose effect is a bound, not an estimate (tuning set, tilted flat: Sq
-  // corrected 0.1 um too low). Not the others:
-  //  - Ssk, Sku: their bias estimate follows the model's sigma to the power 2p and is 2-6x the
-  //    deviations on curved surfaces (tuning cosine Sku: 0.03 against +0.005..+0.013); corrected,
-  //    the cosine's Sku fell out of U. It stays in u uncorrected.
-  //  - Sp, Sv, Sz: SFF errors are heavy-tailed, and a Gaussian Monte Carlo puts the extremes'
-  //    noise bias at 1/3 - 1/7 of the real one (tuning plane Sz at 2 um steps: 0.17 against
-  //    +1.03 um); they keep the documented bound (ExtremeValueBudget).
+  // Reported as measured (ISO 25178), the noise bias in u. Corrected by the Monte Carlo's bias
+  // estimate (GUM 3.2.4) Sa and Sq of flats were sharp (a flat at 5 um steps: +0.050 +- 0.001 um
+  // left -0.002 +- 0.001), but the estimate follows the model's sigma, which structure at 1-3
+  // windows inflates: on a random rough surface (Sq ~1 um, 16-60 px wavelengths) it put the bias
+  // at +0.08 um where the deviation was -0.05, and the corrected Sa fell out of U in every scan
+  // (tests/server/procedures/uncertainty_sharpness_test.cc). Not corrected, then.
   for (int i = 0; i < 4; ++i) r.budgets[int(kMoment[i])] = MonteCarloBudget(mc[i]);
-  if (noise->linearity.characterised_step_um > 0.0) {
-    for (int i = 0; i < 2; ++i) r.budgets[int(kMoment[i])] = MonteCarloCorrectedBudget(mc[i]);
-    r.values.Sa_um -= mc[0].bias;
-    r.values.Sq_um -= mc[1].bias;
-  }
   const double range = LinearityRangeUm(depth_um, mask, *noise);
   // The focus window's flattening of curvature, estimated from the map (WindowAveragingError):
   // an uncorrected systematic error of every moment parameter (Sa, Sq of a 2 um cosine at a

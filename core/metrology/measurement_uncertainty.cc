@@ -68,13 +68,6 @@ UncertaintyBudget MonteCarloBudget(const MonteCarloEstimate& e) {
   return b;
 }
 
-UncertaintyBudget MonteCarloCorrectedBudget(const MonteCarloEstimate& e) {
-  UncertaintyBudget b = MonteCarloBudget(e);
-  b.method = "monte-carlo, noise bias corrected";
-  b.standard_uncertainty = std::hypot(e.spread, e.bias_u);
-  return b;
-}
-
 UncertaintyBudget ExtremeValueBudget(int extremes, double linearity_range_um, const DepthNoiseModel& model) {
   UncertaintyBudget b;
   b.method = "bound";
@@ -270,7 +263,7 @@ StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& d
   std::vector<MonteCarloEstimate> out(n);
   for (size_t i = 0; i < n; ++i) {
     if (!std::isfinite(values[i])) {
-      out[i].spread = out[i].bias = out[i].standard_uncertainty = out[i].bias_u = std::nan("");
+      out[i].spread = out[i].bias = out[i].standard_uncertainty = std::nan("");
       continue;
     }
     if (count[i] < std::max(2, options.samples / 2)) {
@@ -283,15 +276,8 @@ StatusOr<std::vector<MonteCarloEstimate>> MonteCarloUncertainty(const cv::Mat& d
     out[i].spread = std::sqrt(std::max(0.0, (sum2[i] - c * mean * mean) / (c - 1.0)));
     const double d2 = count3[i] > 0 ? sum3[i] / count3[i] : std::nan("");
     out[i].noise_exponent = NoiseBiasExponent(mean, d2, out[i].spread / std::sqrt(c));
-    const double gain = 1.0 / (std::pow(2.0, out[i].noise_exponent) - 1.0);
-    out[i].bias = mean * gain;
+    out[i].bias = mean / (std::pow(2.0, out[i].noise_exponent) - 1.0);
     out[i].standard_uncertainty = std::hypot(out[i].spread, out[i].bias);
-    // The bias goes as sigma^(2p): a relative error e of the model's noise level is 2p e of the
-    // bias. e = 5 %: the flats of the tuning set (plane, step1um, skew5 at 2 and 5 um steps)
-    // left residuals of 1-9 % (RMS 4.5 %) of their corrected Sa / Sq noise bias.
-    constexpr double kNoiseLevelRelativeU = 0.05;
-    out[i].bias_u = std::hypot(out[i].spread / std::sqrt(c) * gain,
-                               2.0 * out[i].noise_exponent * kNoiseLevelRelativeU * out[i].bias);
   }
   return out;
 }

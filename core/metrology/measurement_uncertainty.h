@@ -8,9 +8,8 @@
 //    depth + one draw of the error model.
 // Extremes (Sp, Sv, Sz, flatness) and norms (Sa, Sq) of a noisy surface are biased upwards by the
 // noise itself, and that bias, not the spread, dominates when the surface is smooth: the reported
-// value is either left uncorrected, the bias estimate entering the uncertainty (u^2 = spread^2 +
-// bias^2, MonteCarloBudget), or corrected by it, its own uncertainty entering u
-// (MonteCarloCorrectedBudget: recipe Sa and Sq, core/metrology/measurement.cc). The bias is estimated from three noise
+// value is not corrected (ISO 25178 values are reported as measured), and the bias estimate
+// enters the uncertainty (u^2 = spread^2 + bias^2). The bias is estimated from three noise
 // levels: the measured map holds the noise once (variance v = 1), each Monte Carlo sample twice
 // (v = 2), and the sample with a second independent draw added three times (v = 3). With
 // f(v) = f(0) + c v^p, the measured value's bias is c = d1 / (2^p - 1), d1 = mean f(2) - f(1), and
@@ -108,23 +107,15 @@ struct MonteCarloEstimate {
   double spread = 0.0;                // standard deviation of f(z + e_k) over the samples
   double bias = 0.0;                  // noise-bias estimate d1 / (2^p - 1), signed
   double noise_exponent = 0.5;        // p of the header comment
-  double standard_uncertainty = 0.0;  // sqrt(spread^2 + bias^2): the value left uncorrected
-  // Standard uncertainty of `bias` as an estimate, for a value corrected by it: the Monte Carlo
-  // mean's own scatter, spread / sqrt(samples) / (2^p - 1), and the noise level's: the bias goes
-  // as sigma^(2p), and the model's sigma over a region is taken as known to 5 %.
-  double bias_u = 0.0;
+  double standard_uncertainty = 0.0;  // sqrt(spread^2 + bias^2)
   int samples = 0;                    // samples that gave a finite value
 };
 
 // p in [1/2, 1] of the header comment from d1, d2 and the standard error of d1.
 double NoiseBiasExponent(double d1, double d2, double d1_standard_error);
 
-// Budget of a Monte Carlo estimate, the value left uncorrected: u^2 = spread^2 + bias^2.
+// Budget of a Monte Carlo estimate.
 UncertaintyBudget MonteCarloBudget(const MonteCarloEstimate& e);
-// Budget of a value corrected for its noise bias (value - e.bias, GUM 3.2.4: a recognised
-// systematic effect is corrected, and the correction's own uncertainty enters u):
-// u^2 = spread^2 + bias_u^2; noise_bias holds the correction that was subtracted.
-UncertaintyBudget MonteCarloCorrectedBudget(const MonteCarloEstimate& e);
 
 // values = measure(depth_um); measure is re-run on depth_um + model.SamplePerturbation(k, samples)
 // and, for the noise-bias exponent, on depth_um + draw k + draw (k + samples / 2) % samples.

@@ -276,38 +276,6 @@ TEST(MeasurementUncertaintyTest, UncharacterisedThreePointPeakTakesItsInterpolat
   EXPECT_GT(transferred->linearity.characterised_step_um, 0.0);
 }
 
-TEST(MeasurementUncertaintyTest, SaAndSqOfANoisyFlatAreReportedCorrectedForTheirNoiseBias) {
-  // A flat whose map holds correlated noise of 0.05 um only: the truth's Sa and Sq are 0, the
-  // measured ones are the noise's (~0.04 / 0.05 um), nearly the same on every scan. Corrected by
-  // the Monte Carlo's noise-bias estimate (exact there: p = 1/2) the values are near 0 and their
-  // U is a fraction of the bias, not twice it.
-  const cv::Size size(160, 120);
-  cv::Mat flat(size, CV_32FC1, cv::Scalar(201.0));
-  flat += testing::CorrelatedNoise(size, 0.05, 7, 41);
-  MeasurementContext ctx;
-  ctx.depth_um = flat;
-  ctx.pixel_size_um = kPx;
-  ctx.noise = Options();
-  MeasurementSpec spec;
-  spec.roi = RegionOfInterest::Rectangle(8, 8, 144, 104);
-  for (const MeasurementKind kind : {MeasurementKind::kSa, MeasurementKind::kSq}) {
-    spec.kind = kind;
-    auto m = Measure(spec, ctx);
-    MeasurementContext raw = ctx;
-    raw.with_uncertainty = false;
-    auto r = Measure(spec, raw);
-    ASSERT_TRUE(m.ok() && r.ok()) << m.status().ToString();
-    const double big_u = 2.0 * m->uncertainty.standard_uncertainty;
-    std::printf("%s: as measured %.4f, corrected %.4f (noise bias %.4f), U %.4f\n", MeasurementKindName(kind),
-                r->value, m->value, m->uncertainty.noise_bias, big_u);
-    EXPECT_EQ(m->uncertainty.method, "monte-carlo, noise bias corrected");
-    EXPECT_NEAR(m->value, r->value - m->uncertainty.noise_bias, 1e-12);
-    EXPECT_GT(r->value, 0.03);
-    EXPECT_LE(std::abs(m->value), big_u);   // the truth, 0, is within U
-    EXPECT_LT(big_u, 0.5 * r->value);       // uncorrected, U was >= 2 x the bias
-  }
-}
-
 // A step between two flats, 120 x 80 px at 1 um/px, white noise of 0.02 um, each flat offset by
 // `offset_um` (left +, right -) like a z-linearity error; the step read `gain` times too long.
 StatusOr<MeasuredValue> MeasureNoisyStep(double step_um, double offset_um, double gain,
