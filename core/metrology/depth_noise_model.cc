@@ -144,6 +144,22 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
     }
   }
 
+  if (model.linearity.characterised_step_um <= 0.0 && options.three_point_peak) {
+    // Not characterised at this step, but the depth is interpolated through three frames: the
+    // discrete maximum's +-step / 2 sawtooth bounds which frame is the maximum, not the
+    // interpolated depth (its jump at half a step moved straddling pixels a whole step apart in
+    // every Monte Carlo draw, and made every uncertainty 5-50x wider than the deviations on the
+    // simulated rig). The three-point fit's own analytic error is the prior instead
+    // (ZLinearity::UncharacterisedThreePointPeak, +-0.11 step); a verified l_z still scales it.
+    const std::string why = model.linearity.source;
+    model.linearity = ZLinearity::UncharacterisedThreePointPeak();
+    if (why.rfind("uncharacterised:", 0) != 0 || why.find(';') != std::string::npos) {
+      model.linearity.source += " (" + why + ")";
+    }
+  }
+
+  model.linearity_shape_known = model.linearity.characterised_step_um > 0.0 &&
+                                model.linearity.source.find("transferred from") == std::string::npos;
   model.relative_amplification_u = options.verified.RelativeAmplificationUncertainty();
   if (options.verified.linearity_deviation_um && model.linearity.characterised_step_um <= 0.0) {
     // Not characterised at this step: the verified l_z bounds the deviation instead of +-step / 2.

@@ -22,7 +22,9 @@
 //    fractional position f in the z grid. It is known in shape but its phase relative to a
 //    given specimen's heights is treated as unknown: the model draws the table shifted by a
 //    uniform phase. For a region at one height it is a common offset (it cancels in form and
-//    roughness), for two heights (a step) it is not.
+//    roughness), for two heights (a step) it is not. Not characterised at the scan's step, the
+//    table is a prior: for a three-point peak its interpolation's analytic error
+//    (ZLinearity::UncharacterisedThreePointPeak), for the maximum / line fit the sawtooth.
 // 3. Stage repeatability: each frame's z is off by a uniform +-r (devices: stage
 //    repeatability), one independent error d_i per frame. A depth interpolated through three
 //    samples (Gaussian eq. 3.30-3.34 or the defocus parabola: both the vertex of a parabola
@@ -53,8 +55,10 @@ namespace inspection {
 // those of the rig's latest accepted verification, core/metrology/verification.h; see
 // docs). Each is optional; where one is given it replaces the model's worst-case bound:
 //  - linearity_deviation_um (l_z, um: largest |deviation| of the z response from linear):
-//    where the z linearity is not characterised at the scan's step, the peak-locking sawtooth of
-//    +-step/2 is scaled down to +-l_z (same worst-case shape, verified size; never up).
+//    where the z linearity is not characterised at the scan's step, the uncharacterised prior
+//    (the three-point interpolation's analytic error, +-0.11 step, or the discrete maximum's
+//    sawtooth of +-step/2 without a three-point peak) is scaled down to +-l_z (same shape,
+//    verified size; never up).
 //  - amplification (alpha_z) and amplification_u (its standard uncertainty): the height scale
 //    is off by alpha_z - 1 (uncorrected: values are reported as measured) known to u, so every
 //    height-scale value H (step height, Sa, Sq, Sp, Sv, Sz, flatness, volume) gets
@@ -118,6 +122,9 @@ struct DepthNoiseModel {
   int correlation_px = 1;  // side of the box B
   ZGrid grid;
   ZLinearity linearity;     // the table in use (maybe the uncharacterised bound, see its source)
+  // The table was characterised at this scan's step (not transferred from another step, not a
+  // bound): its shape is known, only its phase is not.
+  bool linearity_shape_known = false;
   double stage_u_um = 0.0;  // standard uncertainty of one frame's z: r / sqrt 3
   bool three_point_peak = true;  // DepthNoiseOptions::three_point_peak
   double relative_amplification_u = 0.0;  // VerifiedCharacteristics::RelativeAmplificationUncertainty

@@ -340,10 +340,12 @@ double HeightDependentErrorBoundUm(const cv::Mat& depth_um, const cv::Mat& mask,
   return 0.5 * linearity_range_um + p99;
 }
 
-StatusOr<cv::Mat> ShapeParameterSensitivitySign(const cv::Mat& surface_um, HeightParameter parameter) {
-  if (parameter != HeightParameter::kSsk && parameter != HeightParameter::kSku) {
-    return Status::InvalidArgument("ShapeParameterSensitivitySign: parameter must be Ssk or Sku");
-  }
+namespace {
+
+// n d(parameter) / d z_p for the levelled surface, up to a positive factor (CV_64FC1, 0 where
+// surface_um is NaN; all 0 for fewer than 2 finite pixels or no variance).
+cv::Mat ShapeParameterGradient(const cv::Mat& surface_um, HeightParameter parameter) {
+  cv::Mat grad(surface_um.size(), CV_64FC1, cv::Scalar(0));
   double n = 0, s1 = 0;
   for (int row = 0; row < surface_um.rows; ++row) {
     const float* z = surface_um.ptr<float>(row);
@@ -354,8 +356,7 @@ StatusOr<cv::Mat> ShapeParameterSensitivitySign(const cv::Mat& surface_um, Heigh
       }
     }
   }
-  cv::Mat sign(surface_um.size(), CV_32FC1, cv::Scalar(0));
-  if (n < 2) return sign;
+  if (n < 2) return grad;
   const double mean = s1 / n;
   double m2 = 0, m3 = 0, m4 = 0;
   for (int row = 0; row < surface_um.rows; ++row) {
@@ -368,18 +369,78 @@ StatusOr<cv::Mat> ShapeParameterSensitivitySign(const cv::Mat& surface_um, Heigh
       m4 += d * d * d * d / n;
     }
   }
-  if (!(m2 > 0)) return sign;
+  if (!(m2 > 0)) return grad;
   // n d(m3 / m2^1.5) / dz_p = (3 (d^2 - m2) m2 - 3 m3 d) / m2^2.5
   // n d(m4 / m2^2) / dz_p   = (4 (d^3 - m3) m2 - 4 m4 d) / m2^3
+  // (the common positive factors 1 / m2^2.5 and 1 / m2^3 are left out: only signs and relative
+  // sizes are used).
   for (int row = 0; row < surface_um.rows; ++row) {
     const float* z = surface_um.ptr<float>(row);
-    float* s = sign.ptr<float>(row);
+    double* g = grad.ptr<double>(row);
     for (int col = 0; col < surface_um.cols; ++col) {
       if (!std::isfinite(z[col])) continue;
       const double d = z[col] - mean;
-      const double g = parameter == HeightParameter::kSsk ? 3.0 * (d * d - m2) * m2 - 3.0 * m3 * d
-                                                          : 4.0 * (d * d * d - m3) * m2 - 4.0 * m4 * d;
-      s[col] = g >= 0.0 ? 1.0f : -1.0f;
+      g[col] = parameter == HeightParameter::kSsk ? 3.0 * (d * d - m2) * m2 - 3.0 * m3 * d
+                                                  : 4.0 * (d * d * d - m3) * m2 - 4.0 * m4 * d;
+    }
+  }
+  return grad;
+}
+
+}  // namespace
+
+StatusOr<cv::Mat> ShapeParameterSensitivitySign(const cv::Mat& surface_um, HeightParameter parameter) {
+  if (parameter != HeightParameter::kSsk && parameter != HeightParameter::kSku) {
+    return Status::InvalidArgument("ShapeParameterSensitivitySign: parameter must be Ssk or Sku");
+  }
+  const cv::Mat grad = ShapeParameterGradient(surface_um, parameter);
+  cv::Mat sign(surface_um.size(), CV_32FC1, cv::Scalar(0));
+  bool any = false;
+  for (int row = 0; row < grad.rows && !any; ++row) {
+    const double* g = grad.ptr<double>(row);
+    for (int col = 0; col < grad.cols && !any; ++col) any = g[col] != 0.0;
+  }
+  if (!any) return sign;
+  for (int row = 0; row < surface_um.rows; ++row) {
+    const float* z = surface_um.ptr<float>(row);
+    const double* g = grad.ptr<double>(row);
+    float* s = sign.ptr<float>(row);
+    for (int col = 0; col < surface_um.cols; ++col) {
+      if (std::isfinite(z[col])) s[col] = g[col] >= 0.0 ? 1.0f : -1.0f;
+    }
+  }
+  return sign;
+}
+
+StatusOr<cv::Mat> PeriodicWorstCaseSign(const cv::Mat& depth_um, const cv::Mat& surface_um, HeightParameter parameter,
+                                        const DepthNoiseModel& model, int bins) {
+  if (parameter != HeightParameter::kSsk && parameter != HeightParameter::kSku) {
+    return Status::InvalidArgument("PeriodicWorstCaseSign: parameter must be Ssk or Sku");
+  }
+  if (bins < 2 || bins > 1000) return Status::InvalidArgument("PeriodicWorstCaseSign: bins must be in 2..1000");
+  if (depth_um.type() != CV_32FC1 || surface_um.type() != CV_32FC1 || depth_um.size() != surface_um.size()) {
+    return Status::InvalidArgument("PeriodicWorstCaseSign: depth and surface must be CV_32FC1 maps of one size");
+  }
+  const cv::Mat grad = ShapeParameterGradient(surface_um, parameter);
+  cv::Mat bin_of(depth_um.size(), CV_32SC1, cv::Scalar(-1));
+  std::vector<double> sum(bins, 0.0);
+  for (int row = 0; row < depth_um.rows; ++row) {
+    const float* z = depth_um.ptr<float>(row);
+    const float* s = surface_um.ptr<float>(row);
+    const double* g = grad.ptr<double>(row);
+    int* b = bin_of.ptr<int>(row);
+    for (int col = 0; col < depth_um.cols; ++col) {
+      if (!std::isfinite(z[col]) || !std::isfinite(s[col])) continue;
+      b[col] = std::min(bins - 1, int(model.grid.Locate(z[col]).fraction * bins));
+      sum[b[col]] += g[col];
+    }
+  }
+  cv::Mat sign(depth_um.size(), CV_32FC1, cv::Scalar(0));
+  for (int row = 0; row < depth_um.rows; ++row) {
+    const int* b = bin_of.ptr<int>(row);
+    float* o = sign.ptr<float>(row);
+    for (int col = 0; col < depth_um.cols; ++col) {
+      if (b[col] >= 0 && sum[b[col]] != 0.0) o[col] = sum[b[col]] > 0.0 ? 1.0f : -1.0f;
     }
   }
   return sign;

@@ -165,6 +165,18 @@ double HeightDependentErrorBoundUm(const cv::Mat& depth_um, const cv::Mat& mask,
 // INVALID_ARGUMENT.
 StatusOr<cv::Mat> ShapeParameterSensitivitySign(const cv::Mat& surface_um, HeightParameter parameter);
 
+// The worst case of a height-dependent error g that is periodic in the z grid, |g| <= delta:
+// g(p) = delta sign(S(f(p))), where f(p) is the fractional grid position of depth_um(p) in
+// `bins` equal bins and S(f) the sum of d parameter / d z over the pixels in f's bin
+// (+1 / -1 as CV_32FC1, 0 where depth or surface is NaN). Why periodic: peak locking is a
+// function of where a height falls between two frames, the same between every pair of frames,
+// so it cannot follow sign(d parameter / d z) over a surface spanning several steps (the
+// unconstrained worst case of ShapeParameterSensitivitySign): between its bins the sensitivities
+// of pixels a step apart cancel. surface_um is the levelled surface the parameter is computed on,
+// pixel for pixel with depth_um. parameter: kSsk or kSku, else INVALID_ARGUMENT.
+StatusOr<cv::Mat> PeriodicWorstCaseSign(const cv::Mat& depth_um, const cv::Mat& surface_um, HeightParameter parameter,
+                                        const DepthNoiseModel& model, int bins);
+
 // Adds a uniform bound B: component height_dependent = B / sqrt 3, combined in quadrature.
 void AddHeightDependentBound(UncertaintyBudget& budget, double bound);
 

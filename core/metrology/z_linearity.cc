@@ -80,6 +80,25 @@ ZLinearity ZLinearity::Uncharacterised() {
   return l;
 }
 
+ZLinearity ZLinearity::UncharacterisedThreePointPeak() {
+  // The Gaussian vertex through ln F at u = -1, 0, 1 (in steps) for the focus at x in [-1/2, 1/2],
+  // F(u) = (1 + ((u - x) / w)^2)^-2, w = 1/2: mu = (g_-1 - g_1) / (2 (g_-1 - 2 g_0 + g_1)), g = -ln F.
+  constexpr double kHalfWidthSteps = 0.5;
+  auto g = [](double u) { return 2.0 * std::log1p((u / kHalfWidthSteps) * (u / kHalfWidthSteps)); };
+  ZLinearity l;
+  const int n = 64;
+  for (int i = 0; i < n; ++i) {
+    const double f = double(i) / n;
+    const double x = f < 0.5 ? f : f - 1.0;  // focus relative to the nearest frame
+    const double gm = g(-1.0 - x), g0 = g(-x), gp = g(1.0 - x);
+    const double den = 2.0 * (gm - 2.0 * g0 + gp);
+    l.bias_of_step.push_back(den > 0.0 ? (gm - gp) / den - x : 0.0);
+  }
+  l.source =
+      "uncharacterised: analytic error bound of the three-point peak interpolation (curve half-width 1/2 z step)";
+  return l;
+}
+
 double ZLinearity::At(double fraction) const {
   const int n = int(bias_of_step.size());
   if (n == 0) return 0.0;

@@ -49,6 +49,19 @@ struct ZLinearity {
   // of +-1/2 step (standard deviation step / sqrt 12). Every interpolation lies within it, so it is
   // safe, and large: characterise the rig to get realistic uncertainties.
   static ZLinearity Uncharacterised();
+  // Not characterised, for a three-point vertex interpolation (Gaussian eq. 3.30-3.34 or the
+  // defocus parabola): the discrete maximum's sawtooth bounds the frame the peak is found at, not
+  // the interpolated depth, whose error is continuous in f, zero on a frame and half-way between
+  // frames. Each of the two three-point fits is exact for one family of focus curves (ln F a
+  // parabola: Gaussian; F^-1/2 a parabola: the defocus curve F = (1 + (u / w)^2)^-2 of a
+  // gradient measure); a real curve lies near them, so the prior is the analytic error of one
+  // fit on the other family, at the narrowest curve the three samples still resolve (half-width
+  // w = step / 2: a narrower peak falls off by > 16x within one step and leaves the flank frames
+  // in the noise). That error, Gaussian fit on the defocus curve, peaks at 0.109 of the step
+  // (the defocus parabola on a Gaussian: 0.093); wider curves give less (w = 1 step: 0.057,
+  // 2 steps: 0.020). Tabulated at 64 fractions, zero-mean by antisymmetry. The simulated rig's
+  // characterised tables reach 0.012 (5 um steps) and 0.018 (2 um) of the step.
+  static ZLinearity UncharacterisedThreePointPeak();
   // Periodic linear interpolation in the table (f taken modulo 1).
   double At(double fraction) const;
   // Root mean square of the table (fraction of a step).

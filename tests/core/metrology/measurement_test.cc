@@ -75,7 +75,8 @@ class SyntheticPartTest : public ::testing::Test {
     ctx_.pixel_size_um = kPx;
     ctx_.noise.window_px = 7;
     for (int k = 0; k < 30; ++k) ctx_.noise.z_positions_um.push_back(180.0 + 5.0 * k);
-    ctx_.noise.linearity.bias_of_step = {0.0, 0.0};  // this synthetic instrument has none
+    ctx_.noise.linearity.bias_of_step = {0.0, 0.0};  // this synthetic instrument has none,
+    ctx_.noise.linearity.characterised_step_um = 5.0;  // characterised at the scan's step
   }
   MeasurementSpec Spec(MeasurementKind kind, RegionOfInterest roi) {
     MeasurementSpec s;

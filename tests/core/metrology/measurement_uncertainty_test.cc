@@ -24,6 +24,7 @@ DepthNoiseOptions Options(int window = 7) {
   o.window_px = window;
   for (int k = 0; k < 40; ++k) o.z_positions_um.push_back(150.0 + 5.0 * k);
   o.linearity.bias_of_step = {0.0, 0.0};  // no z-linearity unless a test sets one
+  o.linearity.characterised_step_um = 5.0;  // (characterised as none: not the uncharacterised prior)
   return o;
 }
 
@@ -214,12 +215,13 @@ TEST(MeasurementUncertaintyTest, LinearityCharacterisedAtACoarserStepIsKeptInMic
   EXPECT_NEAR(fine->linearity.bias_of_step[1] * 2.0, -0.02 * 5.0, 1e-12);
   EXPECT_NEAR(fine->linearity.characterised_step_um, 2.0, 1e-12);
   EXPECT_NE(fine->linearity.source.find("transferred from"), std::string::npos) << fine->linearity.source;
-  // Scan at 10 um steps: the error grows with the step by an unknown amount; the sawtooth bound.
+  // Scan at 10 um steps: the error grows with the step by an unknown amount; the uncharacterised
+  // prior (a three-point peak: its interpolation's analytic error bound).
   o.z_positions_um.clear();
   for (int k = 0; k < 20; ++k) o.z_positions_um.push_back(150.0 + 10.0 * k);
   auto coarse = EstimateDepthNoise(plane, cv::Mat(), o);
   ASSERT_TRUE(coarse.ok()) << coarse.status().ToString();
-  EXPECT_NEAR(coarse->linearity.MaxAbs(), ZLinearity::Uncharacterised().MaxAbs(), 1e-12);
+  EXPECT_NEAR(coarse->linearity.MaxAbs(), ZLinearity::UncharacterisedThreePointPeak().MaxAbs(), 1e-12);
   EXPECT_NE(coarse->linearity.source.find("does not apply"), std::string::npos) << coarse->linearity.source;
   // A transfer that would need more than half a step of bias falls back as well (0.3 at 5 um
   // is 0.75 of a 2 um step).
@@ -228,7 +230,50 @@ TEST(MeasurementUncertaintyTest, LinearityCharacterisedAtACoarserStepIsKeptInMic
   for (int k = 0; k < 60; ++k) o.z_positions_um.push_back(150.0 + 2.0 * k);
   auto far = EstimateDepthNoise(plane, cv::Mat(), o);
   ASSERT_TRUE(far.ok()) << far.status().ToString();
-  EXPECT_NEAR(far->linearity.MaxAbs(), ZLinearity::Uncharacterised().MaxAbs(), 1e-12);
+  EXPECT_NEAR(far->linearity.MaxAbs(), ZLinearity::UncharacterisedThreePointPeak().MaxAbs(), 1e-12);
+}
+
+TEST(MeasurementUncertaintyTest, UncharacterisedThreePointPeakTakesItsInterpolationErrorNotTheSawtooth) {
+  // The prior: the Gaussian three-point vertex on the defocus curve (1 + (u / w)^2)^-2 at
+  // w = step / 2. Zero on a frame and half-way between (by symmetry), antisymmetric about
+  // half a step, largest 0.109 of the step near f = 0.30 (the closed form evaluated by hand:
+  // at x = 0.3, ln F at u = -1.3, -0.3, 0.7 gives mu = 0.1913, so the error is -0.1087).
+  const ZLinearity prior = ZLinearity::UncharacterisedThreePointPeak();
+  ASSERT_EQ(prior.bias_of_step.size(), 64u);
+  EXPECT_NEAR(prior.At(0.0), 0.0, 1e-12);
+  EXPECT_NEAR(prior.At(0.5), 0.0, 1e-12);
+  EXPECT_NEAR(prior.At(0.3), -0.1087, 0.002);
+  for (int i = 1; i < 32; ++i) EXPECT_NEAR(prior.bias_of_step[i], -prior.bias_of_step[64 - i], 1e-12) << i;
+  EXPECT_NEAR(prior.MaxAbs(), 0.109, 0.002);
+  EXPECT_NE(prior.source.find("three-point"), std::string::npos);
+  // EstimateDepthNoise takes it for an uncharacterised linearity when the depth is a three-point
+  // vertex, and keeps the discrete maximum's sawtooth for the maximum / line fit.
+  const cv::Size size(120, 80);
+  const cv::Mat plane = testing::SampleSurface(size, kPx, [](double x, double) { return 200.0 + 0.01 * x; }) +
+                        testing::CorrelatedNoise(size, 0.05, 7, 5);
+  DepthNoiseOptions o = Options();
+  o.linearity = ZLinearity::Uncharacterised();
+  auto three = EstimateDepthNoise(plane, cv::Mat(), o);
+  ASSERT_TRUE(three.ok()) << three.status().ToString();
+  EXPECT_NEAR(three->linearity.MaxAbs(), prior.MaxAbs(), 1e-12);
+  EXPECT_FALSE(three->linearity_shape_known);
+  o.three_point_peak = false;
+  auto maximum = EstimateDepthNoise(plane, cv::Mat(), o);
+  ASSERT_TRUE(maximum.ok());
+  EXPECT_NEAR(maximum->linearity.MaxAbs(), ZLinearity::Uncharacterised().MaxAbs(), 1e-12);
+  // A table characterised at the scan's step is known in shape; one transferred from a coarser
+  // step is not.
+  o.three_point_peak = true;
+  o.linearity.bias_of_step = {0.0, 0.01, 0.0, -0.01};
+  o.linearity.characterised_step_um = o.z_positions_um[1] - o.z_positions_um[0];
+  auto own = EstimateDepthNoise(plane, cv::Mat(), o);
+  ASSERT_TRUE(own.ok());
+  EXPECT_TRUE(own->linearity_shape_known);
+  o.linearity.characterised_step_um *= 2.0;
+  auto transferred = EstimateDepthNoise(plane, cv::Mat(), o);
+  ASSERT_TRUE(transferred.ok());
+  EXPECT_FALSE(transferred->linearity_shape_known);
+  EXPECT_GT(transferred->linearity.characterised_step_um, 0.0);
 }
 
 // A step between two flats, 120 x 80 px at 1 um/px, white noise of 0.02 um, each flat offset by
@@ -256,9 +301,9 @@ StatusOr<MeasuredValue> MeasureNoisyStep(double step_um, double offset_um, doubl
 }
 
 TEST(VerifiedCharacteristicsTest, VerifiedLinearityDeviationReplacesTheSawtoothBoundAndStillCovers) {
-  // Uncharacterised at 5 um steps, a 1.3 um step carries the +-2.5 um sawtooth: U ~ 4 um. A
-  // verified l_z = 0.05 um scales the same worst-case shape to +-0.05 um; the flats' +-0.03 um
-  // offsets (a 0.06 um short step, within 2 l_z) stay covered.
+  // Uncharacterised at 5 um steps, a 1.3 um step carries the three-point peak's prior of
+  // +-0.55 um (0.109 step): U ~ 1.1 um. A verified l_z = 0.05 um scales the same shape to
+  // +-0.05 um; the flats' +-0.03 um offsets (a 0.06 um short step, within 2 l_z) stay covered.
   auto bare = MeasureNoisyStep(1.3, 0.03, 1.0, {});
   VerifiedCharacteristics v;
   v.linearity_deviation_um = 0.05;
@@ -269,10 +314,10 @@ TEST(VerifiedCharacteristicsTest, VerifiedLinearityDeviationReplacesTheSawtoothB
   const double dev = verified->value - 1.3;
   std::printf("step 1.3 um: dev %+.4f, U %.4f uncharacterised, %.4f with l_z 0.05 um\n", dev, u_bare, u_ver);
   EXPECT_NEAR(dev, -0.06, 0.01);
-  EXPECT_GT(u_bare, 2.0);
-  EXPECT_LT(u_ver, 0.15);      // 0.05 / 2.5 of the sawtooth's part, plus the noise
+  EXPECT_GT(u_bare, 0.8);
+  EXPECT_LT(u_ver, 0.15);      // 0.05 / 0.55 of the prior's part, plus the noise
   EXPECT_LE(std::abs(dev), u_ver);
-  // Never widened: an l_z above the sawtooth's size leaves it.
+  // Never widened: an l_z above the prior's size leaves it.
   v.linearity_deviation_um = 10.0;
   auto wide = MeasureNoisyStep(1.3, 0.03, 1.0, v);
   ASSERT_TRUE(wide.ok());

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 
 #include "core/metrology/areal_parameters.h"
 #include "core/metrology/measurement.h"
@@ -103,6 +104,43 @@ TEST(ShapeParameterUncertaintyTest, SensitivitySignsAgreeWithFiniteDifferences) 
   EXPECT_FALSE(ShapeParameterSensitivitySign(surface, HeightParameter::kSa).ok());
 }
 
+TEST(ShapeParameterUncertaintyTest, AnErrorPeriodicInTheGridMovesSskFarLessThanAnUnconstrainedOne) {
+  // A 6 um cosine on a 2 um z grid spans six steps: an error that is a function of the
+  // fractional grid position (peak locking) takes the same sign a step apart in height, so it
+  // cannot follow sign(d Ssk / d z) over the whole surface.
+  const cv::Size size(256, 32);
+  const cv::Mat depth = testing::SampleSurface(
+      size, 1.0, [](double x, double) { return 200.0 + 6.0 * std::cos(2 * kPi * (x - 0.5) / 128.0); });
+  const cv::Mat surface = depth - 200.0;
+  DepthNoiseOptions o = Options();
+  o.z_positions_um.clear();
+  for (int k = 0; k < 40; ++k) o.z_positions_um.push_back(170.0 + 2.0 * k);
+  auto model = EstimateDepthNoise(depth + testing::CorrelatedNoise(size, 0.01, 7, 9), cv::Mat(), o);
+  ASSERT_TRUE(model.ok()) << model.status().ToString();
+  auto periodic = PeriodicWorstCaseSign(depth, surface, HeightParameter::kSsk, *model, 20);
+  auto free = ShapeParameterSensitivitySign(surface, HeightParameter::kSsk);
+  ASSERT_TRUE(periodic.ok() && free.ok());
+  // One sign per bin of the fractional position.
+  std::map<int, float> sign_of_bin;
+  int mismatched = 0;
+  for (int col = 0; col < size.width; ++col) {
+    const int bin = std::min(19, int(model->grid.Locate(depth.at<float>(0, col)).fraction * 20));
+    const float s = periodic->at<float>(0, col);
+    auto [it, inserted] = sign_of_bin.emplace(bin, s);
+    mismatched += !inserted && it->second != s;
+  }
+  EXPECT_EQ(mismatched, 0);
+  const cv::Mat mask(size, CV_8UC1, cv::Scalar(255));
+  auto ssk = [&](const cv::Mat& z) { return ComputeHeightParameters(z, mask)->Ssk; };
+  const double delta = 0.05, base = ssk(surface);
+  const double moved_periodic = std::abs(ssk(surface + *periodic * delta) - base);
+  const double moved_free = std::abs(ssk(surface + *free * delta) - base);
+  std::printf("Ssk moved by %.5f (periodic worst case) against %.5f (unconstrained)\n", moved_periodic, moved_free);
+  EXPECT_GT(moved_free, 0.0);
+  EXPECT_LT(moved_periodic, 0.5 * moved_free);
+  EXPECT_FALSE(PeriodicWorstCaseSign(depth, surface, HeightParameter::kSq, *model, 20).ok());
+}
+
 TEST(ShapeParameterUncertaintyTest, BoundIsTheLinearityHalfRangePlusTheFlattening) {
   DepthNoiseOptions o = Options();
   o.linearity.bias_of_step = {0.0, 0.02, 0.0, -0.02};  // +-0.1 um at 5 um steps
@@ -125,10 +163,12 @@ TEST(ShapeParameterUncertaintyTest, BoundIsTheLinearityHalfRangePlusTheFlattenin
 
 TEST(ShapeParameterUncertaintyTest, SsksUncertaintyCoversAHeightDependentErrorItsMonteCarloDoesNotKnow) {
   // Truth: a cosine (Ssk 0, Sku 1.5). "Measured": the same with its valleys' bottom band raised
-  // by 0.04 um and the rest left (the simulated rig's SFF raised the valleys of a 2 um cosine
-  // by ~0.03 um against its peaks), plus noise. The model's z-linearity table is 10x smaller
-  // than that error and of another shape, so the Monte Carlo cannot know it; its size is within
-  // the bound (half the table's range, 0.01 um, plus the flattening, ~0.04 um).
+  // by 0.04 um and the rest left, plus noise. The cosine (208..212 um) spans less than one 5 um
+  // step, so that error is a function of the fractional grid position too (periodic in the
+  // grid, PeriodicWorstCaseSign). The model's z-linearity table, transferred from a 10 um
+  // characterisation (its shape at 5 um steps unknown: the whole half-range is a worst case), is
+  // of another shape, so the Monte Carlo cannot know the error; its size is within the bound
+  // (half the table's range, 0.01 um, plus the flattening's estimated systematic).
   const cv::Size size(256, 96);
   const auto truth = [](double x, double) { return 210.0 + 2.0 * std::cos(2 * kPi * x / (64 * kPx)); };
   cv::Mat measured = testing::SampleSurface(size, kPx, [&](double x, double y) {
@@ -140,7 +180,8 @@ TEST(ShapeParameterUncertaintyTest, SsksUncertaintyCoversAHeightDependentErrorIt
   ctx.depth_um = measured;
   ctx.pixel_size_um = kPx;
   ctx.noise = Options();
-  ctx.noise.linearity.bias_of_step = {0.0, 0.002, 0.0, -0.002};
+  ctx.noise.linearity.bias_of_step = {0.0, 0.001, 0.0, -0.001};  // +-0.01 um at 10 um
+  ctx.noise.linearity.characterised_step_um = 10.0;
   MeasurementSpec spec;
   spec.roi = RegionOfInterest::Rectangle(32, 8, 192, 80);  // three whole periods
   MeasurementContext truth_ctx = ctx;

@@ -3,7 +3,9 @@
 // tests/bench/uncertainty_evaluate_output.md): the k = 2 interval must cover the deviation from
 // the ground-truth measurement for 93-99 % of all (scene, measurement, seed, z step) triples,
 // and not by being wide: the median of |deviation| / U per parameter must be >= 0.2 (a Gaussian
-// error with U = 2u gives ~0.34). Scenes and seeds are none the model was tuned on.
+// error with U = 2u gives ~0.34). The same scans with the linearity uncharacterised must stay
+// covered (>= 95 %: a bound) and be sharp where the linearity matters little. Scenes and seeds
+// are none the model was tuned on.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -156,8 +158,10 @@ TEST_F(UncertaintySharpnessTest, CoverageIsNearNinetyFivePercentAndUIsNotWiderTh
     cases.push_back(c);
   }
 
-  std::map<std::string, std::vector<double>> ratio;  // parameter -> |dev| / U
-  int covered = 0, total = 0;
+  // Per parameter |dev| / U, with the characterised linearity and with none (the uncharacterised
+  // prior of a three-point peak, core/metrology/z_linearity.h).
+  std::map<std::string, std::vector<double>> ratio, ratio_unchar;
+  int covered = 0, total = 0, covered_unchar = 0;
   for (const double z_step_um : {2.0, 5.0}) {
     for (uint64_t seed = 901; seed <= 906; ++seed) {
       for (const Case& c : cases) {
@@ -170,41 +174,60 @@ TEST_F(UncertaintySharpnessTest, CoverageIsNearNinetyFivePercentAndUIsNotWiderTh
         ctx.noise.z_positions_um = scan->z_um;
         ctx.noise.linearity = *linearity;
         ctx.noise.stage_repeatability_um = SimulatedRigOptions{}.stage_repeatability_um;
+        MeasurementContext unchar = ctx;
+        unchar.noise.linearity = ZLinearity::Uncharacterised();
         MeasurementContext truth_ctx = ctx;
         truth_ctx.depth_um = scan->truth_um;
         truth_ctx.with_uncertainty = false;
         const auto measured = MeasureAll(c.specs, ctx);
+        const auto measured_unchar = MeasureAll(c.specs, unchar);
         const auto truth = MeasureAll(c.specs, truth_ctx);
         for (size_t i = 0; i < c.specs.size(); ++i) {
           ASSERT_TRUE(measured[i].ok()) << measured[i].status().ToString();
+          ASSERT_TRUE(measured_unchar[i].ok()) << measured_unchar[i].status().ToString();
           ASSERT_TRUE(truth[i].ok()) << truth[i].status().ToString();
+          const std::string name = MeasurementKindName(c.specs[i].kind);
           const double dev = measured[i]->value - truth[i]->value;
           const double big_u = 2.0 * measured[i]->uncertainty.standard_uncertainty;
           ASSERT_GT(big_u, 0.0);
           covered += std::abs(dev) <= big_u;
           ++total;
-          ratio[MeasurementKindName(c.specs[i].kind)].push_back(std::abs(dev) / big_u);
+          ratio[name].push_back(std::abs(dev) / big_u);
+          const double dev_unchar = measured_unchar[i]->value - truth[i]->value;
+          const double big_u_unchar = 2.0 * measured_unchar[i]->uncertainty.standard_uncertainty;
+          covered_unchar += std::abs(dev_unchar) <= big_u_unchar;
+          ratio_unchar[name].push_back(std::abs(dev_unchar) / big_u_unchar);
         }
       }
     }
   }
-  const double coverage = double(covered) / total;
-  std::printf("coverage %d / %d = %.1f %%\n", covered, total, 100.0 * coverage);
-  for (auto& [param, r] : ratio) {
+  auto median_of = [](std::vector<double> r) {
     std::sort(r.begin(), r.end());
     const size_t n = r.size();
-    const double median = n % 2 ? r[n / 2] : 0.5 * (r[n / 2 - 1] + r[n / 2]);
+    return n % 2 ? r[n / 2] : 0.5 * (r[n / 2 - 1] + r[n / 2]);
+  };
+  const double coverage = double(covered) / total, coverage_unchar = double(covered_unchar) / total;
+  std::printf("coverage %d / %d = %.1f %% (uncharacterised linearity: %d / %d = %.1f %%)\n", covered, total,
+              100.0 * coverage, covered_unchar, total, 100.0 * coverage_unchar);
+  for (const auto& [param, r] : ratio) {
+    const double median = median_of(r), median_unchar = median_of(ratio_unchar[param]);
     const long in = std::count_if(r.begin(), r.end(), [](double v) { return v <= 1.0; });
-    std::printf("  %-12s n %3zu  covered %3ld  median |dev|/U %.3f\n", param.c_str(), n, in, median);
-    // Ssk and Sku keep a worst-case bound for the z-linearity's height-dependent error (its
-    // shape on a curved surface is not known): their U is still wider than their deviations
-    // (open, see tests/bench/uncertainty_evaluate_output.md); the bound asserted for them only
-    // guards against it growing back (it was ~0.02-0.06).
-    const bool shape = param == "Ssk" || param == "Sku";
-    EXPECT_GE(median, shape ? 0.05 : 0.2) << param;
+    std::printf("  %-12s n %3zu  covered %3ld  median |dev|/U %.3f  (uncharacterised: %.3f)\n", param.c_str(),
+                r.size(), in, median, median_unchar);
+    // Ssk and Sku keep a worst-case bound for the z-linearity's height-dependent error (among
+    // errors periodic in the z grid now) and a noise-bias estimate that structure inflates:
+    // their U is still wider than their deviations (open, tests/bench/uncertainty_evaluate_output.md).
+    // Their bounds guard the gain of the periodic worst case (Ssk 0.175, Sku 0.118 here).
+    const double floor = param == "Ssk" ? 0.15 : param == "Sku" ? 0.1 : 0.2;
+    EXPECT_GE(median, floor) << param;
+    // Uncharacterised, the prior (+-0.11 step) is a bound: wider, but no longer the +-step / 2
+    // sawtooth that left every median at 0.00-0.17. The parameters where the linearity is a
+    // common offset or small against the noise are sharp with it.
+    if (param == "Sa" || param == "Sq" || param == "Sz" || param == "tilt") EXPECT_GE(median_unchar, 0.2) << param;
   }
   EXPECT_GE(coverage, 0.93);
   EXPECT_LE(coverage, 0.99);
+  EXPECT_GE(coverage_unchar, 0.95);
 }
 
 }  // namespace

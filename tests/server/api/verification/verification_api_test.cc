@@ -193,8 +193,9 @@ TEST_F(VerificationApiTest, AFullVerificationIsStoredWithTheCalibrationAndUsedBy
   EXPECT_EQ(RigStatusNow().verification_state(), v1::VERIFICATION_STATE_VERIFIED);
 
   // A scan now: no warning, the verified alpha_z's component u_alpha = sqrt(u^2 + (alpha - 1)^2) |H|
-  // in its uncertainty, and the verified l_z instead of the +-step/2 sawtooth (no z linearity
-  // calibrated): U far smaller, still covering the simulator's 1.000 um.
+  // in its uncertainty, and the verified l_z (0.04 + 2 x 0.06 um, a bound) scaling the
+  // uncharacterised prior of +-0.22 um at 2 um steps (no z linearity calibrated): U smaller
+  // (0.59 -> 0.43 um), still covering the simulator's 1.000 um.
   ASSERT_TRUE(client_->SetSpecimen("step1um", &specimens).ok());
   const v1::InspectionResult after = ScanStep();
   ASSERT_EQ(after.measurements_size(), 1);
@@ -207,7 +208,7 @@ TEST_F(VerificationApiTest, AFullVerificationIsStoredWithTheCalibrationAndUsedBy
   EXPECT_NEAR(a.amplification_uncertainty(), rel * std::abs(a.value()), 1e-12);
   EXPECT_GT(a.amplification_uncertainty(), 0.0);
   EXPECT_LE(a.amplification_uncertainty(), a.standard_uncertainty());
-  EXPECT_LT(a.expanded_uncertainty(), 0.5 * b.expanded_uncertainty());
+  EXPECT_LT(a.expanded_uncertainty(), 0.85 * b.expanded_uncertainty());
   EXPECT_NEAR(a.value(), 1.0, a.expanded_uncertainty());
   EXPECT_NEAR(b.value(), 1.0, b.expanded_uncertainty());
 
