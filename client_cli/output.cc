@@ -199,6 +199,15 @@ void PrintDepthSummary(const v1::DepthSummary& d) {
                         "surface behind\n",
                         d.halo_candidate_percent(), d.halo_reassigned_percent());
   }
+  // Which depth the files hold, and why: inferred depth must not pass for measured.
+  if (d.dense_depth()) {
+    std::cout << Format("depth: dense (%s): %.1f %% of the pixels inferred (confidence below the threshold, hatched "
+                        "in depth_preview.png), the rest measured; --dense off for measured pixels only\n",
+                        d.dense_depth_decision().c_str(), d.filled_percent());
+  } else if (!d.dense_depth_decision().empty()) {
+    std::cout << "depth: measured pixels only (" << d.dense_depth_decision()
+              << "); --dense on for a value at every pixel\n";
+  }
   if (d.has_ground_truth()) {
     std::cout << Format("vs ground truth: RMSE %.3f um, mean |error| %.3f um\n", d.rmse_um(), d.mean_abs_error_um());
   }

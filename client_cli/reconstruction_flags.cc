@@ -108,7 +108,8 @@ void ReconstructionFlags::Add(CLI::App* cmd) {
                 "(ADAPT-family scans, flicker); off by default (docs/reconstruction.md)");
   cmd->add_option("--dense", dense,
                   "Depth at every pixel (edge-aware fit of the measured depths; inferred pixels keep "
-                  "confidence below the threshold): on | off | auto (default: off)")
+                  "confidence below the threshold): on | off | auto (default: on for an imported stack "
+                  "(--images, a folder whose stack.json records no rig scan), off for a rig scan)")
       ->check(CLI::IsMember({"on", "off", "auto"}));
   cmd->add_flag("--halo-suppression", halo_suppression,
                 "SFF: near depth jumps, keep a bright defocused edge's blur from winning over the sharp surface "

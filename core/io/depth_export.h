@@ -15,6 +15,9 @@ namespace inspection {
 struct DepthExportMeta {
   double pixel_size_um = 0.0;  // lateral sampling in x and y; 0 = unknown scale
   std::string description;     // free text stored where the format allows (TIFF ImageDescription, x3p comment)
+  // > 0: pixels with a depth and confidence below this were inferred (dense depth, fill), not
+  // measured; the depth preview hatches them.
+  double inferred_below_confidence = 0.0;
 };
 
 // float32 single-channel TIFF, values in µm, NaN where no depth. Pixel size stored as resolution.

@@ -3,6 +3,8 @@
 #include "core/sff/dense_depth.h"
 
 #include <algorithm>
+#include <atomic>
+#include <cstdint>
 #include <cmath>
 #include <limits>
 #include <opencv2/core/utility.hpp>
@@ -36,6 +38,15 @@ Status DenseDepthOptions::Validate() const {
   }
   if (!(robust_scale > 0.0 && std::isfinite(robust_scale))) {
     return Status::InvalidArgument("dense.robust_scale must be > 0");
+  }
+  if (solve_downscale < 0 || solve_downscale > 16) {
+    return Status::InvalidArgument("dense.solve_downscale must be between 0 (auto) and 16");
+  }
+  if (!(auto_solve_max_pixels >= 1.0 && std::isfinite(auto_solve_max_pixels))) {
+    return Status::InvalidArgument("dense.auto_solve_max_pixels must be >= 1");
+  }
+  if (!(upsample_sigma_color > 0.0 && std::isfinite(upsample_sigma_color))) {
+    return Status::InvalidArgument("dense.upsample_sigma_color must be > 0");
   }
   return Status::Ok();
 }
@@ -74,8 +85,148 @@ cv::Mat HaloFactor(const cv::Mat& guide8, int radius) {
   return factor;
 }
 
-// One weighted fit: fit = the model's value at every pixel, den = F(w).
-// One weighted fit: fit = the model's value at every pixel, den = F(w).
+// The k x k block means of an 8-bit image (the last blocks of a row or column partial).
+cv::Mat BlockMean(const cv::Mat& img8, int k, const cv::Size& size) {
+  const int cn = img8.channels();
+  cv::Mat out(size, img8.type());
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
+    std::vector<uint32_t> sum(size_t(size.width * cn)), cnt(size_t(size.width));
+    for (int by = range.start; by < range.end; ++by) {
+      std::fill(sum.begin(), sum.end(), 0u);
+      std::fill(cnt.begin(), cnt.end(), 0u);
+      for (int y = by * k; y < std::min(img8.rows, (by + 1) * k); ++y) {
+        const uint8_t* p = img8.ptr<uint8_t>(y);
+        for (int x = 0; x < img8.cols; ++x) {
+          const int bx = x / k;
+          ++cnt[size_t(bx)];
+          for (int c = 0; c < cn; ++c) sum[size_t(bx * cn + c)] += p[x * cn + c];
+        }
+      }
+      uint8_t* o = out.ptr<uint8_t>(by);
+      for (int bx = 0; bx < size.width; ++bx)
+        for (int c = 0; c < cn; ++c)
+          o[bx * cn + c] = uint8_t((sum[size_t(bx * cn + c)] + cnt[size_t(bx)] / 2) / cnt[size_t(bx)]);
+    }
+  });
+  return out;
+}
+
+// Flat segments of the guide (connected pixels whose grey gradient stays below `gradient` levels
+// per pixel, at least min_area pixels) and one robust plane per segment fitted to the
+// measurements on it and within `band` pixels of it. Returns the plane's (centred) depth on every
+// pixel of a segment that has one, NaN elsewhere. An untextured region is one surface more often
+// than not (a wall, the sky, a painted part): its depth continues that of the edges around it,
+// and the Cauchy-weighted fit lets the majority of its rim win over the minority that belongs to
+// an occluder in front of it.
+cv::Mat SegmentPlanes(const cv::Mat& guide_s, const cv::Mat& centred, const cv::Mat& w, double gradient, int band,
+                      int min_area, double ridge_px, double robust_scale, double min_scale) {
+  cv::Mat grey;
+  if (guide_s.channels() == 3)
+    cv::cvtColor(guide_s, grey, cv::COLOR_BGR2GRAY);
+  else
+    grey = guide_s;
+  cv::Mat g32, gx, gy;
+  grey.convertTo(g32, CV_32F);
+  cv::GaussianBlur(g32, g32, cv::Size(0, 0), 1.0);
+  cv::Sobel(g32, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
+  cv::Sobel(g32, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
+  cv::Mat mag;
+  cv::magnitude(gx, gy, mag);
+  const cv::Mat flat = mag < float(gradient);
+  cv::Mat labels, stats, centroids;
+  const int n = cv::connectedComponentsWithStats(flat, labels, stats, centroids, 4, CV_32S);
+  const int rows = w.rows, cols = w.cols;
+  cv::Mat out(w.size(), CV_32FC1, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+  struct Sample {
+    float u, v, d, w;
+  };
+  std::vector<int> slot(size_t(n), -1);
+  std::vector<std::vector<Sample>> samples;
+  for (int l = 1; l < n; ++l)
+    if (stats.at<int>(l, cv::CC_STAT_AREA) >= min_area) {
+      slot[size_t(l)] = int(samples.size());
+      samples.emplace_back();
+    }
+  if (samples.empty()) return out;
+  const float scale = 2.f / float(std::max(rows, cols));
+  std::vector<int> seen;
+  for (int y = 0; y < rows; ++y) {
+    const float* pw = w.ptr<float>(y);
+    const float* pc = centred.ptr<float>(y);
+    for (int x = 0; x < cols; ++x) {
+      if (!(pw[x] > 0.f)) continue;
+      seen.clear();
+      for (int yy = std::max(0, y - band); yy <= std::min(rows - 1, y + band); ++yy) {
+        const int* lab = labels.ptr<int>(yy);
+        for (int xx = std::max(0, x - band); xx <= std::min(cols - 1, x + band); ++xx) {
+          const int s = slot[size_t(lab[xx])];
+          if (s >= 0 && std::find(seen.begin(), seen.end(), s) == seen.end()) seen.push_back(s);
+        }
+      }
+      for (int s : seen) samples[size_t(s)].push_back({float(x) * scale, float(y) * scale, pc[x], pw[x]});
+    }
+  }
+  std::vector<double> plane(3 * samples.size(), std::numeric_limits<double>::quiet_NaN());
+  const double r2 = (ridge_px * scale) * (ridge_px * scale);
+  for (size_t s = 0; s < samples.size(); ++s) {
+    const std::vector<Sample>& v = samples[s];
+    if (v.size() < 16) continue;
+    std::vector<double> wt(v.size());
+    for (size_t i = 0; i < v.size(); ++i) wt[i] = v[i].w;
+    double u0 = 0, v0 = 0, sw0 = 0;
+    for (size_t i = 0; i < v.size(); ++i) {
+      u0 += wt[i] * v[i].u;
+      v0 += wt[i] * v[i].v;
+      sw0 += wt[i];
+    }
+    u0 /= sw0;
+    v0 /= sw0;
+    double a = 0, b = 0, c = 0;
+    bool ok = false;
+    for (int it = 0; it < 6; ++it) {
+      // Weighted least squares of d = a + b (u - u0) + c (v - v0), the slope ridged.
+      double s0 = 0, su = 0, sv = 0, suu = 0, suv = 0, svv = 0, sd = 0, sdu = 0, sdv = 0;
+      for (size_t i = 0; i < v.size(); ++i) {
+        const double q = wt[i], du = v[i].u - u0, dv = v[i].v - v0, d = v[i].d;
+        s0 += q, su += q * du, sv += q * dv, suu += q * du * du, suv += q * du * dv, svv += q * dv * dv;
+        sd += q * d, sdu += q * d * du, sdv += q * d * dv;
+      }
+      if (!(s0 > 0)) break;
+      suu += r2 * s0;
+      svv += r2 * s0;
+      const cv::Matx33d A(s0, su, sv, su, suu, suv, sv, suv, svv);
+      const cv::Vec3d rhs(sd, sdu, sdv);
+      cv::Vec3d x;
+      if (!cv::solve(A, rhs, x, cv::DECOMP_CHOLESKY)) break;
+      a = x[0], b = x[1], c = x[2];
+      ok = true;
+      std::vector<double> res(v.size());
+      for (size_t i = 0; i < v.size(); ++i) res[i] = std::abs(v[i].d - (a + b * (v[i].u - u0) + c * (v[i].v - v0)));
+      std::vector<double> sorted = res;
+      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+      const double sc = std::max(robust_scale * 1.4826 * sorted[sorted.size() / 2], min_scale);
+      for (size_t i = 0; i < v.size(); ++i) {
+        const double r = res[i] / sc;
+        wt[i] = v[i].w / (1.0 + r * r);
+      }
+    }
+    if (!ok) continue;
+    plane[3 * s] = a - b * u0 - c * v0;
+    plane[3 * s + 1] = b;
+    plane[3 * s + 2] = c;
+  }
+  for (int y = 0; y < rows; ++y) {
+    const int* lab = labels.ptr<int>(y);
+    float* o = out.ptr<float>(y);
+    for (int x = 0; x < cols; ++x) {
+      const int s = slot[size_t(lab[x])];
+      if (s < 0 || !(plane[3 * size_t(s)] == plane[3 * size_t(s)])) continue;
+      o[x] = float(plane[3 * size_t(s)] + plane[3 * size_t(s) + 1] * x * scale + plane[3 * size_t(s) + 2] * y * scale);
+    }
+  }
+  return out;
+}
+
 // The edge-aware filter, plus (fallback) the weakly edge-aware one times its weight: where the
 // first's support vanishes (a region with no measurement inside whose rim is all guide edges)
 // the second's wider reach decides.
@@ -162,6 +313,13 @@ void Fit(cv::ximgproc::FastGlobalSmootherFilter& fgs, const cv::Mat& centred, co
 
 }  // namespace
 
+int DenseSolveDownscale(const cv::Size& size, const DenseDepthOptions& options) {
+  if (options.solve_downscale > 0) return options.solve_downscale;
+  int k = 1;
+  while (k < 8 && double(size.width / k) * double(size.height / k) > options.auto_solve_max_pixels) k *= 2;
+  return k;
+}
+
 StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::Mat& confidence,
                                              const cv::Mat& guide, const DenseDepthOptions& options) {
   INSPECT_RETURN_IF_ERROR(options.Validate());
@@ -172,43 +330,99 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
   if (guide.empty() || guide.size() != depth_um.size() || (guide.channels() != 1 && guide.channels() != 3)) {
     return Status::InvalidArgument("guide must be the all-in-focus image (1 or 3 channels) of the depth map's size");
   }
-  const cv::Mat measured = depth_um == depth_um;
+  const int rows = depth_um.rows, cols = depth_um.cols;
+  const cv::Mat guide8 = Guide8(guide);
+  const cv::Mat halo = options.halo_radius_px > 0 ? HaloFactor(guide8, options.halo_radius_px) : cv::Mat();
+  // The solve grid: above auto_solve_max_pixels the fit runs on a k-times reduced grid (block
+  // means of w and w d, the guide's block mean as guide), with the smoothness and the ridge
+  // scaled to the same reach in full-resolution pixels, and comes back by joint bilateral
+  // upsampling with the full-resolution guide: FGS's cost is linear in the pixels and the fit is
+  // smooth wherever the guide is, so the reduced grid loses little but across fine structure.
+  const int k = DenseSolveDownscale(depth_um.size(), options);
+  const cv::Size solve_size((cols + k - 1) / k, (rows + k - 1) / k);
+
+  // Weights: the measured pixels' confidence (floored so that a measured pixel always counts),
+  // 0 where nothing was measured. One parallel pass over the solve grid's rows of blocks: the
+  // blocks' weight sums and weighted depth sums, and the measured range, sum and count.
+  struct Stats {
+    double lo = std::numeric_limits<double>::infinity(), hi = -std::numeric_limits<double>::infinity(), sum = 0;
+    int64_t n = 0;
+  };
+  std::vector<Stats> part(static_cast<size_t>(solve_size.height));
+  cv::Mat w(solve_size, CV_32FC1), wz(solve_size, CV_64FC1);
+  cv::parallel_for_(cv::Range(0, solve_size.height), [&](const cv::Range& range) {
+    std::vector<double> sw(size_t(solve_size.width)), swz(size_t(solve_size.width)), cnt(size_t(solve_size.width));
+    for (int by = range.start; by < range.end; ++by) {
+      std::fill(sw.begin(), sw.end(), 0.0);
+      std::fill(swz.begin(), swz.end(), 0.0);
+      std::fill(cnt.begin(), cnt.end(), 0.0);
+      Stats st;
+      for (int y = by * k; y < std::min(rows, (by + 1) * k); ++y) {
+        const float* z = depth_um.ptr<float>(y);
+        const float* c = confidence.empty() ? nullptr : confidence.ptr<float>(y);
+        const float* h = halo.empty() ? nullptr : halo.ptr<float>(y);
+        for (int x = 0; x < cols; ++x) {
+          const size_t bx = size_t(x / k);
+          cnt[bx] += 1.0;
+          if (!(z[x] == z[x])) continue;
+          float a = c ? std::min(std::max(c[x], 1e-3f), 1.f) : 1.f;
+          if (h) a *= h[x];
+          sw[bx] += a;
+          swz[bx] += double(a) * z[x];
+          st.lo = std::min(st.lo, double(z[x]));
+          st.hi = std::max(st.hi, double(z[x]));
+          st.sum += z[x];
+          ++st.n;
+        }
+      }
+      float* pw = w.ptr<float>(by);
+      double* pz = wz.ptr<double>(by);
+      for (int bx = 0; bx < solve_size.width; ++bx) {
+        pw[bx] = float(sw[size_t(bx)] / cnt[size_t(bx)]);
+        pz[bx] = sw[size_t(bx)] > 0.0 ? swz[size_t(bx)] / sw[size_t(bx)] : 0.0;
+      }
+      part[size_t(by)] = st;
+    }
+  });
+  Stats all;
+  for (const Stats& st : part) {
+    all.lo = std::min(all.lo, st.lo);
+    all.hi = std::max(all.hi, st.hi);
+    all.sum += st.sum;
+    all.n += st.n;
+  }
   DenseDepth out;
-  if (cv::countNonZero(measured) == 0) {
+  if (all.n == 0) {
     out.depth_um = depth_um.clone();
     out.inferred = cv::Mat(depth_um.size(), CV_8UC1, cv::Scalar(255));
     out.support = cv::Mat(depth_um.size(), CV_32FC1, cv::Scalar(0));
     out.agreement = out.support.clone();
     return out;
   }
-
-  // Weights: the measured pixels' confidence (floored so that a measured pixel always counts),
-  // 0 where nothing was measured; depth relative to its mean so the float filter keeps precision.
-  cv::Mat w0(depth_um.size(), CV_32FC1, cv::Scalar(0));
-  if (confidence.empty()) {
-    w0.setTo(1.f, measured);
-  } else {
-    cv::Mat floored = cv::min(cv::max(confidence, 1e-3f), 1.f);
-    floored.copyTo(w0, measured);
+  const double lo_um = all.lo, hi_um = all.hi, mean_um = all.sum / double(all.n);
+  // Depth relative to its mean so that the float filter keeps its precision.
+  cv::Mat centred(solve_size, CV_32FC1);
+  for (int by = 0; by < solve_size.height; ++by) {
+    const float* pw = w.ptr<float>(by);
+    const double* pz = wz.ptr<double>(by);
+    float* c = centred.ptr<float>(by);
+    for (int bx = 0; bx < solve_size.width; ++bx) c[bx] = pw[bx] > 0.f ? float(pz[bx] - mean_um) : 0.f;
   }
-  double lo_um = 0, hi_um = 0;
-  cv::minMaxLoc(depth_um, &lo_um, &hi_um, nullptr, nullptr, measured);
-  const double mean_um = cv::mean(depth_um, measured)[0];
-  cv::Mat centred(depth_um.size(), CV_32FC1, cv::Scalar(0));
-  cv::Mat(depth_um - mean_um).copyTo(centred, measured);
+  cv::Mat guide_s = k == 1 ? guide8 : BlockMean(guide8, k, solve_size);
+  const cv::Mat measured_s = w > 0.f;
+  const cv::Mat w_init = w;
+  const double lambda = options.lambda / double(k * k), ridge = options.plane_ridge_px / double(k);
 
-  const cv::Mat guide8 = Guide8(guide);
-  if (options.halo_radius_px > 0) w0 = w0.mul(HaloFactor(guide8, options.halo_radius_px));
   cv::Ptr<cv::ximgproc::FastGlobalSmootherFilter> fgs =
-      cv::ximgproc::createFastGlobalSmootherFilter(guide8, options.lambda, options.sigma_color);
-  cv::Mat w = w0, fit, den;
+      cv::ximgproc::createFastGlobalSmootherFilter(guide_s, lambda, options.sigma_color);
+  cv::Mat fit, den;
   // The Cauchy scale from the measured pixels' residuals to the fit: robust_scale x 1.4826 x
-  // their median absolute value, at least 1e-3 of the measured range.
+  // their median absolute value, at least 1e-3 of the measured depth range.
   auto CauchyScale = [&]() {
     std::vector<float> abs_res;
-    abs_res.reserve(size_t(cv::countNonZero(measured)));
+    abs_res.reserve(size_t(cv::countNonZero(measured_s)));
     for (int y = 0; y < fit.rows; ++y) {
-      const uint8_t* m = measured.ptr<uint8_t>(y);
+      const uint8_t* m = measured_s.ptr<uint8_t>(y);
       const float *c = centred.ptr<float>(y), *f = fit.ptr<float>(y);
       for (int x = 0; x < fit.cols; ++x)
         if (m[x]) abs_res.push_back(std::abs(c[x] - f[x]));
@@ -218,13 +432,13 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
     return std::max(options.robust_scale * sigma, 1e-3 * std::max(hi_um - lo_um, 1e-30));
   };
   for (int it = 0;; ++it) {
-    Fit(*fgs, centred, w, options.local_planes, options.plane_ridge_px, &fit, &den);
+    Fit(*fgs, centred, w, options.local_planes, ridge, &fit, &den);
     if (it == options.robust_iterations) break;
     const double cauchy = CauchyScale();
-    w = cv::Mat(w0.size(), CV_32FC1);
+    w = cv::Mat(w_init.size(), CV_32FC1);
     const float inv = float(1.0 / cauchy);
     for (int y = 0; y < fit.rows; ++y) {
-      const float *c = centred.ptr<float>(y), *f = fit.ptr<float>(y), *a = w0.ptr<float>(y);
+      const float *c = centred.ptr<float>(y), *f = fit.ptr<float>(y), *a = w_init.ptr<float>(y);
       float* b = w.ptr<float>(y);
       for (int x = 0; x < fit.cols; ++x) {
         const float r = (c[x] - f[x]) * inv;
@@ -240,17 +454,35 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
   cv::Mat fit_edge = fit, reach = den;  // reach: where either fit has support
   if (options.fallback_support > 0.0) {
     cv::Ptr<cv::ximgproc::FastGlobalSmootherFilter> wide =
-        cv::ximgproc::createFastGlobalSmootherFilter(guide8, options.lambda, options.fallback_sigma_color);
+        cv::ximgproc::createFastGlobalSmootherFilter(guide_s, lambda, options.fallback_sigma_color);
     cv::Mat fit_wide, den_wide;
-    Fit(*wide, centred, w, options.local_planes, options.plane_ridge_px, &fit_wide, &den_wide);
+    Fit(*wide, centred, w, options.local_planes, ridge, &fit_wide, &den_wide);
+    cv::Mat seg;
+    if (options.segment_planes) {
+      seg = SegmentPlanes(guide_s, centred, w, options.segment_gradient, std::max(1, options.segment_band_px / k),
+                          std::max(16, int(options.segment_min_fraction * double(solve_size.area()))),
+                          options.plane_ridge_px / k, options.robust_scale, 1e-3 * std::max(hi_um - lo_um, 1e-30));
+    }
     // Relative support r = F(w) / F_wide(w): about 1 wherever measurements are spread alike for
     // both (sparse or dense), near 0 inside a region the edges wall off from them.
-    const cv::Mat r = den / cv::max(den_wide, 1e-30f);
-    const cv::Mat r2 = r.mul(r);
-    const float tau = float(options.fallback_support);
-    const cv::Mat t = r2 / (r2 + tau * tau);
-    fit = t.mul(fit_edge) + (1.0 - t).mul(fit_wide);
-    reach = cv::max(den, den_wide);
+    fit = cv::Mat(solve_size, CV_32FC1);
+    reach = cv::Mat(solve_size, CV_32FC1);
+    const float tau2 = float(options.fallback_support * options.fallback_support);
+    for (int y = 0; y < solve_size.height; ++y) {
+      const float *fe = fit_edge.ptr<float>(y), *fw = fit_wide.ptr<float>(y), *d = den.ptr<float>(y),
+                  *dw = den_wide.ptr<float>(y);
+      float *f = fit.ptr<float>(y), *r = reach.ptr<float>(y);
+      const float* sp = seg.empty() ? nullptr : seg.ptr<float>(y);
+      for (int x = 0; x < solve_size.width; ++x) {
+        const float rel = d[x] / std::max(dw[x], 1e-30f), rel2 = rel * rel;
+        float t = rel2 / (rel2 + tau2);
+        // A flat segment's plane stands in for the fallback on it.
+        const bool on_segment = sp && sp[x] == sp[x];
+        if (on_segment && options.segment_override) t = 0.f;
+        f[x] = t * fe[x] + (1.f - t) * (on_segment ? sp[x] : fw[x]);
+        r[x] = std::max(d[x], dw[x]);
+      }
+    }
   }
 
   double max_den = 0.0;
@@ -259,39 +491,106 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
   const float nan = std::numeric_limits<float>::quiet_NaN();
   out.depth_um.create(depth_um.size(), CV_32FC1);
   out.inferred.create(depth_um.size(), CV_8UC1);
-  out.support = cv::min(cv::max(den, 0.f), 1.f);
-  out.agreement = cv::Mat(depth_um.size(), CV_32FC1, cv::Scalar(0));
-  bool unreached = false;
-  for (int y = 0; y < depth_um.rows; ++y) {
-    const float* f = fit.ptr<float>(y);
-    const float* d = reach.ptr<float>(y);
-    const float* z = depth_um.ptr<float>(y);
-    const float* c = centred.ptr<float>(y);
-    float* o = out.depth_um.ptr<float>(y);
-    uint8_t* inf = out.inferred.ptr<uint8_t>(y);
-    float* agree = out.agreement.ptr<float>(y);
-    for (int x = 0; x < depth_um.cols; ++x) {
-      const float fe = fit_edge.at<float>(y, x);
-      const bool outlier = reject && std::abs(c[x] - fe) > cauchy;
-      if (z[x] == z[x]) {
-        const double r = (c[x] - fe) / cauchy;
-        agree[x] = float(1.0 / (1.0 + r * r));
-      }
-      if (options.keep_measured && z[x] == z[x] && !outlier) {
-        o[x] = z[x];
-        inf[x] = 0;
-      } else if (d[x] > min_den) {
-        // A plane extrapolated far from its support can overshoot: no deeper or nearer than
-        // anything measured.
-        o[x] = float(std::clamp(f[x] + mean_um, lo_um, hi_um));
-        inf[x] = z[x] == z[x] && !outlier ? 0 : 255;
-      } else {
-        o[x] = nan;
-        inf[x] = 255;
-        unreached = true;
-      }
+  out.support.create(depth_um.size(), CV_32FC1);
+  out.agreement.create(depth_um.size(), CV_32FC1);
+  // Joint bilateral upsampling (k > 1): the 2 x 2 solve-grid neighbours of a pixel, bilinear
+  // weights times a Gaussian of the colour difference between the pixel's guide and the
+  // neighbour's block mean, so that a pixel takes the fit of the side of an edge it belongs to.
+  // The four fields the final pass reads, interleaved: fit, edge-aware fit, support, reach.
+  cv::Mat fields;
+  cv::merge(std::vector<cv::Mat>{fit, fit_edge, den, reach}, fields);
+  const int channels = guide8.channels();
+  const double inv_two_s2 = 1.0 / (2.0 * options.upsample_sigma_color * options.upsample_sigma_color);
+  float range_lut[511];  // the Gaussian of one channel's difference, -255..255
+  for (int d = -255; d <= 255; ++d) range_lut[d + 255] = float(std::exp(-double(d * d) * inv_two_s2));
+  // Per column: the two blocks whose centres bracket it and their bilinear weights.
+  struct Tap {
+    int i0, i1;
+    float w0, w1;
+  };
+  auto Taps = [&](int n, int blocks) {
+    std::vector<Tap> t(static_cast<size_t>(n));
+    for (int x = 0; x < n; ++x) {
+      const float c = std::max(0.f, (float(x) - 0.5f * float(k - 1)) / float(k));
+      const int i0 = std::min(int(c), blocks - 1), i1 = std::min(i0 + 1, blocks - 1);
+      const float f = i1 == i0 ? 0.f : c - float(i0);
+      t[size_t(x)] = {i0, i1, 1.f - f, f};
     }
-  }
+    return t;
+  };
+  const std::vector<Tap> col_taps = Taps(cols, solve_size.width), row_taps = Taps(rows, solve_size.height);
+  const float mean_f = float(mean_um), lo_f = float(lo_um), hi_f = float(hi_um), inv_cauchy = float(1.0 / cauchy);
+  std::atomic<bool> unreached{false};
+  cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range) {
+    for (int y = range.start; y < range.end; ++y) {
+      const float* z = depth_um.ptr<float>(y);
+      const uint8_t* g = guide8.ptr<uint8_t>(y);
+      float* o = out.depth_um.ptr<float>(y);
+      uint8_t* inf = out.inferred.ptr<uint8_t>(y);
+      float* agree = out.agreement.ptr<float>(y);
+      float* sup = out.support.ptr<float>(y);
+      const Tap& ty = row_taps[size_t(y)];
+      const cv::Vec4f* fr[2] = {fields.ptr<cv::Vec4f>(k == 1 ? y : ty.i0), fields.ptr<cv::Vec4f>(k == 1 ? y : ty.i1)};
+      const uint8_t* gr[2] = {guide_s.ptr<uint8_t>(k == 1 ? y : ty.i0), guide_s.ptr<uint8_t>(k == 1 ? y : ty.i1)};
+      const float wy[2] = {ty.w0, ty.w1};
+      bool row_unreached = false;
+      for (int x = 0; x < cols; ++x) {
+        const bool m = z[x] == z[x];
+        const bool kept = options.keep_measured && m;
+        // f, fe, support, reach; a kept measurement needs only fe (agreement, outlier test)
+        // and the support.
+        float f, fe, dn, rc;
+        if (k == 1) {
+          const cv::Vec4f& v = fr[0][x];
+          f = v[0], fe = v[1], dn = v[2], rc = v[3];
+        } else {
+          const Tap& tx = col_taps[size_t(x)];
+          const cv::Vec4f* q[4] = {fr[0] + tx.i0, fr[0] + tx.i1, fr[1] + tx.i0, fr[1] + tx.i1};
+          const uint8_t* gq[4] = {gr[0] + tx.i0 * channels, gr[0] + tx.i1 * channels, gr[1] + tx.i0 * channels,
+                                  gr[1] + tx.i1 * channels};
+          const float bl[4] = {wy[0] * tx.w0, wy[0] * tx.w1, wy[1] * tx.w0, wy[1] * tx.w1};
+          const uint8_t* gp = g + x * channels;
+          float wt[4], sw = 0.f;
+          for (int t = 0; t < 4; ++t) {
+            float range_w = range_lut[int(gp[0]) - int(gq[t][0]) + 255];
+            for (int ch = 1; ch < channels; ++ch) range_w *= range_lut[int(gp[ch]) - int(gq[t][ch]) + 255];
+            // Bilinear weight, floored so that a pixel unlike all four still gets their mean.
+            wt[t] = (bl[t] + 1e-3f) * range_w + 1e-20f;
+            sw += wt[t];
+          }
+          const float inv = 1.f / sw;
+          fe = inv * (wt[0] * (*q[0])[1] + wt[1] * (*q[1])[1] + wt[2] * (*q[2])[1] + wt[3] * (*q[3])[1]);
+          dn = inv * (wt[0] * (*q[0])[2] + wt[1] * (*q[1])[2] + wt[2] * (*q[2])[2] + wt[3] * (*q[3])[2]);
+          if (kept && !reject) {
+            f = fe;
+            rc = dn;
+          } else {
+            f = inv * (wt[0] * (*q[0])[0] + wt[1] * (*q[1])[0] + wt[2] * (*q[2])[0] + wt[3] * (*q[3])[0]);
+            rc = inv * (wt[0] * (*q[0])[3] + wt[1] * (*q[1])[3] + wt[2] * (*q[2])[3] + wt[3] * (*q[3])[3]);
+          }
+        }
+        sup[x] = std::min(std::max(dn, 0.f), 1.f);
+        const float c = m ? z[x] - mean_f : 0.f;
+        const float r = (c - fe) * inv_cauchy;
+        const bool outlier = reject && m && std::abs(r) > 1.f;
+        agree[x] = m ? 1.f / (1.f + r * r) : 0.f;
+        if (kept && !outlier) {
+          o[x] = z[x];
+          inf[x] = 0;
+        } else if (rc > min_den) {
+          // A plane extrapolated far from its support can overshoot: no deeper or nearer than
+          // anything measured.
+          o[x] = std::clamp(f + mean_f, lo_f, hi_f);
+          inf[x] = m && !outlier ? 0 : 255;
+        } else {
+          o[x] = nan;
+          inf[x] = 255;
+          row_unreached = true;
+        }
+      }
+      if (row_unreached) unreached = true;
+    }
+  });
   if (unreached) {
     INSPECT_ASSIGN_OR_RETURN(out.depth_um, FillDepth(out.depth_um, cv::Mat(), guide, DepthFillOptions{}));
   }

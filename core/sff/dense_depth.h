@@ -51,6 +51,16 @@ struct DenseDepthOptions {
   // otherwise take the depth of whichever neighbour's edge is weakest. 0: off.
   double fallback_support = 0.3;
   double fallback_sigma_color = 32.0;
+  // Flat segments (with the fallback on): connected pixels of the guide whose grey gradient stays
+  // below segment_gradient levels per pixel, covering at least segment_min_fraction of the map,
+  // each get one plane fitted (Cauchy-weighted) to the measurements on and within
+  // segment_band_px of them; on a segment the plane stands in for the fallback fit
+  // (segment_override: for the edge-aware one too).
+  bool segment_planes = false;
+  double segment_gradient = 1.5;
+  int segment_band_px = 2;
+  double segment_min_fraction = 0.002;
+  bool segment_override = false;
   // Measured pixels keep their measured depth (unless rejected by the robust fit); false: every
   // pixel gets the fitted value.
   bool keep_measured = true;
@@ -70,6 +80,17 @@ struct DenseDepthOptions {
   // residual of the measured pixels, at least 1e-3 of the measured depth range); also the residual
   // above which a measured depth is replaced by the fit.
   double robust_scale = 3.0;
+  // Solve grid: the fit runs on a grid reduced k times in each direction and is brought back by
+  // joint bilateral upsampling with the full-resolution guide (measured pixels keep their
+  // depth). 0 = auto: the smallest k of 1, 2, 4, 8 whose grid has at most auto_solve_max_pixels
+  // (1 at 256 x 256 and 400 x 300, 4 at 1600 x 1200), so that the cost stays a few tens of
+  // milliseconds at camera size; smoothness and ridge are scaled to the same reach in
+  // full-resolution pixels.
+  int solve_downscale = 0;
+  double auto_solve_max_pixels = 200000.0;
+  // Joint bilateral upsampling: guide colour difference (8-bit levels) between a pixel and a
+  // solve-grid block's mean at which that block's fit counts e^-0.5 as much.
+  double upsample_sigma_color = 8.0;
 
   Status Validate() const;  // INVALID_ARGUMENT naming the field
 };
@@ -90,6 +111,9 @@ struct DenseDepth {
 // same size.
 StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::Mat& confidence,
                                              const cv::Mat& guide, const DenseDepthOptions& options);
+
+// The solve grid's reduction factor k for a depth map of `size` (DenseDepthOptions::solve_downscale).
+int DenseSolveDownscale(const cv::Size& size, const DenseDepthOptions& options);
 
 // DensifyDepthWithSupport's depth map alone.
 StatusOr<cv::Mat> DensifyDepth(const cv::Mat& depth_um, const cv::Mat& confidence, const cv::Mat& guide,

@@ -77,19 +77,21 @@ StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector
                                DensifyDepthWithSupport(out.depth_um, out.confidence, raw.all_in_focus, o.dense_options));
       // Inferred: below min_confidence whatever the ranking (the documented encoding).
       const float below = std::nextafter(min_confidence, 0.f);
-      for (int y = 0; y < d.depth_um.rows; ++y) {
-        const uint8_t* inferred = d.inferred.ptr<uint8_t>(y);
-        const float* support = d.support.ptr<float>(y);
-        const float* agreement = d.agreement.ptr<float>(y);
-        float* c = out.confidence.ptr<float>(y);
-        for (int x = 0; x < d.depth_um.cols; ++x) {
-          if (inferred[x]) {
-            c[x] = o.dense_confidence ? std::min(below, min_confidence * support[x]) : std::min(c[x], below);
-          } else if (o.dense_confidence) {
-            c[x] = min_confidence + (c[x] - min_confidence) * agreement[x];
+      cv::parallel_for_(cv::Range(0, d.depth_um.rows), [&](const cv::Range& rows) {
+        for (int y = rows.start; y < rows.end; ++y) {
+          const uint8_t* inferred = d.inferred.ptr<uint8_t>(y);
+          const float* support = d.support.ptr<float>(y);
+          const float* agreement = d.agreement.ptr<float>(y);
+          float* c = out.confidence.ptr<float>(y);
+          for (int x = 0; x < d.depth_um.cols; ++x) {
+            if (inferred[x]) {
+              c[x] = o.dense_confidence ? std::min(below, min_confidence * support[x]) : std::min(c[x], below);
+            } else if (o.dense_confidence) {
+              c[x] = min_confidence + (c[x] - min_confidence) * agreement[x];
+            }
           }
         }
-      }
+      });
       out.depth_um = d.depth_um;
     } else {
       INSPECT_ASSIGN_OR_RETURN(out.depth_um, FillDepth(out.depth_um, out.confidence, raw.all_in_focus, o.fill_options));

@@ -205,7 +205,7 @@ StatusOr<ReconstructionSettings> MapReconstructionOptions(const v1::Reconstructi
       return Status::InvalidArgument(field + ".refinement: unknown value " + std::to_string(int(o.refinement())));
   }
   post.fill_low_confidence = o.fill_low_confidence();
-  post.dense = o.has_dense_depth() && o.dense_depth();  // the imported-stack default: MapReconstructStart
+  post.dense = o.has_dense_depth() && o.dense_depth();  // unset: the reconstruct job's default (dense for imports)
   if (m.integral()) {
     // The integral methods threshold their own correlation peak; nothing here applies to them.
     post.consistency = false;
@@ -478,10 +478,9 @@ StatusOr<ReconstructWork> MapReconstructStart(const v1::ReconstructStart& start,
   work.alignment = rec.alignment;
   work.postprocess = rec.postprocess;
   work.halo = rec.halo;
-  // Dense depth only on request for now (dense_depth = true, --dense on): as the imported-stack
-  // default it still loses to focus-stack at full coverage on the held-out natural scenes
-  // (tests/bench/natural_heldout_output.md), and the server's upload tests expect NaN where
-  // nothing was measured.
+  // Unset: the job decides once it has read the stack's manifest (dense for an imported stack,
+  // ReconstructWork::dense_requested).
+  if (start.options().has_dense_depth()) work.dense_requested = start.options().dense_depth();
   return work;
 }
 

@@ -82,6 +82,11 @@ struct ReconstructWork {
   std::optional<FrameAlignment> alignment;
   DepthPostProcessOptions postprocess;  // SFF only
   std::optional<HaloSuppressionOptions> halo;  // SFF only: run it before the post-processing
+  // ReconstructionOptions.dense_depth as requested; nullopt = the default: dense for an imported
+  // stack (an upload whose stack.json records no rig scan: no illumination mode, calibration or
+  // alignment record), measured pixels only (NaN
+  // elsewhere) for a rig scan, whose depth is metrology. postprocess.dense follows it at run time.
+  std::optional<bool> dense_requested;
 };
 
 // A Type-1 gauge study (server/procedures/type1_study_procedure.h): the recipe's scan repeated

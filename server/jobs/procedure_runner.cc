@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -313,6 +314,9 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   AlignmentFigures alignment;
   DepthPostProcessFigures postprocess;
   std::optional<HaloSuppressionFigures> halo;
+  bool dense = false;
+  std::string dense_decision;
+  double inferred_below = 0.0;
   if (work.method.integral()) {
     // The calibration active now; two passes over the frames without per-frame events (and
     // without a cancellation point inside them: ~1 s for 23 frames of 1024 x 768).
@@ -387,6 +391,18 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
     }
     DepthPostProcessOptions post = work.postprocess;
     post.min_confidence = work.sff.min_confidence;
+    // Dense depth by default for an imported stack (a value at every pixel, as photography
+    // expects), not for a rig scan (metrology: NaN where nothing was measured). A rig's
+    // stack.json records its acquisition (illumination mode, calibration, alignment), also when
+    // its folder comes back as an upload.
+    const bool imported = work.source_scan_id.empty() && m.calibration_id.empty() && m.illumination.empty() &&
+                          !m.alignment.has_value();
+    post.dense = work.dense_requested.value_or(imported);
+    dense_decision = work.dense_requested ? (*work.dense_requested ? "requested" : "off as requested")
+                     : imported ? "default for an imported stack (stack.json records no rig scan)"
+                                : "off by default for a rig scan (NaN where nothing was measured)";
+    dense = post.dense;
+    inferred_below = post.dense || post.fill_low_confidence ? post.min_confidence : 0.0;
     std::vector<double> z_um;
     for (const StackFrame& f : m.frames) z_um.push_back(f.z_um);
     INSPECT_ASSIGN_OR_RETURN(depth, PostProcessDepth(*r, z_um, work.sff.window_px, post, &postprocess));
@@ -399,6 +415,13 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   DepthExportMeta meta;
   meta.pixel_size_um = m.pixel_size_um;
   meta.description = "depth (um) from reconstruct job " + context.job_id;
+  meta.inferred_below_confidence = inferred_below;
+  if (dense) {
+    char note[96];
+    std::snprintf(note, sizeof note, "; dense: depth with confidence below %.2f is inferred, not measured",
+                  inferred_below);
+    meta.description += note;
+  }
   const auto t_write = std::chrono::steady_clock::now();
   INSPECT_RETURN_IF_ERROR(publisher.WriteDepth(depth, meta, work.extra_exports));
   const double write_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_write).count();
@@ -425,6 +448,10 @@ StatusOr<v1::JobResult> ProcedureRunner::RunReconstruct(const ReconstructWork& w
   parts.postprocess = &postprocess;
   parts.halo = halo ? &*halo : nullptr;
   *result.mutable_depth() = DepthSummaryProto(parts);
+  if (!work.method.integral()) {
+    result.mutable_depth()->set_dense_depth(dense);
+    result.mutable_depth()->set_dense_depth_decision(dense_decision);
+  }
   const auto t_publish = std::chrono::steady_clock::now();
   INSPECT_RETURN_IF_ERROR(publisher.Publish(&result));
   spdlog::debug("job {}: reconstruction {:.3f} s, artifacts written {:.3f} s, hashed and published {:.3f} s",

@@ -28,8 +28,13 @@ StatusOr<std::vector<DepthArtifactFile>> WriteDepthArtifacts(const DepthResult& 
                      return cv::imwrite(p.string(), r.all_in_focus) ? Status::Ok()
                                                                     : Status::Internal("cannot write all_in_focus.png");
                    }});
+  // Inferred depth (dense, fill) must not pass for measured depth in the preview.
+  cv::Mat inferred;
+  if (meta.inferred_below_confidence > 0.0 && r.confidence.size() == r.depth_um.size()) {
+    inferred = (r.confidence < meta.inferred_below_confidence) & (r.depth_um == r.depth_um);
+  }
   tasks.push_back({{DepthExportKind::kDepthPreviewPng, dir / "depth_preview.png"},
-                   [&](const fs::path& p) { return WriteDepthPreviewPng(p, r.depth_um); }});
+                   [&](const fs::path& p) { return WriteDepthPreviewPng(p, r.depth_um, inferred); }});
   for (DepthExportKind k : extras) {
     switch (k) {
       case DepthExportKind::kDepthPng16:

@@ -17,7 +17,7 @@
 // compared bit for bit with the first run's.
 //
 //   e2e-bench [--frames 60] [--width 1600] [--height 1200] [--runs 2] [--colour]
-//             [--alignment none|estimate] [--work DIR] [--decode-threads 0] [--verbose]
+//             [--alignment none|estimate] [--dense on|off] [--work DIR] [--decode-threads 0] [--verbose]
 //             [--only parallel|sequential]   (one path alone, e.g. under perf; no ratios)
 //             [--focus-stack BIN]   (also time `BIN --nocrop --depthmap=...` on the same PNGs, once
 //                                    per run between ours, and print ours against it)
@@ -62,6 +62,7 @@ struct Args {
   int frames = 60, width = 1600, height = 1200, runs = 2, decode_threads = 0;
   bool colour = false, verbose = false;
   std::string alignment;  // empty = the request's default (estimate, unaligned when it fails)
+  std::string dense;      // "on" / "off": ReconstructionOptions.dense_depth; empty = the request's default
   std::string only;       // "parallel" or "sequential": that path alone (profiling)
   std::string focus_stack;  // focus-stack's binary: timed per run as the external baseline
   fs::path work = fs::temp_directory_path() / "e2e-bench";
@@ -84,6 +85,9 @@ bool ParseArgs(int argc, char** argv, Args* a) {
     } else if (k == "--alignment" && (v = next())) {
       a->alignment = v;
       if (a->alignment != "none" && a->alignment != "estimate") return false;
+    } else if (k == "--dense" && (v = next())) {
+      a->dense = v;
+      if (a->dense != "on" && a->dense != "off") return false;
     } else if (k == "--only" && (v = next())) {
       a->only = v;
       if (a->only != "parallel" && a->only != "sequential") return false;
@@ -218,6 +222,7 @@ bool RunOnce(const Args& a, const fs::path& stack, bool sequential, int run, Pha
   v1::ReconstructStart start;
   if (a.alignment == "none") start.mutable_options()->set_alignment(v1::FRAME_ALIGNMENT_NONE);
   if (a.alignment == "estimate") start.mutable_options()->set_alignment(v1::FRAME_ALIGNMENT_ESTIMATE);
+  if (!a.dense.empty()) start.mutable_options()->set_dense_depth(a.dense == "on");
 
   Clock::time_point t_upload{}, t_job{}, t_storing{}, t_done{};
   const auto t0 = Clock::now();
@@ -275,8 +280,8 @@ int main(int argc, char** argv) {
   Args a;
   if (!ParseArgs(argc, argv, &a)) {
     std::cerr << "usage: e2e-bench [--frames 60] [--width 1600] [--height 1200] [--runs 2] [--colour]\n"
-                 "                 [--alignment none|estimate] [--work DIR] [--decode-threads 0] [--verbose]\n"
-                 "                 [--only parallel|sequential] [--focus-stack BIN]\n";
+                 "                 [--alignment none|estimate] [--dense on|off] [--work DIR] [--decode-threads 0]\n"
+                 "                 [--verbose] [--only parallel|sequential] [--focus-stack BIN]\n";
     return 2;
   }
   // The servers' per-job lines would bury the table; --verbose shows them with the jobs' timings.
@@ -287,8 +292,9 @@ int main(int argc, char** argv) {
   std::printf("stack: %d x %dx%d 8-bit %s PNG in %s (ready in %.1f s)\n", a.frames, a.width, a.height,
               a.colour ? "colour" : "grey", stack.c_str(), Seconds(tg, Clock::now()));
   const double decoded_mb = double(a.frames) * a.width * a.height * (a.colour ? 3 : 1) / (1024.0 * 1024.0);
-  std::printf("decoded stack: %.1f MiB; alignment: %s; hardware threads: %u\n", decoded_mb,
+  std::printf("decoded stack: %.1f MiB; alignment: %s; dense depth: %s; hardware threads: %u\n", decoded_mb,
               a.alignment.empty() ? "request default (estimate)" : a.alignment.c_str(),
+              a.dense.empty() ? "request default" : a.dense.c_str(),
               std::thread::hardware_concurrency());
 
   std::map<bool, std::vector<Phases>> by_path;  // sequential? -> runs

@@ -600,15 +600,27 @@ void TimeDense(const Scene& s) {
     Time("dense default", [&] {
       (void)DensifyDepthWithSupport(post.depth_um, post.confidence, r->all_in_focus, DenseDepthOptions{}).value();
     });
+    DenseDepthOptions full;
+    full.solve_downscale = 1;
+    Time("dense default, full-size solve", [&] {
+      (void)DensifyDepthWithSupport(post.depth_um, post.confidence, r->all_in_focus, full).value();
+    });
+    DepthPostProcessOptions pd;
+    pd.dense = true;
+    Time("threshold+consistency+dense", [&] { (void)PostProcessDepth(*r, s.z, o.window_px, pd).value(); });
   }
   std::printf("\nTiming at %dx%d x %zu frames, best of 3 alternating rounds: engine %.3f s", big.width, big.height,
               frames.size(), best["engine"]);
-  for (const char* name : {"threshold+consistency", "dense constant", "dense default"})
+  for (const char* name : {"threshold+consistency", "dense constant", "dense default", "dense default, full-size solve",
+                           "threshold+consistency+dense"})
     std::printf("; %s %.3f s (%.2fx engine)", name, best[name], best[name] / best["engine"]);
+  std::printf(" (dense solve grid /%d)", DenseSolveDownscale(big, DenseDepthOptions{}));
   std::printf("\n");
 }
 
-int RunHeldOut(std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tuning, bool have_fs) {
+// quick: the tuning table only (the grid reduced to the default's point, no held-out scenes), for
+// iterating on a variant.
+int RunHeldOut(std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tuning, bool have_fs, bool quick) {
   DenseCandidate baseline{"dense FGS constant (previous default)", true, {}, false, false};
   baseline.dense_options.local_planes = false;
   baseline.dense_options.robust_iterations = 0;
@@ -616,10 +628,14 @@ int RunHeldOut(std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tun
   std::vector<DenseCandidate> cands{{"push-pull fill (--fill)", false, {}, false, false}, baseline};
   // The grid: smoothness x edge scale x model (constant / local planes) x the weakly edge-aware
   // fallback's hand-over support (0 = none), colour guide as an imported colour stack has it.
-  for (double lambda : {1024.0, 4096.0, 16384.0})
-    for (double sigma : {4.0, 8.0})
-      for (int planes : {0, 1})
-        for (double fb : {0.0, 0.1, 0.3, 0.5, 1.0}) {
+  const std::vector<double> lambdas = quick ? std::vector<double>{4096.0} : std::vector<double>{1024.0, 4096.0, 16384.0};
+  const std::vector<double> sigmas = quick ? std::vector<double>{4.0} : std::vector<double>{4.0, 8.0};
+  const std::vector<int> models = quick ? std::vector<int>{1} : std::vector<int>{0, 1};
+  const std::vector<double> fallbacks = quick ? std::vector<double>{0.3} : std::vector<double>{0.0, 0.1, 0.3, 0.5, 1.0};
+  for (double lambda : lambdas)
+    for (double sigma : sigmas)
+      for (int planes : models)
+        for (double fb : fallbacks) {
           DenseCandidate c;
           c.dense_options.lambda = lambda;
           c.dense_options.sigma_color = sigma;
@@ -632,28 +648,31 @@ int RunHeldOut(std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tun
           cands.push_back(c);
         }
   // Tried on the tuning scenes and left off by default (rows kept for the record).
-  for (int variant = 0; variant < 4; ++variant) {
+  const size_t n_grid = cands.size();  // the chosen one comes from the grid, not the variants after it
+  auto Variant = [&](const char* name, auto&& set) {
     DenseCandidate c;
-    if (variant == 0) {
-      c.dense_options.robust_iterations = 2;
-      c.name = "dense default + robust IRLS 2";
-    } else if (variant == 1) {
-      c.dense_options.halo_radius_px = 4;
-      c.name = "dense default + halo suppression r4";
-    } else if (variant == 2) {
-      c.dense_options.keep_measured = false;
-      c.name = "dense default, fitted value everywhere";
-    } else {
-      c.colour_guide = false;
-      c.name = "dense default, grey guide";
-    }
+    c.name = name;
+    set(c);
     cands.push_back(c);
-  }
+  };
+  Variant("dense default + robust IRLS 2", [](DenseCandidate& c) { c.dense_options.robust_iterations = 2; });
+  Variant("dense default + halo suppression r4", [](DenseCandidate& c) { c.dense_options.halo_radius_px = 4; });
+  Variant("dense default, fitted value everywhere", [](DenseCandidate& c) { c.dense_options.keep_measured = false; });
+  Variant("dense default, grey guide", [](DenseCandidate& c) { c.colour_guide = false; });
+  // The reduced solve grid that camera-size maps get (auto_solve_max_pixels), forced here.
+  Variant("dense default, solve grid /2", [](DenseCandidate& c) { c.dense_options.solve_downscale = 2; });
+  Variant("dense default, solve grid /4", [](DenseCandidate& c) { c.dense_options.solve_downscale = 4; });
+  // Flat segments of the guide, one robust plane each, in place of the fallback on them.
+  Variant("dense default + flat-segment planes", [](DenseCandidate& c) {
+    c.dense_options.segment_planes = true;
+    c.dense_options.segment_gradient = 4.0;
+    c.dense_options.segment_band_px = 8;
+  });
+  Variant("dense default, fallback sigma 64", [](DenseCandidate& c) { c.dense_options.fallback_sigma_color = 64.0; });
   std::printf("\nTuning scenes 0..%d: RMSE [frames] at 100 %% and 50 %% coverage, AUSE (mean over scenes)\n",
               n_tuning - 1);
   size_t best = 1;
   double best_rmse = 1e30;
-  const size_t n_grid = cands.size() - 4;  // the chosen one comes from the grid, not the variants after it
   for (size_t i = 0; i < cands.size(); ++i) {
     const HeldOutFigures h = ScoreOn(scenes, caches, 0, n_tuning, cands[i], false);
     std::printf("  %-40s %7.3f %7.3f %7.3f\n", cands[i].name.c_str(), h.r100, h.r50, h.ause);
@@ -667,6 +686,10 @@ int RunHeldOut(std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tun
   DenseCandidate baseline_colour = baseline;
   baseline_colour.colour_guide = true;
   baseline_colour.name = "previous default, colour guide";
+  if (quick) {
+    Diagnose(scenes, caches, n_tuning, {&shipped}, have_fs);
+    return 0;
+  }
   Diagnose(scenes, caches, n_tuning, {&shipped, &baseline, &baseline_colour, &cands[0]}, have_fs);
 
   std::printf(
@@ -697,7 +720,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
   cv::Size size(256, 256);
   uint32_t seed = 1;
   std::string fs_flag, keep;
-  bool timing = false;
+  bool timing = false, quick = false;
   int held_out_tuning = 0;  // > 0: only the held-out evaluation, scenes [0, K) tuning, the rest held out
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -713,12 +736,14 @@ int RunNaturalEvaluation(int argc, char** argv) {
       keep = argv[++i];
     else if (a == "--timing")
       timing = true;
+    else if (a == "--quick")
+      quick = true;
     else if (a == "--held-out" && v)
       held_out_tuning = std::atoi(argv[++i]);
     else {
       std::fprintf(stderr,
                    "usage: natural-evaluate [--scenes N] [--size WxH] [--seed S] "
-                   "[--focus-stack PATH|none] [--keep DIR] [--timing] [--held-out K]\n");
+                   "[--focus-stack PATH|none] [--keep DIR] [--timing] [--held-out K [--quick]]\n");
       return 2;
     }
   }
@@ -752,11 +777,11 @@ int RunNaturalEvaluation(int argc, char** argv) {
   const bool have_fs =
       !fs_exe.empty() && std::all_of(scenes.begin(), scenes.end(), [](const Scene& s) { return !s.fs_depth.empty(); });
   if (held_out_tuning > 0) {
-    if (held_out_tuning >= n_scenes) {
+    if (held_out_tuning >= n_scenes + (quick ? 1 : 0)) {
       std::fprintf(stderr, "--held-out K needs K < --scenes\n");
       return 2;
     }
-    const int rc = RunHeldOut(scenes, caches, held_out_tuning, have_fs);
+    const int rc = RunHeldOut(scenes, caches, held_out_tuning, have_fs, quick);
     if (timing) TimeDense(scenes[0]);
     if (keep.empty()) {
       std::error_code ec;

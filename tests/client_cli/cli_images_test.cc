@@ -94,6 +94,10 @@ TEST_F(CliTest, ImageFolderIsOrderedNaturallyWithRegularZAndReconstructsLikeTheS
   EXPECT_NE(r.out.find("depth: "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find(" px (lateral scale unknown), "), std::string::npos) << r.out;
   EXPECT_EQ(r.out.find("0.000 um/px"), std::string::npos) << r.out;
+  // An imported stack gets dense depth by default, and the output says so and how much is inferred.
+  EXPECT_NE(r.out.find("depth: dense (default for an imported stack (stack.json records no rig scan)): "),
+            std::string::npos)
+      << r.out;
   const json manifest = json::parse(ReadAll(kept / "stack.json"));
   EXPECT_FALSE(manifest.contains("pixel_size_um"));
   ASSERT_EQ(manifest["frames"].size(), n);

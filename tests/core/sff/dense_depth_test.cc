@@ -47,6 +47,56 @@ TEST(DenseDepthTest, FillsEveryPixelAndStopsAtTheGuideEdge) {
   }
 }
 
+// The solve grid: full size for the small maps, reduced at camera size so that the cost stays
+// tens of milliseconds (DenseDepthOptions::auto_solve_max_pixels = 200000).
+TEST(DenseDepthTest, SolveGridShrinksAtCameraSize) {
+  const DenseDepthOptions o;
+  EXPECT_EQ(DenseSolveDownscale(cv::Size(256, 256), o), 1);
+  EXPECT_EQ(DenseSolveDownscale(cv::Size(400, 300), o), 1);
+  EXPECT_EQ(DenseSolveDownscale(cv::Size(800, 600), o), 2);
+  EXPECT_EQ(DenseSolveDownscale(cv::Size(1600, 1200), o), 4);
+  EXPECT_EQ(DenseSolveDownscale(cv::Size(4000, 3000), o), 8);
+  DenseDepthOptions forced;
+  forced.solve_downscale = 2;
+  EXPECT_EQ(DenseSolveDownscale(cv::Size(256, 256), forced), 2);
+}
+
+// On the reduced grid (2 and 4 times) the joint bilateral upsampling puts every pixel on its own
+// side of a guide edge that no block boundary follows (x = 397): two sloped surfaces 100 um
+// apart, each measured on a sparse grid, come back within a few um at every pixel, right up to
+// the edge, and measured pixels keep their depth.
+TEST(DenseDepthTest, ReducedSolveGridKeepsEdgesAndMeasuredDepth) {
+  const cv::Size size(800, 600);
+  const int edge = 397;
+  cv::Mat guide(size, CV_8UC3, cv::Scalar(40, 60, 50));
+  guide(cv::Rect(edge, 0, size.width - edge, size.height)).setTo(cv::Scalar(210, 190, 200));
+  auto truth = [&](int x, int y) { return x < edge ? 100.0 + 0.02 * x : 200.0 + 0.03 * y; };
+  cv::Mat depth(size, CV_32FC1, cv::Scalar(kNan));
+  for (int y = 1; y < size.height; y += 6)
+    for (int x = 3; x < size.width; x += 6) depth.at<float>(y, x) = float(truth(x, y));
+  for (const int k : {2, 4}) {
+    DenseDepthOptions o;
+    o.solve_downscale = k;
+    o.fallback_support = 0.0;  // the edge-aware fit alone: the leak across the edge is the upsampling's
+    auto dense = DensifyDepthWithSupport(depth, cv::Mat(), guide, o);
+    ASSERT_TRUE(dense.ok()) << dense.status().ToString();
+    ASSERT_EQ(cv::countNonZero(dense->depth_um == dense->depth_um), size.area());
+    double max_err = 0, max_err_at_edge = 0;
+    for (int y = 0; y < size.height; ++y)
+      for (int x = 0; x < size.width; ++x) {
+        const double e = std::abs(dense->depth_um.at<float>(y, x) - truth(x, y));
+        max_err = std::max(max_err, e);
+        if (std::abs(x - edge) <= 2) max_err_at_edge = std::max(max_err_at_edge, e);
+      }
+    EXPECT_LT(max_err, 5.0) << "k = " << k;
+    EXPECT_LT(max_err_at_edge, 5.0) << "k = " << k;
+    EXPECT_EQ(dense->depth_um.at<float>(7, 9), depth.at<float>(7, 9));
+    EXPECT_EQ(dense->inferred.at<uint8_t>(7, 9), 0);
+    EXPECT_EQ(dense->inferred.at<uint8_t>(8, 9), 255);
+    EXPECT_GT(dense->agreement.at<float>(7, 9), 0.5f);
+  }
+}
+
 // An untextured region walled off by guide edges, with no measurement inside: the background
 // (depth 50) all round it, except one side where a measured foreground strip (depth 10) meets it
 // across a weaker edge. The edge-aware fit alone gives the region the strip's depth (the weakest
