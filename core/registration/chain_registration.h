@@ -29,9 +29,22 @@ struct ChainRegistrationOptions {
   // local mean / standard deviation (contrast-normalised over normalise_sigma_px of the working
   // size), so that the frame's sharp band, which moves across a tilted or stepped surface from
   // frame to frame, does not weigh more than the rest.
-  enum class Image { kGradient, kIntensity, kNormalisedGradient, kNormalisedIntensity };
+  enum class Image { kGradient, kIntensity, kNormalisedGradient, kNormalisedIntensity, kHighpassGradient,
+                     kHighpassIntensity };
   Image image = Image::kGradient;
   double normalise_sigma_px = 8.0;
+  // ECC weighs only pixels about equally sharp in both frames of a pair (local gradient energy,
+  // smoothed over sharpness_sigma_px of the working size, within this factor; <= 1: every
+  // pixel), the whole frame when fewer than equal_sharpness_min_fraction of them qualify.
+  double equal_sharpness_ratio = 0.0;
+  double sharpness_sigma_px = 4.0;
+  double equal_sharpness_min_fraction = 0.2;
+  // Each pair is refined on the two frames made equally defocused (the sharper one blurred per
+  // pixel until its local gradient energy, over sharpness_sigma_px, matches the other's).
+  bool equalise_defocus = false;
+  // Stored values raised to this power (after scaling 8/16-bit to [0, 1]) before registration;
+  // <= 0: as stored.
+  double linearise_gamma = 0.0;
   int max_iterations = 30;        // ECC iterations per level
   double epsilon = 1e-4;          // ECC convergence
   double min_correlation = 0.5;   // ECC correlation of a registered pair; below = not registered

@@ -205,6 +205,7 @@ StatusOr<std::vector<cv::Mat>> RigStack(unsigned seed, const Motion& m) {
   static const char* kSpecimens[] = {"skew5", "skew10", "step1um", "wedge", "chamfer", "cutter", "lens", "coin"};
   o.seed = seed;
   o.camera_size = cv::Size(320 + 32 * rng.uniform(0, 8), 240 + 24 * rng.uniform(0, 8));
+  if (const char* e = std::getenv("CHAIN_RIG_NA")) o.numerical_aperture = std::atof(e);
   // Rig motion is its own: magnification and drift per 100 um of z (the scan's span is
   // 60..200 um, so scale/100 um = m.scale over ~100 um).
   o.focus_breathing_percent_per_100um = 100.0 * m.scale;
@@ -216,6 +217,7 @@ StatusOr<std::vector<cv::Mat>> RigStack(unsigned seed, const Motion& m) {
     auto r = CreateSimulatedRig(o);
     if (r.ok()) {
       rig = std::move(r).value();
+      if (std::getenv("CHAIN_VERBOSE")) std::printf("    specimen %s\n", o.specimen.c_str());
       break;
     }
   }
@@ -275,10 +277,17 @@ ChainRegistrationOptions ChainOptionsFromEnvironment() {
     o.image = v == "intensity" ? Image::kIntensity
               : v == "ngradient" ? Image::kNormalisedGradient
               : v == "nintensity" ? Image::kNormalisedIntensity
+              : v == "hgradient" ? Image::kHighpassGradient
+              : v == "hintensity" ? Image::kHighpassIntensity
                                   : Image::kGradient;
   }
   if (const char* e = std::getenv("CHAIN_SIGMA")) o.gradient_sigma_px = std::atof(e);
   if (const char* e = std::getenv("CHAIN_NORM_SIGMA")) o.normalise_sigma_px = std::atof(e);
+  if (const char* e = std::getenv("CHAIN_MASK_RATIO")) o.equal_sharpness_ratio = std::atof(e);
+  if (const char* e = std::getenv("CHAIN_MASK_SIGMA")) o.sharpness_sigma_px = std::atof(e);
+  if (const char* e = std::getenv("CHAIN_MASK_MIN")) o.equal_sharpness_min_fraction = std::atof(e);
+  if (const char* e = std::getenv("CHAIN_EQUALISE")) o.equalise_defocus = std::atoi(e) != 0;
+  if (const char* e = std::getenv("CHAIN_GAMMA")) o.linearise_gamma = std::atof(e);
   if (const char* e = std::getenv("CHAIN_QUICK")) o.quick_still_check = std::atoi(e) != 0;
   return o;
 }
@@ -308,6 +317,14 @@ void Decide(const std::function<StatusOr<std::vector<cv::Mat>>(unsigned, const M
     return;
   }
   t->worst_ratio = std::max(t->worst_ratio, r->still_statistic / r->still_threshold);
+  if (std::getenv("CHAIN_VERBOSE")) {  // per pair: scale change, shift of the centre, correlation
+    const cv::Point2d c(((*frames)[0].cols - 1) * 0.5, ((*frames)[0].rows - 1) * 0.5);
+    for (size_t i = 1; i < r->pair.size(); ++i) {
+      const SimilarityTransform p = SimilarityOf(r->pair[i], c);
+      std::printf("    pair %zu: scale %+.4f %% shift %+.3f %+.3f px corr %.3f\n", i, 100 * (p.scale - 1),
+                  p.shift_x_px, p.shift_y_px, r->pair_correlation[i]);
+    }
+  }
   if (!r->still) ++t->moving;
   if (!r->still && !m.any()) {
     std::printf("  %s seed %u (%zu frames): still stack warped: statistic %.2f threshold %.2f corner %.2f px\n", name,
@@ -419,6 +436,12 @@ int main(int argc, char** argv) {
   if (mode == "still" && argc > 2) return Rate(std::atoi(argv[2]), 0.0, argc > 3 ? unsigned(std::atoi(argv[3])) : 1000u);
   if (mode == "drift" && argc > 3) return Rate(std::atoi(argv[2]), std::atof(argv[3]), argc > 4 ? unsigned(std::atoi(argv[4])) : 1000u);
   if (mode == "renderers" && argc > 2) return Renderers(std::atoi(argv[2]), argc > 3 ? unsigned(std::atoi(argv[3])) : 9000u);
+  if (mode == "dump" && argc > 3) {  // the still rig stack of a seed, as PNGs
+    auto f = RigStack(unsigned(std::atoi(argv[2])), Motion{});
+    if (!f.ok()) return 1;
+    for (size_t i = 0; i < f->size(); ++i) cv::imwrite(std::string(argv[3]) + "/f" + std::to_string(100 + i) + ".png", (*f)[i]);
+    return 0;
+  }
   if (mode == "speed") {
     return Speed(argc > 2 ? std::atoi(argv[2]) : 60,
                  cv::Size(argc > 3 ? std::atoi(argv[3]) : 1600, argc > 4 ? std::atoi(argv[4]) : 1200));
