@@ -58,30 +58,24 @@ double StudentTQuantile(double one_sided_alpha, int dof) {
 
 namespace {
 
-// What a frame contributes to its pairs: the registered image's pyramid (finest first) and, when
-// the equal-sharpness mask is on, the pyramid of its local gradient energy.
-struct Pyramid {
-  cv::Mat working;  // the frame at the working size, before any smoothing (equalise_defocus only)
-  std::vector<cv::Mat> image;
-  std::vector<cv::Mat> sharpness;
-  bool empty() const { return image.empty(); }
-};
-
-// The image ECC registers (ChainRegistrationOptions::image) of a working-size frame; *gradient
-// receives the gradient magnitude of the smoothed frame.
-cv::Mat RegistrationImage(const cv::Mat& frame, const ChainRegistrationOptions& o, cv::Mat* gradient_out) {
-  cv::Mat small = frame;
-  if (o.gradient_sigma_px > 0) cv::GaussianBlur(frame, small, cv::Size(), o.gradient_sigma_px);
+// Gradient magnitude of the smoothed, shrunk frame, and its pyramid (finest first).
+std::vector<cv::Mat> GradientPyramid(const cv::Mat& frame, double f, const ChainRegistrationOptions& o) {
+  cv::Mat grey;
+  frame.convertTo(grey, CV_32F);
+  cv::Mat small;
+  if (f < 1.0) {
+    cv::resize(grey, small, cv::Size(), f, f, cv::INTER_AREA);
+  } else {
+    small = grey;
+  }
+  if (o.gradient_sigma_px > 0) cv::GaussianBlur(small, small, cv::Size(), o.gradient_sigma_px);
   using Image = ChainRegistrationOptions::Image;
-  cv::Mat mag, gradient;
-  {
+  cv::Mat mag;
+  if (o.image == Image::kGradient || o.image == Image::kNormalisedGradient) {
     cv::Mat gx, gy;
     cv::Sobel(small, gx, CV_32F, 1, 0);
     cv::Sobel(small, gy, CV_32F, 0, 1);
-    cv::magnitude(gx, gy, gradient);
-  }
-  if (o.image == Image::kGradient || o.image == Image::kNormalisedGradient || o.image == Image::kHighpassGradient) {
-    mag = gradient;
+    cv::magnitude(gx, gy, mag);
   } else {
     mag = small;
   }
@@ -100,124 +94,22 @@ cv::Mat RegistrationImage(const cv::Mat& frame, const ChainRegistrationOptions& 
     cv::Scalar mean = cv::mean(var);
     cv::divide(mag - mu, var + 1e-2 * (mean[0] + 1e-6), mag);
   }
-  if (o.image == Image::kHighpassGradient || o.image == Image::kHighpassIntensity) {
-    cv::Mat local;
-    cv::GaussianBlur(mag, local, cv::Size(), o.normalise_sigma_px);
-    mag = mag - local;
-  }
-  *gradient_out = gradient;
-  return mag;
-}
-
-// Local gradient energy of a working-size image (smoothed as the registration image is).
-cv::Mat LocalEnergy(const cv::Mat& x, const ChainRegistrationOptions& o) {
-  cv::Mat smoothed = x, gx, gy, e;
-  if (o.gradient_sigma_px > 0) cv::GaussianBlur(x, smoothed, cv::Size(), o.gradient_sigma_px);
-  cv::Sobel(smoothed, gx, CV_32F, 1, 0);
-  cv::Sobel(smoothed, gy, CV_32F, 0, 1);
-  cv::GaussianBlur(gx.mul(gx) + gy.mul(gy), e, cv::Size(), o.sharpness_sigma_px);
-  return e;
-}
-
-// Neighbours at different defocus, made equally defocused: per pixel, the sharper of the two is
-// blurred further (a ladder of Gaussian widths, interpolated in log energy) until its local
-// gradient energy matches the blurrier one's. On a tilted or curved surface the sharp band moves
-// from frame to frame; registered as they are, the pair's differing blur pulls the estimate the
-// same way in every pair and the chain accumulates it into px of motion on a still stack. a and b
-// are on one grid (b already resampled onto a's by the first estimate).
-void EqualiseDefocus(cv::Mat* a, cv::Mat* b, const ChainRegistrationOptions& o) {
-  static constexpr double kExtraSigma[] = {0.0, 0.5, 0.8, 1.1, 1.5, 2.0, 2.7, 3.6, 5.0, 7.0};
-  constexpr int kRungs = int(sizeof kExtraSigma / sizeof kExtraSigma[0]);
-  std::vector<cv::Mat> la(kRungs), lb(kRungs), ea(kRungs), eb(kRungs);
-  for (int i = 0; i < kRungs; ++i) {
-    if (i == 0) {
-      la[0] = *a, lb[0] = *b;
-    } else {
-      cv::GaussianBlur(*a, la[size_t(i)], cv::Size(), kExtraSigma[i]);
-      cv::GaussianBlur(*b, lb[size_t(i)], cv::Size(), kExtraSigma[i]);
-    }
-    ea[size_t(i)] = LocalEnergy(la[size_t(i)], o);
-    eb[size_t(i)] = LocalEnergy(lb[size_t(i)], o);
-  }
-  cv::Mat out_a = a->clone(), out_b = b->clone();
-  const float tiny = 1e-12f;
-  for (int y = 0; y < a->rows; ++y) {
-    for (int x = 0; x < a->cols; ++x) {
-      const float e_a = ea[0].at<float>(y, x), e_b = eb[0].at<float>(y, x);
-      const bool a_sharper = e_a > e_b;
-      const std::vector<cv::Mat>& ladder = a_sharper ? la : lb;
-      const std::vector<cv::Mat>& energy = a_sharper ? ea : eb;
-      const float target = std::log(std::min(e_a, e_b) + tiny);
-      float value = ladder[kRungs - 1].at<float>(y, x);
-      for (int i = 0; i + 1 < kRungs; ++i) {
-        const float hi = std::log(energy[size_t(i)].at<float>(y, x) + tiny);
-        const float lo = std::log(energy[size_t(i + 1)].at<float>(y, x) + tiny);
-        if (lo <= target) {
-          const float t = hi > lo ? std::clamp((hi - target) / (hi - lo), 0.0f, 1.0f) : 0.0f;
-          value = (1 - t) * ladder[size_t(i)].at<float>(y, x) + t * ladder[size_t(i + 1)].at<float>(y, x);
-          break;
-        }
-      }
-      (a_sharper ? out_a : out_b).at<float>(y, x) = value;
-    }
-  }
-  *a = out_a;
-  *b = out_b;
-}
-
-// Gradient magnitude of the smoothed, shrunk frame, and its pyramid (finest first).
-Pyramid GradientPyramid(const cv::Mat& frame, double f, const ChainRegistrationOptions& o) {
-  cv::Mat grey;
-  const double full_scale = frame.depth() == CV_8U ? 255.0 : frame.depth() == CV_16U ? 65535.0 : 1.0;
-  frame.convertTo(grey, CV_32F, 1.0 / full_scale);
-  if (o.linearise_gamma > 0) {
-    // Back to (roughly) linear radiance: a defocused edge is symmetric about its position in
-    // radiance, but a camera's concave response curve bends it, so that in the stored values the
-    // edge moves into the darker side as the blur grows: the bright parts of a frame look larger
-    // the more defocused they are, a scale and shift change from frame to frame on a still stack.
-    cv::max(grey, 0.0, grey);
-    cv::pow(grey, o.linearise_gamma, grey);
-  }
-  cv::Mat small;
-  if (f < 1.0) {
-    cv::resize(grey, small, cv::Size(), f, f, cv::INTER_AREA);
-  } else {
-    small = grey;
-  }
-  Pyramid p;
-  if (o.equalise_defocus || o.equal_sharpness_ratio > 1) p.working = small.clone();
-  cv::Mat gradient;
-  cv::Mat mag = RegistrationImage(small, o, &gradient);
-  p.image.push_back(mag);
-  for (int k = 1; k < o.pyramid_levels && p.image.back().cols >= 64 && p.image.back().rows >= 64; ++k) {
+  std::vector<cv::Mat> levels{mag};
+  for (int k = 1; k < o.pyramid_levels && levels.back().cols >= 64 && levels.back().rows >= 64; ++k) {
     cv::Mat down;
-    cv::pyrDown(p.image.back(), down);
-    p.image.push_back(down);
+    cv::pyrDown(levels.back(), down);
+    levels.push_back(down);
   }
-  return p;
-}
-
-// Pixels about equally sharp in both frames of a pair (local gradient energy within a factor
-// equal_sharpness_ratio): where one frame is much sharper than the other the defocus differs,
-// and on a tilted surface that difference moves the apparent edges the same way in every pair.
-// Empty (the whole frame) when too few pixels qualify.
-cv::Mat EqualSharpnessMask(const cv::Mat& a, const cv::Mat& b, const ChainRegistrationOptions& o) {
-  cv::Mat lo, hi;
-  cv::min(a, b, lo);
-  cv::max(a, b, hi);
-  const double floor = 1e-6 * (cv::mean(hi)[0] + 1e-12);
-  cv::Mat mask = (lo + floor) * o.equal_sharpness_ratio >= hi;
-  if (cv::countNonZero(mask) < o.equal_sharpness_min_fraction * double(mask.total())) return cv::Mat();
-  return mask;
+  return levels;
 }
 
 cv::Matx23d Identity() { return cv::Matx23d(1, 0, 0, 0, 1, 0); }
 
 // ECC from coarse to fine, started at `start` (finest-level coordinates): template = previous frame,
 // input = this frame, so the warp maps previous-frame pixels to this frame's.
-bool RegisterPair(const Pyramid& previous, const Pyramid& current, cv::Matx23d start,
-                  const ChainRegistrationOptions& o, cv::Matx23d* out, double* correlation, bool use_mask = false) {
-  const int levels = int(std::min(previous.image.size(), current.image.size()));
+bool RegisterPair(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& current, cv::Matx23d start,
+                  const ChainRegistrationOptions& o, cv::Matx23d* out, double* correlation) {
+  const int levels = int(std::min(previous.size(), current.size()));
   cv::Matx23d w = start;
   const double down = std::ldexp(1.0, -(levels - 1));
   w(0, 2) *= down;
@@ -226,15 +118,11 @@ bool RegisterPair(const Pyramid& previous, const Pyramid& current, cv::Matx23d s
   for (int k = levels - 1; k >= 0; --k) {
     cv::Mat warp(w, true);
     warp.convertTo(warp, CV_32F);
-    cv::Mat mask;  // on the input (current) frame's grid, as ECC wants it
-    if (use_mask && size_t(k) < previous.sharpness.size() && size_t(k) < current.sharpness.size()) {
-      mask = EqualSharpnessMask(previous.sharpness[size_t(k)], current.sharpness[size_t(k)], o);
-    }
     try {
-      rho = cv::findTransformECC(previous.image[size_t(k)], current.image[size_t(k)], warp, cv::MOTION_AFFINE,
+      rho = cv::findTransformECC(previous[size_t(k)], current[size_t(k)], warp, cv::MOTION_AFFINE,
                                  cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, o.max_iterations,
                                                   o.epsilon),
-                                 mask, 1);  // empty: every pixel
+                                 cv::noArray(), 1);
     } catch (const cv::Exception&) {
       return false;
     }
@@ -296,8 +184,8 @@ std::string FrameSizeError(int i, cv::Size got, cv::Size want) {
 // when the caller has it (else it is loaded).
 Status RunPairs(const std::function<StatusOr<cv::Mat>(int)>& load, const std::vector<int>& idx, size_t begin,
                 size_t end, cv::Size size, double f, const ChainRegistrationOptions& o,
-                Pyramid first, ChainPass* pass) {
-  Pyramid previous = std::move(first);
+                std::vector<cv::Mat> first, ChainPass* pass) {
+  std::vector<cv::Mat> previous = std::move(first);
   if (previous.empty()) {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(idx[begin - 1]));
     if (frame.size() != size) return Status::InvalidArgument(FrameSizeError(idx[begin - 1], frame.size(), size));
@@ -308,7 +196,7 @@ Status RunPairs(const std::function<StatusOr<cv::Mat>(int)>& load, const std::ve
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(idx[j]));
     if (frame.channels() != 1) return Status::InvalidArgument("frame " + std::to_string(idx[j]) + " is not grey");
     if (frame.size() != size) return Status::InvalidArgument(FrameSizeError(idx[j], frame.size(), size));
-    Pyramid current = GradientPyramid(frame, f, o);
+    std::vector<cv::Mat> current = GradientPyramid(frame, f, o);
     cv::Matx23d w;
     double rho = 0;
     bool ok = RegisterPair(previous, current, start, o, &w, &rho);
@@ -319,27 +207,6 @@ Status RunPairs(const std::function<StatusOr<cv::Mat>(int)>& load, const std::ve
           rho_identity > (ok ? rho : -1.0)) {
         ok = true, w = w_identity, rho = rho_identity;
       }
-    }
-    if (ok && rho >= o.min_correlation && (o.equalise_defocus || o.equal_sharpness_ratio > 1) &&
-        !previous.working.empty()) {
-      // Refine on the current frame resampled onto the previous one's grid by the first
-      // estimate (blur and sharpness are compared pixel by pixel): the pair made equally
-      // defocused, and/or only the pixels about equally sharp in both.
-      cv::Mat a = previous.working, b;
-      cv::warpAffine(current.working, b, cv::Mat(w), a.size(), cv::INTER_LINEAR | cv::WARP_INVERSE_MAP,
-                     cv::BORDER_REFLECT);
-      Pyramid pa, pb;
-      if (o.equal_sharpness_ratio > 1) {
-        pa.sharpness.push_back(LocalEnergy(a, o));
-        pb.sharpness.push_back(LocalEnergy(b, o));
-      }
-      if (o.equalise_defocus) EqualiseDefocus(&a, &b, o);
-      cv::Mat unused;
-      pa.image.push_back(RegistrationImage(a, o, &unused));
-      pb.image.push_back(RegistrationImage(b, o, &unused));
-      cv::Matx23d residual;
-      double rho_refined = 0;
-      if (RegisterPair(pa, pb, Identity(), o, &residual, &rho_refined, true)) w = Compose(w, residual);
     }
     if (!ok || rho < o.min_correlation) {
       pass->pair[j] = cv::Matx23d::zeros();  // marks the failure for RunChain
@@ -356,7 +223,7 @@ Status RunPairs(const std::function<StatusOr<cv::Mat>(int)>& load, const std::ve
 
 // The chain over idx at factor f with `levels` pyramid levels, cut into runs over threads.
 Status RunChain(const std::function<StatusOr<cv::Mat>(int)>& load, const std::vector<int>& idx, cv::Size size,
-                double f, const ChainRegistrationOptions& o, const Pyramid& first_pyramid,
+                double f, const ChainRegistrationOptions& o, const std::vector<cv::Mat>& first_pyramid,
                 ChainPass* pass) {
   const size_t m = idx.size() - 1;
   pass->pair.assign(idx.size(), Identity());
@@ -367,7 +234,7 @@ Status RunChain(const std::function<StatusOr<cv::Mat>(int)>& load, const std::ve
   std::vector<Status> status(size_t(threads), Status::Ok());
   auto run = [&](int t) {
     const size_t begin = 1 + m * size_t(t) / size_t(threads), end = 1 + m * size_t(t + 1) / size_t(threads);
-    status[size_t(t)] = RunPairs(load, idx, begin, end, size, f, o, t == 0 ? first_pyramid : Pyramid(),
+    status[size_t(t)] = RunPairs(load, idx, begin, end, size, f, o, t == 0 ? first_pyramid : std::vector<cv::Mat>(),
                                  &parts[size_t(t)]);
   };
   if (threads == 1) {

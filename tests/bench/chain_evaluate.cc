@@ -277,17 +277,10 @@ ChainRegistrationOptions ChainOptionsFromEnvironment() {
     o.image = v == "intensity" ? Image::kIntensity
               : v == "ngradient" ? Image::kNormalisedGradient
               : v == "nintensity" ? Image::kNormalisedIntensity
-              : v == "hgradient" ? Image::kHighpassGradient
-              : v == "hintensity" ? Image::kHighpassIntensity
                                   : Image::kGradient;
   }
   if (const char* e = std::getenv("CHAIN_SIGMA")) o.gradient_sigma_px = std::atof(e);
   if (const char* e = std::getenv("CHAIN_NORM_SIGMA")) o.normalise_sigma_px = std::atof(e);
-  if (const char* e = std::getenv("CHAIN_MASK_RATIO")) o.equal_sharpness_ratio = std::atof(e);
-  if (const char* e = std::getenv("CHAIN_MASK_SIGMA")) o.sharpness_sigma_px = std::atof(e);
-  if (const char* e = std::getenv("CHAIN_MASK_MIN")) o.equal_sharpness_min_fraction = std::atof(e);
-  if (const char* e = std::getenv("CHAIN_EQUALISE")) o.equalise_defocus = std::atoi(e) != 0;
-  if (const char* e = std::getenv("CHAIN_GAMMA")) o.linearise_gamma = std::atof(e);
   if (const char* e = std::getenv("CHAIN_QUICK")) o.quick_still_check = std::atoi(e) != 0;
   return o;
 }
