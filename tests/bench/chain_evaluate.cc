@@ -392,6 +392,19 @@ int Speed(int n, cv::Size size) {
     estimate.alignment = FrameAlignment::kEstimate;
     estimate.fall_back_to_none = true;
     estimate.options.threads = 0;  // as the server runs it on frames held in memory
+    estimate.chain = ChainOptionsFromEnvironment();
+    if (moving && std::getenv("CHAIN_SPEED_STILL_ONLY")) break;
+    if (std::getenv("CHAIN_SPEED_CHAIN_ONLY")) {  // the chain's decision and time alone
+      ChainRegistrationOptions chain = estimate.chain;
+      chain.threads = 0;
+      const auto t0 = std::chrono::steady_clock::now();
+      auto c = RegisterChain([&](int i) -> StatusOr<cv::Mat> { return s.frames[size_t(i)]; }, n, chain);
+      const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      if (!c.ok()) return 1;
+      std::printf("chain alone %.3f s: still %d quick %d stride %d corner %.2f px\n", t, int(c->still), int(c->quick),
+                  c->quick_stride, c->max_corner_displacement_px);
+      continue;
+    }
     double t_none = 1e9, t_est = 1e9, t_chain = 1e9;
     AlignmentFigures figures;
     for (int rep = 0; rep < 2; ++rep) {  // best of two, alternating
