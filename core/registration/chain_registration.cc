@@ -58,17 +58,22 @@ double StudentTQuantile(double one_sided_alpha, int dof) {
 
 namespace {
 
-// Gradient magnitude of the smoothed, shrunk frame, and its pyramid (finest first).
-std::vector<cv::Mat> GradientPyramid(const cv::Mat& frame, double f, const ChainRegistrationOptions& o) {
-  cv::Mat grey;
-  frame.convertTo(grey, CV_32F);
+// A frame as its pairs register it: the registration image's pyramid (finest first), and the
+// frame at the working size it was made from (for a second attempt on another image).
+struct Pyramid {
+  cv::Mat working;
+  std::vector<cv::Mat> levels;
+  bool empty() const { return levels.empty(); }
+};
+
+// The registration image (options.image) of the working-size frame, and its pyramid.
+Pyramid PyramidOf(const cv::Mat& working, const ChainRegistrationOptions& o) {
   cv::Mat small;
-  if (f < 1.0) {
-    cv::resize(grey, small, cv::Size(), f, f, cv::INTER_AREA);
+  if (o.gradient_sigma_px > 0) {
+    cv::GaussianBlur(working, small, cv::Size(), o.gradient_sigma_px);
   } else {
-    small = grey;
+    small = working.clone();
   }
-  if (o.gradient_sigma_px > 0) cv::GaussianBlur(small, small, cv::Size(), o.gradient_sigma_px);
   using Image = ChainRegistrationOptions::Image;
   cv::Mat mag;
   if (o.image == Image::kGradient || o.image == Image::kNormalisedGradient) {
@@ -94,22 +99,37 @@ std::vector<cv::Mat> GradientPyramid(const cv::Mat& frame, double f, const Chain
     cv::Scalar mean = cv::mean(var);
     cv::divide(mag - mu, var + 1e-2 * (mean[0] + 1e-6), mag);
   }
-  std::vector<cv::Mat> levels{mag};
-  for (int k = 1; k < o.pyramid_levels && levels.back().cols >= 64 && levels.back().rows >= 64; ++k) {
+  Pyramid p;
+  p.working = working;
+  p.levels.push_back(mag);
+  for (int k = 1; k < o.pyramid_levels && p.levels.back().cols >= 64 && p.levels.back().rows >= 64; ++k) {
     cv::Mat down;
-    cv::pyrDown(levels.back(), down);
-    levels.push_back(down);
+    cv::pyrDown(p.levels.back(), down);
+    p.levels.push_back(down);
   }
-  return levels;
+  return p;
+}
+
+// The frame shrunk by f (INTER_AREA), as float, and its pyramid.
+Pyramid GradientPyramid(const cv::Mat& frame, double f, const ChainRegistrationOptions& o) {
+  cv::Mat grey;
+  frame.convertTo(grey, CV_32F);
+  cv::Mat small;
+  if (f < 1.0) {
+    cv::resize(grey, small, cv::Size(), f, f, cv::INTER_AREA);
+  } else {
+    small = grey;
+  }
+  return PyramidOf(small, o);
 }
 
 cv::Matx23d Identity() { return cv::Matx23d(1, 0, 0, 0, 1, 0); }
 
 // ECC from coarse to fine, started at `start` (finest-level coordinates): template = previous frame,
 // input = this frame, so the warp maps previous-frame pixels to this frame's.
-bool RegisterPair(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& current, cv::Matx23d start,
+bool RegisterPair(const Pyramid& previous, const Pyramid& current, cv::Matx23d start,
                   const ChainRegistrationOptions& o, cv::Matx23d* out, double* correlation) {
-  const int levels = int(std::min(previous.size(), current.size()));
+  const int levels = int(std::min(previous.levels.size(), current.levels.size()));
   cv::Matx23d w = start;
   const double down = std::ldexp(1.0, -(levels - 1));
   w(0, 2) *= down;
@@ -119,7 +139,7 @@ bool RegisterPair(const std::vector<cv::Mat>& previous, const std::vector<cv::Ma
     cv::Mat warp(w, true);
     warp.convertTo(warp, CV_32F);
     try {
-      rho = cv::findTransformECC(previous[size_t(k)], current[size_t(k)], warp, cv::MOTION_AFFINE,
+      rho = cv::findTransformECC(previous.levels[size_t(k)], current.levels[size_t(k)], warp, cv::MOTION_AFFINE,
                                  cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, o.max_iterations,
                                                   o.epsilon),
                                  cv::noArray(), 1);
@@ -184,8 +204,8 @@ std::string FrameSizeError(int i, cv::Size got, cv::Size want) {
 // when the caller has it (else it is loaded).
 Status RunPairs(const std::function<StatusOr<cv::Mat>(int)>& load, const std::vector<int>& idx, size_t begin,
                 size_t end, cv::Size size, double f, const ChainRegistrationOptions& o,
-                std::vector<cv::Mat> first, ChainPass* pass) {
-  std::vector<cv::Mat> previous = std::move(first);
+                Pyramid first, ChainPass* pass) {
+  Pyramid previous = std::move(first);
   if (previous.empty()) {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(idx[begin - 1]));
     if (frame.size() != size) return Status::InvalidArgument(FrameSizeError(idx[begin - 1], frame.size(), size));
@@ -196,7 +216,7 @@ Status RunPairs(const std::function<StatusOr<cv::Mat>(int)>& load, const std::ve
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(idx[j]));
     if (frame.channels() != 1) return Status::InvalidArgument("frame " + std::to_string(idx[j]) + " is not grey");
     if (frame.size() != size) return Status::InvalidArgument(FrameSizeError(idx[j], frame.size(), size));
-    std::vector<cv::Mat> current = GradientPyramid(frame, f, o);
+    Pyramid current = GradientPyramid(frame, f, o);
     cv::Matx23d w;
     double rho = 0;
     bool ok = RegisterPair(previous, current, start, o, &w, &rho);
@@ -206,6 +226,27 @@ Status RunPairs(const std::function<StatusOr<cv::Mat>(int)>& load, const std::ve
       if (RegisterPair(previous, current, Identity(), o, &w_identity, &rho_identity) &&
           rho_identity > (ok ? rho : -1.0)) {
         ok = true, w = w_identity, rho = rho_identity;
+      }
+    }
+    if ((!ok || rho < o.min_correlation) && o.image != ChainRegistrationOptions::Image::kGradient) {
+      // The contrast-normalised intensity's basin is narrower than the gradient magnitude's
+      // (pairs 8 px apart at the working size do not converge): the gradient magnitude finds
+      // the pair, the registration image refines it.
+      ChainRegistrationOptions g = o;
+      g.image = ChainRegistrationOptions::Image::kGradient;
+      cv::Matx23d w_gradient;
+      double rho_gradient = 0;
+      if (RegisterPair(PyramidOf(previous.working, g), PyramidOf(current.working, g), Identity(), g, &w_gradient,
+                       &rho_gradient) &&
+          rho_gradient >= o.min_correlation) {
+        cv::Matx23d w_refined;
+        double rho_refined = 0;
+        if (RegisterPair(previous, current, w_gradient, o, &w_refined, &rho_refined) &&
+            rho_refined >= o.min_correlation) {
+          ok = true, w = w_refined, rho = rho_refined;
+        } else {
+          ok = true, w = w_gradient, rho = rho_gradient;
+        }
       }
     }
     if (!ok || rho < o.min_correlation) {
@@ -223,7 +264,7 @@ Status RunPairs(const std::function<StatusOr<cv::Mat>(int)>& load, const std::ve
 
 // The chain over idx at factor f with `levels` pyramid levels, cut into runs over threads.
 Status RunChain(const std::function<StatusOr<cv::Mat>(int)>& load, const std::vector<int>& idx, cv::Size size,
-                double f, const ChainRegistrationOptions& o, const std::vector<cv::Mat>& first_pyramid,
+                double f, const ChainRegistrationOptions& o, const Pyramid& first_pyramid,
                 ChainPass* pass) {
   const size_t m = idx.size() - 1;
   pass->pair.assign(idx.size(), Identity());
@@ -234,7 +275,7 @@ Status RunChain(const std::function<StatusOr<cv::Mat>(int)>& load, const std::ve
   std::vector<Status> status(size_t(threads), Status::Ok());
   auto run = [&](int t) {
     const size_t begin = 1 + m * size_t(t) / size_t(threads), end = 1 + m * size_t(t + 1) / size_t(threads);
-    status[size_t(t)] = RunPairs(load, idx, begin, end, size, f, o, t == 0 ? first_pyramid : std::vector<cv::Mat>(),
+    status[size_t(t)] = RunPairs(load, idx, begin, end, size, f, o, t == 0 ? first_pyramid : Pyramid(),
                                  &parts[size_t(t)]);
   };
   if (threads == 1) {

@@ -19,18 +19,19 @@ struct ChainRegistrationOptions {
   // transforms are scaled back to full resolution.
   int max_side_px = 512;
   int pyramid_levels = 3;  // 1..5, each halves the working size
-  // Gaussian smoothing before the gradient magnitude (px of the working size): the gradient
-  // magnitude of neighbours at different defocus differs mostly in its finest detail. 3 px with
-  // the normalised gradient below called fewer still stacks of the simulated rig moving and put
-  // the PCB stack within 0.131 % / 1.05 px of ORB + RANSAC, but does not converge on 8 px pairs
-  // (chain_registration_test's 12 % / 150 px stack): not the default yet.
+  // Gaussian smoothing of the working-size frame before the registration image is made (px):
+  // neighbours at different defocus differ mostly in their finest detail.
   double gradient_sigma_px = 1.5;
   // What ECC registers: the gradient magnitude, the smoothed intensity, or either divided by its
   // local mean / standard deviation (contrast-normalised over normalise_sigma_px of the working
   // size), so that the frame's sharp band, which moves across a tilted or stepped surface from
-  // frame to frame, does not weigh more than the rest.
+  // frame to frame, does not weigh more than the rest. The contrast-normalised intensity: on
+  // still stacks of chain-evaluate's tuning seeds it called 2 of 10 natural-scene stacks moving
+  // where the gradient magnitude called 8 (rig 5 vs 6, lens 0 vs 1, noise 0 vs 0), and it put the
+  // PCB stack closer to ORB + RANSAC (docs/alignment.md). A gradient magnitude's apparent edge
+  // moves with the blur's change across a slope; an intensity edge does not, to first order.
   enum class Image { kGradient, kIntensity, kNormalisedGradient, kNormalisedIntensity };
-  Image image = Image::kGradient;
+  Image image = Image::kNormalisedIntensity;
   double normalise_sigma_px = 8.0;
   int max_iterations = 30;        // ECC iterations per level
   double epsilon = 1e-4;          // ECC convergence

@@ -49,11 +49,9 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
       };
       // A rig's scan has metric z from the stage: the linear-in-z focus-breathing model is the
       // right prior there. An imported stack's z is nominal: a chain of neighbour registrations
-      // assumes nothing about it (a.chain_for_imported_stacks).
-      // The default (fall_back_to_none) keeps the linear estimate for now: on still stacks of the
-      // simulated rig's tilted specimens the chain's still test calls 6 of 25 moving
-      // (docs/alignment.md), and an explicit request is the user's choice.
-      if (!a.chain_for_imported_stacks || a.fall_back_to_none || !manifest.illumination.empty()) {
+      // assumes nothing about it (a.chain_for_imported_stacks), by default as on request; the
+      // default's fallback to none is the chain's own, below.
+      if (!a.chain_for_imported_stacks || !manifest.illumination.empty()) {
         StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
         if (!estimate.ok()) {
           const StatusCode code = estimate.status().code();

@@ -205,6 +205,7 @@ StatusOr<std::vector<cv::Mat>> RigStack(unsigned seed, const Motion& m) {
   static const char* kSpecimens[] = {"skew5", "skew10", "step1um", "wedge", "chamfer", "cutter", "lens", "coin"};
   o.seed = seed;
   o.camera_size = cv::Size(320 + 32 * rng.uniform(0, 8), 240 + 24 * rng.uniform(0, 8));
+  if (const char* e = std::getenv("CHAIN_RIG_NA")) o.numerical_aperture = std::atof(e);
   // Rig motion is its own: magnification and drift per 100 um of z (the scan's span is
   // 60..200 um, so scale/100 um = m.scale over ~100 um).
   o.focus_breathing_percent_per_100um = 100.0 * m.scale;
@@ -216,6 +217,7 @@ StatusOr<std::vector<cv::Mat>> RigStack(unsigned seed, const Motion& m) {
     auto r = CreateSimulatedRig(o);
     if (r.ok()) {
       rig = std::move(r).value();
+      if (std::getenv("CHAIN_VERBOSE")) std::printf("    specimen %s\n", o.specimen.c_str());
       break;
     }
   }
@@ -308,6 +310,14 @@ void Decide(const std::function<StatusOr<std::vector<cv::Mat>>(unsigned, const M
     return;
   }
   t->worst_ratio = std::max(t->worst_ratio, r->still_statistic / r->still_threshold);
+  if (std::getenv("CHAIN_VERBOSE")) {  // per pair: scale change, shift of the centre, correlation
+    const cv::Point2d c(((*frames)[0].cols - 1) * 0.5, ((*frames)[0].rows - 1) * 0.5);
+    for (size_t i = 1; i < r->pair.size(); ++i) {
+      const SimilarityTransform p = SimilarityOf(r->pair[i], c);
+      std::printf("    pair %zu: scale %+.4f %% shift %+.3f %+.3f px corr %.3f\n", i, 100 * (p.scale - 1),
+                  p.shift_x_px, p.shift_y_px, r->pair_correlation[i]);
+    }
+  }
   if (!r->still) ++t->moving;
   if (!r->still && !m.any()) {
     std::printf("  %s seed %u (%zu frames): still stack warped: statistic %.2f threshold %.2f corner %.2f px\n", name,
@@ -382,6 +392,19 @@ int Speed(int n, cv::Size size) {
     estimate.alignment = FrameAlignment::kEstimate;
     estimate.fall_back_to_none = true;
     estimate.options.threads = 0;  // as the server runs it on frames held in memory
+    estimate.chain = ChainOptionsFromEnvironment();
+    if (moving && std::getenv("CHAIN_SPEED_STILL_ONLY")) break;
+    if (std::getenv("CHAIN_SPEED_CHAIN_ONLY")) {  // the chain's decision and time alone
+      ChainRegistrationOptions chain = estimate.chain;
+      chain.threads = 0;
+      const auto t0 = std::chrono::steady_clock::now();
+      auto c = RegisterChain([&](int i) -> StatusOr<cv::Mat> { return s.frames[size_t(i)]; }, n, chain);
+      const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      if (!c.ok()) return 1;
+      std::printf("chain alone %.3f s: still %d quick %d stride %d corner %.2f px\n", t, int(c->still), int(c->quick),
+                  c->quick_stride, c->max_corner_displacement_px);
+      continue;
+    }
     double t_none = 1e9, t_est = 1e9, t_chain = 1e9;
     AlignmentFigures figures;
     for (int rep = 0; rep < 2; ++rep) {  // best of two, alternating
@@ -419,6 +442,12 @@ int main(int argc, char** argv) {
   if (mode == "still" && argc > 2) return Rate(std::atoi(argv[2]), 0.0, argc > 3 ? unsigned(std::atoi(argv[3])) : 1000u);
   if (mode == "drift" && argc > 3) return Rate(std::atoi(argv[2]), std::atof(argv[3]), argc > 4 ? unsigned(std::atoi(argv[4])) : 1000u);
   if (mode == "renderers" && argc > 2) return Renderers(std::atoi(argv[2]), argc > 3 ? unsigned(std::atoi(argv[3])) : 9000u);
+  if (mode == "dump" && argc > 3) {  // the still rig stack of a seed, as PNGs
+    auto f = RigStack(unsigned(std::atoi(argv[2])), Motion{});
+    if (!f.ok()) return 1;
+    for (size_t i = 0; i < f->size(); ++i) cv::imwrite(std::string(argv[3]) + "/f" + std::to_string(100 + i) + ".png", (*f)[i]);
+    return 0;
+  }
   if (mode == "speed") {
     return Speed(argc > 2 ? std::atoi(argv[2]) : 60,
                  cv::Size(argc > 3 ? std::atoi(argv[3]) : 1600, argc > 4 ? std::atoi(argv[4]) : 1200));
