@@ -223,7 +223,9 @@ TEST_F(UncertaintySharpnessTest, CoverageIsNearNinetyFivePercentAndUIsNotWiderTh
     // Uncharacterised, the prior (+-0.11 step) is a bound: wider, but no longer the +-step / 2
     // sawtooth that left every median at 0.00-0.17. The parameters where the linearity is a
     // common offset or small against the noise are sharp with it.
-    if (param == "Sa" || param == "Sq" || param == "Sz" || param == "tilt") EXPECT_GE(median_unchar, 0.2) << param;
+    if (param == "Sa" || param == "Sq" || param == "Sz" || param == "tilt") {
+      EXPECT_GE(median_unchar, 0.2) << param;
+    }
   }
   EXPECT_GE(coverage, 0.93);
   EXPECT_LE(coverage, 0.99);
