@@ -111,7 +111,7 @@ Pyramid PyramidOf(const cv::Mat& working, const ChainRegistrationOptions& o) {
 }
 
 // The frame shrunk by f (INTER_AREA), as float, and its pyramid.
-Pyramid GradientPyramid(const cv::Mat& frame, double f, const ChainRegistrationOptions& o) {
+Pyramid ShrunkPyramid(const cv::Mat& frame, double f, const ChainRegistrationOptions& o) {
   cv::Mat grey;
   frame.convertTo(grey, CV_32F);
   cv::Mat small;
@@ -209,14 +209,14 @@ Status RunPairs(const std::function<StatusOr<cv::Mat>(int)>& load, const std::ve
   if (previous.empty()) {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(idx[begin - 1]));
     if (frame.size() != size) return Status::InvalidArgument(FrameSizeError(idx[begin - 1], frame.size(), size));
-    previous = GradientPyramid(frame, f, o);
+    previous = ShrunkPyramid(frame, f, o);
   }
   cv::Matx23d start = Identity();  // working-size coordinates
   for (size_t j = begin; j < end; ++j) {
     INSPECT_ASSIGN_OR_RETURN(cv::Mat frame, load(idx[j]));
     if (frame.channels() != 1) return Status::InvalidArgument("frame " + std::to_string(idx[j]) + " is not grey");
     if (frame.size() != size) return Status::InvalidArgument(FrameSizeError(idx[j], frame.size(), size));
-    Pyramid current = GradientPyramid(frame, f, o);
+    Pyramid current = ShrunkPyramid(frame, f, o);
     cv::Matx23d w;
     double rho = 0;
     bool ok = RegisterPair(previous, current, start, o, &w, &rho);
@@ -399,7 +399,7 @@ StatusOr<ChainRegistration> RegisterChain(const std::function<StatusOr<cv::Mat>(
     for (int i = 0; i < n; i += stride) idx.push_back(i);
     if (idx.back() != n - 1) idx.push_back(n - 1);
     ChainPass pass;
-    INSPECT_RETURN_IF_ERROR(RunChain(load, idx, size, fq, quick, GradientPyramid(frame0, fq, quick), &pass));
+    INSPECT_RETURN_IF_ERROR(RunChain(load, idx, size, fq, quick, ShrunkPyramid(frame0, fq, quick), &pass));
     if (pass.failures == 0 && idx.size() >= 4) {
       std::vector<std::array<double, 8>> d;
       for (size_t j = 1; j < idx.size(); ++j) d.push_back(CornerDisplacement(pass.pair[j], size));
@@ -441,7 +441,7 @@ StatusOr<ChainRegistration> RegisterChain(const std::function<StatusOr<cv::Mat>(
   std::vector<int> all(static_cast<size_t>(n));
   for (int i = 0; i < n; ++i) all[size_t(i)] = i;
   ChainPass pass;
-  INSPECT_RETURN_IF_ERROR(RunChain(load, all, size, f, options, GradientPyramid(frame0, f, options), &pass));
+  INSPECT_RETURN_IF_ERROR(RunChain(load, all, size, f, options, ShrunkPyramid(frame0, f, options), &pass));
   if (registered_pairs) *registered_pairs = m - pass.failures;
   if (pass.failures > 0) {
     return Status::FailedPrecondition("alignment could not register " + std::to_string(pass.failures) + " of " +

@@ -13,33 +13,6 @@
 namespace inspection::testing {
 namespace {
 
-struct BandError {
-  double depth_rmse_frames = 0, aif_rms = 0, valid_percent = 0;
-};
-
-// Background pixels from 4 px (beyond the focus window's reach of the edge) to the object's blur
-// radius at the background's focus: where the halo is. Depth in um = frames (z step 1 from 0).
-BandError HaloBand(const testing_halo::HaloScene& s, const cv::Mat& depth, const cv::Mat& aif) {
-  cv::Mat not_foreground = ~s.foreground, distance;
-  cv::distanceTransform(not_foreground, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
-  double dsq = 0, asq = 0;
-  int n = 0, valid = 0;
-  for (int y = 0; y < distance.rows; ++y)
-    for (int x = 0; x < distance.cols; ++x) {
-      const float d = distance.at<float>(y, x);
-      if (d <= 4 || d > s.band_px) continue;
-      const double e = depth.at<float>(y, x) - s.depth_frames.at<float>(y, x);
-      if (std::isfinite(e)) {
-        dsq += e * e;
-        ++valid;
-      }
-      const double a = double(aif.at<uint8_t>(y, x)) - s.all_in_focus.at<uint8_t>(y, x);
-      asq += a * a;
-      ++n;
-    }
-  return {std::sqrt(dsq / std::max(valid, 1)), std::sqrt(asq / std::max(n, 1)), 100.0 * valid / std::max(n, 1)};
-}
-
 TEST_F(CliTest, HaloSuppressionReachesTheServerAndLowersTheHaloBandError) {
   StartServer();
   testing_halo::HaloSceneOptions o;
@@ -76,14 +49,14 @@ TEST_F(CliTest, HaloSuppressionReachesTheServerAndLowersTheHaloBandError) {
                 d.halo_candidate_percent(), d.halo_reassigned_percent());
   EXPECT_NE(after_run.out.find(line), std::string::npos) << after_run.out;
 
-  BandError e[2];
+  testing_halo::HaloBandError e[2];
   for (int k = 0; k < 2; ++k) {
     const fs::path dir = work_ / (k ? "after" : "before");
     auto depth = ReadDepthTiff(dir / "depth.tiff");
     ASSERT_TRUE(depth.ok()) << depth.status().ToString();
     const cv::Mat aif = cv::imread((dir / "all_in_focus.png").string(), cv::IMREAD_GRAYSCALE);
     ASSERT_EQ(aif.size(), s.foreground.size());
-    e[k] = HaloBand(s, *depth, aif);
+    e[k] = testing_halo::HaloBandErrorOf(s, *depth, aif);  // depth in um = frames (z step 1 from 0)
   }
   std::printf("halo band through inspectctl: depth RMSE %.2f -> %.2f frames (valid %.1f -> %.1f %%), AIF RMS %.2f -> "
               "%.2f grey\n",

@@ -172,4 +172,32 @@ inline HaloScene RenderHaloScene(const HaloSceneOptions& o) {
   return s;
 }
 
+// Errors in the halo band: background pixels from 4 px (beyond the 7 px focus window's reach of
+// the edge) to the object's blur radius at the background's focus. depth: CV_32FC1 in frames (NaN
+// = no depth: counted out of the RMSE, into valid_percent); all_in_focus: CV_8UC1.
+struct HaloBandError {
+  double depth_rmse_frames = 0, aif_rms = 0;  // depth over the pixels with depth
+  double valid_percent = 0;
+};
+inline HaloBandError HaloBandErrorOf(const HaloScene& s, const cv::Mat& depth, const cv::Mat& all_in_focus) {
+  cv::Mat not_foreground = ~s.foreground, distance;
+  cv::distanceTransform(not_foreground, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  double dsq = 0, asq = 0;
+  int n = 0, valid = 0;
+  for (int y = 0; y < distance.rows; ++y)
+    for (int x = 0; x < distance.cols; ++x) {
+      const float d = distance.at<float>(y, x);
+      if (d <= 4 || d > s.band_px) continue;
+      const double e = depth.at<float>(y, x) - s.depth_frames.at<float>(y, x);
+      if (std::isfinite(e)) {
+        dsq += e * e;
+        ++valid;
+      }
+      const double a = double(all_in_focus.at<uint8_t>(y, x)) - s.all_in_focus.at<uint8_t>(y, x);
+      asq += a * a;
+      ++n;
+    }
+  return {std::sqrt(dsq / std::max(valid, 1)), std::sqrt(asq / std::max(n, 1)), 100.0 * valid / std::max(n, 1)};
+}
+
 }  // namespace inspection::testing_halo

@@ -21,31 +21,10 @@ namespace {
 using testing_halo::HaloScene;
 using testing_halo::HaloSceneOptions;
 
-struct BandError {
-  double depth_rmse_frames = 0, aif_rms = 0;  // depth over the pixels with depth
-  double valid_percent = 0;
-};
+using BandError = testing_halo::HaloBandError;
 
-// Background pixels from 4 px (beyond the focus window's reach of the edge) to the blur radius.
 BandError HaloBandError(const HaloScene& s, const DepthResult& r) {
-  cv::Mat not_foreground = ~s.foreground, distance;
-  cv::distanceTransform(not_foreground, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
-  double dsq = 0, asq = 0;
-  int n = 0, valid = 0;
-  for (int y = 0; y < distance.rows; ++y)
-    for (int x = 0; x < distance.cols; ++x) {
-      const float d = distance.at<float>(y, x);
-      if (d <= 4 || d > s.band_px) continue;
-      const double e = r.depth_um.at<float>(y, x) - s.depth_frames.at<float>(y, x);
-      const double a = double(r.all_in_focus.at<uint8_t>(y, x)) - s.all_in_focus.at<uint8_t>(y, x);
-      if (std::isfinite(e)) {
-        dsq += e * e;
-        ++valid;
-      }
-      asq += a * a;
-      ++n;
-    }
-  return {std::sqrt(dsq / std::max(valid, 1)), std::sqrt(asq / n), 100.0 * valid / n};
+  return testing_halo::HaloBandErrorOf(s, r.depth_um, r.all_in_focus);
 }
 
 std::function<StatusOr<cv::Mat>(int)> FramesOf(const std::vector<cv::Mat>& frames) {
