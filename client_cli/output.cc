@@ -149,6 +149,7 @@ void PrintAlignment(const v1::DepthSummary& d) {
                         name, d.alignment_max_scale_change_percent(), d.alignment_max_shift_px(),
                         d.alignment_seen_percent(), method.c_str());
   }
+  if (!a.decision().empty()) std::cout << "  why: " << a.decision() << '\n';
   for (const v1::FrameTransform& f : a.frames()) {
     std::cout << Format("  frame %d%s: scale %.5f, rotation %.4f deg, shift %.2f, %.2f px\n", f.frame(),
                         f.frame() == a.reference_frame() ? " (reference)" : "", f.scale(), f.rotation_deg(),

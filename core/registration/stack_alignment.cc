@@ -252,7 +252,7 @@ StatusOr<FocusBreathingModel> EstimateOnChain(const std::function<StatusOr<cv::M
         "alignment did not converge: the frames do not follow one scale/drift model through z (" +
         std::to_string(failed) + " pairs failed to register, " + std::to_string(disagreeing) + " of " +
         std::to_string(pairs) + " disagree with the model by more than " +
-        std::to_string(options.max_pair_residual_px) + " px: " + worst + ")");
+        cv::format("%g", options.max_pair_residual_px) + " px: " + worst + ")");
   }
   return m;
 }

@@ -118,6 +118,9 @@ struct AlignmentFigures {
   std::string method;
   // Set when the default alignment fell back to none, and why (the CLI prints it).
   std::string fallback_reason;
+  // Set when the default chose a method other than its first one, and why (e.g. an imported
+  // stack the linear-in-z model did not fit, registered as a chain instead).
+  std::string decision;
   bool still = false;  // the transforms were measured and found indistinguishable from none
   // Chain only (ChainRegistration): the still test's statistic and critical value, and the
   // largest corner displacement of the accumulated transforms (px).

@@ -54,18 +54,28 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
       // warped 12 of 25 and 26 of 50 held-out still stacks of the simulated rig (8/25, 16/50 of
       // the natural-scene renderer's) and cost 11x the engine on a still 60 x 1600x1200 stack
       // (docs/alignment.md); an explicit request is the user's choice.
-      if (!a.chain_for_imported_stacks || a.fall_back_to_none || !manifest.illumination.empty()) {
+      // When the linear estimate does not fit an imported stack (a focus rail: its scale and
+      // shift follow the frame index, not a nominal z), the default registers it as a chain
+      // instead of leaving a stack that visibly moves unaligned; the result says so
+      // (figures->decision). A rig's scan keeps the linear model's verdict.
+      const bool imported = a.chain_for_imported_stacks && manifest.illumination.empty();
+      std::string decision;
+      if (!imported || a.fall_back_to_none) {
         StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
-        if (!estimate.ok()) {
-          const StatusCode code = estimate.status().code();
-          if (a.fall_back_to_none && (code == StatusCode::kFailedPrecondition || code == StatusCode::kInvalidArgument)) {
-            if (figures) figures->fallback_reason = "the focus-breathing estimate failed: " + estimate.status().message();
-            return std::optional<StackAligner>();
-          }
-          return estimate.status();
+        if (estimate.ok()) {
+          model = *estimate;
+          break;
         }
-        model = *estimate;
-        break;
+        const StatusCode code = estimate.status().code();
+        const bool fallback =
+            a.fall_back_to_none && (code == StatusCode::kFailedPrecondition || code == StatusCode::kInvalidArgument);
+        if (!fallback) return estimate.status();
+        if (!imported) {
+          if (figures) figures->fallback_reason = "the focus-breathing estimate failed: " + estimate.status().message();
+          return std::optional<StackAligner>();
+        }
+        decision = "the linear-in-z focus-breathing model did not fit (" + estimate.status().message() +
+                   "); registered as a chain of neighbouring frames instead";
       }
       if (a.fall_back_to_none && z_um.size() < 3) {
         if (figures) figures->fallback_reason = "a stack of fewer than 3 frames is not registered";
@@ -97,6 +107,7 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
           if (figures) figures->fallback_reason = "no frame pair could be registered: " + chain.status().message();
           return std::optional<StackAligner>();
         }
+        if (!decision.empty()) return Status(chain.status().code(), decision + ", which failed: " + chain.status().message());
         return chain.status();
       }
       INSPECT_ASSIGN_OR_RETURN(StackAligner aligner,
@@ -105,6 +116,7 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
       if (figures) {
         *figures = aligner.figures();
         figures->method = "chain";
+        figures->decision = decision;
         figures->still_statistic = chain->still_statistic;
         figures->still_threshold = chain->still_threshold;
         figures->max_corner_displacement_px = chain->max_corner_displacement_px;

@@ -42,7 +42,10 @@ struct StackFolderAlignment {
   // model estimated from its frames, as kCalibrated uses the calibrated one.
   ChainRegistrationOptions chain;
   // kEstimate on a stack whose stack.json names no illumination (imported): the chain instead
-  // of the linear-in-z estimate (false: the linear-in-z estimate for every stack).
+  // of the linear-in-z estimate (false: the linear-in-z estimate for every stack). With
+  // fall_back_to_none (the default) an imported stack gets the linear estimate first, which
+  // decides most still stacks at a fraction of the chain's cost; where that model does not fit
+  // (a focus rail) the chain registers it, and figures->decision says so.
   bool chain_for_imported_stacks = true;
 };
 

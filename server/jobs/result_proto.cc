@@ -38,6 +38,7 @@ void FillAlignmentDetail(const AlignmentFigures& a, v1::AlignmentDetail* out) {
   out->set_method(a.method);
   out->set_still(a.still);
   out->set_fallback_reason(a.fallback_reason);
+  out->set_decision(a.decision);
   out->set_reference_frame(a.reference_frame);
   out->set_still_statistic(a.still_statistic);
   out->set_still_threshold(a.still_threshold);

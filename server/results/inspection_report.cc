@@ -228,6 +228,7 @@ std::string AlignmentRow(const v1::DepthSummary& d) {
   text += FormatFixed(d.alignment_max_scale_change_percent(), 3) + " %, max shift " +
           FormatFixed(d.alignment_max_shift_px(), 2) + " px, seen by all " + FormatFixed(d.alignment_seen_percent(), 1) +
           " %";
+  if (!a.decision().empty()) text += "; " + HtmlEscape(a.decision());
   if (a.frames_size() > 0) {
     text += "<table class=\"alignment-frames\"><tr><th>frame</th><th>scale</th><th>rotation (°)</th>"
             "<th>shift x (px)</th><th>shift y (px)</th></tr>";

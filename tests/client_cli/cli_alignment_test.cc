@@ -53,8 +53,9 @@ TEST_F(CliAlignmentTest, ReconstructEstimatesCalibratedNeedsTheStepUnknownIsUsag
 }
 
 // A plain image folder of n frames: a smooth random texture shifted by (shift_px, -shift_px / 2)
-// * i / (n - 1) (featureless: flat grey, only sensor noise), defocus varying with the frame.
-void WriteImages(const fs::path& dir, int n, double shift_px, bool textured) {
+// * u^power, u = i / (n - 1) (featureless: flat grey, only sensor noise), defocus varying with
+// the frame.
+void WriteImages(const fs::path& dir, int n, double shift_px, bool textured, double power = 1.0) {
   fs::create_directories(dir);
   const cv::Size size(256, 192);
   cv::Mat scene(size, CV_32F);
@@ -64,7 +65,7 @@ void WriteImages(const fs::path& dir, int n, double shift_px, bool textured) {
   cv::normalize(scene, scene, 40, 216, cv::NORM_MINMAX);
   if (!textured) scene.setTo(128);
   for (int i = 0; i < n; ++i) {
-    const double u = double(i) / (n - 1);
+    const double u = std::pow(double(i) / (n - 1), power);
     cv::Mat f;
     cv::warpAffine(scene, f, cv::Matx23d(1, 0, shift_px * u, 0, 1, -0.5 * shift_px * u), size,
                    cv::INTER_CUBIC | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT_101);
@@ -99,6 +100,15 @@ TEST_F(CliAlignmentTest, ImageFolderPrintsTheChainPerFrameAndTheDefaultsFallback
   ASSERT_EQ(std::sscanf(line.c_str() + shift_at, "shift %lf, %lf px", &sx, &sy), 2) << line;
   EXPECT_NEAR(sx, -8.0, 0.3) << line;
   EXPECT_NEAR(sy, 4.0, 0.3) << line;
+
+  // The default on a folder whose motion is not linear in its z (shift ~ u^3): the linear-in-z
+  // model does not fit, so the chain registers it, and the CLI prints why under the alignment line.
+  WriteImages(work_ / "rail", 9, 16.0, true, 3.0);
+  r = Run({"reconstruct", "--images", (work_ / "rail").string(), "--z-step", "5", "--out", (work_ / "r").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find(", method chain\n  why: the linear-in-z focus-breathing model did not fit ("), std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("); registered as a chain of neighbouring frames instead\n"), std::string::npos) << r.out;
 
   WriteImages(work_ / "flat", 6, 0.0, false);
   r = Run({"reconstruct", "--images", (work_ / "flat").string(), "--z-step", "5", "--out", (work_ / "f").string()});

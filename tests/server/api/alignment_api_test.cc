@@ -73,7 +73,7 @@ class AlignmentApiTest : public ServerTest {
   // u = i / (n - 1), defocus blur 0.7 .. 2.2 px varying with i, sensor noise. truth[i]: reference
   // (middle) grid -> frame i. out_of_line >= 0: that frame shows an unrelated texture.
   fs::path WriteImportedStack(const std::string& name, int n, double scale_total, double sx, double sy,
-                              std::vector<cv::Matx23d>* truth, int out_of_line = -1) {
+                              std::vector<cv::Matx23d>* truth, int out_of_line = -1, double exponent = 1.3) {
     const cv::Size size(320, 240);
     const fs::path dir = UniqueTempDir(name);
     auto texture = [&](unsigned seed) {
@@ -91,7 +91,7 @@ class AlignmentApiTest : public ServerTest {
     for (int i = 0; i < n; ++i) {
       const double u = double(i) / (n - 1);
       SimilarityTransform t;
-      t.scale = 1.0 + scale_total * std::pow(u, 1.3);
+      t.scale = 1.0 + scale_total * std::pow(u, exponent);
       t.shift_x_px = sx * u;
       t.shift_y_px = sy * u;
       world.push_back(FrameFromReference(t, c));
@@ -242,6 +242,41 @@ TEST_F(AlignmentApiTest, ImportedStacksAreRegisteredAsAChainAndReportEveryFrame)
   ASSERT_TRUE(s.ok()) << s.error_message();
   EXPECT_EQ(job.result().depth().alignment(), v1::FRAME_ALIGNMENT_NONE);
   EXPECT_TRUE(job.result().depth().alignment_detail().fallback_reason().empty());
+}
+
+// The default (no --alignment) on an imported stack whose motion is not linear in its nominal z,
+// as on a focus rail: the linear-in-z model does not fit, and instead of leaving a stack that
+// moves unaligned the default registers it as a chain and says why.
+TEST_F(AlignmentApiTest, TheDefaultRegistersAStackTheLinearModelDoesNotFitAsAChain) {
+  std::vector<cv::Matx23d> truth;
+  const fs::path rail = WriteImportedStack("rail", 11, 0.08, 30.0, -12.0, &truth, -1, 3.0);
+  v1::Job job;
+  grpc::Status s = client_->ReconstructUpload(rail, v1::ReconstructStart(), nullptr, &job);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  const v1::DepthSummary& d = job.result().depth();
+  EXPECT_EQ(d.alignment(), v1::FRAME_ALIGNMENT_ESTIMATE);
+  const v1::AlignmentDetail& a = d.alignment_detail();
+  EXPECT_EQ(a.method(), "chain") << a.DebugString();
+  EXPECT_FALSE(a.still());
+  EXPECT_TRUE(a.fallback_reason().empty()) << a.fallback_reason();
+  EXPECT_NE(a.decision().find("linear-in-z focus-breathing model did not fit"), std::string::npos) << a.decision();
+  EXPECT_NE(a.decision().find("registered as a chain"), std::string::npos) << a.decision();
+  ASSERT_EQ(a.frames_size(), 11);
+  const cv::Point2d c(159.5, 119.5);
+  for (int i = 0; i < 11; ++i) {
+    const SimilarityTransform t = SimilarityOf(truth[size_t(i)], c);
+    EXPECT_NEAR(a.frames(i).scale(), t.scale, 0.001 * t.scale) << "frame " << i;
+    EXPECT_NEAR(a.frames(i).shift_x_px(), t.shift_x_px, 0.5) << "frame " << i;
+    EXPECT_NEAR(a.frames(i).shift_y_px(), t.shift_y_px, 0.5) << "frame " << i;
+  }
+  // The same stack unmoved: the linear estimate decides it (still), no chain, no decision.
+  const fs::path still = WriteImportedStack("rail-still", 11, 0.0, 0.0, 0.0, nullptr);
+  s = client_->ReconstructUpload(still, v1::ReconstructStart(), nullptr, &job);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  EXPECT_EQ(job.result().depth().alignment_detail().method(), "model")
+      << job.result().depth().alignment_detail().DebugString();
+  EXPECT_TRUE(job.result().depth().alignment_detail().decision().empty());
+  EXPECT_DOUBLE_EQ(job.result().depth().alignment_seen_percent(), 100.0);
 }
 
 TEST_F(AlignmentApiTest, CalibratedScansAndEstimatedReconstructionsReportTheirAlignment) {

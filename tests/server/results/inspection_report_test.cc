@@ -413,6 +413,14 @@ TEST(InspectionReport, AlignmentRowNamesTheMethodEachFramesTransformAndAnyFallba
       << html.substr(html.find("Frame alignment"), 800);
   EXPECT_NE(html.find("<tr><td>1 (reference)</td><td class=\"num\">1.00000</td>"), std::string::npos);
 
+  a->set_decision("the linear-in-z focus-breathing model did not fit (<implausible>); registered as a chain");
+  html = Render(in);
+  EXPECT_NE(html.find("seen by all 91.5 %; the linear-in-z focus-breathing model did not fit (&lt;implausible&gt;); "
+                      "registered as a chain<table"),
+            std::string::npos)
+      << html.substr(html.find("Frame alignment"), 400);
+  a->clear_decision();
+
   a->set_still(true);
   html = Render(in);
   EXPECT_NE(html.find("ESTIMATE (chain): still, frames used as captured; measured max scale change 2.500 %"),
