@@ -12,7 +12,8 @@
 // of the ratio, the share of tiles over 1.5, and the same for the gradient energy (sum of
 // squared Sobel responses), whose ratio a ghost raises less (a ghost edge is a blurred one).
 //
-//   aif-edges --frames DIR [--tile 128] [--margin 64] NAME=IMAGE [NAME=IMAGE ...]
+//   aif-edges --frames DIR [--tile 128] [--margin 64] [--crop X,Y,W,H,OUT.png] NAME=IMAGE [NAME=IMAGE ...]
+// --crop: the same region of every named image, side by side at 2x (nearest), to look at.
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -62,9 +63,18 @@ int main(int argc, char** argv) {
   std::string frames_dir;
   int tile = 128, margin = 64;
   std::vector<std::pair<std::string, std::string>> images;
+  cv::Rect crop;
+  std::string crop_file;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--frames" && i + 1 < argc) {
+    if (a == "--crop" && i + 1 < argc) {
+      char out[512] = {0};
+      if (std::sscanf(argv[++i], "%d,%d,%d,%d,%511s", &crop.x, &crop.y, &crop.width, &crop.height, out) != 5) {
+        std::fprintf(stderr, "aif-edges: --crop wants X,Y,W,H,OUT.png\n");
+        return 2;
+      }
+      crop_file = out;
+    } else if (a == "--frames" && i + 1 < argc) {
       frames_dir = argv[++i];
     } else if (a == "--tile" && i + 1 < argc) {
       tile = std::atoi(argv[++i]);
@@ -122,6 +132,7 @@ int main(int argc, char** argv) {
   std::printf("%zu frames of %dx%d, %zu textured tiles of %d px (margin %d px)\n", frames.size(), size.width,
               size.height, tiles.size(), tile, margin);
   std::printf("%-24s %8s %8s %9s | %8s %8s %9s\n", "image", "edges", "p90", ">1.5", "energy", "p90", ">1.5");
+  std::vector<cv::Mat> crops;
   for (const auto& [name, file] : images) {
     cv::Mat m = cv::imread(file, cv::IMREAD_UNCHANGED);
     if (m.empty()) {
@@ -132,6 +143,18 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "aif-edges: %s is %dx%d, the frames %dx%d\n", file.c_str(), m.cols, m.rows, size.width,
                    size.height);
       return 2;
+    }
+    if (!crop_file.empty()) {
+      if ((crop & cv::Rect(0, 0, m.cols, m.rows)) != crop) {
+        std::fprintf(stderr, "aif-edges: --crop lies outside %s\n", file.c_str());
+        return 2;
+      }
+      cv::Mat c = m(crop).clone(), big;
+      if (c.depth() != CV_8U) c.convertTo(c, CV_8U, 255.0 / 65535.0);
+      if (c.channels() == 1) cv::cvtColor(c, c, cv::COLOR_GRAY2BGR);
+      cv::resize(c, big, cv::Size(), 2, 2, cv::INTER_NEAREST);
+      if (!crops.empty()) crops.push_back(cv::Mat(big.rows, 8, CV_8UC3, cv::Scalar(255, 255, 255)));
+      crops.push_back(big);
     }
     const Maps a = MapsOf(m);
     std::vector<double> edge_ratio, energy_ratio;
@@ -146,6 +169,16 @@ int main(int argc, char** argv) {
     std::printf("%-24s %8.3f %8.3f %8.1f%% | %8.3f %8.3f %8.1f%%\n", name.c_str(), Quantile(edge_ratio, 0.5),
                 Quantile(edge_ratio, 0.9), over(edge_ratio), Quantile(energy_ratio, 0.5), Quantile(energy_ratio, 0.9),
                 over(energy_ratio));
+  }
+  if (!crop_file.empty()) {
+    cv::Mat side;
+    cv::hconcat(crops, side);
+    if (!cv::imwrite(crop_file, side)) {
+      std::fprintf(stderr, "aif-edges: cannot write %s\n", crop_file.c_str());
+      return 2;
+    }
+    std::printf("crop %d,%d %dx%d of each image, left to right in the order given: %s\n", crop.x, crop.y, crop.width,
+                crop.height, crop_file.c_str());
   }
   return 0;
 }

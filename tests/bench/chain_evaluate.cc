@@ -287,8 +287,50 @@ ChainRegistrationOptions ChainOptionsFromEnvironment() {
 
 struct Tally {
   int stacks = 0, moving = 0, failed = 0;
+  int chained = 0;  // CHAIN_DEFAULT: stacks the default registered as a chain after the linear model
   double worst_ratio = 0, seconds = 0;
 };
+
+// CHAIN_DEFAULT=1: what the product's default (no --alignment) decides for an imported stack
+// (stack.json without illumination, z nominal at 1 um a frame): the linear-in-z estimate first,
+// the chain where that model does not fit (core/sff/stack_reconstruct.cc), through the same
+// ReconstructStackFrames call the server makes. A warp (not still, not none) of a still stack
+// counts as a false positive.
+void DecideAsTheDefault(const std::vector<cv::Mat>& frames, const Motion& m, Tally* t, const char* name,
+                        unsigned seed) {
+  StackManifest manifest;
+  for (size_t i = 0; i < frames.size(); ++i) manifest.frames.push_back({"f" + std::to_string(i), double(i), 0.0, ""});
+  StackFrameSource source;
+  source.frame = [&](int i) -> StatusOr<cv::Mat> { return frames[size_t(i)]; };
+  StackFolderAlignment a;
+  a.alignment = FrameAlignment::kEstimate;
+  a.fall_back_to_none = true;
+  a.options.threads = 0;
+  const std::atomic<bool> cancel{false};
+  AlignmentFigures figures;
+  const auto t0 = std::chrono::steady_clock::now();
+  auto r = ReconstructStackFrames(manifest, source, SffOptions{}, {}, cancel, a, &figures);
+  t->seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!r.ok()) {
+    ++t->failed;
+    std::printf("  %s seed %u (%zu frames%s): default failed: %s\n", name, seed, frames.size(),
+                m.any() ? ", moving" : ", still", r.status().ToString().c_str());
+    return;
+  }
+  const bool warped = figures.alignment != FrameAlignment::kNone && !figures.still;
+  if (warped) ++t->moving;
+  if (!figures.decision.empty()) ++t->chained;
+  if (warped && !m.any()) {
+    std::printf("  %s seed %u (%zu frames): still stack warped by the default (method %s%s): scale %.3f %%, shift "
+                "%.2f px, corner %.2f px\n",
+                name, seed, frames.size(), figures.method.c_str(), figures.decision.empty() ? "" : ", after the linear model",
+                figures.max_scale_change_percent, figures.max_shift_px, figures.max_corner_displacement_px);
+  }
+  if (!warped && m.any()) {
+    std::printf("  %s seed %u (%zu frames): moving stack not warped by the default (%s%s)\n", name, seed,
+                frames.size(), figures.still ? "still" : "none", figures.fallback_reason.empty() ? "" : ": fell back");
+  }
+}
 
 void Decide(const std::function<StatusOr<std::vector<cv::Mat>>(unsigned, const Motion&)>& render, unsigned seed,
             const Motion& m, Tally* t, const char* name) {
@@ -297,6 +339,10 @@ void Decide(const std::function<StatusOr<std::vector<cv::Mat>>(unsigned, const M
   if (!frames.ok()) {
     ++t->failed;
     std::printf("  %s seed %u: render failed: %s\n", name, seed, frames.status().ToString().c_str());
+    return;
+  }
+  if (std::getenv("CHAIN_DEFAULT")) {  // the product's default for an imported stack instead of the chain alone
+    DecideAsTheDefault(*frames, m, t, name, seed);
     return;
   }
   const auto t0 = std::chrono::steady_clock::now();
@@ -361,6 +407,10 @@ int Renderers(int count, unsigned seed_base) {
                   (still.seconds + little.seconds + big.seconds) / std::max(1, 3 * count));
     rows.push_back(row);
     std::printf("%s\n", row);
+    if (std::getenv("CHAIN_DEFAULT")) {
+      std::printf("  the default registered as a chain after the linear model: still %d, small %d, typical %d\n",
+                  still.chained, little.chained, big.chained);
+    }
     std::fflush(stdout);
   }
   std::printf("\nseeds %u..%u; small motion: scale 0.2 %%, shift (2, -1) px over the stack (rig: per 100 um of z); "
