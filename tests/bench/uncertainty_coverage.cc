@@ -10,7 +10,7 @@
 //
 //   uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM]
 //                        [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile]
-//                        [--na NA] [--window PX] [--gaussian] [--prior-lz SHARE]
+//                        [--na NA] [--window PX] [--gaussian] [--prior-lz SHARE] [--z-offset UM]
 // --na, --window and --gaussian change the instrument (objective NA: the focus curve's width per um;
 // the SFF focus window; the Gaussian three-point fit instead of the defocus parabola), for checking
 // the uncharacterised linearity prior on instruments whose interpolation error is larger.
@@ -62,6 +62,9 @@ struct Args {
   // > 0: the uncharacterised runs bound the linearity by +-this share of the scan's step (as a
   // verified l_z does), to see whether a narrower prior than the analytic one would still cover.
   double prior_lz_of_step = 0.0;
+  // Test scans' specimen height offset (um): moves the specimens' heights against the z grid, i.e.
+  // the phase of the z linearity (the calibration scan keeps 0).
+  double z_offset_um = 0.0;
 };
 
 struct Case {
@@ -345,12 +348,14 @@ int main(int argc, char** argv) {
       a.window_px = std::atoi(argv[++i]);
     else if (arg == "--gaussian")
       a.gaussian = true;
+    else if (arg == "--z-offset" && i + 1 < argc)
+      a.z_offset_um = std::atof(argv[++i]);
     else if (arg == "--prior-lz" && i + 1 < argc)
       a.prior_lz_of_step = std::atof(argv[++i]);
     else if (arg == "--camera" && i + 1 < argc &&
              std::sscanf(argv[++i], "%dx%d", &a.camera.width, &a.camera.height) == 2) {
     } else {
-      std::fprintf(stderr, "usage: uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM] [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile] [--na NA] [--window PX] [--gaussian] [--prior-lz SHARE]\n");
+      std::fprintf(stderr, "usage: uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM] [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile] [--na NA] [--window PX] [--gaussian] [--prior-lz SHARE] [--z-offset UM]\n");
       return 2;
     }
   }
@@ -412,6 +417,7 @@ int main(int argc, char** argv) {
     rig_options.specimen = "plane";
     auto rig = CreateSimulatedRig(rig_options);
     if (!rig.ok()) return 1;
+    if (a.z_offset_um != 0.0 && !(*rig)->simulation()->SetSpecimenZOffsetUm(a.z_offset_um).ok()) return 1;
     for (const Case& c : cases) {
       const auto t0 = std::chrono::steady_clock::now();
       auto scan = ScanOnce(**rig, c.specimen, work, a, a.z_step_um);
