@@ -117,8 +117,7 @@ struct DepthNoiseModel {
   // mask (same directions as sigma). A lone spike of height A gives a second difference of -2A
   // at its centre, so this is A; for Gaussian noise it is ~1.2x the largest error (sqrt(6) / 2).
   // SFF depth errors have heavier tails than Gaussian (wrong-peak clusters), which a Gaussian
-  // Monte Carlo misses: extremes use a bound instead (flatness this one; Sp, Sv, Sz the map below,
-  // with each pixel's height).
+  // Monte Carlo misses: extremes use a bound instead (flatness this; Sp, Sv, Sz the map below).
   double extreme_error_um = 0.0;
   // The same bound per pixel (CV_32FC1, NaN outside the mask; empty when not estimated): how far
   // an error near p can move it, from the second differences around p less the surface's own
