@@ -42,6 +42,57 @@ void SecondDifferences(const cv::Mat& depth, const cv::Mat& usable, int lag, boo
   }
 }
 
+// Where a lone error can sit and how large it plausibly is, per pixel (CV_32FC1, NaN where no
+// second difference reaches): |d2 - local mean of d2| / 2 along the used directions, the larger of
+// the two, spread over +-lag (an error at p enters the second differences centred at p and at
+// p +- lag, and the band within lag of the region's edge has none of its own). The local mean
+// (box of 2 lag + 1) is the surface's own curvature at that scale, which is no error: a 3 um sine
+// at a 43 px period has second differences of 3.7 um at lag 8, and made the extremes' bound 3-4x
+// their deviations. A lone spike's mean over that box is zero (-2A at p, +A at p +- lag), so the
+// spike keeps its full size.
+cv::Mat LocalExtremeError(const cv::Mat& depth, const cv::Mat& usable, int lag, bool use_x, bool use_y) {
+  cv::Mat best(depth.size(), CV_32FC1, cv::Scalar(-1.0f));
+  const int side = 2 * lag + 1;
+  for (const bool along_x : {true, false}) {
+    if (along_x ? !use_x : !use_y) continue;
+    cv::Mat d2 = cv::Mat::zeros(depth.size(), CV_64F), count = cv::Mat::zeros(depth.size(), CV_64F);
+    const int dx = along_x ? lag : 0, dy = along_x ? 0 : lag;
+    for (int row = dy; row < depth.rows - dy; ++row) {
+      const float* z0 = depth.ptr<float>(row - dy);
+      const float* z1 = depth.ptr<float>(row);
+      const float* z2 = depth.ptr<float>(row + dy);
+      const uint8_t* u0 = usable.ptr<uint8_t>(row - dy);
+      const uint8_t* u1 = usable.ptr<uint8_t>(row);
+      const uint8_t* u2 = usable.ptr<uint8_t>(row + dy);
+      double* v = d2.ptr<double>(row);
+      double* c = count.ptr<double>(row);
+      for (int col = dx; col < depth.cols - dx; ++col) {
+        if (!u0[col - dx] || !u1[col] || !u2[col + dx]) continue;
+        v[col] = double(z0[col - dx]) - 2.0 * double(z1[col]) + double(z2[col + dx]);
+        c[col] = 1.0;
+      }
+    }
+    cv::Mat sum, n;
+    cv::boxFilter(d2, sum, CV_64F, cv::Size(side, side), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    cv::boxFilter(count, n, CV_64F, cv::Size(side, side), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    for (int row = 0; row < depth.rows; ++row) {
+      const double* v = d2.ptr<double>(row);
+      const double* c = count.ptr<double>(row);
+      const double* sm = sum.ptr<double>(row);
+      const double* nn = n.ptr<double>(row);
+      float* b = best.ptr<float>(row);
+      for (int col = 0; col < depth.cols; ++col) {
+        if (c[col] > 0.0) b[col] = std::max(b[col], float(0.5 * std::abs(v[col] - sm[col] / nn[col])));
+      }
+    }
+  }
+  cv::Mat spread;
+  cv::dilate(best, spread, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(side, side)), cv::Point(-1, -1), 1,
+             cv::BORDER_CONSTANT, cv::Scalar(-1.0f));
+  spread.setTo(std::nanf(""), spread < 0.0f);
+  return spread;
+}
+
 }  // namespace
 
 Status DepthNoiseOptions::Validate() const {
@@ -183,7 +234,8 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
   // Estimate over `usable`; fills `var_x/var_y` (local, CV_64F, NaN where too few samples) and
   // returns the global per-direction variances (NaN when none).
   const int nb = options.neighbourhood_px > 0 ? (options.neighbourhood_px | 1) : (8 * options.window_px + 1);
-  auto estimate = [&](const cv::Mat& usable, cv::Mat* local_var, double* global_var, double* extreme) {
+  auto estimate = [&](const cv::Mat& usable, cv::Mat* local_var, double* global_var, double* extreme,
+                      cv::Mat* extreme_map) {
     cv::Mat vx, cx, vy, cy;
     SecondDifferences(depth_um, usable, lag, true, &vx, &cx);
     SecondDifferences(depth_um, usable, lag, false, &vy, &cy);
@@ -217,6 +269,7 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
     if (use_x) cv::minMaxLoc(vx, nullptr, &max_x);
     if (use_y) cv::minMaxLoc(vy, nullptr, &max_y);
     *extreme = std::sqrt(6.0 * std::max(max_x, max_y)) / 2.0;
+    *extreme_map = LocalExtremeError(depth_um, usable, lag, use_x, use_y);
     cv::Mat sv, sc;
     cv::boxFilter(v, sv, CV_64F, cv::Size(nb, nb), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
     cv::boxFilter(c, sc, CV_64F, cv::Size(nb, nb), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
@@ -232,13 +285,14 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
   };
 
   const cv::Mat region = mask.empty() ? finite : (finite & mask);
-  cv::Mat local_var;
+  cv::Mat local_var, extreme_map;
   double global_var = std::nan(""), extreme = 0.0;
-  estimate(region, &local_var, &global_var, &extreme);
+  estimate(region, &local_var, &global_var, &extreme, &extreme_map);
   if (!std::isfinite(global_var) && !mask.empty()) {
     // Too small a region for its own estimate: the whole map's noise level stands in.
-    estimate(finite, &local_var, &global_var, &extreme);
+    estimate(finite, &local_var, &global_var, &extreme, &extreme_map);
     local_var.setTo(std::nan(""));
+    extreme_map = cv::Mat();
   }
   if (!std::isfinite(global_var)) {
     return Status::FailedPrecondition("depth noise: too few measured pixels to estimate the noise (needs runs of " +
@@ -246,6 +300,15 @@ StatusOr<DepthNoiseModel> EstimateDepthNoise(const cv::Mat& depth_um, const cv::
   }
   model.global_sigma_um = std::sqrt(global_var);
   model.extreme_error_um = extreme;
+  model.extreme_error_map_um = cv::Mat(depth_um.size(), CV_32FC1, cv::Scalar(std::nanf("")));
+  for (int row = 0; row < depth_um.rows; ++row) {
+    const uint8_t* r = region.ptr<uint8_t>(row);
+    const float* e = extreme_map.empty() ? nullptr : extreme_map.ptr<float>(row);
+    float* o = model.extreme_error_map_um.ptr<float>(row);
+    for (int col = 0; col < depth_um.cols; ++col) {
+      if (r[col]) o[col] = e && std::isfinite(e[col]) ? std::min(e[col], float(extreme)) : float(extreme);
+    }
+  }
   model.sigma_um = cv::Mat(depth_um.size(), CV_32FC1, cv::Scalar(std::nanf("")));
   for (int row = 0; row < depth_um.rows; ++row) {
     const uint8_t* r = region.ptr<uint8_t>(row);

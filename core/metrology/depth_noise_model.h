@@ -117,8 +117,15 @@ struct DepthNoiseModel {
   // mask (same directions as sigma). A lone spike of height A gives a second difference of -2A
   // at its centre, so this is A; for Gaussian noise it is ~1.2x the largest error (sqrt(6) / 2).
   // SFF depth errors have heavier tails than Gaussian (wrong-peak clusters), which a Gaussian
-  // Monte Carlo misses: extremes (Sp, Sv, Sz, flatness) use this bound instead.
+  // Monte Carlo misses: extremes use a bound instead (flatness this; Sp, Sv, Sz the map below).
   double extreme_error_um = 0.0;
+  // The same bound per pixel (CV_32FC1, NaN outside the mask; empty when not estimated): how far
+  // an error near p can move it, from the second differences around p less the surface's own
+  // curvature at the lag's scale (their local mean). Where no second difference reaches p (or the
+  // region was too small), extreme_error_um. Never above extreme_error_um. Extremes use it with
+  // each pixel's height (ExtremeErrorUm, core/metrology/measurement_uncertainty.h): an error on a
+  // flank far below the peak cannot move the peak.
+  cv::Mat extreme_error_map_um;
   int correlation_px = 1;  // side of the box B
   ZGrid grid;
   ZLinearity linearity;     // the table in use (maybe the uncharacterised bound, see its source)

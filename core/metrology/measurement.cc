@@ -82,9 +82,13 @@ StatusOr<ArealGroupResult> EvaluateArealGroup(const cv::Mat& depth_um, const cv:
     }
     AddHeightDependentBound(r.budgets[int(shape)], bound);
   }
-  r.budgets[int(HeightParameter::kSp)] = ExtremeValueBudget(1, range, *noise);
-  r.budgets[int(HeightParameter::kSv)] = ExtremeValueBudget(1, range, *noise);
-  r.budgets[int(HeightParameter::kSz)] = ExtremeValueBudget(2, range, *noise);
+  // Extremes: the errors that can reach the peak and the valley (ExtremeErrorUm), not the
+  // largest anywhere in the region.
+  const double peak_um = ExtremeErrorUm(e.surface_um, *noise, true);
+  const double valley_um = ExtremeErrorUm(e.surface_um, *noise, false);
+  r.budgets[int(HeightParameter::kSp)] = ExtremeValueBudgetUm(peak_um, range);
+  r.budgets[int(HeightParameter::kSv)] = ExtremeValueBudgetUm(valley_um, range);
+  r.budgets[int(HeightParameter::kSz)] = ExtremeValueBudgetUm(peak_um + valley_um, range);
   return r;
 }
 

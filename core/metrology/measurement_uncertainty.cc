@@ -77,6 +77,38 @@ UncertaintyBudget ExtremeValueBudget(int extremes, double linearity_range_um, co
   return b;
 }
 
+UncertaintyBudget ExtremeValueBudgetUm(double extreme_error_um, double linearity_range_um) {
+  UncertaintyBudget b;
+  b.method = "bound";
+  b.random = 0.5 * extreme_error_um;
+  b.linearity = 0.5 * linearity_range_um;
+  b.standard_uncertainty = b.random + b.linearity;
+  return b;
+}
+
+double ExtremeErrorUm(const cv::Mat& surface_um, const DepthNoiseModel& model, bool peak) {
+  const cv::Mat& e = model.extreme_error_map_um;
+  if (e.empty() || e.size() != surface_um.size() || surface_um.type() != CV_32FC1) return model.extreme_error_um;
+  double top = peak ? -1e300 : 1e300;
+  for (int row = 0; row < surface_um.rows; ++row) {
+    const float* z = surface_um.ptr<float>(row);
+    for (int col = 0; col < surface_um.cols; ++col) {
+      if (std::isfinite(z[col])) top = peak ? std::max(top, double(z[col])) : std::min(top, double(z[col]));
+    }
+  }
+  double worst = -1.0;
+  for (int row = 0; row < surface_um.rows; ++row) {
+    const float* z = surface_um.ptr<float>(row);
+    const float* er = e.ptr<float>(row);
+    for (int col = 0; col < surface_um.cols; ++col) {
+      if (!std::isfinite(z[col]) || !std::isfinite(er[col])) continue;
+      const double gap = peak ? top - z[col] : z[col] - top;
+      worst = std::max(worst, double(er[col]) - gap);
+    }
+  }
+  return worst >= 0.0 ? worst : model.extreme_error_um;
+}
+
 double LinearityRangeUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model) {
   FractionCells cells;
   std::vector<char> occupied;

@@ -68,6 +68,18 @@ struct UncertaintyBudget {
 // offset that the form removal takes out). extremes = 1 for Sp and Sv (one extreme moves),
 // 2 for Sz and flatness (peak and valley can move apart). The budget's standard uncertainty is U / 2.
 UncertaintyBudget ExtremeValueBudget(int extremes, double linearity_range_um, const DepthNoiseModel& model);
+// The same with the errors' part given in um: U = extreme_error_um + R (Sp: ExtremeErrorUm of the
+// peak; Sz: of the peak plus of the valley).
+UncertaintyBudget ExtremeValueBudgetUm(double extreme_error_um, double linearity_range_um);
+// How far the error field can move the highest (peak = true) or the lowest point of surface_um
+// (the levelled surface, pixel for pixel with the map the model was estimated on): the largest
+// E(p) - gap(p) over its finite pixels, E = model.extreme_error_map_um and gap(p) the height
+// between p and the measured extreme. The measured peak moves up by at most its own error (gap 0);
+// the true peak q, moved down by D, is measured at most E(q) - D below the measured peak, so D <=
+// E(q) - gap(q). An error on a flank far below the peak cannot reach it: E over the whole region
+// made Sz's U 3-10x its deviation on sines and rough surfaces, whose flanks hold the largest
+// errors. model.extreme_error_um when the model has no map or no pixel has both.
+double ExtremeErrorUm(const cv::Mat& surface_um, const DepthNoiseModel& model, bool peak);
 // R of ExtremeValueBudget over the pixels where mask is non-zero and depth finite.
 double LinearityRangeUm(const cv::Mat& depth_um, const cv::Mat& mask, const DepthNoiseModel& model);
 

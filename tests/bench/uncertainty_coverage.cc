@@ -10,6 +10,10 @@
 //
 //   uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM]
 //                        [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile]
+//                        [--na NA] [--window PX] [--gaussian] [--prior-lz SHARE] [--z-offset UM]
+// --na, --window and --gaussian change the instrument (objective NA: the focus curve's width per um;
+// the SFF focus window; the Gaussian three-point fit instead of the defocus parabola), for checking
+// the uncharacterised linearity prior on instruments whose interpolation error is larger.
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -52,6 +56,15 @@ struct Args {
   // heights on tilted planes, sinusoids of other amplitudes and periods, other sphere and
   // cylinder radii, random rough surfaces), never looked at while tuning; "all": both.
   std::string scene_set = "tuning";
+  double numerical_aperture = 0.0;  // 0 = the rig's default
+  int window_px = 0;                // 0 = the SFF default
+  bool gaussian = false;            // DepthInterpolation::kGaussian instead of the default
+  // > 0: the uncharacterised runs bound the linearity by +-this share of the scan's step (as a
+  // verified l_z does), to see whether a narrower prior than the analytic one would still cover.
+  double prior_lz_of_step = 0.0;
+  // Test scans' specimen height offset (um): moves the specimens' heights against the z grid, i.e.
+  // the phase of the z linearity (the calibration scan keeps 0).
+  double z_offset_um = 0.0;
 };
 
 struct Case {
@@ -66,11 +79,14 @@ struct Scan {
 };
 
 // z_step_um 0 = the rig's default step.
-StatusOr<Scan> ScanOnce(Rig& rig, const std::string& specimen, const fs::path& work, double z_step_um = 0.0) {
+StatusOr<Scan> ScanOnce(Rig& rig, const std::string& specimen, const fs::path& work, const Args& a,
+                        double z_step_um = 0.0) {
   INSPECT_RETURN_IF_ERROR(rig.simulation()->SetSpecimen(specimen));
   const ScanDefaults d = rig.scan_defaults();
   const double step = z_step_um > 0.0 ? z_step_um : d.z_step_um;
   INSPECT_ASSIGN_OR_RETURN(ScanPlan plan, MakeScanPlan(d.z_start_um, d.z_end_um, step, d.exposure_us, rig.stage()));
+  if (a.window_px > 0) plan.sff.window_px = a.window_px;
+  if (a.gaussian) plan.sff.interpolation = DepthInterpolation::kGaussian;
   std::atomic<bool> cancel{false};
   const fs::path dir = work / "stack";
   std::error_code ec;
@@ -326,10 +342,20 @@ int main(int argc, char** argv) {
       a.scene_set = argv[++i];
     else if (arg == "--components")
       a.components = true;
+    else if (arg == "--na" && i + 1 < argc)
+      a.numerical_aperture = std::atof(argv[++i]);
+    else if (arg == "--window" && i + 1 < argc)
+      a.window_px = std::atoi(argv[++i]);
+    else if (arg == "--gaussian")
+      a.gaussian = true;
+    else if (arg == "--z-offset" && i + 1 < argc)
+      a.z_offset_um = std::atof(argv[++i]);
+    else if (arg == "--prior-lz" && i + 1 < argc)
+      a.prior_lz_of_step = std::atof(argv[++i]);
     else if (arg == "--camera" && i + 1 < argc &&
              std::sscanf(argv[++i], "%dx%d", &a.camera.width, &a.camera.height) == 2) {
     } else {
-      std::fprintf(stderr, "usage: uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM] [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile]\n");
+      std::fprintf(stderr, "usage: uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM] [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile] [--na NA] [--window PX] [--gaussian] [--prior-lz SHARE] [--z-offset UM]\n");
       return 2;
     }
   }
@@ -337,6 +363,7 @@ int main(int argc, char** argv) {
   fs::create_directories(work);
   SimulatedRigOptions rig_options;
   rig_options.camera_size = a.camera;
+  if (a.numerical_aperture > 0.0) rig_options.numerical_aperture = a.numerical_aperture;
   const double px = rig_options.pixel_size_um;
 
   // 1. Characterise the z linearity on SKEW10 (seed 100000: not a test seed).
@@ -347,7 +374,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%s\n", cal_rig.status().ToString().c_str());
     return 1;
   }
-  auto cal = ScanOnce(**cal_rig, "skew10", work, a.cal_step_um);
+  auto cal = ScanOnce(**cal_rig, "skew10", work, a, a.cal_step_um);
   if (!cal.ok()) {
     std::fprintf(stderr, "calibration scan: %s\n", cal.status().ToString().c_str());
     return 1;
@@ -390,9 +417,10 @@ int main(int argc, char** argv) {
     rig_options.specimen = "plane";
     auto rig = CreateSimulatedRig(rig_options);
     if (!rig.ok()) return 1;
+    if (a.z_offset_um != 0.0 && !(*rig)->simulation()->SetSpecimenZOffsetUm(a.z_offset_um).ok()) return 1;
     for (const Case& c : cases) {
       const auto t0 = std::chrono::steady_clock::now();
-      auto scan = ScanOnce(**rig, c.specimen, work, a.z_step_um);
+      auto scan = ScanOnce(**rig, c.specimen, work, a, a.z_step_um);
       const auto t1 = std::chrono::steady_clock::now();
       if (!scan.ok()) {
         std::fprintf(stderr, "%s seed %d: %s\n", Short(c.specimen).c_str(), seed, scan.status().ToString().c_str());
@@ -431,6 +459,9 @@ int main(int argc, char** argv) {
       measure_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t2).count();
       MeasurementContext unchar = ctx;
       unchar.noise.linearity = ZLinearity::Uncharacterised();
+      if (a.prior_lz_of_step > 0.0 && scan->z_um.size() >= 2) {
+        unchar.noise.verified.linearity_deviation_um = a.prior_lz_of_step * std::abs(scan->z_um[1] - scan->z_um[0]);
+      }
       const auto measured_unchar = MeasureAll(specs, unchar);
       MeasurementContext truth_ctx = ctx;
       truth_ctx.depth_um = scan->truth_um;

@@ -56,6 +56,44 @@ TEST(MeasurementUncertaintyTest, NoiseEstimateRecoversSigmaOnPlaneAndOnALaidSurf
   EXPECT_NEAR(ml->global_sigma_um, sigma, 0.15 * sigma);
 }
 
+TEST(MeasurementUncertaintyTest, ExtremeBoundLeavesOutTheFormAndErrorsThatCannotReachTheExtreme) {
+  // A 3 um sine along x and y (43 px periods: second differences of 3.7 um at lag 8 from the form
+  // alone) with one +0.5 um spike on a flank, mid-height, and light noise.
+  const cv::Size size(240, 200);
+  const double lambda_um = 43.0 * kPx;
+  cv::Mat z = testing::SampleSurface(size, kPx, [&](double x, double y) {
+    return 200.0 + 1.5 * std::sin(2 * kPi * x / lambda_um) + 1.5 * std::sin(2 * kPi * y / lambda_um);
+  });
+  z += testing::CorrelatedNoise(size, 0.02, 7, 23);
+  const int fx = 86, fy = 86;  // sin(2 pi 86 / 43) = 0 in both: the flank's middle height
+  z.at<float>(fy, fx) += 0.5f;
+  auto m = EstimateDepthNoise(z, cv::Mat(), Options());
+  ASSERT_TRUE(m.ok()) << m.status().ToString();
+  ASSERT_FALSE(m->extreme_error_map_um.empty());
+  // The region-wide bound is the form's curvature; the local one at the spike is the spike.
+  EXPECT_GT(m->extreme_error_um, 1.0);
+  EXPECT_NEAR(m->extreme_error_map_um.at<float>(fy, fx), 0.5, 0.15);
+  // The spike lies ~3 um below the peak and above the valley: it cannot move either, so the
+  // extremes' bounds are the form's residual and the noise at the peak and the valley, well
+  // below the spike and the region-wide bound.
+  const double peak = ExtremeErrorUm(z, *m, true), valley = ExtremeErrorUm(z, *m, false);
+  EXPECT_LT(peak, 0.45);
+  EXPECT_LT(valley, 0.45);
+  EXPECT_GT(peak, 0.0);
+  // The same spike on the peak itself moves Sp by 0.5 um: the bound holds it.
+  cv::Mat on_peak = z.clone();
+  on_peak.at<float>(fy, fx) -= 0.5f;
+  const int px = 86 + 11, py = 86 + 11;  // sin = 1 in both: the top
+  on_peak.at<float>(py, px) += 0.5f;
+  auto mp = EstimateDepthNoise(on_peak, cv::Mat(), Options());
+  ASSERT_TRUE(mp.ok());
+  EXPECT_GE(ExtremeErrorUm(on_peak, *mp, true), 0.45);
+  // The budget: U = E + R, u = U / 2.
+  const UncertaintyBudget b = ExtremeValueBudgetUm(0.4, 0.1);
+  EXPECT_DOUBLE_EQ(b.standard_uncertainty, 0.25);
+  EXPECT_EQ(b.method, "bound");
+}
+
 TEST(MeasurementUncertaintyTest, NoiseEstimateFollowsRegionsAndFallsBackForTinyOnes) {
   const cv::Size size(300, 120);
   // Left half noise 0.02 um, right half 0.1 um.

@@ -153,7 +153,10 @@ TEST_F(UncertaintySharpnessTest, CoverageIsNearNinetyFivePercentAndUIsNotWiderTh
                },
                305),
            {}};
-    for (MeasurementKind k : {MeasurementKind::kSa, MeasurementKind::kSq, MeasurementKind::kSsk, MeasurementKind::kSku})
+    // Sz too: its bound is the errors that can reach the peak and the valley; the largest
+    // second difference anywhere (this surface's form at lag 8) made its U 3-10x its deviation.
+    for (MeasurementKind k : {MeasurementKind::kSa, MeasurementKind::kSq, MeasurementKind::kSsk, MeasurementKind::kSku,
+                              MeasurementKind::kSz})
       c.specs.push_back(Spec(k, inner));
     cases.push_back(c);
   }
@@ -186,7 +189,9 @@ TEST_F(UncertaintySharpnessTest, CoverageIsNearNinetyFivePercentAndUIsNotWiderTh
           ASSERT_TRUE(measured[i].ok()) << measured[i].status().ToString();
           ASSERT_TRUE(measured_unchar[i].ok()) << measured_unchar[i].status().ToString();
           ASSERT_TRUE(truth[i].ok()) << truth[i].status().ToString();
-          const std::string name = MeasurementKindName(c.specs[i].kind);
+          // The rough surface's Sz apart: the plane's Sz is sharp either way.
+          const bool rough_sz = c.specs[i].kind == MeasurementKind::kSz && c.specimen.find("rough") != std::string::npos;
+          const std::string name = std::string(MeasurementKindName(c.specs[i].kind)) + (rough_sz ? "(rough)" : "");
           const double dev = measured[i]->value - truth[i]->value;
           const double big_u = 2.0 * measured[i]->uncertainty.standard_uncertainty;
           ASSERT_GT(big_u, 0.0);
@@ -218,6 +223,9 @@ TEST_F(UncertaintySharpnessTest, CoverageIsNearNinetyFivePercentAndUIsNotWiderTh
     // errors periodic in the z grid now) and a noise-bias estimate that structure inflates:
     // their U is still wider than their deviations (open, tests/bench/uncertainty_evaluate_output.md).
     // Their bounds guard the gain of the periodic worst case (Ssk 0.175, Sku 0.118 here).
+    // Sz of the rough surface too (0.239 here): the extremes' bound takes the errors that can
+    // reach the peak and the valley, not the largest second difference anywhere (the form's at
+    // lag 8), which left it at 0.132 here and at 0.12-0.21 on the bench's rough surfaces.
     const double floor = param == "Ssk" ? 0.15 : param == "Sku" ? 0.1 : 0.2;
     EXPECT_GE(median, floor) << param;
     // Uncharacterised, the prior (+-0.11 step) is a bound: wider, but no longer the +-step / 2
