@@ -318,6 +318,14 @@ bool RunOnce(const Args& a, const fs::path& stack, bool sequential, int run, Pha
                   d.still() ? " still" : !d.fallback_reason().empty() ? " fallback" : !d.method().empty() ? " warped" : "",
                   d.still_statistic(), d.still_threshold(), d.max_corner_displacement_px());
     p->alignment = buf;
+    double max_scale = 0, max_shift = 0;  // the warp applied, largest over the frames
+    for (const v1::FrameTransform& f : d.frames()) {
+      max_scale = std::max(max_scale, std::abs(f.scale() - 1.0) * 100.0);
+      max_shift = std::max(max_shift, std::hypot(f.shift_x_px(), f.shift_y_px()));
+    }
+    std::snprintf(buf, sizeof buf, "; %d frames, max scale change %.3f %%, max shift %.2f px", d.frames_size(),
+                  max_scale, max_shift);
+    p->alignment += buf;
     if (!d.fallback_reason().empty()) p->alignment += "; fallback: " + d.fallback_reason();
     if (!d.decision().empty()) p->alignment += "; why: " + d.decision();
   }
