@@ -21,6 +21,13 @@
 //             [--only parallel|sequential]   (one path alone, e.g. under perf; no ratios)
 //             [--focus-stack BIN]   (also time `BIN --nocrop --depthmap=...` on the same PNGs, once
 //                                    per run between ours, and print ours against it)
+//             [--renderer own|lens]  (own: the wavy surface below; lens: chain_lens_renderer, a
+//                                    terraced scene through a thin lens that shares no code with it)
+//             [--moving]             (lens only: scale 3 %, shift 30/-12 px over the stack)
+//             [--warp-floor]         (no reconstruction: time cv::warpAffine of the stack's frames,
+//                                    INTER_LINEAR and INTER_LANCZOS4, and reading + INTER_AREA
+//                                    resizing of 13 frames to 256 px, the costs alignment cannot undercut)
+// Each run prints what the alignment decided (DepthSummary.alignment_detail).
 #include <grpcpp/grpcpp.h>
 #include <spdlog/spdlog.h>
 
@@ -42,6 +49,7 @@
 
 #include "client_cli/inspection_client.h"
 #include "server/app/inspection_server.h"
+#include "tests/bench/chain_lens_renderer.h"
 #include "tests/bench/process_memory.h"
 
 namespace fs = std::filesystem;
@@ -60,7 +68,8 @@ using inspection::bench::ResetPeakRss;
 
 struct Args {
   int frames = 60, width = 1600, height = 1200, runs = 2, decode_threads = 0;
-  bool colour = false, verbose = false;
+  bool colour = false, verbose = false, moving = false, warp_floor = false;
+  std::string renderer = "own";  // "own" (the wavy surface) or "lens" (chain_lens_renderer)
   std::string alignment;  // empty = the request's default (estimate, unaligned when it fails)
   std::string dense;      // "on" / "off": ReconstructionOptions.dense_depth; empty = the request's default
   std::string only;       // "parallel" or "sequential": that path alone (profiling)
@@ -77,6 +86,13 @@ bool ParseArgs(int argc, char** argv, Args* a) {
       a->colour = true;
     } else if (k == "--verbose") {
       a->verbose = true;
+    } else if (k == "--moving") {
+      a->moving = true;
+    } else if (k == "--warp-floor") {
+      a->warp_floor = true;
+    } else if (k == "--renderer" && (v = next())) {
+      a->renderer = v;
+      if (a->renderer != "own" && a->renderer != "lens") return false;
     } else if ((k == "--frames" || k == "--width" || k == "--height" || k == "--runs" || k == "--decode-threads") &&
                (v = next())) {
       const int n = std::atoi(v);
@@ -99,6 +115,8 @@ bool ParseArgs(int argc, char** argv, Args* a) {
       return false;
     }
   }
+  if (a->moving && a->renderer != "lens") return false;
+  if (a->renderer == "lens" && a->colour) return false;  // the lens renderer is grey only
   return a->frames >= 3 && a->width >= 32 && a->height >= 32;
 }
 
@@ -117,6 +135,38 @@ double TimeFocusStack(const Args& a, const fs::path& stack) {
   const int rc = std::system(cmd.c_str());
   const double s = Seconds(t0, Clock::now());
   return rc == 0 ? s : -1.0;
+}
+
+// The lens renderer's stack as PNGs (1 um per frame), reused like GenerateStack's.
+fs::path GenerateLensStack(const Args& a) {
+  char tag[96];
+  std::snprintf(tag, sizeof tag, "lens_%dx%dx%d%s", a.width, a.height, a.frames, a.moving ? "_moving" : "_still");
+  const fs::path dir = a.work / tag;
+  if (fs::exists(dir / "stack.json")) return dir;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  chain_bench::LensStackOptions o;
+  o.size = cv::Size(a.width, a.height);
+  o.frames = a.frames;
+  o.seed = 1;
+  if (a.moving) {
+    o.scale_total = 0.03;
+    o.shift_x_total_px = 30.0;
+    o.shift_y_total_px = -12.0;
+  }
+  const chain_bench::LensStack stack = chain_bench::RenderLensStack(o);
+  std::ofstream json(dir / "stack.json.tmp");
+  json << R"({"format": "inspection-stack", "version": 1, "pixel_size_um": 1.0, "bit_depth": 8, "frames": [)";
+  for (int k = 0; k < a.frames; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%04d.png", k);
+    cv::imwrite((dir / name).string(), stack.frames[size_t(k)]);
+    json << (k ? "," : "") << R"({"file": ")" << name << R"(", "z_um": )" << double(k) << "}";
+  }
+  json << "]}\n";
+  json.close();
+  fs::rename(dir / "stack.json.tmp", dir / "stack.json");
+  return dir;
 }
 
 // The stack: frame k = the texture blurred by sigma(|z_k - h(x, y)|), interpolated between
@@ -179,6 +229,7 @@ fs::path GenerateStack(const Args& a) {
 }
 
 struct Phases {
+  std::string alignment;  // what the alignment decided (DepthSummary.alignment_detail)
   double upload = 0, decode = 0, engine = 0, artifacts = 0, download = 0, total = 0;
   double engine_s = 0;  // the job's own engine figure (DepthSummary.engine_seconds)
   double peak_rss_mb = 0;      // above the process's RSS before the run (the server's share)
@@ -260,6 +311,24 @@ bool RunOnce(const Args& a, const fs::path& stack, bool sequential, int run, Pha
   p->download = Seconds(t_dl0, t_end);
   p->total = Seconds(t0, t_end);
   p->engine_s = job.result().depth().engine_seconds();
+  {
+    const v1::AlignmentDetail& d = job.result().depth().alignment_detail();
+    char buf[256];
+    std::snprintf(buf, sizeof buf, "%s%s stat %.2f/%.2f max corner %.2f px", d.method().empty() ? "none" : d.method().c_str(),
+                  d.still() ? " still" : !d.fallback_reason().empty() ? " fallback" : !d.method().empty() ? " warped" : "",
+                  d.still_statistic(), d.still_threshold(), d.max_corner_displacement_px());
+    p->alignment = buf;
+    double max_scale = 0, max_shift = 0;  // the warp applied, largest over the frames
+    for (const v1::FrameTransform& f : d.frames()) {
+      max_scale = std::max(max_scale, std::abs(f.scale() - 1.0) * 100.0);
+      max_shift = std::max(max_shift, std::hypot(f.shift_x_px(), f.shift_y_px()));
+    }
+    std::snprintf(buf, sizeof buf, "; %d frames, max scale change %.3f %%, max shift %.2f px", d.frames_size(),
+                  max_scale, max_shift);
+    p->alignment += buf;
+    if (!d.fallback_reason().empty()) p->alignment += "; fallback: " + d.fallback_reason();
+    if (!d.decision().empty()) p->alignment += "; why: " + d.decision();
+  }
   (*server)->Shutdown();
   out->depth = cv::imread((results / "depth.tiff").string(), cv::IMREAD_UNCHANGED);
   out->confidence = cv::imread((results / "confidence.tiff").string(), cv::IMREAD_UNCHANGED);
@@ -274,6 +343,42 @@ double Median(std::vector<double> v) {
   return v.empty() ? 0 : v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
+// The floor under any alignment of this stack: warping every frame once (the aligner's warp,
+// both interpolations) and the registration's input (13 frames read and shrunk to 256 px).
+int WarpFloor(const Args& a, const fs::path& stack) {
+  std::vector<cv::Mat> frames;
+  for (int k = 0; k < a.frames; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%04d.png", k);
+    frames.push_back(cv::imread((stack / name).string(), cv::IMREAD_UNCHANGED));
+    if (frames.back().empty()) return 1;
+  }
+  const cv::Matx23d m(1.01, 0.002, 3.3, -0.002, 1.01, -1.7);
+  for (int run = 0; run < a.runs; ++run) {
+    for (int interp : {cv::INTER_LINEAR, cv::INTER_LANCZOS4}) {
+      cv::Mat out;
+      const auto t0 = Clock::now();
+      for (const cv::Mat& f : frames) cv::warpAffine(f, out, m, f.size(), interp, cv::BORDER_REPLICATE);
+      std::printf("warp floor run %d: %d frames warpAffine %-8s %.3f s\n", run, a.frames,
+                  interp == cv::INTER_LINEAR ? "LINEAR" : "LANCZOS4", Seconds(t0, Clock::now()));
+    }
+    const auto t0 = Clock::now();
+    const int n = std::min(13, a.frames);
+    for (int i = 0; i < n; ++i) {
+      char name[32];
+      std::snprintf(name, sizeof name, "frame_%04d.png", i * (a.frames - 1) / std::max(1, n - 1));
+      const cv::Mat f = cv::imread((stack / name).string(), cv::IMREAD_UNCHANGED);
+      cv::Mat small;
+      const double s = 256.0 / std::max(f.cols, f.rows);
+      cv::resize(f, small, cv::Size(), s, s, cv::INTER_AREA);
+    }
+    std::printf("warp floor run %d: read + INTER_AREA to 256 px of %d frames %.3f s\n", run, n,
+                Seconds(t0, Clock::now()));
+    std::fflush(stdout);
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -281,22 +386,24 @@ int main(int argc, char** argv) {
   if (!ParseArgs(argc, argv, &a)) {
     std::cerr << "usage: e2e-bench [--frames 60] [--width 1600] [--height 1200] [--runs 2] [--colour]\n"
                  "                 [--alignment none|estimate] [--dense on|off] [--work DIR] [--decode-threads 0]\n"
-                 "                 [--verbose] [--only parallel|sequential] [--focus-stack BIN]\n";
+                 "                 [--verbose] [--only parallel|sequential] [--focus-stack BIN]\n"
+                 "                 [--renderer own|lens] [--moving] [--warp-floor]\n";
     return 2;
   }
   // The servers' per-job lines would bury the table; --verbose shows them with the jobs' timings.
   spdlog::set_level(a.verbose ? spdlog::level::debug : spdlog::level::warn);
   fs::create_directories(a.work);
   const auto tg = Clock::now();
-  const fs::path stack = GenerateStack(a);
-  std::printf("stack: %d x %dx%d 8-bit %s PNG in %s (ready in %.1f s)\n", a.frames, a.width, a.height,
-              a.colour ? "colour" : "grey", stack.c_str(), Seconds(tg, Clock::now()));
+  const fs::path stack = a.renderer == "lens" ? GenerateLensStack(a) : GenerateStack(a);
+  std::printf("stack (%s%s): %d x %dx%d 8-bit %s PNG in %s (ready in %.1f s)\n", a.renderer.c_str(), a.moving ? ", moving" : "",
+              a.frames, a.width, a.height, a.colour ? "colour" : "grey", stack.c_str(), Seconds(tg, Clock::now()));
   const double decoded_mb = double(a.frames) * a.width * a.height * (a.colour ? 3 : 1) / (1024.0 * 1024.0);
   std::printf("decoded stack: %.1f MiB; alignment: %s; dense depth: %s; hardware threads: %u\n", decoded_mb,
               a.alignment.empty() ? "request default (estimate)" : a.alignment.c_str(),
               a.dense.empty() ? "request default" : a.dense.c_str(),
               std::thread::hardware_concurrency());
 
+  if (a.warp_floor) return WarpFloor(a, stack);
   std::map<bool, std::vector<Phases>> by_path;  // sequential? -> runs
   Outputs first;
   bool identical = true;
@@ -328,6 +435,7 @@ int main(int argc, char** argv) {
       std::printf("%-12s %3d %8.3f %8.3f %8.3f %9.3f %8.3f %8.3f %8.3f %6.0f MiB\n",
                   sequential ? "sequential" : "parallel", run, p.upload, p.decode, p.engine, p.artifacts, p.download,
                   p.total, p.engine_s, p.peak_rss_mb);
+      std::printf("%-12s %3d alignment: %s\n", "", run, p.alignment.c_str());
       std::fflush(stdout);
     }
   }
