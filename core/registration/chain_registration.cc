@@ -397,6 +397,8 @@ Status RefineToReference(const std::function<StatusOr<cv::Mat>(int)>& load, int 
   reference_frame.release();
   std::vector<cv::Matx23d> refined = r->frame_from_reference;
   std::vector<char> replaced(size_t(n), 0);
+  std::vector<double> correlation(size_t(n), 0.0);
+  correlation[size_t(r->reference_frame)] = 1.0;
   std::vector<Status> status(size_t(n), Status::Ok());
   auto refine = [&](int i) {
     if (i == r->reference_frame) return;
@@ -413,10 +415,9 @@ Status RefineToReference(const std::function<StatusOr<cv::Mat>(int)>& load, int 
     // ~3 sigma in from it, and frames far from the reference are shifted and scaled against it
     // by tens of px, so the edge bands do not coincide as a neighbour's do.
     const int border = int(std::ceil(3 * (o.gradient_sigma_px + o.normalise_sigma_px))) + 2;
-    if (!RegisterPair(reference, current, ToWorking(chain, f), o, &w, &rho, border) ||
-        rho < o.refine_min_correlation) {
-      return;
-    }
+    if (!RegisterPair(reference, current, ToWorking(chain, f), o, &w, &rho, border)) return;
+    correlation[size_t(i)] = rho;
+    if (rho < o.refine_min_correlation) return;
     const cv::Matx23d full = ToFullResolution(w, f);
     const std::array<double, 8> a = CornerDisplacement(full, size), b = CornerDisplacement(chain, size);
     for (size_t k = 0; k < 8; k += 2) {
@@ -439,6 +440,7 @@ Status RefineToReference(const std::function<StatusOr<cv::Mat>(int)>& load, int 
   }
   r->frame_from_reference = refined;
   r->refined_frames = int(std::count(replaced.begin(), replaced.end(), 1));
+  r->refine_correlation = correlation;
   return Status::Ok();
 }
 

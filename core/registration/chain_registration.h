@@ -95,6 +95,9 @@ struct ChainRegistration {
   int quick_stride = 0;  // frames apart in the quick pass (0: it did not run)
   // Frames whose transform the refinement against the reference replaced (refine_to_reference).
   int refined_frames = 0;
+  // Per frame: the refinement's ECC correlation (0: it did not converge or did not run; the
+  // reference 1).
+  std::vector<double> refine_correlation;
 };
 
 // load(i), i in [0, n): frame i (CV_8UC1, CV_16UC1 or CV_32FC1), called in order (options.threads

@@ -512,6 +512,7 @@ int Moving(int count, unsigned seed_base) {
     o.rotation_total_rad = rng.uniform(-0.01, 0.01);
     o.scene_covers_motion = true;
     if (const char* e = std::getenv("CHAIN_MOVING_BLUR")) o.blur_px_per_frame = std::atof(e);  // diagnosis
+    if (const char* e = std::getenv("CHAIN_MOVING_PRNU")) o.prnu = std::atof(e);  // diagnosis
     if (std::getenv("CHAIN_MOVING_STILL")) o.scale_total = o.shift_x_total_px = o.shift_y_total_px = o.rotation_total_rad = 0;
     const chain_bench::LensStack stack = chain_bench::RenderLensStack(o);
     const int n = int(stack.frames.size());
@@ -599,6 +600,13 @@ int Moving(int count, unsigned seed_base) {
                 worst.corner_px, ra, rb, rc, ra / rb, 100.0 * double(pixels) / double(size.area()),
                 100.0 * double(pixels_c) / double(size.area()), seconds);
     if (std::getenv("CHAIN_VERBOSE")) {
+      // The chain alone once more, for its refinement's figures (the product's result has none).
+      auto r = RegisterChain([&](int i) -> StatusOr<cv::Mat> { return stack.frames[size_t(i)]; }, n, estimate.chain);
+      if (r.ok()) {
+        std::printf("    refined %d of %d frames; correlation:", r->refined_frames, n - 1);
+        for (double v : r->refine_correlation) std::printf(" %.2f", v);
+        std::printf("\n");
+      }
       for (int i = 0; i < n; ++i) {
         const TransformError e = ErrorOf(figures.frame_from_reference[size_t(i)], stack.frame_from_reference[size_t(i)], size);
         std::printf("    frame %d: scale err %.4f %% centre %.3f px corner %.3f px\n", i, e.scale_percent, e.centre_px,
