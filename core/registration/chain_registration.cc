@@ -27,6 +27,11 @@ Status ChainRegistrationOptions::Validate() const {
   if (quick_max_side_px < 32) return Status::InvalidArgument("quick_max_side_px must be >= 32");
   if (quick_max_pairs < 3) return Status::InvalidArgument("quick_max_pairs must be >= 3");
   if (threads < 0) return Status::InvalidArgument("threads must be >= 0");
+  if (refine_max_side_px < 64) return Status::InvalidArgument("refine_max_side_px must be >= 64");
+  if (!(refine_min_correlation >= 0 && refine_min_correlation < 1)) {
+    return Status::InvalidArgument("refine_min_correlation must be in [0, 1)");
+  }
+  if (!(refine_max_change_px > 0)) return Status::InvalidArgument("refine_max_change_px must be > 0");
   return Status::Ok();
 }
 
@@ -126,9 +131,11 @@ Pyramid ShrunkPyramid(const cv::Mat& frame, double f, const ChainRegistrationOpt
 cv::Matx23d Identity() { return cv::Matx23d(1, 0, 0, 0, 1, 0); }
 
 // ECC from coarse to fine, started at `start` (finest-level coordinates): template = previous frame,
-// input = this frame, so the warp maps previous-frame pixels to this frame's.
+// input = this frame, so the warp maps previous-frame pixels to this frame's. border_px > 0
+// (finest level, halved per level): template pixels that map within that many px of the input's
+// edge do not count.
 bool RegisterPair(const Pyramid& previous, const Pyramid& current, cv::Matx23d start,
-                  const ChainRegistrationOptions& o, cv::Matx23d* out, double* correlation) {
+                  const ChainRegistrationOptions& o, cv::Matx23d* out, double* correlation, int border_px = 0) {
   const int levels = int(std::min(previous.levels.size(), current.levels.size()));
   cv::Matx23d w = start;
   const double down = std::ldexp(1.0, -(levels - 1));
@@ -138,11 +145,18 @@ bool RegisterPair(const Pyramid& previous, const Pyramid& current, cv::Matx23d s
   for (int k = levels - 1; k >= 0; --k) {
     cv::Mat warp(w, true);
     warp.convertTo(warp, CV_32F);
+    cv::Mat mask;
+    if (border_px > 0) {
+      const cv::Size s = current.levels[size_t(k)].size();
+      const int b = std::max(1, border_px >> k);
+      mask = cv::Mat::zeros(s, CV_8U);
+      if (s.width > 2 * b && s.height > 2 * b) mask(cv::Rect(b, b, s.width - 2 * b, s.height - 2 * b)).setTo(1);
+    }
     try {
       rho = cv::findTransformECC(previous.levels[size_t(k)], current.levels[size_t(k)], warp, cv::MOTION_AFFINE,
                                  cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, o.max_iterations,
                                                   o.epsilon),
-                                 cv::noArray(), 1);
+                                 mask, 1);  // an empty mask: every pixel
     } catch (const cv::Exception&) {
       return false;
     }
@@ -165,6 +179,12 @@ cv::Matx23d ToFullResolution(const cv::Matx23d& w, double f) {
   const double b = 0.5 * f - 0.5;
   const cv::Matx23d s(f, 0, b, 0, f, b);
   return Compose(Invert(s), Compose(w, s));
+}
+
+cv::Matx23d ToWorking(const cv::Matx23d& m, double f) {
+  const double b = 0.5 * f - 0.5;
+  const cv::Matx23d s(f, 0, b, 0, f, b);
+  return Compose(s, Compose(m, Invert(s)));
 }
 
 std::array<double, 8> CornerDisplacement(const cv::Matx23d& m, cv::Size s) {
@@ -365,6 +385,65 @@ double MaxCorner(const std::vector<cv::Matx23d>& t, cv::Size size) {
   return worst;
 }
 
+// Each frame but the reference registered directly against the reference at refine_max_side_px,
+// started from r->frame_from_reference (the chain's): replaces the transforms that pass.
+Status RefineToReference(const std::function<StatusOr<cv::Mat>(int)>& load, int n, cv::Size size,
+                         const ChainRegistrationOptions& options, ChainRegistration* r) {
+  ChainRegistrationOptions o = options;
+  o.pyramid_levels = 1;
+  const double f = std::min(1.0, double(options.refine_max_side_px) / std::max(size.width, size.height));
+  INSPECT_ASSIGN_OR_RETURN(cv::Mat reference_frame, load(r->reference_frame));
+  const Pyramid reference = ShrunkPyramid(reference_frame, f, o);
+  reference_frame.release();
+  std::vector<cv::Matx23d> refined = r->frame_from_reference;
+  std::vector<char> replaced(size_t(n), 0);
+  std::vector<double> correlation(size_t(n), 0.0);
+  correlation[size_t(r->reference_frame)] = 1.0;
+  std::vector<Status> status(size_t(n), Status::Ok());
+  auto refine = [&](int i) {
+    if (i == r->reference_frame) return;
+    StatusOr<cv::Mat> frame = load(i);
+    if (!frame.ok()) {
+      status[size_t(i)] = frame.status();
+      return;
+    }
+    const Pyramid current = ShrunkPyramid(*frame, f, o);
+    const cv::Matx23d chain = r->frame_from_reference[size_t(i)];
+    cv::Matx23d w;
+    double rho = 0;
+    // The frame's own edge: its registration image's smoothing and local normalisation reach
+    // ~3 sigma in from it, and frames far from the reference are shifted and scaled against it
+    // by tens of px, so the edge bands do not coincide as a neighbour's do.
+    const int border = int(std::ceil(3 * (o.gradient_sigma_px + o.normalise_sigma_px))) + 2;
+    if (!RegisterPair(reference, current, ToWorking(chain, f), o, &w, &rho, border)) return;
+    correlation[size_t(i)] = rho;
+    if (rho < o.refine_min_correlation) return;
+    const cv::Matx23d full = ToFullResolution(w, f);
+    const std::array<double, 8> a = CornerDisplacement(full, size), b = CornerDisplacement(chain, size);
+    for (size_t k = 0; k < 8; k += 2) {
+      if (std::hypot(a[k] - b[k], a[k + 1] - b[k + 1]) > o.refine_max_change_px) return;
+    }
+    refined[size_t(i)] = full;
+    replaced[size_t(i)] = 1;
+  };
+  const int threads = options.threads == 0 ? std::max(1, cv::getNumberOfCPUs()) : options.threads;
+  if (threads == 1) {
+    for (int i = 0; i < n; ++i) {
+      refine(i);
+      INSPECT_RETURN_IF_ERROR(status[size_t(i)]);
+    }
+  } else {
+    cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& range) {
+      for (int i = range.start; i < range.end; ++i) refine(i);
+    }, threads);
+    for (int i = 0; i < n; ++i) INSPECT_RETURN_IF_ERROR(status[size_t(i)]);
+  }
+  r->frame_from_reference = refined;
+  r->refined_frames = int(std::count(replaced.begin(), replaced.end(), 1));
+  r->refine_correlation = correlation;
+  return Status::Ok();
+}
+
 }  // namespace
 
 StatusOr<ChainRegistration> RegisterChain(const std::function<StatusOr<cv::Mat>(int)>& load, int n,
@@ -465,6 +544,10 @@ StatusOr<ChainRegistration> RegisterChain(const std::function<StatusOr<cv::Mat>(
   r.frame_from_reference = Accumulate(r.pair, size_t(r.reference_frame));
   r.max_corner_displacement_px = MaxCorner(r.frame_from_reference, size);
   if (r.max_corner_displacement_px < options.min_motion_px) r.still = true;
+  if (!r.still && options.refine_to_reference) {
+    INSPECT_RETURN_IF_ERROR(RefineToReference(load, n, size, options, &r));
+    r.max_corner_displacement_px = MaxCorner(r.frame_from_reference, size);
+  }
   return r;
 }
 

@@ -59,6 +59,18 @@ struct ChainRegistrationOptions {
   bool quick_still_check = true;
   int quick_max_side_px = 256;
   int quick_max_pairs = 12;
+  // A moving stack's chain accumulates its pairs' small errors: on the lens renderer's stacks with
+  // 5-20 % scale change and 50-300 px shift (chain-evaluate moving) they added up to 0.2-0.3 %
+  // of scale at the ends of the chain. So, once the stack is called moving, every frame is
+  // registered once more directly against the reference frame (ECC, one level, on the
+  // registration image of both shrunk to refine_max_side_px), started from the chain's
+  // composed transform; a frame whose refinement does not converge, correlates below
+  // refine_min_correlation or moves a corner by more than refine_max_change_px from the chain's
+  // keeps the chain's transform.
+  bool refine_to_reference = true;
+  int refine_max_side_px = 1024;
+  double refine_min_correlation = 0.2;
+  double refine_max_change_px = 8.0;  // full-resolution px
   // Frames prepared and pairs registered at once (0 = all hardware threads; 1 = in order, two
   // frames in memory, load called once per frame in order). With more, load must be
   // thread-safe: the chain is cut into contiguous runs, each started from the identity, and a
@@ -81,10 +93,16 @@ struct ChainRegistration {
   // sampled, interpolated between them; pair and pair_correlation stay identity / 1.
   bool quick = false;
   int quick_stride = 0;  // frames apart in the quick pass (0: it did not run)
+  // Frames whose transform the refinement against the reference replaced (refine_to_reference).
+  int refined_frames = 0;
+  // Per frame: the refinement's ECC correlation (0: it did not converge or did not run; the
+  // reference 1).
+  std::vector<double> refine_correlation;
 };
 
 // load(i), i in [0, n): frame i (CV_8UC1, CV_16UC1 or CV_32FC1), called in order (options.threads
-// 1): the quick pass's frames, then, unless it called the stack still, every frame once more.
+// 1): the quick pass's frames, then, unless it called the stack still, every frame once more,
+// and for a moving stack with refine_to_reference the reference and every other frame again.
 // INVALID_ARGUMENT: fewer than 3 frames, frames smaller than 32x32 px or of different sizes (naming
 // the frame); FAILED_PRECONDITION naming the frame pairs that could not be registered (featureless,
 // unrelated) or disagree with the chain.

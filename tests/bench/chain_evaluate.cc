@@ -14,6 +14,12 @@
 //   chain-evaluate speed [frames] [width] [height]  what the alignment costs against the engine in
 //                                 the same run: a still and a moving stack of the lens renderer,
 //                                 reconstructed with alignment none and with the default estimate
+//   chain-evaluate moving <count> [seed]  large motion against the truth: lens-renderer stacks with
+//                                 5-20 % scale (non-linear), 50-300 px shift, up to 10 mrad rotation,
+//                                 20-40 frames at 1600x1200 (CHAIN_MOVING_SIZE=WxH; the shift is
+//                                 scaled with the width); per frame the chain's transform against the
+//                                 truth, and the depth RMSE of the product path (--alignment estimate),
+//                                 of an oracle warping with the true transforms and of no alignment
 #include <atomic>
 #include <chrono>
 #include <cstdlib>
@@ -30,6 +36,7 @@
 
 #include "core/registration/chain_registration.h"
 #include "core/registration/frame_registration.h"
+#include "core/sff/depth_postprocess.h"
 #include "core/sff/stack_reconstruct.h"
 #include "devices/sim/natural_scene.h"
 #include "devices/sim/simulated_rig.h"
@@ -282,6 +289,13 @@ ChainRegistrationOptions ChainOptionsFromEnvironment() {
   if (const char* e = std::getenv("CHAIN_SIGMA")) o.gradient_sigma_px = std::atof(e);
   if (const char* e = std::getenv("CHAIN_NORM_SIGMA")) o.normalise_sigma_px = std::atof(e);
   if (const char* e = std::getenv("CHAIN_QUICK")) o.quick_still_check = std::atoi(e) != 0;
+  if (const char* e = std::getenv("CHAIN_EPS")) o.epsilon = std::atof(e);
+  if (const char* e = std::getenv("CHAIN_ITER")) o.max_iterations = std::atoi(e);
+  if (const char* e = std::getenv("CHAIN_MAX_SIDE")) o.max_side_px = std::atoi(e);
+  if (const char* e = std::getenv("CHAIN_LEVELS")) o.pyramid_levels = std::atoi(e);
+  if (const char* e = std::getenv("CHAIN_REFINE")) o.refine_to_reference = std::atoi(e) != 0;
+  if (const char* e = std::getenv("CHAIN_REFINE_SIDE")) o.refine_max_side_px = std::atoi(e);
+  if (const char* e = std::getenv("CHAIN_REFINE_MIN_CORR")) o.refine_min_correlation = std::atof(e);
   return o;
 }
 
@@ -484,6 +498,189 @@ int Speed(int n, cv::Size size) {
   return 0;
 }
 
+
+// ---- moving: large motion against the truth.
+
+// Per frame: the recovered transform against the truth, about the image centre and at the corners.
+struct TransformError {
+  double scale_percent = 0, centre_px = 0, corner_px = 0;
+};
+
+TransformError ErrorOf(const cv::Matx23d& estimate, const cv::Matx23d& truth, cv::Size size) {
+  const cv::Point2d c((size.width - 1) * 0.5, (size.height - 1) * 0.5);
+  TransformError e;
+  e.scale_percent = 100 * std::abs(SimilarityOf(estimate, c).scale / SimilarityOf(truth, c).scale - 1);
+  auto at = [&](const cv::Matx23d& m, cv::Point2d p) { return m * cv::Vec3d(p.x, p.y, 1); };
+  e.centre_px = cv::norm(at(estimate, c) - at(truth, c));
+  for (cv::Point2d p : {cv::Point2d(0, 0), cv::Point2d(size.width - 1, 0), cv::Point2d(0, size.height - 1),
+                        cv::Point2d(size.width - 1, size.height - 1)}) {
+    e.corner_px = std::max(e.corner_px, cv::norm(at(estimate, p) - at(truth, p)));
+  }
+  return e;
+}
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[size_t(std::min<double>(double(v.size() - 1), std::round(q * double(v.size() - 1))))];
+}
+
+int Moving(int count, unsigned seed_base) {
+  cv::Size size(1600, 1200);
+  if (const char* e = std::getenv("CHAIN_MOVING_SIZE")) std::sscanf(e, "%dx%d", &size.width, &size.height);
+  const double shift_factor = size.width / 1600.0;  // 50-300 px at 1600 px wide
+  // The product's path for an imported stack with an explicit --alignment estimate; the engine
+  // unthresholded and the post-processing's defaults (dense off unless CHAIN_MOVING_DENSE=1:
+  // the RMSE is then over measured pixels only), the same for all three.
+  SffOptions sff;
+  sff.min_confidence = 0.0;
+  DepthPostProcessOptions post;
+  post.min_confidence = SffOptions{}.min_confidence;
+  post.dense = std::getenv("CHAIN_MOVING_DENSE") != nullptr && std::atoi(std::getenv("CHAIN_MOVING_DENSE")) != 0;
+  std::printf("lens renderer, %dx%d, scale 5-20 %% (1 + s u^1.4), shift %.0f-%.0f px, rotation <= 10 mrad, 20-40 frames; "
+              "post-processing dense %d\n",
+              size.width, size.height, 50 * shift_factor, 300 * shift_factor, int(post.dense));
+  std::printf("| seed | frames | scale %% | shift px | rot mrad | worst scale err %% | worst centre err px | worst corner err px | "
+              "RMSE chain | RMSE oracle | RMSE none | chain/oracle | pixels %% (chain+oracle / +none) | product s |\n"
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::fflush(stdout);
+  std::vector<double> all_scale, all_centre, all_corner, ratios;
+  std::vector<double> seed_scale, seed_centre, seed_corner;
+  double sum_a = 0, sum_b = 0, sum_c = 0;
+  int failed = 0, within = 0, ratio_ok = 0;
+  for (int s = 0; s < count; ++s) {
+    const unsigned seed = seed_base + unsigned(s);
+    cv::RNG rng(seed * 49979687u + 23u);
+    chain_bench::LensStackOptions o;
+    o.seed = seed;
+    o.size = size;
+    o.frames = rng.uniform(20, 41);
+    o.scale_total = rng.uniform(0.05, 0.20);
+    const double shift = rng.uniform(50.0, 300.0) * shift_factor, direction = rng.uniform(0.0, 2 * CV_PI);
+    o.shift_x_total_px = shift * std::cos(direction);
+    o.shift_y_total_px = shift * std::sin(direction);
+    o.rotation_total_rad = rng.uniform(-0.01, 0.01);
+    o.scene_covers_motion = true;
+    if (const char* e = std::getenv("CHAIN_MOVING_BLUR")) o.blur_px_per_frame = std::atof(e);  // diagnosis
+    if (const char* e = std::getenv("CHAIN_MOVING_PRNU")) o.prnu = std::atof(e);  // diagnosis
+    if (std::getenv("CHAIN_MOVING_STILL")) o.scale_total = o.shift_x_total_px = o.shift_y_total_px = o.rotation_total_rad = 0;
+    const chain_bench::LensStack stack = chain_bench::RenderLensStack(o);
+    const int n = int(stack.frames.size());
+    StackManifest manifest;  // imported: no illumination, z nominal
+    std::vector<double> z_um;
+    for (int i = 0; i < n; ++i) {
+      manifest.frames.push_back({"frame_" + std::to_string(i) + ".png", double(i), 0.0, ""});
+      z_um.push_back(double(i));
+    }
+    const std::atomic<bool> cancel{false};
+    StackFrameSource plain;
+    plain.frame = [&](int i) -> StatusOr<cv::Mat> { return stack.frames[size_t(i)]; };
+    auto finish = [&](StatusOr<DepthResult> raw) -> StatusOr<DepthResult> {
+      if (!raw.ok()) return raw.status();
+      return PostProcessDepth(*raw, z_um, sff.window_px, post);
+    };
+    // (a) the product: --alignment estimate on an imported stack (the chain).
+    StackFolderAlignment estimate;
+    estimate.alignment = FrameAlignment::kEstimate;
+    estimate.fall_back_to_none = false;
+    estimate.chain_for_imported_stacks = true;
+    estimate.options.threads = 0;  // frames in memory, as the server's decoded path
+    estimate.chain = ChainOptionsFromEnvironment();
+    AlignmentFigures figures;
+    const auto t0 = std::chrono::steady_clock::now();
+    StatusOr<DepthResult> a = finish(ReconstructStackFrames(manifest, plain, sff, {}, cancel, estimate, &figures));
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    // (b) the oracle: the true transforms through the same aligner, engine and post-processing.
+    StatusOr<StackAligner> truth = StackAligner::FromTransforms(stack.frame_from_reference, (n - 1) / 2,
+                                                                FrameAlignment::kEstimate, size, true);
+    if (!truth.ok()) return 1;
+    StackFrameSource warped;
+    warped.frame = [&](int i) -> StatusOr<cv::Mat> { return truth->Warp(stack.frames[size_t(i)], i); };
+    StatusOr<DepthResult> b_raw = ReconstructStackFrames(manifest, warped, sff, {}, cancel, {}, nullptr);
+    if (b_raw.ok()) MaskUnseenPixels(*truth, &*b_raw);
+    StatusOr<DepthResult> b = finish(std::move(b_raw));
+    // (c) no alignment.
+    StatusOr<DepthResult> c = finish(ReconstructStackFrames(manifest, plain, sff, {}, cancel, {}, nullptr));
+    if (!a.ok() || !b.ok() || !c.ok()) {
+      ++failed;
+      std::printf("| %u | %d | %.1f | %.0f | %.1f | failed: %s / %s / %s |\n", seed, n, 100 * o.scale_total, shift,
+                  1e3 * o.rotation_total_rad, a.status().ToString().c_str(), b.status().ToString().c_str(),
+                  c.status().ToString().c_str());
+      std::fflush(stdout);
+      continue;
+    }
+    TransformError worst;
+    for (int i = 0; i < n; ++i) {
+      const cv::Matx23d est = figures.frame_from_reference.empty() ? cv::Matx23d(1, 0, 0, 0, 1, 0)
+                                                                   : figures.frame_from_reference[size_t(i)];
+      const TransformError e = ErrorOf(est, stack.frame_from_reference[size_t(i)], size);
+      all_scale.push_back(e.scale_percent), all_centre.push_back(e.centre_px), all_corner.push_back(e.corner_px);
+      worst.scale_percent = std::max(worst.scale_percent, e.scale_percent);
+      worst.centre_px = std::max(worst.centre_px, e.centre_px);
+      worst.corner_px = std::max(worst.corner_px, e.corner_px);
+    }
+    seed_scale.push_back(worst.scale_percent), seed_centre.push_back(worst.centre_px), seed_corner.push_back(worst.corner_px);
+    if (worst.scale_percent <= 0.1 && worst.centre_px <= 0.5) ++within;
+    // Pixels the true transforms say every frame saw, with a depth in the chain's and the
+    // oracle's results (and, for none, in its result too: none leaves more pixels unmeasured).
+    double se_a = 0, se_b = 0, se_c = 0;
+    long pixels = 0, pixels_c = 0;
+    const cv::Mat& seen = truth->seen_by_every_frame();
+    for (int y = 0; y < size.height; ++y) {
+      const float *da = a->depth_um.ptr<float>(y), *db = b->depth_um.ptr<float>(y), *dc = c->depth_um.ptr<float>(y),
+                  *dt = stack.depth_reference.ptr<float>(y);
+      const uchar* m = seen.ptr<uchar>(y);
+      for (int x = 0; x < size.width; ++x) {
+        if (!m[x] || !std::isfinite(da[x]) || !std::isfinite(db[x])) continue;
+        se_a += double(da[x] - dt[x]) * (da[x] - dt[x]);
+        se_b += double(db[x] - dt[x]) * (db[x] - dt[x]);
+        ++pixels;
+        if (!std::isfinite(dc[x])) continue;
+        se_c += double(dc[x] - dt[x]) * (dc[x] - dt[x]);
+        ++pixels_c;
+      }
+    }
+    const double ra = std::sqrt(se_a / std::max(1L, pixels)), rb = std::sqrt(se_b / std::max(1L, pixels)),
+                 rc = std::sqrt(se_c / std::max(1L, pixels_c));
+    sum_a += ra, sum_b += rb, sum_c += rc;
+    ratios.push_back(ra / rb);
+    if (ra / rb <= 1.10) ++ratio_ok;
+    std::printf("| %u | %d | %.1f | %.0f | %+.1f | %.3f | %.2f | %.2f | %.3f | %.3f | %.3f | %.3f | %.1f / %.1f | %.1f |\n",
+                seed, n, 100 * o.scale_total, shift, 1e3 * o.rotation_total_rad, worst.scale_percent, worst.centre_px,
+                worst.corner_px, ra, rb, rc, ra / rb, 100.0 * double(pixels) / double(size.area()),
+                100.0 * double(pixels_c) / double(size.area()), seconds);
+    if (std::getenv("CHAIN_VERBOSE")) {
+      // The chain alone once more, for its refinement's figures (the product's result has none).
+      auto r = RegisterChain([&](int i) -> StatusOr<cv::Mat> { return stack.frames[size_t(i)]; }, n, estimate.chain);
+      if (r.ok()) {
+        std::printf("    refined %d of %d frames; correlation:", r->refined_frames, n - 1);
+        for (double v : r->refine_correlation) std::printf(" %.2f", v);
+        std::printf("\n");
+      }
+      for (int i = 0; i < n; ++i) {
+        const TransformError e = ErrorOf(figures.frame_from_reference[size_t(i)], stack.frame_from_reference[size_t(i)], size);
+        std::printf("    frame %d: scale err %.4f %% centre %.3f px corner %.3f px\n", i, e.scale_percent, e.centre_px,
+                    e.corner_px);
+      }
+    }
+    std::fflush(stdout);
+  }
+  const int done = count - failed;
+  std::printf("\nseeds %u..%u: %d stacks, %d failed\n", seed_base, seed_base + unsigned(count) - 1, count, failed);
+  std::printf("per-frame transform error over all frames: scale %% max %.4f median %.4f; centre px max %.3f median %.3f; "
+              "corner px max %.3f median %.3f\n",
+              Percentile(all_scale, 1), Percentile(all_scale, 0.5), Percentile(all_centre, 1), Percentile(all_centre, 0.5),
+              Percentile(all_corner, 1), Percentile(all_corner, 0.5));
+  std::printf("per-stack worst: scale %% median %.4f; centre px median %.3f; corner px median %.3f\n",
+              Percentile(seed_scale, 0.5), Percentile(seed_centre, 0.5), Percentile(seed_corner, 0.5));
+  std::printf("stacks within 0.1 %% / 0.5 px (every frame): %d/%d\n", within, done);
+  std::printf("depth RMSE (frames) mean over stacks: chain %.4f oracle %.4f none %.4f; chain/oracle max %.3f median %.3f; "
+              "<= 1.10: %d/%d\n",
+              sum_a / std::max(1, done), sum_b / std::max(1, done), sum_c / std::max(1, done), Percentile(ratios, 1),
+              Percentile(ratios, 0.5), ratio_ok, done);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -498,12 +695,13 @@ int main(int argc, char** argv) {
     for (size_t i = 0; i < f->size(); ++i) cv::imwrite(std::string(argv[3]) + "/f" + std::to_string(100 + i) + ".png", (*f)[i]);
     return 0;
   }
+  if (mode == "moving" && argc > 2) return Moving(std::atoi(argv[2]), argc > 3 ? unsigned(std::atoi(argv[3])) : 100u);
   if (mode == "speed") {
     return Speed(argc > 2 ? std::atoi(argv[2]) : 60,
                  cv::Size(argc > 3 ? std::atoi(argv[3]) : 1600, argc > 4 ? std::atoi(argv[4]) : 1200));
   }
   std::fprintf(stderr,
                "usage: chain-evaluate pcb <dir> | still <count> | drift <count> <px> | renderers <count> [seed] | "
-               "speed [frames] [width] [height]\n");
+               "speed [frames] [width] [height] | moving <count> [seed]\n");
   return 2;
 }

@@ -30,7 +30,8 @@ cv::Matx23d After(const cv::Matx23d& a, const cv::Matx23d& b) {  // a(b(p))
   return cv::Matx23d(C(0, 0), C(0, 1), C(0, 2), C(1, 0), C(1, 1), C(1, 2));
 }
 
-cv::Mat Albedo(cv::Size size, cv::RNG& rng) {
+// frame: the frame's size (ellipse size, and their count per frame area, as on a frame-sized scene).
+cv::Mat Albedo(cv::Size size, cv::Size frame, cv::RNG& rng) {
   cv::Mat a(size, CV_32F, cv::Scalar(0.0));
   const int gratings = rng.uniform(2, 7);
   cv::Mat xs(size, CV_32F), ys(size, CV_32F);
@@ -43,8 +44,8 @@ cv::Mat Albedo(cv::Size size, cv::RNG& rng) {
       for (int x = 0; x < size.width; ++x) s.at<float>(y, x) = std::sin(arg.at<float>(y, x));
     a += s * rng.uniform(0.02, 0.12);
   }
-  const int ellipses = rng.uniform(40, 401);
-  const double scale = std::max(size.width, size.height) / 480.0;
+  const int ellipses = int(rng.uniform(40, 401) * (double(size.area()) / double(frame.area())));
+  const double scale = std::max(frame.width, frame.height) / 480.0;
   for (int e = 0; e < ellipses; ++e) {
     const cv::Point c(rng.uniform(0, size.width), rng.uniform(0, size.height));
     const cv::Size axes(int(scale * rng.uniform(2, 40)), int(scale * rng.uniform(2, 40)));
@@ -86,11 +87,36 @@ cv::Mat Depth(cv::Size size, int n, cv::RNG& rng) {
 
 LensStack RenderLensStack(const LensStackOptions& o) {
   cv::RNG rng(o.seed * 2654435761u + 17u);
-  const cv::Size size = o.size;
+  const cv::Size frame_size = o.size;
   const int n = std::max(3, o.frames);
+  const int ref = (n - 1) / 2;
+  const cv::Point2d centre((frame_size.width - 1) * 0.5, (frame_size.height - 1) * 0.5);
+  std::vector<cv::Matx23d> world;  // frame px -> scene px (before the scene's margin)
+  for (int k = 0; k < n; ++k) {
+    const double u = double(k) / (n - 1);
+    world.push_back(SimilarityAbout(1.0 + o.scale_total * std::pow(u, 1.4), o.rotation_total_rad * u,
+                                    o.shift_x_total_px * u, o.shift_y_total_px * u, centre));
+  }
+  // The scene's margin around the frame-sized area: every frame's footprint plus the cubic
+  // kernel's reach.
+  int margin_x = 0, margin_y = 0;
+  if (o.scene_covers_motion) {
+    for (const cv::Matx23d& w : world) {
+      for (cv::Point2d p : {cv::Point2d(0, 0), cv::Point2d(frame_size.width - 1, 0),
+                            cv::Point2d(0, frame_size.height - 1),
+                            cv::Point2d(frame_size.width - 1, frame_size.height - 1)}) {
+        const cv::Vec2d q = w * cv::Vec3d(p.x, p.y, 1);
+        margin_x = std::max({margin_x, int(std::ceil(-q[0])), int(std::ceil(q[0] - (frame_size.width - 1)))});
+        margin_y = std::max({margin_y, int(std::ceil(-q[1])), int(std::ceil(q[1] - (frame_size.height - 1)))});
+      }
+    }
+    margin_x += 4, margin_y += 4;
+    for (cv::Matx23d& w : world) w(0, 2) += margin_x, w(1, 2) += margin_y;
+  }
+  const cv::Size size(frame_size.width + 2 * margin_x, frame_size.height + 2 * margin_y);  // the scene's
   const double blur = o.blur_px_per_frame > 0 ? o.blur_px_per_frame : rng.uniform(0.4, 1.5);
   const double full_well = o.full_well > 0 ? o.full_well : rng.uniform(2000.0, 20000.0);
-  const cv::Mat albedo = Albedo(size, rng);
+  const cv::Mat albedo = Albedo(size, frame_size, rng);
   const cv::Mat depth = Depth(size, n, rng);
 
   // Pyramid levels of the albedo, each brought back to full size.
@@ -111,35 +137,42 @@ LensStack RenderLensStack(const LensStackOptions& o) {
     }
     level[size_t(j)] = up;
   }
-  // Fixed across frames: vignetting and pixel gain.
-  cv::Mat gain(size, CV_32F);
+  // Fixed across frames: vignetting and pixel gain (the sensor's, frame-sized).
+  cv::Mat gain(frame_size, CV_32F);
   rng.fill(gain, cv::RNG::NORMAL, 1.0, o.prnu);
-  const double half_diag = 0.5 * std::hypot(size.width, size.height);
-  for (int y = 0; y < size.height; ++y)
-    for (int x = 0; x < size.width; ++x) {
-      const double r = std::hypot(x - 0.5 * size.width, y - 0.5 * size.height) / half_diag;
+  const double half_diag = 0.5 * std::hypot(frame_size.width, frame_size.height);
+  for (int y = 0; y < frame_size.height; ++y)
+    for (int x = 0; x < frame_size.width; ++x) {
+      const double r = std::hypot(x - 0.5 * frame_size.width, y - 0.5 * frame_size.height) / half_diag;
       const double c = std::cos(std::atan(0.6 * r));
       gain.at<float>(y, x) *= float(c * c * c * c);
     }
 
-  const int ref = (n - 1) / 2;
-  const cv::Point2d centre((size.width - 1) * 0.5, (size.height - 1) * 0.5);
-  std::vector<cv::Matx23d> world;  // frame px -> scene px
-  for (int k = 0; k < n; ++k) {
-    const double u = double(k) / (n - 1);
-    world.push_back(SimilarityAbout(1.0 + o.scale_total * std::pow(u, 1.4), o.rotation_total_rad * u,
-                                    o.shift_x_total_px * u, o.shift_y_total_px * u, centre));
-  }
   const bool moving = o.scale_total != 0 || o.rotation_total_rad != 0 || o.shift_x_total_px != 0 ||
                       o.shift_y_total_px != 0;
   LensStack out;
-  cv::Mat sharp(size, CV_32F), noise(size, CV_32F), read(size, CV_32F);
+  cv::warpAffine(depth, out.depth_reference, world[size_t(ref)], frame_size, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP,
+                 cv::BORDER_REFLECT_101);
+  cv::Mat sharp(size, CV_32F), noise(frame_size, CV_32F), read(frame_size, CV_32F);
   for (int k = 0; k < n; ++k) {
+    // The scene pixels frame k samples (all of them on a frame-sized scene).
+    cv::Rect box(0, 0, size.width, size.height);
+    if (o.scene_covers_motion) {
+      double x0 = 1e18, y0 = 1e18, x1 = -1e18, y1 = -1e18;
+      for (cv::Point2d p : {cv::Point2d(0, 0), cv::Point2d(frame_size.width - 1, 0),
+                            cv::Point2d(0, frame_size.height - 1),
+                            cv::Point2d(frame_size.width - 1, frame_size.height - 1)}) {
+        const cv::Vec2d q = world[size_t(k)] * cv::Vec3d(p.x, p.y, 1);
+        x0 = std::min(x0, q[0]), y0 = std::min(y0, q[1]), x1 = std::max(x1, q[0]), y1 = std::max(y1, q[1]);
+      }
+      const int bx = int(std::floor(x0)) - 3, by = int(std::floor(y0)) - 3;
+      box = cv::Rect(bx, by, int(std::ceil(x1)) + 4 - bx, int(std::ceil(y1)) + 4 - by) & box;
+    }
     // Per pixel: the pyramid level of its blur radius, blended between the two neighbours.
-    for (int y = 0; y < size.height; ++y) {
+    for (int y = box.y; y < box.y + box.height; ++y) {
       const float* d = depth.ptr<float>(y);
       float* s = sharp.ptr<float>(y);
-      for (int x = 0; x < size.width; ++x) {
+      for (int x = box.x; x < box.x + box.width; ++x) {
         const double r = blur * std::abs(d[x] - k);
         const double l = std::min(kLevels - 1.001, std::log2(1.0 + r / 1.8));
         const int j = int(l);
@@ -148,8 +181,8 @@ LensStack RenderLensStack(const LensStackOptions& o) {
       }
     }
     cv::Mat frame = sharp;
-    if (moving) {
-      cv::warpAffine(sharp, frame, world[size_t(k)], size, cv::INTER_CUBIC | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT_101);
+    if (moving || size != frame_size) {
+      cv::warpAffine(sharp, frame, world[size_t(k)], frame_size, cv::INTER_CUBIC | cv::WARP_INVERSE_MAP, cv::BORDER_REFLECT_101);
     }
     const double exposure = 1.0 + rng.uniform(-0.01, 0.01);
     cv::Mat electrons = frame.mul(gain) * (full_well * exposure);

@@ -13,7 +13,11 @@
 //   electrons for albedo 1, read noise, gamma 1/2.2, 8-bit.
 // - Motion (optional): frame k's grid is the scene's under scale 1 + scale_total u^1.4,
 //   rotation rotation_total u, shift (shift_x_total, shift_y_total) u, u = k / (n - 1), applied
-//   before the camera noise; truth is the reference (middle) grid -> frame k matrix.
+//   before the camera noise; truth is the reference (middle) grid -> frame k matrix. By default
+//   the scene is the frame's size and frames moving past its edge see it mirrored;
+//   scene_covers_motion renders a scene large enough that every frame sees scene only.
+// - Depth truth: depth_reference, the scene's depth on the reference grid in frame units (the
+//   frame index at which the pixel is sharpest, blur 0).
 #pragma once
 
 #include <cstdint>
@@ -34,11 +38,15 @@ struct LensStackOptions {
   double rotation_total_rad = 0.0;
   double shift_x_total_px = 0.0;
   double shift_y_total_px = 0.0;
+  // The scene extends past the frame by as much as the motion needs (no mirrored content; the
+  // albedo's ellipses keep their density and size). Slower to render only for large motion.
+  bool scene_covers_motion = false;
 };
 
 struct LensStack {
   std::vector<cv::Mat> frames;                 // CV_8UC1
   std::vector<cv::Matx23d> frame_from_reference;  // truth: reference (middle) grid px -> frame k px
+  cv::Mat depth_reference;  // CV_32FC1 on the reference grid: frame index of best focus (truth)
 };
 
 LensStack RenderLensStack(const LensStackOptions& options);
