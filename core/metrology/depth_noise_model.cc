@@ -17,10 +17,10 @@ uint64_t SplitMix(uint64_t x) {
   return x ^ (x >> 31);
 }
 
-// Squared lagged second differences / 6 along one axis where all three samples are usable:
-// value and 0/1 count images (CV_64F).
-void SecondDifferences(const cv::Mat& depth, const cv::Mat& usable, int lag, bool along_x, cv::Mat* value,
-                       cv::Mat* count) {
+// Lagged second differences z(p - lag) - 2 z(p) + z(p + lag) along one axis where all three
+// samples are usable: value and 0/1 count images (CV_64F, 0 elsewhere).
+void LaggedSecondDifferences(const cv::Mat& depth, const cv::Mat& usable, int lag, bool along_x, cv::Mat* value,
+                             cv::Mat* count) {
   *value = cv::Mat::zeros(depth.size(), CV_64F);
   *count = cv::Mat::zeros(depth.size(), CV_64F);
   const int dx = along_x ? lag : 0, dy = along_x ? 0 : lag;
@@ -35,10 +35,20 @@ void SecondDifferences(const cv::Mat& depth, const cv::Mat& usable, int lag, boo
     double* c = count->ptr<double>(row);
     for (int col = dx; col < depth.cols - dx; ++col) {
       if (!u0[col - dx] || !u1[col] || !u2[col + dx]) continue;
-      const double d2 = double(z0[col - dx]) - 2.0 * double(z1[col]) + double(z2[col + dx]);
-      v[col] = d2 * d2 / 6.0;
+      v[col] = double(z0[col - dx]) - 2.0 * double(z1[col]) + double(z2[col + dx]);
       c[col] = 1.0;
     }
+  }
+}
+
+// Squared lagged second differences / 6 along one axis where all three samples are usable:
+// value and 0/1 count images (CV_64F).
+void SecondDifferences(const cv::Mat& depth, const cv::Mat& usable, int lag, bool along_x, cv::Mat* value,
+                       cv::Mat* count) {
+  LaggedSecondDifferences(depth, usable, lag, along_x, value, count);
+  for (int row = 0; row < value->rows; ++row) {
+    double* v = value->ptr<double>(row);
+    for (int col = 0; col < value->cols; ++col) v[col] = v[col] * v[col] / 6.0;
   }
 }
 
@@ -55,23 +65,8 @@ cv::Mat LocalExtremeError(const cv::Mat& depth, const cv::Mat& usable, int lag, 
   const int side = 2 * lag + 1;
   for (const bool along_x : {true, false}) {
     if (along_x ? !use_x : !use_y) continue;
-    cv::Mat d2 = cv::Mat::zeros(depth.size(), CV_64F), count = cv::Mat::zeros(depth.size(), CV_64F);
-    const int dx = along_x ? lag : 0, dy = along_x ? 0 : lag;
-    for (int row = dy; row < depth.rows - dy; ++row) {
-      const float* z0 = depth.ptr<float>(row - dy);
-      const float* z1 = depth.ptr<float>(row);
-      const float* z2 = depth.ptr<float>(row + dy);
-      const uint8_t* u0 = usable.ptr<uint8_t>(row - dy);
-      const uint8_t* u1 = usable.ptr<uint8_t>(row);
-      const uint8_t* u2 = usable.ptr<uint8_t>(row + dy);
-      double* v = d2.ptr<double>(row);
-      double* c = count.ptr<double>(row);
-      for (int col = dx; col < depth.cols - dx; ++col) {
-        if (!u0[col - dx] || !u1[col] || !u2[col + dx]) continue;
-        v[col] = double(z0[col - dx]) - 2.0 * double(z1[col]) + double(z2[col + dx]);
-        c[col] = 1.0;
-      }
-    }
+    cv::Mat d2, count;
+    LaggedSecondDifferences(depth, usable, lag, along_x, &d2, &count);
     cv::Mat sum, n;
     cv::boxFilter(d2, sum, CV_64F, cv::Size(side, side), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
     cv::boxFilter(count, n, CV_64F, cv::Size(side, side), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
