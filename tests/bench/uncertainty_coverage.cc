@@ -10,7 +10,9 @@
 //
 //   uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM]
 //                        [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile]
-//                        [--na NA] [--window PX] [--gaussian] [--prior-lz SHARE] [--z-offset UM]
+//                        [--na NA] [--window PX] [--gaussian] [--prior-lz SHARE] [--z-offset UM] [--dump FILE]
+// --dump writes one line per measured value (tab-separated: camera, z step, seed, specimen, label,
+// deviation, U, uncharacterised deviation, U; U = 2u) for pooling runs (tests/bench/pool_coverage.py).
 // --na, --window and --gaussian change the instrument (objective NA: the focus curve's width per um;
 // the SFF focus window; the Gaussian three-point fit instead of the defocus parabola), for checking
 // the uncharacterised linearity prior on instruments whose interpolation error is larger.
@@ -65,6 +67,7 @@ struct Args {
   // Test scans' specimen height offset (um): moves the specimens' heights against the z grid, i.e.
   // the phase of the z linearity (the calibration scan keeps 0).
   double z_offset_um = 0.0;
+  std::string dump;  // per-value rows (see the header)
 };
 
 struct Case {
@@ -350,12 +353,14 @@ int main(int argc, char** argv) {
       a.gaussian = true;
     else if (arg == "--z-offset" && i + 1 < argc)
       a.z_offset_um = std::atof(argv[++i]);
+    else if (arg == "--dump" && i + 1 < argc)
+      a.dump = argv[++i];
     else if (arg == "--prior-lz" && i + 1 < argc)
       a.prior_lz_of_step = std::atof(argv[++i]);
     else if (arg == "--camera" && i + 1 < argc &&
              std::sscanf(argv[++i], "%dx%d", &a.camera.width, &a.camera.height) == 2) {
     } else {
-      std::fprintf(stderr, "usage: uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM] [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile] [--na NA] [--window PX] [--gaussian] [--prior-lz SHARE] [--z-offset UM]\n");
+      std::fprintf(stderr, "usage: uncertainty-coverage [--seeds N] [--camera WxH] [--samples N] [--first-seed N] [--z-step UM] [--cal-step UM] [--scenes tuning|heldout|all] [--components] [--only NAME] [--residual-profile] [--na NA] [--window PX] [--gaussian] [--prior-lz SHARE] [--z-offset UM] [--dump FILE]\n");
       return 2;
     }
   }
@@ -410,6 +415,11 @@ int main(int argc, char** argv) {
   // Mean of each budget component (k = 1) per case: random, linearity, stage, other, MC spread,
   // |noise bias|, height-dependent, |estimated systematic| (NaN components count as 0).
   std::map<std::string, std::array<double, 8>> components;
+  std::FILE* dump = a.dump.empty() ? nullptr : std::fopen(a.dump.c_str(), "w");
+  if (!a.dump.empty() && dump == nullptr) {
+    std::fprintf(stderr, "cannot write %s\n", a.dump.c_str());
+    return 2;
+  }
   double scan_s = 0, measure_s = 0;
   int scans = 0, failures = 0;
   for (int seed = a.first_seed; seed < a.first_seed + a.seeds; ++seed) {
@@ -491,6 +501,15 @@ int main(int argc, char** argv) {
         }
         by_case_unchar[key].Add(measured_unchar[i]->value - truth[i]->value,
                                 measured_unchar[i]->uncertainty.standard_uncertainty);
+        if (dump) {
+          std::fprintf(dump, "%dx%d\t%g\t%d\t%s\t%s\t%.9g\t%.9g\t%.9g\t%.9g\n", a.camera.width, a.camera.height,
+                       scan->z_um.size() >= 2 ? std::abs(scan->z_um[1] - scan->z_um[0]) : 0.0, seed,
+                       Short(c.specimen).c_str(), c.specs[i].first.c_str(), dev,
+                       2.0 * measured[i]->uncertainty.standard_uncertainty,
+                       measured_unchar[i]->value - truth[i]->value,
+                       2.0 * measured_unchar[i]->uncertainty.standard_uncertainty);
+          std::fflush(dump);
+        }
         char buf[64];
         std::snprintf(buf, sizeof buf, "%.5g %s", truth[i]->value, measured[i]->unit.c_str());
         truth_of[key] = buf;
@@ -592,6 +611,7 @@ int main(int argc, char** argv) {
                   bins[b].second ? bins[b].first / bins[b].second : std::nan(""), bins[b].second);
     }
   }
+  if (dump) std::fclose(dump);
   std::error_code ec;
   fs::remove_all(work, ec);
   return 0;
