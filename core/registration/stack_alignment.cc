@@ -3,6 +3,7 @@
 #include "core/registration/stack_alignment.h"
 
 #include <algorithm>
+#include <boost/math/distributions/students_t.hpp>
 #include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
@@ -71,6 +72,7 @@ Status StackAlignmentOptions::Validate() const {
   if (!(max_pair_residual_px > 0)) return Status::InvalidArgument("max_pair_residual_px must be > 0");
   if (threads < 0) return Status::InvalidArgument("threads must be >= 0 (0 = all hardware threads)");
   if (max_pairs < 0 || max_pairs == 1) return Status::InvalidArgument("max_pairs must be 0 (all) or >= 2");
+  if (!(min_motion_px >= 0.0)) return Status::InvalidArgument("min_motion_px must be >= 0");
   return Status::Ok();
 }
 
@@ -82,6 +84,40 @@ double Median(std::vector<double> v) {
   if (v.size() % 2) return v[m];
   const double hi = v[m];
   return 0.5 * (hi + *std::max_element(v.begin(), v.begin() + long(m)));
+}
+
+// Whether each rate of the model differs from zero by more than its pairs' scatter allows: a
+// two-sided Student t test of each median (scale, rotation, x and y shift per 100 um) at 1 % over
+// the four (Bonferroni), the median's standard error 1.2533 * 1.4826 MAD / sqrt(n). A linear
+// model's rates are constant, so a pair that departs from them is noise to the model, systematic
+// or not: defocus makes the apparent scale of a still scene grow and then shrink as the focus
+// passes through it (pairs' scale rates that change sign part-way through the stack), which moves
+// the median a little off zero with a scatter many times larger; real breathing and drift keep
+// one rate through the stack. A rate that is not significant is set to 0; what remains decides
+// (StackAligner: still when it moves no frame corner by kNegligibleAlignmentPx). Fewer than 4
+// pairs: no test (the rates as measured).
+void TestRates(const std::vector<double>& ks, const std::vector<double>& kr, const std::vector<double>& kx,
+               const std::vector<double>& ky, FocusBreathingModel* m) {
+  const size_t n = ks.size();
+  m->still_statistic = m->still_threshold = 0.0;
+  if (n < 4) return;
+  const boost::math::students_t dist(double(n - 1));
+  const double threshold = boost::math::quantile(boost::math::complement(dist, 0.01 / (2.0 * 4.0)));
+  double worst = 0.0;
+  auto test = [&](const std::vector<double>& v, double* rate) {
+    std::vector<double> dev;
+    for (double x : v) dev.push_back(std::abs(x - *rate));
+    const double se = 1.2533 * 1.4826 * Median(dev) / std::sqrt(double(n));
+    const double t = se > 0 ? std::abs(*rate) / se : (*rate != 0.0 ? 1e9 : 0.0);
+    worst = std::max(worst, t);
+    if (t < threshold) *rate = 0.0;
+  };
+  test(ks, &m->scale_change_per_100um);
+  test(kr, &m->rotation_rad_per_100um);
+  test(kx, &m->shift_x_px_per_100um);
+  test(ky, &m->shift_y_px_per_100um);
+  m->still_statistic = worst;
+  m->still_threshold = threshold;
 }
 
 // RMS distance between two maps of the frame's corners.
@@ -204,8 +240,9 @@ StatusOr<FocusBreathingModel> EstimateOnChain(const std::function<StatusOr<cv::M
   // F(z_i) F(z_{i-1})^-1, so its scale is s_i / s_{i-1} and its shift d_i - A_i A_{i-1}^-1 d_{i-1}:
   // undoing that coupling needs the model itself, hence two passes (the second is exact to well
   // below the registration noise).
+  std::vector<double> ks, kr, kx, ky;
   for (int pass = 0; pass < 2; ++pass) {
-    std::vector<double> ks, kr, kx, ky;
+    ks.clear(), kr.clear(), kx.clear(), ky.clear();
     for (int i = 1; i < n; ++i) {
       if (!ok[size_t(i)]) continue;
       const double dz = (z_um[size_t(i)] - z_um[size_t(i - 1)]) / 100.0;
@@ -246,6 +283,8 @@ StatusOr<FocusBreathingModel> EstimateOnChain(const std::function<StatusOr<cv::M
     ++agreeing;
   }
   m.fit_rms_px = agreeing > 0 ? std::sqrt(sum / agreeing) : 0.0;
+  m.measured_corner_px = ks.size() >= 4 ? MaxCornerDisplacementPx(m, stack_z_um) : 0.0;
+  TestRates(ks, kr, kx, ky, &m);
   INSPECT_RETURN_IF_ERROR(m.Validate().WithContext("alignment: the estimated model is implausible"));
   if (agreeing < 2 || failed + disagreeing > options.max_failed_pair_share * pairs) {
     return Status::FailedPrecondition(
@@ -278,7 +317,7 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
     coarse.registration.max_side_px = options.registration.max_side_px / 2;
     coarse.registration.pyramid_levels = std::max(1, options.registration.pyramid_levels - 1);
     StatusOr<FocusBreathingModel> m = EstimateOnChain(load, z_um, chain, coarse);
-    if (m.ok() && MaxCornerDisplacementPx(*m, z_um) < kNegligibleAlignmentPx) return m;
+    if (m.ok() && MaxCornerDisplacementPx(*m, z_um) < options.min_motion_px) return m;
     // Moving, or no answer at that size (errors included): the full estimate decides and words it.
   }
   return EstimateOnChain(load, z_um, chain, options);
@@ -301,7 +340,9 @@ double MaxCornerDisplacementPx(const FocusBreathingModel& model, const std::vect
 }
 
 StatusOr<StackAligner> StackAligner::Create(const FocusBreathingModel& model, FrameAlignment alignment,
-                                            const std::vector<double>& z_um, cv::Size frame_size) {
+                                            const std::vector<double>& z_um, cv::Size frame_size,
+                                            double min_motion_px) {
+  if (!(min_motion_px >= 0.0)) return Status::InvalidArgument("min_motion_px must be >= 0");
   INSPECT_RETURN_IF_ERROR(model.Validate());
   if (model.frame_size != frame_size) {
     return Status::FailedPrecondition("the focus-breathing model was measured on " +
@@ -315,8 +356,12 @@ StatusOr<StackAligner> StackAligner::Create(const FocusBreathingModel& model, Fr
   std::vector<cv::Matx23d> maps;
   for (int i = 0; i < n; ++i) maps.push_back(model.FrameFromReference(z_um[size_t(i)], z_um[size_t(ref)]));
   INSPECT_ASSIGN_OR_RETURN(StackAligner a, FromTransforms(maps, ref, alignment, frame_size,
-                                                          MaxCornerDisplacementPx(model, z_um) >= kNegligibleAlignmentPx));
+                                                          MaxCornerDisplacementPx(model, z_um) >= min_motion_px));
   a.figures_.method = "model";
+  a.figures_.still_statistic = model.still_statistic;
+  a.figures_.still_threshold = model.still_threshold;
+  a.figures_.max_corner_displacement_px =
+      model.still_threshold > 0 ? model.measured_corner_px : MaxCornerDisplacementPx(model, z_um);
   return a;
 }
 

@@ -25,6 +25,12 @@ enum class FrameAlignment {
 const char* FrameAlignmentName(FrameAlignment a);
 StatusOr<FrameAlignment> ParseFrameAlignment(const std::string& name);
 
+// Below this largest corner displacement a stack is taken as registered and left as it is:
+// warping would only resample (smooth) the frames, and an estimate on frames that do not move is
+// itself off by about this much (neighbour registrations of one texture at different defocus err
+// by ~5e-5 in scale per pair, and those errors are correlated).
+inline constexpr double kNegligibleAlignmentPx = 0.5;
+
 // The camera grid at stage z relative to the grid at reference_z_um (where it is the identity):
 //   p_z = c + s(z) R(theta(z)) (p_ref - c) + d(z),
 //   s(z) = 1 + scale_change_per_100um * (z - z_ref) / 100, theta(z) = rotation_rad_per_100um *
@@ -43,6 +49,15 @@ struct FocusBreathingModel {
   // (measured - model) pair transform at the frame corners, px; and the frames it came from.
   double fit_rms_px = 0.0;
   int frames = 0;
+  // An estimate's test of its rates (EstimateFocusBreathing): the largest |median rate| over its
+  // standard error from the pairs' scatter, and the Student t threshold each rate is held against
+  // (1 % over the four rates). A rate under the threshold is 0 in the model; the stack is still
+  // when the rest moves no corner by kNegligibleAlignmentPx. Both 0: not tested (a calibrated
+  // model, or fewer than 4 pairs).
+  double still_statistic = 0.0;
+  double still_threshold = 0.0;
+  // The largest frame-corner motion of the rates as measured, before the test (px; 0: not tested).
+  double measured_corner_px = 0.0;
 
   cv::Point2d centre_px() const { return {(frame_size.width - 1) * 0.5, (frame_size.height - 1) * 0.5}; }
   SimilarityTransform At(double z_um) const;  // grid at z relative to the reference grid
@@ -50,6 +65,10 @@ struct FocusBreathingModel {
   cv::Matx23d FrameFromReference(double z_um, double reference_frame_z_um) const;
   Status Validate() const;  // INVALID_ARGUMENT naming the field
 };
+
+// Largest displacement (px) of a frame corner over the frames at z_um under the model, relative
+// to the middle frame.
+double MaxCornerDisplacementPx(const FocusBreathingModel& model, const std::vector<double>& z_um);
 
 struct StackAlignmentOptions {
   FrameRegistrationOptions registration;
@@ -81,6 +100,9 @@ struct StackAlignmentOptions {
   // the size of motion the aligner already treats as negligible. Otherwise, or when it fails,
   // the full estimate runs as if it had not.
   bool coarse_first = true;
+  // A model that moves no frame corner by this much is still (frames left as captured); the
+  // coarse pass's answer when its model moves them less. See StackAligner::Create.
+  double min_motion_px = kNegligibleAlignmentPx;
   Status Validate() const;
 };
 
@@ -96,14 +118,6 @@ StatusOr<FocusBreathingModel> EstimateFocusBreathing(const std::function<StatusO
                                                      const std::vector<double>& z_um,
                                                      const StackAlignmentOptions& options);
 
-// Largest displacement (px) of a frame corner over the frames at z_um under the model, relative
-// to the middle frame.
-double MaxCornerDisplacementPx(const FocusBreathingModel& model, const std::vector<double>& z_um);
-// Below this largest corner displacement a stack is taken as registered and left as it is:
-// warping would only resample (smooth) the frames, and an estimate on frames that do not move is
-// itself off by about this much (neighbour registrations of one texture at different defocus err
-// by ~5e-5 in scale per pair, and those errors are correlated).
-inline constexpr double kNegligibleAlignmentPx = 0.5;
 
 // The alignment of one stack: every frame's transform to the reference frame, set up before the
 // first frame arrives; Warp resamples each frame as it comes.
@@ -122,8 +136,9 @@ struct AlignmentFigures {
   // stack the linear-in-z model did not fit, registered as a chain instead).
   std::string decision;
   bool still = false;  // the transforms were measured and found indistinguishable from none
-  // Chain only (ChainRegistration): the still test's statistic and critical value, and the
-  // largest corner displacement of the accumulated transforms (px).
+  // The still test's statistic and critical value (chain: ChainRegistration's; model estimated
+  // from the stack: FocusBreathingModel's rate test; 0 when not tested), and the largest corner
+  // displacement of the transforms (px).
   double still_statistic = 0.0;
   double still_threshold = 0.0;
   double max_corner_displacement_px = 0.0;
@@ -137,9 +152,14 @@ class StackAligner {
  public:
   // The reference frame is the middle one (index (n - 1) / 2): the largest transform to any
   // frame is then about half of the stack's, which keeps the most pixels seen by every frame.
-  // z_um: the stack's frame positions; the model must match frame_size.
+  // z_um: the stack's frame positions; the model must match frame_size. A model that moves no
+  // frame corner by min_motion_px leaves the frames as they are (still): kNegligibleAlignmentPx
+  // for a rig's scan; an imported stack's default takes the chain's floor
+  // (ChainRegistrationOptions::min_motion_px), measured: warping a stack that moves less costs
+  // more depth accuracy in resampling than it corrects (docs/alignment.md).
   static StatusOr<StackAligner> Create(const FocusBreathingModel& model, FrameAlignment alignment,
-                                       const std::vector<double>& z_um, cv::Size frame_size);
+                                       const std::vector<double>& z_um, cv::Size frame_size,
+                                       double min_motion_px = kNegligibleAlignmentPx);
   // From measured per-frame transforms (e.g. RegisterChain's): warps unless `warps` is false (a
   // stack its still test could not tell from motionless), then frames stay as they are.
   static StatusOr<StackAligner> FromTransforms(const std::vector<cv::Matx23d>& frame_from_reference,

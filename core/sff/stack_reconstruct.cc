@@ -31,6 +31,7 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
   std::vector<double> z_um;
   for (const StackFrame& f : manifest.frames) z_um.push_back(f.z_um);
   FocusBreathingModel model;
+  StackAlignmentOptions estimate_options = a.options;
   switch (a.alignment) {
     case FrameAlignment::kNone:
       return std::optional<StackAligner>();
@@ -59,9 +60,12 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
       // instead of leaving a stack that visibly moves unaligned; the result says so
       // (figures->decision). A rig's scan keeps the linear model's verdict.
       const bool imported = a.chain_for_imported_stacks && manifest.illumination.empty();
+      // An imported stack's default holds the linear estimate to the chain's floor: below it a
+      // warp loses more depth accuracy in resampling than the motion does (docs/alignment.md).
+      if (imported && a.fall_back_to_none) estimate_options.min_motion_px = a.chain.min_motion_px;
       std::string decision;
       if (!imported || a.fall_back_to_none) {
-        StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, a.options);
+        StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, estimate_options);
         if (estimate.ok()) {
           model = *estimate;
           break;
@@ -125,7 +129,8 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
     }
   }
   INSPECT_ASSIGN_OR_RETURN(cv::Mat first, source.grey(0));
-  INSPECT_ASSIGN_OR_RETURN(StackAligner aligner, StackAligner::Create(model, a.alignment, z_um, first.size()));
+  INSPECT_ASSIGN_OR_RETURN(StackAligner aligner,
+                           StackAligner::Create(model, a.alignment, z_um, first.size(), estimate_options.min_motion_px));
   if (figures) *figures = aligner.figures();
   return std::optional<StackAligner>(std::move(aligner));
 }

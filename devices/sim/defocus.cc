@@ -281,4 +281,32 @@ void SpatiallyVaryingBlur::Apply(const cv::Mat& src, const BlurPlan& plan, cv::M
   }
 }
 
+void SpatiallyVaryingBlur::ApplyScatter(const cv::Mat& src, const BlurPlan& plan, cv::Mat* dst) {
+  CV_Assert(src.type() == CV_32FC1 && src.size() == plan.rung.size());
+  const int m = plan.last_rung - plan.first_rung + 1;
+  cv::Mat total(src.size(), CV_32FC1, cv::Scalar(0)), part(src.size(), CV_32FC1), blurred;
+  BlurPlan one;  // a single rung everywhere
+  one.rung = cv::Mat(src.size(), CV_8UC1, cv::Scalar(0));
+  one.weight = cv::Mat(src.size(), CV_32FC1, cv::Scalar(0));
+  for (int j = 0; j < m; ++j) {
+    bool any = false;
+    for (int y = 0; y < src.rows; ++y) {
+      const float* s = src.ptr<float>(y);
+      const uint8_t* r = plan.rung.ptr<uint8_t>(y);
+      const float* w = plan.weight.ptr<float>(y);
+      float* p = part.ptr<float>(y);
+      for (int x = 0; x < src.cols; ++x) {
+        const float share = r[x] == j ? 1.0f - w[x] : (r[x] + 1 == j ? w[x] : 0.0f);
+        p[x] = share * s[x];
+        any = any || share > 0.0f;
+      }
+    }
+    if (!any) continue;
+    one.first_rung = one.last_rung = plan.first_rung + j;
+    Apply(part, one, &blurred);
+    total += blurred;
+  }
+  *dst = total;
+}
+
 }  // namespace inspection

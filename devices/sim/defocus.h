@@ -23,6 +23,12 @@ struct DefocusModel {
   // same second moment (radius 2 sigma) that is reached at pillbox_from_sigma_px.
   double gaussian_until_sigma_px = 1.5;
   double pillbox_from_sigma_px = 8.0;
+  // How the image pass spreads a surface whose defocus varies across the frame. false: each
+  // camera pixel takes the PSF of its own defocus (the thesis' fast blur, a gather); where the
+  // defocus varies (a tilted or stepped surface) that moves defocused content by about
+  // d(sigma^2)/dx per frame, a lateral motion the specimen does not make. true: each surface
+  // point spreads by its own defocus, as a telecentric thin lens images it (ApplyScatter).
+  bool point_spread_imaging = false;
 
   Status Validate() const;
   // PSF width (sigma, camera px) for a defocus |h - z| in micrometres:
@@ -58,6 +64,9 @@ class SpatiallyVaryingBlur {
   // dst(p) = (src * PSF(sigma(p)))(p) for the plan's sigma map. src CV_32FC1 of the plan's size.
   // Border: reflected.
   void Apply(const cv::Mat& src, const BlurPlan& plan, cv::Mat* dst);
+  // Each source pixel spread by the PSF of its own sigma (plan's rungs read at the source): the
+  // source split between its two rungs, each part blurred by its rung, the parts summed.
+  void ApplyScatter(const cv::Mat& src, const BlurPlan& plan, cv::Mat* dst);
   void Apply(const cv::Mat& src, const cv::Mat& sigma_px, cv::Mat* dst) { Apply(src, Plan(sigma_px), dst); }
 
   const std::vector<double>& ladder_sigma_px() const { return ladder_; }

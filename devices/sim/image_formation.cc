@@ -154,7 +154,11 @@ const cv::Mat& ImageFormation::CameraIrradianceScratch(const cv::Mat& pattern, d
     ep = &scratch_ep_blurred_;
   }
   cv::multiply(*ep, surface_, scratch_es_);      // eq. 5.2
-  blur_.Apply(scratch_es_, plan, &scratch_ec_);  // defocus on the way back
+  if (options_.defocus.point_spread_imaging) {
+    blur_.ApplyScatter(scratch_es_, plan, &scratch_ec_);  // defocus on the way back
+  } else {
+    blur_.Apply(scratch_es_, plan, &scratch_ec_);
+  }
   if (!options_.lateral.active()) return scratch_ec_;
   // The image on the sensor is the specimen's through the breathing optics. Beyond the specimen
   // maps the scene continues mirrored (the camera at low magnification sees past their edge).

@@ -79,6 +79,7 @@ StatusOr<ImageFormationOptions> ImageFormationOptionsFor(const SimulatedRigOptio
   const double na = options.numerical_aperture;
   f.defocus.blur_radius_px_per_um = std::tan(std::asin(na)) / options.pixel_size_um;
   f.defocus.in_focus_sigma_px = std::clamp(0.21 * 0.55 / na / options.pixel_size_um, 0.55, 5.0);
+  f.defocus.point_spread_imaging = options.point_spread_imaging;
   f.lateral = LateralOpticsOf(options);
   INSPECT_RETURN_IF_ERROR(f.Validate());
   return f;

@@ -28,6 +28,8 @@ struct SimulatedRigOptions {
   cv::Size projector_size{1280, 720};
   double pixel_size_um = 0.74;          // camera pixel on the specimen (thesis 6: 0.740 µm)
   double numerical_aperture = 0.3;      // objective NA (10x): sets the defocus blur per µm
+  // The image pass's defocus as each surface point's own PSF (DefocusModel::point_spread_imaging).
+  bool point_spread_imaging = false;
   double stage_repeatability_um = 0.1;  // ±, uniform (thesis 6: ±0.1 µm)
   double read_noise_dn = 0.8;           // camera read noise, in output grey levels (8-bit scale)
   bool shot_noise = true;

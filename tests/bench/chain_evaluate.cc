@@ -213,6 +213,7 @@ StatusOr<std::vector<cv::Mat>> RigStack(unsigned seed, const Motion& m) {
   o.seed = seed;
   o.camera_size = cv::Size(320 + 32 * rng.uniform(0, 8), 240 + 24 * rng.uniform(0, 8));
   if (const char* e = std::getenv("CHAIN_RIG_NA")) o.numerical_aperture = std::atof(e);
+  o.point_spread_imaging = std::getenv("CHAIN_SCATTER") != nullptr;  // each point spreads by its own defocus
   // Rig motion is its own: magnification and drift per 100 um of z (the scan's span is
   // 60..200 um, so scale/100 um = m.scale over ~100 um).
   o.focus_breathing_percent_per_100um = 100.0 * m.scale;
@@ -262,6 +263,7 @@ StatusOr<std::vector<cv::Mat>> LensStackOf(unsigned seed, const Motion& m) {
   o.shift_x_total_px = m.sx;
   o.shift_y_total_px = m.sy;
   o.rotation_total_rad = m.rot;
+  o.scatter = std::getenv("CHAIN_SCATTER") != nullptr;
   return chain_bench::RenderLensStack(o).frames;
 }
 
@@ -444,6 +446,8 @@ int Speed(int n, cv::Size size) {
     o.size = size;
     o.frames = n;
     o.seed = 77;
+    if (const char* e = std::getenv("CHAIN_SPEED_SEED")) o.seed = unsigned(std::atoi(e));  // e2e-bench's is 1
+    o.scatter = std::getenv("CHAIN_SCATTER") != nullptr;
     if (moving) o.scale_total = 0.03, o.shift_x_total_px = 30, o.shift_y_total_px = -12;
     const chain_bench::LensStack s = chain_bench::RenderLensStack(o);
     StackManifest manifest;
@@ -564,6 +568,14 @@ int Moving(int count, unsigned seed_base) {
     if (const char* e = std::getenv("CHAIN_MOVING_BLUR")) o.blur_px_per_frame = std::atof(e);  // diagnosis
     if (const char* e = std::getenv("CHAIN_MOVING_PRNU")) o.prnu = std::atof(e);  // diagnosis
     if (std::getenv("CHAIN_MOVING_STILL")) o.scale_total = o.shift_x_total_px = o.shift_y_total_px = o.rotation_total_rad = 0;
+    // Small motion, for where warping starts to pay: the scale over the stack and the shift (px),
+    // in the seed's direction, no rotation.
+    if (const char* e = std::getenv("CHAIN_MOVING_SCALE")) o.scale_total = std::atof(e), o.rotation_total_rad = 0;
+    if (const char* e = std::getenv("CHAIN_MOVING_SHIFT")) {
+      o.shift_x_total_px = std::atof(e) * std::cos(direction), o.shift_y_total_px = std::atof(e) * std::sin(direction);
+      o.rotation_total_rad = 0;
+    }
+    if (std::getenv("CHAIN_SCATTER")) o.scatter = true;
     const chain_bench::LensStack stack = chain_bench::RenderLensStack(o);
     const int n = int(stack.frames.size());
     StackManifest manifest;  // imported: no illumination, z nominal

@@ -11,6 +11,23 @@ namespace {
 
 constexpr int kLevels = 7;
 
+// Level j of the blur: j times pyrDown, then pyrUp back to the image's size (blur ~ 2^j px).
+cv::Mat PyramidBlur(const cv::Mat& image, int j) {
+  std::vector<cv::Mat> down{image};
+  for (int k = 0; k < j; ++k) {
+    cv::Mat d;
+    cv::pyrDown(down.back(), d);
+    down.push_back(d);
+  }
+  cv::Mat up = down.back();
+  for (int k = j - 1; k >= 0; --k) {
+    cv::Mat u;
+    cv::pyrUp(up, u, down[size_t(k)].size());
+    up = u;
+  }
+  return up;
+}
+
 cv::Matx23d SimilarityAbout(double scale, double rot, double tx, double ty, cv::Point2d c) {
   const double a = scale * std::cos(rot), b = scale * std::sin(rot);
   // p' = c + [a -b; b a] (p - c) + t
@@ -122,21 +139,7 @@ LensStack RenderLensStack(const LensStackOptions& o) {
   // Pyramid levels of the albedo, each brought back to full size.
   std::vector<cv::Mat> level(kLevels);
   level[0] = albedo;
-  for (int j = 1; j < kLevels; ++j) {
-    std::vector<cv::Mat> down{albedo};
-    for (int k = 0; k < j; ++k) {
-      cv::Mat d;
-      cv::pyrDown(down.back(), d);
-      down.push_back(d);
-    }
-    cv::Mat up = down.back();
-    for (int k = j - 1; k >= 0; --k) {
-      cv::Mat u;
-      cv::pyrUp(up, u, down[size_t(k)].size());
-      up = u;
-    }
-    level[size_t(j)] = up;
-  }
+  for (int j = 1; j < kLevels && !o.scatter; ++j) level[size_t(j)] = PyramidBlur(albedo, j);
   // Fixed across frames: vignetting and pixel gain (the sensor's, frame-sized).
   cv::Mat gain(frame_size, CV_32F);
   rng.fill(gain, cv::RNG::NORMAL, 1.0, o.prnu);
@@ -168,8 +171,28 @@ LensStack RenderLensStack(const LensStackOptions& o) {
       const int bx = int(std::floor(x0)) - 3, by = int(std::floor(y0)) - 3;
       box = cv::Rect(bx, by, int(std::ceil(x1)) + 4 - bx, int(std::ceil(y1)) + 4 - by) & box;
     }
+    if (o.scatter) {
+      // Each scene pixel's albedo split between the two levels of its own blur radius, each
+      // part blurred by its level, the parts summed.
+      std::vector<cv::Mat> part(kLevels);
+      for (cv::Mat& p : part) p = cv::Mat::zeros(size, CV_32F);
+      for (int y = 0; y < size.height; ++y) {
+        const float* d = depth.ptr<float>(y);
+        const float* a = albedo.ptr<float>(y);
+        for (int x = 0; x < size.width; ++x) {
+          const double r = blur * std::abs(d[x] - k);
+          const double l = std::min(kLevels - 1.001, std::log2(1.0 + r / 1.8));
+          const int j = int(l);
+          const double w = l - j;
+          part[size_t(j)].at<float>(y, x) += float((1 - w) * a[x]);
+          part[size_t(j + 1)].at<float>(y, x) += float(w * a[x]);
+        }
+      }
+      sharp = part[0].clone();
+      for (int j = 1; j < kLevels; ++j) sharp += PyramidBlur(part[size_t(j)], j);
+    }
     // Per pixel: the pyramid level of its blur radius, blended between the two neighbours.
-    for (int y = box.y; y < box.y + box.height; ++y) {
+    for (int y = box.y; y < box.y + box.height && !o.scatter; ++y) {
       const float* d = depth.ptr<float>(y);
       float* s = sharp.ptr<float>(y);
       for (int x = box.x; x < box.x + box.width; ++x) {

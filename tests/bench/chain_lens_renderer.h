@@ -41,6 +41,12 @@ struct LensStackOptions {
   // The scene extends past the frame by as much as the motion needs (no mirrored content; the
   // albedo's ellipses keep their density and size). Slower to render only for large motion.
   bool scene_covers_motion = false;
+  // Defocus as a thin lens forms it: each scene point spreads by its own depth's blur (its level
+  // weights applied to the albedo before the blur, then summed). The default (false) lets each
+  // output pixel pick the blur of its own depth instead, the usual cheap approximation; where
+  // the blur varies across the image (a tilted surface) that moves defocused content by about
+  // d(sigma^2)/dx, a motion the scene does not make.
+  bool scatter = false;
 };
 
 struct LensStack {

@@ -103,9 +103,13 @@ TEST_F(CliTest, HaloSuppressionOnAScanAndOnItsStoredStack) {
               d[1].halo_reassigned_percent(), d[1].halo_candidate_percent());
   EXPECT_EQ(d[0].halo_candidate_percent(), 0.0);
   EXPECT_GT(d[1].halo_reassigned_percent(), 1.0);
-  // Measured 8.339 -> 7.993 um at this 320x240 camera; 8.991 -> 6.752 um at 1024x768 (the rig's
-  // default camera, `inspectctl reconstruct --scan-id`), where the blur covers more pixels.
-  EXPECT_LT(d[1].rmse_um(), 0.98 * d[0].rmse_um());
+  // Measured 3.105 -> 3.140 um at this 320x240 camera. Until the default
+  // estimate tested its rates against their scatter it warped this still stack (the coin's
+  // outline changes its apparent size with defocus), 8.339 -> 7.993 um: suppression made up for
+  // part of that misregistration. On the still stack it moves 6-7 % of the pixels and costs at
+  // most 2 % of RMSE; its gain is measured on the halo scene above.
+  EXPECT_LT(d[1].rmse_um(), 1.02 * d[0].rmse_um());
+  EXPECT_LT(d[0].rmse_um(), 4.0);
   EXPECT_GE(d[1].valid_percent(), 0.95 * d[0].valid_percent());
 }
 

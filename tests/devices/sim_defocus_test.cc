@@ -84,5 +84,40 @@ TEST(SpatiallyVaryingBlurTest, EachPixelGetsItsOwnWidth) {
   EXPECT_NEAR(hi, 0.7, 1e-5);
 }
 
+// Where sigma varies across the image the two passes differ. The gather (Apply: each output
+// pixel takes its own sigma) moves a point's image towards the larger blur (by about
+// d(sigma^2)/dx = 0.24 px here for a Gaussian); the scatter (ApplyScatter: each source point
+// spreads by its own sigma) keeps it centred, with that point's width, and conserves the energy.
+// The source is a pair of pixels either side of x = 80 (centroid 79.5), so that the reduced rungs'
+// 2^k x 2^k blocks do not move it. A uniform sigma gives the same image both ways.
+TEST(SpatiallyVaryingBlurTest, PointSpreadKeepsAPointCentredWhereTheBlurVaries) {
+  DefocusModel d;
+  SpatiallyVaryingBlur blur(d);
+  const cv::Size size(160, 96);
+  cv::Mat src(size, CV_32FC1, cv::Scalar(0));
+  src.at<float>(47, 79) = src.at<float>(47, 80) = src.at<float>(48, 79) = src.at<float>(48, 80) = 0.25f;
+  cv::Mat sigma(size, CV_32FC1);
+  const double slope = 0.04;  // sigma 3 px at the point, growing 0.04 px per px to the right
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) sigma.at<float>(y, x) = float(3.0 + slope * (x - 79.5));
+  const BlurPlan plan = blur.Plan(sigma);
+  cv::Mat gather, scatter;
+  blur.Apply(src, plan, &gather);
+  blur.ApplyScatter(src, plan, &scatter);
+  const cv::Moments g = cv::moments(gather), s = cv::moments(scatter);
+  EXPECT_NEAR(s.m00, 1.0, 1e-3);
+  EXPECT_NEAR(s.m10 / s.m00, 79.5, 0.05);
+  EXPECT_NEAR(s.m01 / s.m00, 47.5, 0.05);
+  EXPECT_NEAR(std::sqrt(0.5 * (s.mu20 + s.mu02) / s.m00), 3.0, 0.3);
+  EXPECT_GT(g.m10 / g.m00 - 79.5, 0.15);
+  cv::Mat uniform(size, CV_32FC1, cv::Scalar(2.5)), a, b;
+  const BlurPlan flat = blur.Plan(uniform);
+  cv::Mat texture(size, CV_32FC1);
+  cv::randu(texture, 0.0, 1.0);
+  blur.Apply(texture, flat, &a);
+  blur.ApplyScatter(texture, flat, &b);
+  EXPECT_LT(cv::norm(a, b, cv::NORM_INF), 1e-4);
+}
+
 }  // namespace
 }  // namespace inspection

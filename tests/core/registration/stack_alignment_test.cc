@@ -245,6 +245,71 @@ TEST(StackAlignmentTest, CoarseEstimateFirstDecidesStacksThatDoNotMove) {
   }
 }
 
+// The estimate's rates are tested against their pairs' scatter (FocusBreathingModel::
+// still_statistic): an apparent scale that grows by 0.4 % and shrinks back through the stack (as
+// defocus makes a still scene look, 1.3 px at the corners) is no linear breathing: its median
+// rate is within the scatter, the rate is 0 and the frames stay as captured (a shift rate of
+// ~0.01 px per 100 um may come out significant, and stays: it moves nothing). The same 0.4 % as a
+// constant rate (real breathing) is significant, kept and warped.
+TEST(StackAlignmentTest, RatesThatReverseThroughTheStackAreNotBreathing) {
+  const cv::Size size(512, 384);
+  const cv::Mat texture = Texture(size, 9);
+  const int n = 13;
+  for (const bool reversing : {true, false}) {
+    SCOPED_TRACE(reversing ? "reversing" : "constant rate");
+    std::vector<cv::Mat> frames;
+    std::vector<double> z_um;
+    for (int i = 0; i < n; ++i) {
+      const double z = 10.0 * i, u = double(i) / (n - 1);
+      SimilarityTransform t;
+      t.scale = 1.0 + 0.004 * (reversing ? 1.0 - std::abs(2.0 * u - 1.0) : u);
+      z_um.push_back(z);
+      frames.push_back(Render(texture, t, 0.6 + 0.02 * std::abs(z - 50.0), 300 + unsigned(i)));
+    }
+    StackAlignmentOptions o;
+    o.coarse_first = false;
+    auto m = EstimateFocusBreathing([&](int i) -> StatusOr<cv::Mat> { return frames[size_t(i)]; }, z_um, o);
+    ASSERT_TRUE(m.ok()) << m.status().ToString();
+    ASSERT_GT(m->still_threshold, 2.5);  // Student t, 11 degrees of freedom, 1 % over four rates
+    auto aligner = StackAligner::Create(*m, FrameAlignment::kEstimate, z_um, size);
+    ASSERT_TRUE(aligner.ok()) << aligner.status().ToString();
+    EXPECT_GT(m->still_statistic, 0.0);
+    if (reversing) {
+      EXPECT_EQ(m->scale_change_per_100um, 0.0);
+      EXPECT_LT(MaxCornerDisplacementPx(*m, z_um), kNegligibleAlignmentPx);
+      EXPECT_FALSE(aligner->warps());
+      EXPECT_TRUE(aligner->figures().still);
+    } else {
+      EXPECT_GT(m->still_statistic, m->still_threshold);
+      EXPECT_NEAR(m->scale_change_per_100um, 0.004 / 1.2, 3e-4);  // 0.4 % over 120 um
+      EXPECT_TRUE(aligner->warps());
+      EXPECT_EQ(aligner->figures().still_statistic, m->still_statistic);
+    }
+  }
+}
+
+// The still floor is the caller's: a model moving the corners by 0.75 px warps a rig's scan
+// (kNegligibleAlignmentPx, 0.5 px) and leaves an imported stack's default as captured (the
+// chain's 1 px); a negative floor is an invalid argument.
+TEST(StackAlignmentTest, TheStillFloorIsTheCallers) {
+  FocusBreathingModel m;
+  m.frame_size = cv::Size(400, 300);
+  m.shift_x_px_per_100um = 1.5;  // 100 um of stack: 0.75 px either side of the middle frame
+  const std::vector<double> z_um = {0, 25, 50, 75, 100};
+  EXPECT_NEAR(MaxCornerDisplacementPx(m, z_um), 0.75, 1e-9);
+  auto rig = StackAligner::Create(m, FrameAlignment::kEstimate, z_um, m.frame_size);
+  ASSERT_TRUE(rig.ok());
+  EXPECT_TRUE(rig->warps());
+  auto imported = StackAligner::Create(m, FrameAlignment::kEstimate, z_um, m.frame_size, 1.0);
+  ASSERT_TRUE(imported.ok());
+  EXPECT_FALSE(imported->warps());
+  EXPECT_TRUE(imported->figures().still);
+  EXPECT_NEAR(imported->figures().max_corner_displacement_px, 0.75, 1e-9);
+  const Status bad = StackAligner::Create(m, FrameAlignment::kEstimate, z_um, m.frame_size, -1.0).status();
+  EXPECT_EQ(bad.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.message(), "min_motion_px must be >= 0");
+}
+
 // a long stack registers a chain of frames `stride` apart (max_pairs); the model
 // matches the truth as the all-neighbour estimate does, and a pair is named by its frames.
 TEST(StackAlignmentTest, LongStacksRegisterAChainOfFramesStrideApart) {
