@@ -17,6 +17,7 @@ Status DepthPostProcessOptions::Validate() const {
   INSPECT_RETURN_IF_ERROR(refinement.Validate());
   if (fill_low_confidence) INSPECT_RETURN_IF_ERROR(fill_options.Validate());
   if (dense) INSPECT_RETURN_IF_ERROR(dense_options.Validate());
+
   return Status::Ok();
 }
 
@@ -82,10 +83,13 @@ StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector
           const uint8_t* inferred = d.inferred.ptr<uint8_t>(y);
           const float* support = d.support.ptr<float>(y);
           const float* agreement = d.agreement.ptr<float>(y);
+          const float* measured = out.depth_um.ptr<float>(y);
           float* c = out.confidence.ptr<float>(y);
           for (int x = 0; x < d.depth_um.cols; ++x) {
             if (inferred[x]) {
-              c[x] = o.dense_confidence ? std::min(below, min_confidence * support[x]) : std::min(c[x], below);
+              // A rejected measurement ranks by its agreement with the fit as well.
+              const float rank = measured[x] == measured[x] ? support[x] * agreement[x] : support[x];
+              c[x] = o.dense_confidence ? std::min(below, min_confidence * rank) : std::min(c[x], below);
             } else if (o.dense_confidence) {
               c[x] = min_confidence + (c[x] - min_confidence) * agreement[x];
             }
