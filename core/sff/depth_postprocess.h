@@ -43,6 +43,12 @@ struct DepthPostProcessOptions {
   // measured one keeps at least min_confidence, the part above it scaled by its agreement with
   // the fit. false: inferred pixels keep the engine's confidence, rejected ones 0.
   bool dense_confidence = true;
+  // With dense_confidence: an inferred pixel's rank is also multiplied by the square root of the
+  // share of measured pixels within dense_rank_radius_px (a (2r + 1)^2 box), so that of two
+  // pixels the fit supports alike, the one amid measurements ranks above the one at the end of
+  // a long reach along the guide. 0: off. 8 chosen on the tuning scenes (seeds 1-8) among 1-32:
+  // RMSE over the most confident half 1.268 -> 1.193 frames, AUSE 1.106 -> 0.972.
+  int dense_rank_radius_px = 8;
 
   Status Validate() const;  // INVALID_ARGUMENT naming the field
 };
