@@ -359,21 +359,20 @@ TEST(DenseDepthTest, PostProcessDenseMarksInferredByConfidence) {
   // side (x 20..39 against 0..9): 109.2 measured; a nearest-value fill is off by up to 2.5.
   EXPECT_NEAR(r->depth_um.at<float>(15, 15), 107.5f, 2.0f);
   // dense_confidence: inferred pixels get 0.4 x the fit's support (amid measurements: just
-  // below 0.4) x the square root of the measured share within 8 px (at the hole's centre
-  // 189 / 289 of the 17 x 17 box), measured ones keep at least 0.4, the part above scaled by
-  // their agreement with the fit.
-  EXPECT_GT(r->confidence.at<float>(15, 15), 0.3f * std::sqrt(189.f / 289.f));
-  EXPECT_LT(r->confidence.at<float>(15, 15), 0.4f * std::sqrt(189.f / 289.f));
-  // The hole's corner, nearer the measurements, ranks above its centre.
-  EXPECT_GT(r->confidence.at<float>(10, 10), r->confidence.at<float>(15, 15));
-  EXPECT_LT(r->confidence.at<float>(10, 10), 0.4f);
-  // Without the local factor (dense_rank_radius_px 0): 0.4 x the support alone.
-  DepthPostProcessOptions no_radius = o;
-  no_radius.dense_rank_radius_px = 0;
-  auto nr = PostProcessDepth(raw, z, 7, no_radius);
-  ASSERT_TRUE(nr.ok());
-  EXPECT_GT(nr->confidence.at<float>(15, 15), 0.3f);
-  EXPECT_LT(nr->confidence.at<float>(15, 15), 0.4f);
+  // below 0.4), measured ones keep at least 0.4, the part above scaled by their agreement with
+  // the fit.
+  EXPECT_GT(r->confidence.at<float>(15, 15), 0.3f);
+  EXPECT_LT(r->confidence.at<float>(15, 15), 0.4f);
+  // With the local factor (dense_rank_radius_px 8, off by default): also x the square root of
+  // the measured share within 8 px (at the hole's centre 189 / 289 of the 17 x 17 box); the
+  // hole's corner, nearer the measurements, ranks above its centre.
+  DepthPostProcessOptions with_radius = o;
+  with_radius.dense_rank_radius_px = 8;
+  auto wr = PostProcessDepth(raw, z, 7, with_radius);
+  ASSERT_TRUE(wr.ok());
+  EXPECT_NEAR(wr->confidence.at<float>(15, 15), r->confidence.at<float>(15, 15) * std::sqrt(189.f / 289.f), 1e-4f);
+  EXPECT_GT(wr->confidence.at<float>(10, 10), wr->confidence.at<float>(15, 15));
+  EXPECT_LT(wr->confidence.at<float>(10, 10), 0.4f);
   EXPECT_GE(r->confidence.at<float>(0, 0), 0.4f);
   EXPECT_LE(r->confidence.at<float>(0, 0), 0.9f);
   // dense_confidence off: the engine's confidence as it was.
