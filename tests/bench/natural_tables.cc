@@ -636,15 +636,9 @@ void DiagnosePropagation(const std::vector<Scene>& scenes, std::vector<Cache>& c
   methods.push_back({"dense default", [](const cv::Mat& d, const cv::Mat& c, const cv::Mat& g) {
                        return DensifyDepth(d, c, g, DenseDepthOptions{}).value();
                      }});
-  methods.push_back({"dense, fallback only (sigma 32)", [](const cv::Mat& d, const cv::Mat& c, const cv::Mat& g) {
+  methods.push_back({"dense without rejection (previous default)", [](const cv::Mat& d, const cv::Mat& c, const cv::Mat& g) {
                        DenseDepthOptions o;
-                       o.fallback_support = 1e6;
-                       return DensifyDepth(d, c, g, o).value();
-                     }});
-  methods.push_back({"dense, fallback only (sigma 255)", [](const cv::Mat& d, const cv::Mat& c, const cv::Mat& g) {
-                       DenseDepthOptions o;
-                       o.fallback_support = 1e6;
-                       o.fallback_sigma_color = 255;
+                       o.reject_scale = 0.0;
                        return DensifyDepth(d, c, g, o).value();
                      }});
   methods.push_back({"push-pull plain", [](const cv::Mat& d, const cv::Mat& c, const cv::Mat& g) {
