@@ -449,7 +449,7 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
       }
     }
   }
-  // Agreement (and, with the robust fit, the outlier test) against the final edge-aware fit.
+  // Agreement and the outlier test against the final edge-aware fit.
   const double cauchy = CauchyScale(options.robust_scale);
   // The outlier test: with the robust fit at its Cauchy scale, else at reject_scale (0: none).
   const bool reject = options.robust_iterations > 0 || options.reject_scale > 0.0;

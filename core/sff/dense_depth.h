@@ -17,7 +17,7 @@
 // weakly textured patch, a halo next to an occlusion edge) are down-weighted by a Cauchy weight of
 // their residual and the fit is repeated (iteratively reweighted least squares), so that a few
 // outliers do not smear over a region; after the last fit a measured depth whose residual exceeds
-// the Cauchy scale is replaced by the fit and counted as inferred.
+// the Cauchy scale is replaced by the fit and counted as inferred (without it: reject_scale).
 //
 // For imported stacks (photography), where a user expects a value at every pixel. Measured vs
 // inferred stays readable from the confidence map: an inferred pixel is one whose confidence is

@@ -21,7 +21,6 @@ Status DepthPostProcessOptions::Validate() const {
   INSPECT_RETURN_IF_ERROR(refinement.Validate());
   if (fill_low_confidence) INSPECT_RETURN_IF_ERROR(fill_options.Validate());
   if (dense) INSPECT_RETURN_IF_ERROR(dense_options.Validate());
-
   return Status::Ok();
 }
 

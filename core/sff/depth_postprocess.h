@@ -38,8 +38,8 @@ struct DepthPostProcessOptions {
   bool dense = false;
   DenseDepthOptions dense_options;
   // With dense: the confidence ranks pixels by how far their depth can be trusted. An inferred
-  // pixel (unmeasured, or a measurement the robust fit rejected) gets min_confidence x the fit's
-  // support there (just below min_confidence amid confident measurements, 0 far from any); a
+  // pixel (unmeasured, or a rejected measurement: x its agreement too) gets min_confidence x the
+  // fit's support there (just below min_confidence amid confident measurements, 0 far from any); a
   // measured one keeps at least min_confidence, the part above it scaled by its agreement with
   // the fit. false: inferred pixels keep the engine's confidence, rejected ones 0.
   bool dense_confidence = true;
