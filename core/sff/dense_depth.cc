@@ -36,6 +36,9 @@ Status DenseDepthOptions::Validate() const {
   if (robust_iterations < 0 || robust_iterations > 10) {
     return Status::InvalidArgument("dense.robust_iterations must be between 0 and 10");
   }
+  if (!(reject_scale >= 0.0 && std::isfinite(reject_scale))) {
+    return Status::InvalidArgument("dense.reject_scale must be >= 0");
+  }
   if (!(robust_scale > 0.0 && std::isfinite(robust_scale))) {
     return Status::InvalidArgument("dense.robust_scale must be > 0");
   }
@@ -418,7 +421,7 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
   cv::Mat fit, den;
   // The Cauchy scale from the measured pixels' residuals to the fit: robust_scale x 1.4826 x
   // their median absolute value, at least 1e-3 of the measured depth range.
-  auto CauchyScale = [&]() {
+  auto CauchyScale = [&](double multiple) {
     std::vector<float> abs_res;
     abs_res.reserve(size_t(cv::countNonZero(measured_s)));
     for (int y = 0; y < fit.rows; ++y) {
@@ -429,12 +432,12 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
     }
     std::nth_element(abs_res.begin(), abs_res.begin() + abs_res.size() / 2, abs_res.end());
     const double sigma = 1.4826 * abs_res[abs_res.size() / 2];
-    return std::max(options.robust_scale * sigma, 1e-3 * std::max(hi_um - lo_um, 1e-30));
+    return std::max(multiple * sigma, 1e-3 * std::max(hi_um - lo_um, 1e-30));
   };
   for (int it = 0;; ++it) {
     Fit(*fgs, centred, w, options.local_planes, ridge, &fit, &den);
     if (it == options.robust_iterations) break;
-    const double cauchy = CauchyScale();
+    const double cauchy = CauchyScale(options.robust_scale);
     w = cv::Mat(w_init.size(), CV_32FC1);
     const float inv = float(1.0 / cauchy);
     for (int y = 0; y < fit.rows; ++y) {
@@ -446,9 +449,13 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
       }
     }
   }
-  // Agreement (and, with the robust fit, the outlier test) against the final edge-aware fit.
-  const double cauchy = CauchyScale();
-  const bool reject = options.robust_iterations > 0;
+  // Agreement and the outlier test against the final edge-aware fit.
+  const double cauchy = CauchyScale(options.robust_scale);
+  // The outlier test: with the robust fit at its Cauchy scale, else at reject_scale (0: none).
+  const bool reject = options.robust_iterations > 0 || options.reject_scale > 0.0;
+  const double reject_limit = options.robust_iterations > 0 ? cauchy
+                              : options.reject_scale > 0.0 ? CauchyScale(options.reject_scale)
+                                                           : 1.0;
   // Residuals (robust fit, the outlier test) refer to the edge-aware fit alone; the fallback
   // only takes over where that fit has no support: fit = t fit + (1 - t) fallback.
   cv::Mat fit_edge = fit, reach = den;  // reach: where either fit has support
@@ -520,6 +527,7 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
   };
   const std::vector<Tap> col_taps = Taps(cols, solve_size.width), row_taps = Taps(rows, solve_size.height);
   const float mean_f = float(mean_um), lo_f = float(lo_um), hi_f = float(hi_um), inv_cauchy = float(1.0 / cauchy);
+  const float inv_limit = float(1.0 / reject_limit);
   std::atomic<bool> unreached{false};
   cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range) {
     for (int y = range.start; y < range.end; ++y) {
@@ -572,11 +580,11 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
         sup[x] = std::min(std::max(dn, 0.f), 1.f);
         const float c = m ? z[x] - mean_f : 0.f;
         const float r = (c - fe) * inv_cauchy;
-        const bool outlier = reject && m && std::abs(r) > 1.f;
+        const bool outlier = reject && m && std::abs((c - fe) * inv_limit) > 1.f;
         agree[x] = m ? 1.f / (1.f + r * r) : 0.f;
-        if (kept && !outlier) {
+        if (kept && (!outlier || options.keep_rejected_depth)) {
           o[x] = z[x];
-          inf[x] = 0;
+          inf[x] = outlier ? 255 : 0;
         } else if (rc > min_den) {
           // A plane extrapolated far from its support can overshoot: no deeper or nearer than
           // anything measured.

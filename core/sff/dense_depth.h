@@ -17,7 +17,7 @@
 // weakly textured patch, a halo next to an occlusion edge) are down-weighted by a Cauchy weight of
 // their residual and the fit is repeated (iteratively reweighted least squares), so that a few
 // outliers do not smear over a region; after the last fit a measured depth whose residual exceeds
-// the Cauchy scale is replaced by the fit and counted as inferred.
+// the Cauchy scale is replaced by the fit and counted as inferred (without it: reject_scale).
 //
 // For imported stacks (photography), where a user expects a value at every pixel. Measured vs
 // inferred stays readable from the confidence map: an inferred pixel is one whose confidence is
@@ -37,7 +37,8 @@ namespace inspection {
 // 0/0.1/0.3/0.5/1) by RMSE at full coverage on the tuning scenes of natural-evaluate --held-out 8
 // (seeds 1-8, colour guide), reported on seeds 9-16 and 101-108 (tests/bench/natural_heldout_output.md,
 // docs/import-stacks.md). Robust reweighting, halo suppression and keep_measured = false were
-// tried there too and stay off (no better, or within 1 %).
+// tried there too and stay off (no better, or within 1 %). The outlier rejection (reject_scale)
+// came later, from the per-scene diagnosis of natural-evaluate --diagnose.
 struct DenseDepthOptions {
   // FGS smoothness weight: larger spreads measured depth further across untextured regions.
   double lambda = 4096.0;
@@ -80,6 +81,17 @@ struct DenseDepthOptions {
   // residual of the measured pixels, at least 1e-3 of the measured depth range); also the residual
   // above which a measured depth is replaced by the fit.
   double robust_scale = 3.0;
+  // Without the robust fit (robust_iterations 0): a measured depth whose residual to the
+  // edge-aware fit exceeds reject_scale robust standard deviations (1.4826 x the median absolute
+  // residual of the measured pixels, as robust_scale's) is an outlier: replaced by the fit and
+  // counted as inferred (keep_rejected_depth: keeps its depth, still counted as inferred). The fit
+  // itself is not reweighted. 0: off. Default 12, chosen on the tuning scenes (seeds 1-8) of
+  // natural-evaluate --experiments among 1.5..20: there the measured pixels' gross errors (a
+  // flat pixel next to texture measured at the texture's depth, most of them in untextured
+  // regions) otherwise lead the confidence ranking (RMSE over the most confident half 1.690 ->
+  // 1.268 frames, at full coverage 3.981 -> 3.931; tests/bench/natural_heldout_output.md).
+  double reject_scale = 12.0;
+  bool keep_rejected_depth = false;
   // Solve grid: the fit runs on a grid reduced k times in each direction and is brought back by
   // joint bilateral upsampling with the full-resolution guide (measured pixels keep their
   // depth). 0 = auto: the smallest k of 1, 2, 4, 8 whose grid has at most auto_solve_max_pixels

@@ -6,12 +6,16 @@
 #include <cstdint>
 #include <limits>
 #include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace inspection {
 
 Status DepthPostProcessOptions::Validate() const {
   if (!(min_confidence >= 0.0 && min_confidence <= 1.0)) {
     return Status::InvalidArgument("min_confidence must be between 0 and 1");
+  }
+  if (dense_rank_radius_px < 0 || dense_rank_radius_px > 256) {
+    return Status::InvalidArgument("dense_rank_radius_px must be between 0 and 256");
   }
   if (consistency) INSPECT_RETURN_IF_ERROR(consistency_options.Validate());
   INSPECT_RETURN_IF_ERROR(refinement.Validate());
@@ -77,15 +81,33 @@ StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector
                                DensifyDepthWithSupport(out.depth_um, out.confidence, raw.all_in_focus, o.dense_options));
       // Inferred: below min_confidence whatever the ranking (the documented encoding).
       const float below = std::nextafter(min_confidence, 0.f);
+      // The measured share around each pixel (the rank's local factor).
+      cv::Mat share;
+      if (o.dense_confidence && o.dense_rank_radius_px > 0) {
+        share = cv::Mat(d.inferred.size(), CV_32FC1);
+        cv::parallel_for_(cv::Range(0, share.rows), [&](const cv::Range& rows) {
+          for (int y = rows.start; y < rows.end; ++y) {
+            const uint8_t* inferred = d.inferred.ptr<uint8_t>(y);
+            float* s = share.ptr<float>(y);
+            for (int x = 0; x < share.cols; ++x) s[x] = inferred[x] ? 0.f : 1.f;
+          }
+        });
+        const int k = 2 * o.dense_rank_radius_px + 1;
+        cv::boxFilter(share, share, -1, cv::Size(k, k), cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+      }
       cv::parallel_for_(cv::Range(0, d.depth_um.rows), [&](const cv::Range& rows) {
         for (int y = rows.start; y < rows.end; ++y) {
           const uint8_t* inferred = d.inferred.ptr<uint8_t>(y);
           const float* support = d.support.ptr<float>(y);
           const float* agreement = d.agreement.ptr<float>(y);
+          const float* measured = out.depth_um.ptr<float>(y);
           float* c = out.confidence.ptr<float>(y);
           for (int x = 0; x < d.depth_um.cols; ++x) {
             if (inferred[x]) {
-              c[x] = o.dense_confidence ? std::min(below, min_confidence * support[x]) : std::min(c[x], below);
+              // A rejected measurement ranks by its agreement with the fit as well.
+              float rank = measured[x] == measured[x] ? support[x] * agreement[x] : support[x];
+              if (!share.empty()) rank *= std::sqrt(std::max(share.at<float>(y, x), 0.f));
+              c[x] = o.dense_confidence ? std::min(below, min_confidence * rank) : std::min(c[x], below);
             } else if (o.dense_confidence) {
               c[x] = min_confidence + (c[x] - min_confidence) * agreement[x];
             }

@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <functional>
 #include <chrono>
@@ -60,6 +61,7 @@ struct Scene {
   cv::Mat colour_aif;         // the colour all-in-focus image an imported stack gets (stack_reconstruct.h)
   double fs_seconds = 0;
   fs::path dir;
+  uint32_t seed = 0;
 };
 
 struct EngineKey {
@@ -408,7 +410,18 @@ struct DenseCandidate {
   // Guide: the colour all-in-focus image, as an imported colour stack has it
   // (ReconstructStackFolder); false: the engine's grey one.
   bool colour_guide = true;
+  // Prototype: inferred pixels blend in an isotropic fill of the measured ones (plain push-pull or
+  // focus-stack's radial average): d = b dense + (1 - b) iso, b = iso_weight_mode 0: blend_b,
+  // 1: support (confidence / min_confidence) ^ blend_b.
+  double blend_b = -1.0;  // < 0: off
+  int iso_mode = 0;       // 0 push-pull plain, 1 radial average
+  int blend_mode = 0;
+  double soft_min_conf = -1.0;  // prototype: the dense step sees pixels down to this confidence (< 0: off)
+  int rank_radius = -1;  // DepthPostProcessOptions::dense_rank_radius_px (< 0: its default)
+  bool soft_no_consistency = false;
 };
+
+cv::Mat RadialAverageFill(const cv::Mat& depth);
 
 const cv::Mat& ColourAllInFocus(Scene& s) {
   if (s.colour_aif.empty()) {
@@ -437,8 +450,37 @@ DepthResult PostProcessed(const Scene& s, const DenseCandidate& c, Cache* cache,
   o.dense_options = c.dense_options;
   o.dense_confidence = c.dense_confidence;
   o.fill_low_confidence = !c.dense;
+  if (c.rank_radius >= 0) o.dense_rank_radius_px = c.rank_radius;
+  if (c.soft_min_conf >= 0.0) {
+    o.min_confidence = c.soft_min_conf;
+    if (c.soft_no_consistency) o.consistency = false;
+  }
   const auto t0 = Clock::now();
   DepthResult r = PostProcessDepth(raw, s.z, d.window_px, o).value();
+  if (c.soft_min_conf >= 0.0) {
+    // Pixels below the real threshold rank as inferred (below 0.4, in their order).
+    for (int y = 0; y < r.confidence.rows; ++y)
+      for (int x = 0; x < r.confidence.cols; ++x) {
+        float& cf = r.confidence.at<float>(y, x);
+        if (raw.confidence.at<float>(y, x) < 0.4f && cf >= float(c.soft_min_conf)) cf = 0.39f * cf;
+        else if (cf < float(c.soft_min_conf)) cf *= 0.3f;
+      }
+    o.min_confidence = 0.4;
+  }
+  if (c.blend_b >= 0.0) {
+    cv::Mat meas = r.depth_um.clone();
+    meas.setTo(NAN, r.confidence < float(o.min_confidence));
+    DepthFillOptions fo;
+    fo.guide_sigma = 0;
+    const cv::Mat iso = c.iso_mode == 0 ? FillDepth(meas, r.confidence, raw.all_in_focus, fo).value() : RadialAverageFill(meas);
+    for (int y = 0; y < meas.rows; ++y)
+      for (int x = 0; x < meas.cols; ++x) {
+        const float cf = r.confidence.at<float>(y, x);
+        if (cf >= float(o.min_confidence) || !std::isfinite(iso.at<float>(y, x))) continue;
+        const double b = c.blend_mode == 0 ? c.blend_b : std::pow(std::min(1.0, cf / o.min_confidence), c.blend_b);
+        r.depth_um.at<float>(y, x) = float(b * r.depth_um.at<float>(y, x) + (1 - b) * iso.at<float>(y, x));
+      }
+  }
   if (seconds) *seconds += Seconds(t0);
   return r;
 }
@@ -531,6 +573,276 @@ void Diagnose(const std::vector<Scene>& scenes, std::vector<Cache>& caches, int 
   }
 }
 
+// Guide texture (3 x 3 Sobel energy) over the strongest within `radius` (as dense_depth's halo factor).
+cv::Mat DiagHaloFactor(const cv::Mat& guide, int radius) {
+  cv::Mat grey;
+  if (guide.channels() == 3)
+    cv::cvtColor(guide, grey, cv::COLOR_BGR2GRAY);
+  else
+    grey = guide;
+  cv::Mat g32;
+  grey.convertTo(g32, CV_32F, grey.depth() == CV_16U ? 1.0 / 257.0 : grey.depth() == CV_32F ? 255.0 : 1.0);
+  cv::Mat gx, gy;
+  cv::Sobel(g32, gx, CV_32F, 1, 0);
+  cv::Sobel(g32, gy, CV_32F, 0, 1);
+  cv::Mat energy = gx.mul(gx) + gy.mul(gy);
+  cv::boxFilter(energy, energy, -1, cv::Size(3, 3));
+  cv::Mat strongest;
+  cv::dilate(energy, strongest, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * radius + 1, 2 * radius + 1)));
+  cv::Mat f = energy / cv::max(strongest, 1.f);
+  f.setTo(1.f, strongest < 1.f);
+  return f;
+}
+
+// focus-stack's hole fill (RadialFilter::average, 64 rays): every pixel gets the mean over 64
+// directions of the nearest finite depth behind it along that direction (itself if finite).
+cv::Mat RadialAverageFill(const cv::Mat& depth) {
+  const int rows = depth.rows, cols = depth.cols;
+  cv::Mat out = depth.clone();
+  constexpr int kRays = 64;
+  cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range) {
+    for (int y = range.start; y < range.end; ++y)
+      for (int x = 0; x < cols; ++x) {
+        if (std::isfinite(depth.at<float>(y, x))) continue;
+        double sum = 0;
+        int n = 0;
+        for (int r = 0; r < kRays; ++r) {
+          const double a = 2 * M_PI * r / kRays, dx = std::cos(a), dy = std::sin(a);
+          for (int step = 1;; ++step) {
+            const int xx = int(std::lround(x - dx * step)), yy = int(std::lround(y - dy * step));
+            if (xx < 0 || yy < 0 || xx >= cols || yy >= rows) break;
+            const float v = depth.at<float>(yy, xx);
+            if (std::isfinite(v)) {
+              sum += v;
+              ++n;
+              break;
+            }
+          }
+        }
+        out.at<float>(y, x) = n ? float(sum / n) : NAN;
+      }
+  });
+  return out;
+}
+
+// Propagation alone: fills of the truth at our measured pixels (and of our measured depth), RMSE
+// at full coverage per region, mean over scenes [from, to).
+void DiagnosePropagation(const std::vector<Scene>& scenes, std::vector<Cache>& caches, int from, int to) {
+  struct Method {
+    std::string name;
+    std::function<cv::Mat(const cv::Mat&, const cv::Mat&, const cv::Mat&)> fill;  // depth, conf, guide
+  };
+  std::vector<Method> methods;
+  methods.push_back({"dense default", [](const cv::Mat& d, const cv::Mat& c, const cv::Mat& g) {
+                       return DensifyDepth(d, c, g, DenseDepthOptions{}).value();
+                     }});
+  methods.push_back({"dense without rejection (previous default)", [](const cv::Mat& d, const cv::Mat& c, const cv::Mat& g) {
+                       DenseDepthOptions o;
+                       o.reject_scale = 0.0;
+                       return DensifyDepth(d, c, g, o).value();
+                     }});
+  methods.push_back({"push-pull plain", [](const cv::Mat& d, const cv::Mat& c, const cv::Mat& g) {
+                       DepthFillOptions o;
+                       o.guide_sigma = 0;
+                       return FillDepth(d, c, g, o).value();
+                     }});
+  methods.push_back({"radial average (focus-stack's fill)",
+                     [](const cv::Mat& d, const cv::Mat&, const cv::Mat&) { return RadialAverageFill(d); }});
+  methods.push_back({"mean of dense default and radial average", [](const cv::Mat& d, const cv::Mat& c, const cv::Mat& g) {
+                       return cv::Mat(0.5 * DensifyDepth(d, c, g, DenseDepthOptions{}).value() + 0.5 * RadialAverageFill(d));
+                     }});
+  const int nm = int(methods.size());
+  std::vector<std::array<double, 8>> acc(size_t(4 * nm));
+  for (auto& a : acc) a.fill(0.0);
+  for (int k = from; k < to; ++k) {
+    const Scene& s = scenes[size_t(k)];
+    const cv::Mat& t = s.truth.depth_frames;
+    const SffOptions d;
+    DepthResult raw = Run(s, EngineKey{d.focus_measure, d.window_px, d.interpolation}, &caches[size_t(k)]);
+    raw.all_in_focus = ColourAllInFocus(const_cast<Scene&>(s));
+    const DepthResult measured = PostProcessDepth(raw, s.z, d.window_px, DepthPostProcessOptions{}).value();
+    cv::Mat truth_at = measured.depth_um.clone();
+    for (int y = 0; y < t.rows; ++y)
+      for (int x = 0; x < t.cols; ++x)
+        if (std::isfinite(truth_at.at<float>(y, x))) truth_at.at<float>(y, x) = t.at<float>(y, x);
+    cv::Mat cleaned = measured.depth_um.clone();
+    for (int y = 0; y < t.rows; ++y)
+      for (int x = 0; x < t.cols; ++x)
+        if (std::abs(cleaned.at<float>(y, x) - t.at<float>(y, x)) > 2.f) cleaned.at<float>(y, x) = NAN;
+    cv::Mat truth_textured(t.size(), CV_32FC1, cv::Scalar(NAN));
+    t.copyTo(truth_textured, s.truth.textured);
+    for (int m = 0; m < 4 * nm; ++m) {
+      const cv::Mat f = methods[size_t(m % nm)].fill(m < nm ? truth_at : m < 2 * nm ? measured.depth_um : m < 3 * nm ? cleaned : truth_textured,
+                                                     measured.confidence, raw.all_in_focus);
+      double se[4] = {}, n[4] = {};
+      for (int y = kBorderPx; y < t.rows - kBorderPx; ++y)
+        for (int x = kBorderPx; x < t.cols - kBorderPx; ++x) {
+          const int region = s.truth.occlusion_edge.at<uint8_t>(y, x) ? 2 : s.truth.textured.at<uint8_t>(y, x) ? 0 : 1;
+          const float v = f.at<float>(y, x);
+          const double e = std::isfinite(v) ? v - t.at<float>(y, x) : 1e3;
+          se[region] += e * e;
+          n[region] += 1;
+          se[3] += e * e;
+          n[3] += 1;
+        }
+      for (int g = 0; g < 4; ++g) acc[size_t(m)][size_t(g)] += std::sqrt(se[g] / std::max(n[g], 1.0)) / (to - from);
+    }
+  }
+  std::printf("\nPropagation (mean over scenes of RMSE [frames] at full coverage; input = the truth at our measured "
+              "pixels, our measured depth, our measured depth without its errors > 2 frames, the truth at every textured pixel): all / textured / flat / edge\n");
+  for (int m = 0; m < 4 * nm; ++m)
+    std::printf("  %-8s %-44s %7.3f %7.3f %7.3f %7.3f\n", m < nm ? "truth" : m < 2 * nm ? "measured" : m < 3 * nm ? "cleaned" : "truth-tx", methods[size_t(m % nm)].name.c_str(),
+                acc[size_t(m)][3], acc[size_t(m)][0], acc[size_t(m)][1], acc[size_t(m)][2]);
+}
+
+// Per scene (scenes [from, to)): where the full-coverage error is and how good the 50 % ranking
+// is, ours (candidate c) beside focus-stack. Regions (exclusive): edge = within 3 px of a depth
+// jump, flat = untextured, textured = the rest (the border of kBorderPx left out). Our top half
+// = our most confident 50 % (the ranking of Sparsify). Floors: "best-of-both" takes per pixel
+// the smaller error of ours and focus-stack's; "oracle-measured" runs the same dense solve on the
+// true depth at our measured pixels (the error left by propagation alone).
+void DiagnoseScenes(const std::vector<Scene>& scenes, std::vector<Cache>& caches, int from, int to,
+                    const DenseCandidate& c, bool have_fs) {
+  std::printf(
+      "\nPer-scene diagnosis (%s): RMSE [frames] ours/focus-stack by region (share of our squared error); "
+      "meas = share measured (confidence >= 0.4); top50 = our most confident half: RMSE ours / focus-stack on "
+      "the same pixels / oracle 50 %% (ours ranked by |error|), its share measured / flat / edge; "
+      "floors at 100 %%: best-of-both, dense on the truth at our measured pixels\n",
+      c.name.c_str());
+  std::printf("%-6s %5s %5s %5s | %14s %6s | %20s %20s %20s | %21s %15s | %6s %7s\n", "seed", "blur", "tex%",
+              "meas%", "RMSE100 us/FS", "ratio", "textured", "flat", "edge", "top50 us/FS/orac", "meas/flat/edge",
+              "best2", "oraclM");
+  struct Pool {
+    double se[3] = {}, fse[3] = {}, n[3] = {};
+    double r100 = 0, f100 = 0, r50 = 0, f50 = 0, o50 = 0, meas = 0, top_meas = 0, top_flat = 0, top_edge = 0;
+    double best2 = 0, oracm = 0;
+  } pool;
+  const int n_sc = to - from;
+  for (int k = from; k < to; ++k) {
+    const Scene& s = scenes[size_t(k)];
+    const cv::Mat& t = s.truth.depth_frames;
+    const DepthResult r = PostProcessed(s, c, &caches[size_t(k)]);
+    // The measured map before the dense step and its oracle counterpart.
+    const SffOptions d;
+    DepthResult raw = Run(s, EngineKey{d.focus_measure, d.window_px, d.interpolation}, &caches[size_t(k)]);
+    if (c.colour_guide) raw.all_in_focus = ColourAllInFocus(const_cast<Scene&>(s));
+    DepthPostProcessOptions po;
+    const DepthResult measured = PostProcessDepth(raw, s.z, d.window_px, po).value();
+    cv::Mat truth_at_measured = measured.depth_um.clone();
+    for (int y = 0; y < t.rows; ++y)
+      for (int x = 0; x < t.cols; ++x)
+        if (std::isfinite(truth_at_measured.at<float>(y, x))) truth_at_measured.at<float>(y, x) = t.at<float>(y, x);
+    const cv::Mat oracle_dense =
+        DensifyDepth(truth_at_measured, measured.confidence, raw.all_in_focus, c.dense_options).value();
+    double se[3] = {}, fse[3] = {}, n[3] = {}, meas = 0, total = 0, best2 = 0, oracm = 0;
+    double mse = 0, mout = 0, mout_region[3] = {}, lowtex = 0, lowtex_se = 0;
+    const cv::Mat halo = DiagHaloFactor(raw.all_in_focus, 4);
+    std::vector<std::tuple<float, int>> order;
+    for (int y = kBorderPx; y < t.rows - kBorderPx; ++y)
+      for (int x = kBorderPx; x < t.cols - kBorderPx; ++x) {
+        const int region = s.truth.occlusion_edge.at<uint8_t>(y, x) ? 2 : s.truth.textured.at<uint8_t>(y, x) ? 0 : 1;
+        const float dv = r.depth_um.at<float>(y, x), tv = t.at<float>(y, x);
+        const double e = std::isfinite(dv) ? dv - tv : 1e3;
+        const float fv = have_fs ? s.fs_depth.at<float>(y, x) : NAN;
+        const double fe = std::isfinite(fv) ? fv - tv : 1e3;
+        se[region] += e * e;
+        fse[region] += fe * fe;
+        n[region] += 1;
+        total += 1;
+        const bool is_meas = r.confidence.at<float>(y, x) >= 0.4f;
+        meas += is_meas;
+        if (is_meas) {
+          mse += e * e;
+          const bool bad = std::abs(e) > 2.0;
+          mout += bad;
+          if (bad) mout_region[region] += 1;
+          // Guide texture of the pixel relative to the strongest within 4 px (the halo cue).
+          if (halo.at<float>(y, x) < 0.25f) {
+            lowtex += 1;
+            lowtex_se += e * e;
+          }
+        }
+        best2 += std::min(e * e, fe * fe);
+        const double oe = oracle_dense.at<float>(y, x) - tv;
+        oracm += oe * oe;
+        order.push_back({-r.confidence.at<float>(y, x), y * t.cols + x});
+      }
+    std::stable_sort(order.begin(), order.end(),
+                     [](const auto& a, const auto& b) { return std::get<0>(a) < std::get<0>(b); });
+    const size_t cut = order.size() / 2;
+    double tse = 0, tfse = 0, tm = 0, tf = 0, te = 0, tinf_se = 0;
+    std::vector<double> e2s;
+    for (size_t i = 0; i < order.size(); ++i) {
+      const int idx = std::get<1>(order[i]);
+      const int y = idx / t.cols, x = idx % t.cols;
+      const double e = r.depth_um.at<float>(y, x) - t.at<float>(y, x);
+      e2s.push_back(e * e);
+      if (i >= cut) continue;
+      const float fv = have_fs ? s.fs_depth.at<float>(y, x) : NAN;
+      const double fe = std::isfinite(fv) ? fv - t.at<float>(y, x) : 1e3;
+      tse += e * e;
+      tfse += fe * fe;
+      const bool top_meas = r.confidence.at<float>(y, x) >= 0.4f;
+      tm += top_meas;
+      if (!top_meas) tinf_se += e * e;
+      const bool edge = s.truth.occlusion_edge.at<uint8_t>(y, x) != 0;
+      te += edge;
+      tf += !edge && !s.truth.textured.at<uint8_t>(y, x);
+    }
+    std::sort(e2s.begin(), e2s.end());
+    double ose = 0;
+    for (size_t i = 0; i < cut; ++i) ose += e2s[i];
+    const double all_se = se[0] + se[1] + se[2];
+    const double r100 = std::sqrt(all_se / total), f100 = std::sqrt((fse[0] + fse[1] + fse[2]) / total);
+    const double r50 = std::sqrt(tse / double(cut)), f50 = std::sqrt(tfse / double(cut)), o50 = std::sqrt(ose / double(cut));
+    char reg[3][32];
+    for (int g = 0; g < 3; ++g)
+      std::snprintf(reg[g], sizeof reg[g], "%5.2f/%5.2f(%3.0f%%)", n[g] ? std::sqrt(se[g] / n[g]) : NAN,
+                    n[g] ? std::sqrt(fse[g] / n[g]) : NAN, 100 * se[g] / all_se);
+    std::printf("%-6u %5.2f %5.0f %5.1f | %6.3f/%6.3f %6.2f | %20s %20s %20s | %5.2f/%5.2f/%5.2f %5.2f | %3.0f/%3.0f/%3.0f %6.3f %7.3f\n",
+                unsigned(s.seed), s.truth.blur_radius_px_per_frame,
+                100.0 * cv::countNonZero(s.truth.textured) / double(s.truth.textured.total()), 100 * meas / total,
+                r100, f100, r100 / f100, reg[0], reg[1], reg[2], r50, f50, o50, r50 / f50, 100 * tm / double(cut),
+                100 * tf / double(cut), 100 * te / double(cut), std::sqrt(best2 / total), std::sqrt(oracm / total));
+    std::printf("       measured: RMSE %.3f, out>2 %.1f %% (of which textured/flat/edge %.0f/%.0f/%.0f %%), low guide texture "
+                "(< 0.25 of the strongest within 4 px) %.0f %% of measured, RMSE %.3f; top half: %.0f %% of its squared "
+                "error from measured pixels, inferred part RMSE %.3f\n",
+                std::sqrt(mse / std::max(meas, 1.0)), 100 * mout / std::max(meas, 1.0),
+                100 * mout_region[0] / std::max(mout, 1.0), 100 * mout_region[1] / std::max(mout, 1.0),
+                100 * mout_region[2] / std::max(mout, 1.0), 100 * lowtex / std::max(meas, 1.0),
+                std::sqrt(lowtex_se / std::max(lowtex, 1.0)), 100 * (tse - tinf_se) / std::max(tse, 1e-30),
+                std::sqrt(tinf_se / std::max(double(cut) - tm, 1.0)));
+    for (int g = 0; g < 3; ++g) {
+      pool.se[g] += se[g] / total / n_sc;
+      pool.fse[g] += fse[g] / total / n_sc;
+      pool.n[g] += n[g] / total / n_sc;
+    }
+    pool.r100 += r100 / n_sc;
+    pool.f100 += f100 / n_sc;
+    pool.r50 += r50 / n_sc;
+    pool.f50 += f50 / n_sc;
+    pool.o50 += o50 / n_sc;
+    pool.meas += meas / total / n_sc;
+    pool.top_meas += tm / double(cut) / n_sc;
+    pool.top_flat += tf / double(cut) / n_sc;
+    pool.top_edge += te / double(cut) / n_sc;
+    pool.best2 += std::sqrt(best2 / total) / n_sc;
+    pool.oracm += std::sqrt(oracm / total) / n_sc;
+  }
+  const double all = pool.se[0] + pool.se[1] + pool.se[2], fall = pool.fse[0] + pool.fse[1] + pool.fse[2];
+  std::printf("mean of scenes: RMSE100 %.3f / focus-stack %.3f (%.2fx); RMSE50 %.3f / %.3f (%.2fx), oracle 50 %% %.3f; "
+              "measured %.1f %%; top half %.0f %% measured, %.0f %% flat, %.0f %% edge; best-of-both %.3f; "
+              "oracle-measured dense %.3f\n",
+              pool.r100, pool.f100, pool.r100 / pool.f100, pool.r50, pool.f50, pool.r50 / pool.f50, pool.o50,
+              100 * pool.meas, 100 * pool.top_meas, 100 * pool.top_flat, 100 * pool.top_edge, pool.best2, pool.oracm);
+  const char* names[] = {"textured", "flat", "edge"};
+  std::printf("pooled by region (RMSE ours / focus-stack, share of pixels, share of our / focus-stack's squared error):");
+  for (int g = 0; g < 3; ++g)
+    std::printf("  %s %.3f/%.3f %.0f%% %.0f%%/%.0f%%", names[g], std::sqrt(pool.se[g] / pool.n[g]),
+                std::sqrt(pool.fse[g] / pool.n[g]), 100 * pool.n[g], 100 * pool.se[g] / all, 100 * pool.fse[g] / fall);
+  std::printf("\n");
+}
+
 struct HeldOutFigures {
   double r100 = 0, r50 = 0, ause = 0, f100 = 0, f50 = 0, seconds = 0;
   std::vector<double> curve = std::vector<double>(kSparseSteps, 0.0);
@@ -583,6 +895,7 @@ void TimeDense(const Scene& s) {
   constant.local_planes = false;
   constant.robust_iterations = 0;
   constant.fallback_support = 0.0;
+  constant.reject_scale = 0.0;
   std::map<std::string, double> best;
   auto Time = [&](const std::string& name, auto&& fn) {
     const auto t0 = Clock::now();
@@ -600,6 +913,11 @@ void TimeDense(const Scene& s) {
     Time("dense default", [&] {
       (void)DensifyDepthWithSupport(post.depth_um, post.confidence, r->all_in_focus, DenseDepthOptions{}).value();
     });
+    DenseDepthOptions no_reject;
+    no_reject.reject_scale = 0.0;
+    Time("dense default without rejection", [&] {
+      (void)DensifyDepthWithSupport(post.depth_um, post.confidence, r->all_in_focus, no_reject).value();
+    });
     DenseDepthOptions full;
     full.solve_downscale = 1;
     Time("dense default, full-size solve", [&] {
@@ -611,8 +929,8 @@ void TimeDense(const Scene& s) {
   }
   std::printf("\nTiming at %dx%d x %zu frames, best of 3 alternating rounds: engine %.3f s", big.width, big.height,
               frames.size(), best["engine"]);
-  for (const char* name : {"threshold+consistency", "dense constant", "dense default", "dense default, full-size solve",
-                           "threshold+consistency+dense"})
+  for (const char* name : {"threshold+consistency", "dense constant", "dense default", "dense default without rejection",
+                           "dense default, full-size solve", "threshold+consistency+dense"})
     std::printf("; %s %.3f s (%.2fx engine)", name, best[name], best[name] / best["engine"]);
   std::printf(" (dense solve grid /%d)", DenseSolveDownscale(big, DenseDepthOptions{}));
   std::printf("\n");
@@ -625,6 +943,7 @@ int RunHeldOut(std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tun
   baseline.dense_options.local_planes = false;
   baseline.dense_options.robust_iterations = 0;
   baseline.dense_options.fallback_support = 0.0;
+  baseline.dense_options.reject_scale = 0.0;
   std::vector<DenseCandidate> cands{{"push-pull fill (--fill)", false, {}, false, false}, baseline};
   // The grid: smoothness x edge scale x model (constant / local planes) x the weakly edge-aware
   // fallback's hand-over support (0 = none), colour guide as an imported colour stack has it.
@@ -713,6 +1032,78 @@ int RunHeldOut(std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tun
   return 0;
 }
 
+// (The rows of tests/bench/natural_heldout_output.md "Tried on the tuning seeds" came from this
+// list as it was at each step: outlier rejection scales, IRLS, halo weights, the solve grid with
+// rejection, blends with isotropic fills, a lower threshold for the dense input, rank radii.)
+template <typename F>
+void ExperimentVariants(F&& Variant) {
+  for (int rad : {0, 4, 8, 16})
+    Variant("rank radius " + std::to_string(rad), [=](DenseCandidate& c) { c.rank_radius = rad; });
+  Variant("reject 8", [=](DenseCandidate& c) { c.dense_options.reject_scale = 8; });
+  Variant("reject 8 + isotropic push-pull blend 0.75", [=](DenseCandidate& c) {
+    c.dense_options.reject_scale = 8;
+    c.blend_b = 0.75;
+  });
+  Variant("dense sees confidence >= 0.1", [=](DenseCandidate& c) { c.soft_min_conf = 0.1; });
+}
+
+// Variants of the dense step tried on the scenes given (the tuning seeds 1-8): RMSE at 100 % and
+// 50 %, AUSE, focus-stack's figures and the ratios, mean over the scenes.
+void RunExperiments(std::vector<Scene>& scenes, std::vector<Cache>& caches, bool have_fs) {
+  std::vector<DenseCandidate> v;
+  v.push_back({"dense default (DenseDepthOptions{})", true, {}, true, true});
+  auto Variant = [&](const std::string& name, auto&& set) {
+    DenseCandidate c;
+    c.name = name;
+    set(c);
+    v.push_back(c);
+  };
+  ExperimentVariants(Variant);
+  std::printf("\nExperiments on scenes %u..%u: RMSE [frames] at 100 %% and 50 %%, AUSE; focus-stack at 100 %% and on our half\n",
+              unsigned(scenes.front().seed), unsigned(scenes.back().seed));
+  std::printf("%-52s %8s %8s %8s %8s %8s %7s %7s\n", "variant", "RMSE100", "RMSE50", "AUSE", "FS100", "FS50same", "r100", "r50");
+  for (const DenseCandidate& c : v) {
+    const HeldOutFigures h = ScoreOn(scenes, caches, 0, int(scenes.size()), c, have_fs);
+    std::printf("%-52s %8.3f %8.3f %8.3f %8.3f %8.3f %7.3f %7.3f\n", c.name.c_str(), h.r100, h.r50, h.ause, h.f100,
+                h.f50, h.r100 / h.f100, h.r50 / h.f50);
+    std::fflush(stdout);
+  }
+}
+
+// The shipped default beside the previous one (no outlier rejection) on the scenes given, with
+// focus-stack's figures: per scene and the mean, RMSE at 100 % and 50 % (each method's own most
+// confident half; focus-stack on our half), AUSE, the dense step's seconds per scene.
+void RunCompare(std::vector<Scene>& scenes, std::vector<Cache>& caches, bool have_fs) {
+  DenseCandidate shipped{"dense default (DenseDepthOptions{})", true, {}, true, true};
+  DenseCandidate previous{"previous default (no rejection, no radius)", true, {}, true, true};
+  previous.dense_options.reject_scale = 0.0;
+  previous.rank_radius = 0;
+  DenseCandidate with_radius{"rejection + rank radius 8 (not shipped)", true, {}, true, true};
+  with_radius.rank_radius = 8;
+  std::printf("\nSeeds %u..%u: RMSE [frames] at 100 %% and 50 %% coverage (each method's own most confident half; "
+              "focus-stack on the same pixels as the row's), AUSE over 5..100 %%; per scene: RMSE100 / RMSE50 "
+              "(focus-stack's)\n",
+              unsigned(scenes.front().seed), unsigned(scenes.back().seed));
+  for (const DenseCandidate* c : {&previous, &with_radius, &shipped}) {
+    std::printf("%s per scene:", c->name.c_str());
+    for (size_t k = 0; k < scenes.size(); ++k) {
+      const HeldOutFigures h = ScoreOn(scenes, caches, int(k), int(k) + 1, *c, have_fs);
+      std::printf("%s %u %.2f/%.2f (%.2f/%.2f)", k ? ";" : "", unsigned(scenes[k].seed), h.r100, h.r50, h.f100, h.f50);
+    }
+    std::printf("\n");
+  }
+  std::printf("%-40s %8s %8s %8s %8s %8s %7s %7s %8s\n", "method", "RMSE100", "RMSE50", "AUSE", "FS100", "FS50same",
+              "r100", "r50", "dense s");
+  for (const DenseCandidate* c : {&previous, &with_radius, &shipped}) {
+    const HeldOutFigures h = ScoreOn(scenes, caches, 0, int(scenes.size()), *c, have_fs);
+    std::printf("%-40s %8.3f %8.3f %8.3f %8.3f %8.3f %6.2fx %6.2fx %8.3f\n", c->name.c_str(), h.r100, h.r50, h.ause,
+                h.f100, h.f50, h.r100 / h.f100, h.r50 / h.f50, h.seconds);
+    std::printf("  sparsification (coverage 10..100 %% step 10):");
+    for (int j = 1; j < kSparseSteps; j += 2) std::printf(" %.3f", h.curve[size_t(j)]);
+    std::printf("\n");
+  }
+}
+
 }  // namespace
 
 int RunNaturalEvaluation(int argc, char** argv) {
@@ -720,7 +1111,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
   cv::Size size(256, 256);
   uint32_t seed = 1;
   std::string fs_flag, keep;
-  bool timing = false, quick = false;
+  bool timing = false, quick = false, diagnose = false, experiments = false, propagation = false, compare = false;
   int held_out_tuning = 0;  // > 0: only the held-out evaluation, scenes [0, K) tuning, the rest held out
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -740,10 +1131,18 @@ int RunNaturalEvaluation(int argc, char** argv) {
       quick = true;
     else if (a == "--held-out" && v)
       held_out_tuning = std::atoi(argv[++i]);
+    else if (a == "--diagnose")
+      diagnose = true;
+    else if (a == "--experiments")
+      experiments = true;
+    else if (a == "--propagation")
+      propagation = true;
+    else if (a == "--compare")
+      compare = true;
     else {
       std::fprintf(stderr,
                    "usage: natural-evaluate [--scenes N] [--size WxH] [--seed S] "
-                   "[--focus-stack PATH|none] [--keep DIR] [--timing] [--held-out K [--quick]]\n");
+                   "[--focus-stack PATH|none] [--keep DIR] [--timing] [--held-out K [--quick]] [--diagnose] [--propagation] [--experiments] [--compare]\n");
       return 2;
     }
   }
@@ -765,6 +1164,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
     const auto t0 = Clock::now();
     scenes.push_back(MakeScene(o, root / ("scene_" + std::to_string(o.seed))));
     Scene& s = scenes.back();
+    s.seed = o.seed;
     std::printf("scene %u: %d frames, %s (render %.1f s", o.seed, o.frames, s.truth.description.c_str(), Seconds(t0));
     if (!fs_exe.empty()) {
       s.fs_depth = RunFocusStack(fs_exe, s, &s.fs_seconds);
@@ -776,6 +1176,19 @@ int RunNaturalEvaluation(int argc, char** argv) {
   std::vector<Cache> caches(scenes.size());
   const bool have_fs =
       !fs_exe.empty() && std::all_of(scenes.begin(), scenes.end(), [](const Scene& s) { return !s.fs_depth.empty(); });
+  if (diagnose || experiments || propagation || compare) {
+    // Every scene given (choose the seeds: tuning ones for experiments).
+    if (diagnose) DiagnoseScenes(scenes, caches, 0, int(scenes.size()), DenseCandidate{"dense default (DenseDepthOptions{})", true, {}, true, true}, have_fs);
+    if (propagation) DiagnosePropagation(scenes, caches, 0, int(scenes.size()));
+    if (experiments) RunExperiments(scenes, caches, have_fs);
+    if (compare) RunCompare(scenes, caches, have_fs);
+    if (compare && timing) TimeDense(scenes[0]);
+    if (keep.empty()) {
+      std::error_code ec;
+      fs::remove_all(root, ec);
+    }
+    return 0;
+  }
   if (held_out_tuning > 0) {
     if (held_out_tuning >= n_scenes + (quick ? 1 : 0)) {
       std::fprintf(stderr, "--held-out K needs K < --scenes\n");

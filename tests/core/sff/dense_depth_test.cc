@@ -197,6 +197,7 @@ TEST(DenseDepthTest, RobustFitRejectsOutliers) {
   DenseDepthOptions o = Local();
   o.local_planes = true;
   o.robust_iterations = 0;
+  o.reject_scale = 0.0;  // no outlier test at all
   auto plain = DensifyDepthWithSupport(depth, cv::Mat(), guide, o);
   o.robust_iterations = 3;
   auto robust = DensifyDepthWithSupport(depth, cv::Mat(), guide, o);
@@ -223,6 +224,82 @@ TEST(DenseDepthTest, RobustFitRejectsOutliers) {
   EXPECT_LT(robust->support.at<float>(32, 32), robust->support.at<float>(2, 2));
 }
 
+// The default outlier test (reject_scale 12, no reweighting): on a plane with 0.5 um noise, 2 %
+// of the measured pixels 30 um off (a wrong peak, as a flat pixel next to texture gets) are
+// replaced by the fit and counted as inferred; the noisy but right ones stay measured. Through
+// the post-processing the rejected pixels rank below min_confidence and below the unmeasured
+// pixels amid measurements (their rank is the support times their agreement with the fit).
+TEST(DenseDepthTest, DefaultRejectsGrossOutliersWithoutReweighting) {
+  const cv::Size size(96, 64);
+  cv::Mat depth(size, CV_32FC1), truth(size, CV_32FC1), noise(size, CV_32FC1);
+  cv::RNG rng(7);
+  rng.fill(noise, cv::RNG::NORMAL, 0.0, 0.5);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      truth.at<float>(y, x) = 50.f + 0.2f * x + 0.1f * y;
+      depth.at<float>(y, x) = truth.at<float>(y, x) + noise.at<float>(y, x);
+    }
+  cv::Mat is_outlier(size, CV_8UC1, cv::Scalar(0));
+  int outliers = 0;
+  for (int y = 3; y < size.height; y += 7)
+    for (int x = (y * 3) % 7; x < size.width; x += 7) {
+      depth.at<float>(y, x) += 30.f;
+      is_outlier.at<uint8_t>(y, x) = 255;
+      ++outliers;
+    }
+  const cv::Rect hole(40, 20, 12, 12);
+  depth(hole).setTo(kNan);
+  is_outlier(hole).setTo(0);
+  outliers = cv::countNonZero(is_outlier);
+  cv::Mat guide(size, CV_8UC1, cv::Scalar(90));
+  const DenseDepthOptions o;
+  ASSERT_EQ(o.reject_scale, 12.0);
+  ASSERT_EQ(o.robust_iterations, 0);
+  auto d = DensifyDepthWithSupport(depth, cv::Mat(), guide, o);
+  ASSERT_TRUE(d.ok()) << d.status().ToString();
+  int rejected_outliers = 0, rejected_good = 0;
+  double max_err = 0;
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      const bool in_hole = hole.contains(cv::Point(x, y));
+      if (!in_hole && d->inferred.at<uint8_t>(y, x)) {
+        if (is_outlier.at<uint8_t>(y, x)) ++rejected_outliers;
+        else ++rejected_good;
+      }
+      if (is_outlier.at<uint8_t>(y, x))
+        max_err = std::max(max_err, double(std::abs(d->depth_um.at<float>(y, x) - truth.at<float>(y, x))));
+    }
+  EXPECT_GE(rejected_outliers, int(0.95 * outliers));
+  EXPECT_LT(rejected_good, int(0.01 * size.area()));
+  EXPECT_LT(max_err, 6.0);  // the fit, pulled a little by the other outliers (2 % at +30 um)
+  // A right measurement stays exactly as measured.
+  EXPECT_EQ(d->depth_um.at<float>(0, 0), depth.at<float>(0, 0));
+
+  DepthResult raw;
+  raw.depth_um = depth.clone();
+  raw.depth_um(hole).setTo(60.f);
+  raw.confidence = cv::Mat(size, CV_32FC1, cv::Scalar(0.9f));
+  raw.confidence(hole).setTo(0.1f);
+  raw.all_in_focus = guide;
+  raw.frame_count = 30;
+  std::vector<double> z;
+  for (int k = 0; k < 30; ++k) z.push_back(40.0 + 2.0 * k);
+  DepthPostProcessOptions po;
+  po.consistency = false;
+  po.dense = true;
+  auto r = PostProcessDepth(raw, z, 7, po);
+  ASSERT_TRUE(r.ok()) << r.status().ToString();
+  int ranked_below = 0, ranked = 0;
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x)
+      if (is_outlier.at<uint8_t>(y, x) && r->confidence.at<float>(y, x) < 0.4f) {
+        ++ranked;
+        ranked_below += r->confidence.at<float>(y, x) < r->confidence.at<float>(hole.y, hole.x);
+      }
+  EXPECT_GE(ranked, int(0.95 * outliers));
+  EXPECT_GE(ranked_below, int(0.95 * ranked));
+}
+
 TEST(DenseDepthTest, RejectsBadInputNamingIt) {
   cv::Mat depth(10, 10, CV_32FC1, cv::Scalar(1.f)), guide(10, 10, CV_8UC1, cv::Scalar(0));
   DenseDepthOptions bad;
@@ -235,6 +312,10 @@ TEST(DenseDepthTest, RejectsBadInputNamingIt) {
   auto rr = DensifyDepth(depth, cv::Mat(), guide, bad_robust);
   ASSERT_FALSE(rr.ok());
   EXPECT_NE(rr.status().ToString().find("dense.robust_iterations"), std::string::npos);
+  DenseDepthOptions bad_reject;
+  bad_reject.reject_scale = -1;
+  EXPECT_NE(DensifyDepth(depth, cv::Mat(), guide, bad_reject).status().ToString().find("dense.reject_scale"),
+            std::string::npos);
   DenseDepthOptions bad_ridge;
   bad_ridge.plane_ridge_px = -1;
   EXPECT_NE(DensifyDepth(depth, cv::Mat(), guide, bad_ridge).status().ToString().find("dense.plane_ridge_px"),
@@ -282,6 +363,16 @@ TEST(DenseDepthTest, PostProcessDenseMarksInferredByConfidence) {
   // the fit.
   EXPECT_GT(r->confidence.at<float>(15, 15), 0.3f);
   EXPECT_LT(r->confidence.at<float>(15, 15), 0.4f);
+  // With the local factor (dense_rank_radius_px 8, off by default): also x the square root of
+  // the measured share within 8 px (at the hole's centre 189 / 289 of the 17 x 17 box); the
+  // hole's corner, nearer the measurements, ranks above its centre.
+  DepthPostProcessOptions with_radius = o;
+  with_radius.dense_rank_radius_px = 8;
+  auto wr = PostProcessDepth(raw, z, 7, with_radius);
+  ASSERT_TRUE(wr.ok());
+  EXPECT_NEAR(wr->confidence.at<float>(15, 15), r->confidence.at<float>(15, 15) * std::sqrt(189.f / 289.f), 1e-4f);
+  EXPECT_GT(wr->confidence.at<float>(10, 10), wr->confidence.at<float>(15, 15));
+  EXPECT_LT(wr->confidence.at<float>(10, 10), 0.4f);
   EXPECT_GE(r->confidence.at<float>(0, 0), 0.4f);
   EXPECT_LE(r->confidence.at<float>(0, 0), 0.9f);
   // dense_confidence off: the engine's confidence as it was.
