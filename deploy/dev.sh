@@ -78,9 +78,18 @@ install_missing() {  # packages...: installs those not yet installed
   fi
 }
 
+# ccache keys without the checkout's path: CCACHE_BASEDIR makes the paths relative, and
+# CCACHE_NOHASHDIR leaves the working directory out of the key (with -g1 ccache hashes it by
+# default), so a second checkout, a worktree, CI's fresh clone and the image build
+# (deploy/Containerfile) reuse each other's objects. The debug info then names the directory of
+# whichever build compiled the object first; nothing reads it.
+ccache_env() {
+  export CCACHE_BASEDIR="$here" CCACHE_NOHASHDIR=1
+}
+
 configure_and_build() {  # dir, extra cmake args...
   local dir="$1"; shift
-  export CCACHE_BASEDIR="$here"
+  ccache_env
   cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG" "$@" >"$dir.configure.log" 2>&1 ||
     { cat "$dir.configure.log"; exit 1; }
   cmake --build "$dir" -j "$jobs"
@@ -92,7 +101,7 @@ demo() {
   # saves 2 of the 145 objects but changes a public definition, and then no object of the demo
   # build would be a ccache hit for `deploy/dev.sh test`.
   local dir="$build-demo"
-  export CCACHE_BASEDIR="$here"
+  ccache_env
   cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG" \
     -DINSPECT_BUILD_TESTS=OFF -DINSPECT_BUILD_BENCH=OFF >"$dir.configure.log" 2>&1 ||
     { cat "$dir.configure.log"; exit 1; }

@@ -20,7 +20,7 @@ max_kb="${FUZZ_CORPUS_MAX_KB:-256}"
 build="${FUZZ_BUILD_DIR:-build-fuzz}"
 targets=(fuzz_stack_manifest fuzz_png_frame_decode fuzz_rig_config fuzz_access_policy fuzz_request_validators fuzz_recipe_document)
 
-export CCACHE_BASEDIR="$here"
+export CCACHE_BASEDIR="$here" CCACHE_NOHASHDIR=1  # as deploy/dev.sh: keys without the checkout's path
 CC=clang-15 CXX=clang++-15 cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DINSPECT_FUZZ=ON -DINSPECT_BUILD_BENCH=OFF \
   >"$build.configure.log" 2>&1 || { cat "$build.configure.log"; exit 1; }
