@@ -31,6 +31,16 @@ StatusOr<FrameAlignment> ParseFrameAlignment(const std::string& name);
 // by ~5e-5 in scale per pair, and those errors are correlated).
 inline constexpr double kNegligibleAlignmentPx = 0.5;
 
+// An imported stack's default (no --alignment) leaves a stack whose measured motion moves no frame
+// corner by this much as captured, and says so (AlignmentFigures::decision). Measured on the lens
+// renderer's stacks (chain-evaluate moving, tuning seeds 8100-8105, 800x600 and 1600x1200):
+// warping with the TRUE transforms changed the depth error by no more than +-1 % up to 1 px of
+// corner motion (on the pixels both results measure), and improved every stack from 1.5 px of
+// shift on; a pure scale change was still neutral at 1.6 px (docs/alignment.md). Below this a warp
+// gains nothing measurable, and a false one (a still stack's defocus read as motion) costs a
+// misplaced depth map and several times the engine's time.
+inline constexpr double kImportedWarpPaysPx = 1.5;
+
 // The camera grid at stage z relative to the grid at reference_z_um (where it is the identity):
 //   p_z = c + s(z) R(theta(z)) (p_ref - c) + d(z),
 //   s(z) = 1 + scale_change_per_100um * (z - z_ref) / 100, theta(z) = rotation_rad_per_100um *

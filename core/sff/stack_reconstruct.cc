@@ -1,6 +1,8 @@
 // The stack folder -> SFF engine loop (core/sff/stack_reconstruct.h): decode, push, report, per frame.
 #include "core/sff/stack_reconstruct.h"
 
+#include <algorithm>
+#include <cstdio>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -23,6 +25,17 @@ namespace {
 // Rows per band of a colour frame's focus score (the composer's; the engine has its own).
 constexpr int kScoreBandRows = 256;
 
+// Why a stack whose motion is significant (and not negligible) is still used as captured: it moves
+// no corner by the imported default's floor (kImportedWarpPaysPx), below which a warp does not pay.
+std::string BelowTheFloor(double corner_px, double statistic, double threshold, double floor_px) {
+  char text[256];
+  std::snprintf(text, sizeof text,
+                "the frames move (still statistic %.2f > %.2f) but by %.2f px at most at the corners, below the %.2g px "
+                "where a warp starts to pay in depth accuracy; used as captured",
+                statistic, threshold, corner_px, floor_px);
+  return text;
+}
+
 // The aligner for the folder's frames, or nullopt when the frames are used as they are.
 StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& source, const StackManifest& manifest,
                                                        const StackFolderAlignment& a, const std::atomic<bool>& cancel,
@@ -32,6 +45,7 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
   for (const StackFrame& f : manifest.frames) z_um.push_back(f.z_um);
   FocusBreathingModel model;
   StackAlignmentOptions estimate_options = a.options;
+  bool imported_default = false;  // an imported stack's default: the floor is a.imported_default_min_motion_px
   switch (a.alignment) {
     case FrameAlignment::kNone:
       return std::optional<StackAligner>();
@@ -62,7 +76,8 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
       const bool imported = a.chain_for_imported_stacks && manifest.illumination.empty();
       // An imported stack's default holds the linear estimate to the chain's floor: below it a
       // warp loses more depth accuracy in resampling than the motion does (docs/alignment.md).
-      if (imported && a.fall_back_to_none) estimate_options.min_motion_px = a.chain.min_motion_px;
+      imported_default = imported && a.fall_back_to_none;
+      if (imported_default) estimate_options.min_motion_px = a.imported_default_min_motion_px;
       std::string decision;
       if (!imported || a.fall_back_to_none) {
         StatusOr<FocusBreathingModel> estimate = EstimateFocusBreathing(load, z_um, estimate_options);
@@ -100,6 +115,7 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
       // estimate) register in runs concurrently.
       ChainRegistrationOptions chain_options = a.chain;
       if (a.options.threads != 1) chain_options.threads = a.options.threads;
+      if (imported_default) chain_options.min_motion_px = std::max(chain_options.min_motion_px, a.imported_default_min_motion_px);
       StatusOr<ChainRegistration> chain = RegisterChain(load, int(z_um.size()), chain_options, &registered_pairs);
       if (!chain.ok()) {
         // The default (not an explicit request) reconstructs unaligned only when no pair
@@ -121,6 +137,12 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
         *figures = aligner.figures();
         figures->method = "chain";
         figures->decision = decision;
+        if (imported_default && chain->still && chain->still_statistic > chain->still_threshold &&
+            chain->max_corner_displacement_px >= kNegligibleAlignmentPx) {
+          const std::string why = BelowTheFloor(chain->max_corner_displacement_px, chain->still_statistic,
+                                                chain->still_threshold, chain_options.min_motion_px);
+          figures->decision = decision.empty() ? why : decision + "; " + why;
+        }
         figures->still_statistic = chain->still_statistic;
         figures->still_threshold = chain->still_threshold;
         figures->max_corner_displacement_px = chain->max_corner_displacement_px;
@@ -131,7 +153,16 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
   INSPECT_ASSIGN_OR_RETURN(cv::Mat first, source.grey(0));
   INSPECT_ASSIGN_OR_RETURN(StackAligner aligner,
                            StackAligner::Create(model, a.alignment, z_um, first.size(), estimate_options.min_motion_px));
-  if (figures) *figures = aligner.figures();
+  if (figures) {
+    *figures = aligner.figures();
+    // Said where the motion is significant and not negligible (kNegligibleAlignmentPx, a rig's
+    // floor): a stack the old 0.5 px floor would have warped.
+    if (imported_default && !aligner.warps() && model.still_threshold > 0 && model.still_statistic > model.still_threshold &&
+        MaxCornerDisplacementPx(model, z_um) >= kNegligibleAlignmentPx) {
+      figures->decision = BelowTheFloor(MaxCornerDisplacementPx(model, z_um), model.still_statistic,
+                                        model.still_threshold, estimate_options.min_motion_px);
+    }
+  }
   return std::optional<StackAligner>(std::move(aligner));
 }
 

@@ -47,6 +47,13 @@ struct StackFolderAlignment {
   // decides most still stacks at a fraction of the chain's cost; where that model does not fit
   // (a focus rail) the chain registers it, and figures->decision says so.
   bool chain_for_imported_stacks = true;
+  // With fall_back_to_none (the default) on an imported stack: the still floor of the linear
+  // estimate and of the chain. A stack whose measured motion moves no frame corner by this much
+  // is left as captured, and figures->decision names the motion and the floor when the motion
+  // was significant (kImportedWarpPaysPx: below it a warp does not pay in depth accuracy). A rig's
+  // scan keeps options.min_motion_px (kNegligibleAlignmentPx); an explicit request keeps the
+  // chain's own floor (chain.min_motion_px).
+  double imported_default_min_motion_px = kImportedWarpPaysPx;
 };
 
 // manifest: as read by ReadStackManifest(dir). on_frame may be empty. cancel is polled before

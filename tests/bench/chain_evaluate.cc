@@ -335,13 +335,24 @@ void DecideAsTheDefault(const std::vector<cv::Mat>& frames, const Motion& m, Tal
   }
   const bool warped = figures.alignment != FrameAlignment::kNone && !figures.still;
   if (warped) ++t->moving;
-  if (!figures.decision.empty()) ++t->chained;
+  if (figures.method == "chain") ++t->chained;
   if (warped && !m.any()) {
     std::printf("  %s seed %u (%zu frames): still stack warped by the default (method %s%s): scale %.3f %%, shift "
                 "%.2f px, corner %.2f px\n",
                 name, seed, frames.size(), figures.method.c_str(), figures.decision.empty() ? "" : ", after the linear model",
                 figures.max_scale_change_percent, figures.max_shift_px, figures.max_corner_displacement_px);
+    if (!figures.frame_from_reference.empty()) {  // the ends of the stack: what the model moves
+      const cv::Point2d c((frames[0].cols - 1) * 0.5, (frames[0].rows - 1) * 0.5);
+      const SimilarityTransform first = SimilarityOf(figures.frame_from_reference.front(), c),
+                                last = SimilarityOf(figures.frame_from_reference.back(), c);
+      std::printf("    statistic %.2f threshold %.2f; first frame scale %+.4f %% rotation %+.3f mrad shift %+.2f %+.2f px; "
+                  "last frame scale %+.4f %% rotation %+.3f mrad shift %+.2f %+.2f px\n",
+                  figures.still_statistic, figures.still_threshold, 100 * (first.scale - 1), 1e3 * first.rotation_rad,
+                  first.shift_x_px, first.shift_y_px, 100 * (last.scale - 1), 1e3 * last.rotation_rad, last.shift_x_px,
+                  last.shift_y_px);
+    }
   }
+  if (!warped && !figures.decision.empty() && std::getenv("CHAIN_VERBOSE")) std::printf("    why: %s\n", figures.decision.c_str());
   if (!warped && m.any()) {
     std::printf("  %s seed %u (%zu frames): moving stack not warped by the default (%s%s)\n", name, seed,
                 frames.size(), figures.still ? "still" : "none", figures.fallback_reason.empty() ? "" : ": fell back");
@@ -550,6 +561,8 @@ int Moving(int count, unsigned seed_base) {
   std::fflush(stdout);
   std::vector<double> all_scale, all_centre, all_corner, ratios;
   std::vector<double> seed_scale, seed_centre, seed_corner;
+  std::vector<double> oracle_over_none, true_corners;  // oracle over none on the same pixels
+  double sum_bc = 0, sum_c_same = 0, sum_abs_b = 0, sum_abs_c = 0;
   double sum_a = 0, sum_b = 0, sum_c = 0;
   int failed = 0, within = 0, ratio_ok = 0;
   for (int s = 0; s < count; ++s) {
@@ -598,10 +611,6 @@ int Moving(int count, unsigned seed_base) {
     estimate.chain_for_imported_stacks = true;
     estimate.options.threads = 0;  // frames in memory, as the server's decoded path
     estimate.chain = ChainOptionsFromEnvironment();
-    AlignmentFigures figures;
-    const auto t0 = std::chrono::steady_clock::now();
-    StatusOr<DepthResult> a = finish(ReconstructStackFrames(manifest, plain, sff, {}, cancel, estimate, &figures));
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     // (b) the oracle: the true transforms through the same aligner, engine and post-processing.
     StatusOr<StackAligner> truth = StackAligner::FromTransforms(stack.frame_from_reference, (n - 1) / 2,
                                                                 FrameAlignment::kEstimate, size, true);
@@ -611,6 +620,15 @@ int Moving(int count, unsigned seed_base) {
     StatusOr<DepthResult> b_raw = ReconstructStackFrames(manifest, warped, sff, {}, cancel, {}, nullptr);
     if (b_raw.ok()) MaskUnseenPixels(*truth, &*b_raw);
     StatusOr<DepthResult> b = finish(std::move(b_raw));
+    // CHAIN_MOVING_ORACLE_ONLY=1: the oracle against none only (where warping starts to pay); the
+    // product's columns then repeat the oracle's.
+    AlignmentFigures figures;
+    const bool oracle_only = std::getenv("CHAIN_MOVING_ORACLE_ONLY") != nullptr;
+    const auto t0 = std::chrono::steady_clock::now();
+    StatusOr<DepthResult> a =
+        oracle_only ? b : finish(ReconstructStackFrames(manifest, plain, sff, {}, cancel, estimate, &figures));
+    if (oracle_only) figures.frame_from_reference = stack.frame_from_reference;
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     // (c) no alignment.
     StatusOr<DepthResult> c = finish(ReconstructStackFrames(manifest, plain, sff, {}, cancel, {}, nullptr));
     if (!a.ok() || !b.ok() || !c.ok()) {
@@ -622,6 +640,10 @@ int Moving(int count, unsigned seed_base) {
       continue;
     }
     TransformError worst;
+    // The motion itself: the true transforms' largest corner displacement from the middle frame.
+    double true_corner_px = 0;
+    for (int i = 0; i < n; ++i)
+      true_corner_px = std::max(true_corner_px, ErrorOf(cv::Matx23d(1, 0, 0, 0, 1, 0), stack.frame_from_reference[size_t(i)], size).corner_px);
     for (int i = 0; i < n; ++i) {
       const cv::Matx23d est = figures.frame_from_reference.empty() ? cv::Matx23d(1, 0, 0, 0, 1, 0)
                                                                    : figures.frame_from_reference[size_t(i)];
@@ -636,12 +658,24 @@ int Moving(int count, unsigned seed_base) {
     // Pixels the true transforms say every frame saw, with a depth in the chain's and the
     // oracle's results (and, for none, in its result too: none leaves more pixels unmeasured).
     double se_a = 0, se_b = 0, se_c = 0;
+    // The oracle and none on the same pixels (both have a depth): RMSE and mean |error|.
+    double se_bc = 0, ae_bc = 0, ae_c = 0;
     long pixels = 0, pixels_c = 0;
     const cv::Mat& seen = truth->seen_by_every_frame();
+    // CHAIN_MOVING_MARGIN=<px>: only pixels at least this far from the seen region's edge (all three).
+    cv::Mat inner = seen;
+    if (const char* e = std::getenv("CHAIN_MOVING_MARGIN")) {
+      const int r = std::atoi(e);
+      cv::Mat padded;
+      cv::copyMakeBorder(seen, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+      cv::erode(padded, padded, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * r + 1, 2 * r + 1)),
+                cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+      inner = padded(cv::Rect(1, 1, size.width, size.height)).clone();
+    }
     for (int y = 0; y < size.height; ++y) {
       const float *da = a->depth_um.ptr<float>(y), *db = b->depth_um.ptr<float>(y), *dc = c->depth_um.ptr<float>(y),
                   *dt = stack.depth_reference.ptr<float>(y);
-      const uchar* m = seen.ptr<uchar>(y);
+      const uchar* m = inner.ptr<uchar>(y);
       for (int x = 0; x < size.width; ++x) {
         if (!m[x] || !std::isfinite(da[x]) || !std::isfinite(db[x])) continue;
         se_a += double(da[x] - dt[x]) * (da[x] - dt[x]);
@@ -649,6 +683,9 @@ int Moving(int count, unsigned seed_base) {
         ++pixels;
         if (!std::isfinite(dc[x])) continue;
         se_c += double(dc[x] - dt[x]) * (dc[x] - dt[x]);
+        se_bc += double(db[x] - dt[x]) * (db[x] - dt[x]);
+        ae_bc += std::abs(double(db[x] - dt[x]));
+        ae_c += std::abs(double(dc[x] - dt[x]));
         ++pixels_c;
       }
     }
@@ -656,6 +693,13 @@ int Moving(int count, unsigned seed_base) {
                  rc = std::sqrt(se_c / std::max(1L, pixels_c));
     sum_a += ra, sum_b += rb, sum_c += rc;
     ratios.push_back(ra / rb);
+    const double rbc = std::sqrt(se_bc / std::max(1L, pixels_c));
+    oracle_over_none.push_back(rbc / rc);
+    sum_bc += rbc, sum_c_same += rc, sum_abs_b += ae_bc / std::max(1L, pixels_c), sum_abs_c += ae_c / std::max(1L, pixels_c);
+    true_corners.push_back(true_corner_px);
+    std::printf("  seed %u: true corner motion %.3f px, on the same pixels oracle %.4f none %.4f (RMSE), %.4f %.4f (mean |error|), "
+                "product %s\n", seed, true_corner_px, rbc, rc, ae_bc / std::max(1L, pixels_c), ae_c / std::max(1L, pixels_c),
+                oracle_only ? "not run" : figures.still ? "still" : figures.alignment == FrameAlignment::kNone ? "none" : "warped");
     if (ra / rb <= 1.10) ++ratio_ok;
     std::printf("| %u | %d | %.1f | %.0f | %+.1f | %.3f | %.2f | %.2f | %.3f | %.3f | %.3f | %.3f | %.1f / %.1f | %.1f |\n",
                 seed, n, 100 * o.scale_total, shift, 1e3 * o.rotation_total_rad, worst.scale_percent, worst.centre_px,
@@ -690,6 +734,12 @@ int Moving(int count, unsigned seed_base) {
               "<= 1.10: %d/%d\n",
               sum_a / std::max(1, done), sum_b / std::max(1, done), sum_c / std::max(1, done), Percentile(ratios, 1),
               Percentile(ratios, 0.5), ratio_ok, done);
+  std::printf("on the same pixels (oracle and none both have a depth), mean over stacks: RMSE oracle %.4f none %.4f, "
+              "mean |error| oracle %.4f none %.4f; oracle/none RMSE median %.3f min %.3f max %.3f; true corner motion px "
+              "median %.3f max %.3f\n",
+              sum_bc / std::max(1, done), sum_c_same / std::max(1, done), sum_abs_b / std::max(1, done),
+              sum_abs_c / std::max(1, done), Percentile(oracle_over_none, 0.5), Percentile(oracle_over_none, 0),
+              Percentile(oracle_over_none, 1), Percentile(true_corners, 0.5), Percentile(true_corners, 1));
   return 0;
 }
 

@@ -5,7 +5,10 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
+#include <cstdlib>
+#include <string>
 #include <opencv2/imgproc.hpp>
 #include <random>
 
@@ -289,8 +292,8 @@ TEST(StackAlignmentTest, RatesThatReverseThroughTheStackAreNotBreathing) {
 }
 
 // The still floor is the caller's: a model moving the corners by 0.75 px warps a rig's scan
-// (kNegligibleAlignmentPx, 0.5 px) and leaves an imported stack's default as captured (the
-// chain's 1 px); a negative floor is an invalid argument.
+// (kNegligibleAlignmentPx, 0.5 px) and leaves an imported stack's default as captured
+// (kImportedWarpPaysPx, 1.5 px); a negative floor is an invalid argument.
 TEST(StackAlignmentTest, TheStillFloorIsTheCallers) {
   FocusBreathingModel m;
   m.frame_size = cv::Size(400, 300);
@@ -300,7 +303,8 @@ TEST(StackAlignmentTest, TheStillFloorIsTheCallers) {
   auto rig = StackAligner::Create(m, FrameAlignment::kEstimate, z_um, m.frame_size);
   ASSERT_TRUE(rig.ok());
   EXPECT_TRUE(rig->warps());
-  auto imported = StackAligner::Create(m, FrameAlignment::kEstimate, z_um, m.frame_size, 1.0);
+  EXPECT_EQ(kImportedWarpPaysPx, 1.5);
+  auto imported = StackAligner::Create(m, FrameAlignment::kEstimate, z_um, m.frame_size, kImportedWarpPaysPx);
   ASSERT_TRUE(imported.ok());
   EXPECT_FALSE(imported->warps());
   EXPECT_TRUE(imported->figures().still);
@@ -308,6 +312,64 @@ TEST(StackAlignmentTest, TheStillFloorIsTheCallers) {
   const Status bad = StackAligner::Create(m, FrameAlignment::kEstimate, z_um, m.frame_size, -1.0).status();
   EXPECT_EQ(bad.code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(bad.message(), "min_motion_px must be >= 0");
+}
+
+// An imported stack's default (no --alignment, stack.json without illumination) leaves a stack
+// whose significant motion moves no corner by kImportedWarpPaysPx (1.5 px) as captured, and says
+// so with the figures; one moving more is warped with its transforms recovered. A rig's scan of
+// the slowly moving stack keeps the 0.5 px floor and is warped.
+TEST(StackAlignmentTest, ImportedDefaultLeavesMotionBelowTheWarpFloorAsCapturedAndSaysSo) {
+  const cv::Size size(480, 360);
+  const std::atomic<bool> cancel{false};
+  struct Case {
+    const char* name;
+    double dx_per_100um, dy_per_100um;  // 13 frames 10 um apart: the ends are 60 um from the middle
+    const char* illumination;
+  };
+  for (const Case& c : {Case{"imported, 1.1 px", 1.8333, 0.0, ""}, Case{"imported, 3.4 px", 5.0, -2.5, ""},
+                        Case{"rig scan, 1.1 px", 1.8333, 0.0, "STD"}}) {
+    SCOPED_TRACE(c.name);
+    const BreathingStack s = MakeStack(size, 13, 10.0, 0.0, 0.0, c.dx_per_100um, c.dy_per_100um);
+    const double corner_px = 0.6 * std::hypot(c.dx_per_100um, c.dy_per_100um);
+    StackManifest manifest;
+    manifest.illumination = c.illumination;
+    for (size_t i = 0; i < s.frames.size(); ++i) manifest.frames.push_back({"f" + std::to_string(i), s.z_um[i], 0.0, ""});
+    StackFrameSource source;
+    source.frame = [&](int i) -> StatusOr<cv::Mat> { return s.frames[size_t(i)]; };
+    StackFolderAlignment a;
+    a.alignment = FrameAlignment::kEstimate;
+    a.fall_back_to_none = true;  // the default
+    AlignmentFigures f;
+    auto r = ReconstructStackFrames(manifest, source, SffOptions{}, {}, cancel, a, &f);
+    ASSERT_TRUE(r.ok()) << r.status().ToString();
+    EXPECT_EQ(f.alignment, FrameAlignment::kEstimate);
+    EXPECT_EQ(f.method, "model");
+    EXPECT_GT(f.still_statistic, f.still_threshold);  // the motion is significant in every case
+    EXPECT_NEAR(f.max_corner_displacement_px, corner_px, 0.15);
+    ASSERT_EQ(f.frame_from_reference.size(), 13u);
+    if (std::string(c.name) == "imported, 1.1 px") {
+      EXPECT_TRUE(f.still);
+      EXPECT_DOUBLE_EQ(f.seen_by_every_frame_percent, 100.0);
+      // The still line's "why": the motion, its significance and the floor.
+      EXPECT_NE(f.decision.find("the frames move (still statistic "), std::string::npos) << f.decision;
+      EXPECT_NE(f.decision.find("px at most at the corners, below the 1.5 px where a warp starts to pay in depth "
+                                "accuracy; used as captured"),
+                std::string::npos)
+          << f.decision;
+      const double said = std::atof(f.decision.substr(f.decision.find(" but by ") + 8).c_str());
+      EXPECT_NEAR(said, corner_px, 0.15) << f.decision;
+      continue;
+    }
+    // Warped: every frame's transform within 0.25 px of the truth at the frame's corners.
+    EXPECT_FALSE(f.still);
+    EXPECT_TRUE(f.decision.empty()) << f.decision;
+    EXPECT_LT(f.seen_by_every_frame_percent, 100.0);
+    for (int i = 0; i < 13; ++i) {
+      const cv::Matx23d truth = s.truth.FrameFromReference(s.z_um[size_t(i)], s.z_um[6]);
+      for (cv::Vec3d p : {cv::Vec3d(0, 0, 1), cv::Vec3d(479, 0, 1), cv::Vec3d(0, 359, 1), cv::Vec3d(479, 359, 1)})
+        EXPECT_LT(cv::norm(f.frame_from_reference[size_t(i)] * p - truth * p), 0.25) << "frame " << i;
+    }
+  }
 }
 
 // a long stack registers a chain of frames `stride` apart (max_pairs); the model
