@@ -246,15 +246,22 @@ struct Smoother {
   }
 };
 
-// One weighted fit: fit = the model's value at every pixel, den = F(w).
+// One weighted fit: fit = the model's value at every pixel, den = F(w). spread (optional): the
+// weighted RMS residual of the measured depths the fit draws on about the model at the pixel,
+// sqrt(F(w (d - model)^2) / F(w)), from one more filtered moment, F(w d^2).
 void Fit(cv::ximgproc::FastGlobalSmootherFilter& fgs, const cv::Mat& centred, const cv::Mat& w, bool planes, double ridge, cv::Mat* fit,
-         cv::Mat* den) {
+         cv::Mat* den, cv::Mat* spread = nullptr) {
   const cv::Mat wd = centred.mul(w);  // 0 where unmeasured (w = 0, centred = 0)
   fgs.filter(w, *den);
-  cv::Mat num;
+  cv::Mat num, mdd;
   fgs.filter(wd, num);
+  if (spread) fgs.filter(wd.mul(centred), mdd);
   if (!planes) {
     *fit = num / cv::max(*den, 1e-30f);
+    if (spread) {
+      cv::Mat var = mdd / cv::max(*den, 1e-30f) - fit->mul(*fit);
+      cv::sqrt(cv::max(var, 0.f), *spread);
+    }
     return;
   }
   // Coordinates scaled to about [-1, 1] so that the float moments keep their precision.
@@ -280,17 +287,21 @@ void Fit(cv::ximgproc::FastGlobalSmootherFilter& fgs, const cv::Mat& centred, co
   fgs.filter(wd.mul(v), mdv);
   const double r2 = (ridge * scale) * (ridge * scale);
   fit->create(w.size(), CV_32FC1);
+  if (spread) spread->create(w.size(), CV_32FC1);
   cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range) {
     for (int y = range.start; y < range.end; ++y) {
       const float *m0 = den->ptr<float>(y), *m1 = num.ptr<float>(y), *a_u = mu.ptr<float>(y),
                   *a_v = mv.ptr<float>(y), *a_uu = muu.ptr<float>(y), *a_uv = muv.ptr<float>(y),
                   *a_vv = mvv.ptr<float>(y), *b_u = mdu.ptr<float>(y), *b_v = mdv.ptr<float>(y),
                   *pu = u.ptr<float>(y), *pv = v.ptr<float>(y);
+      const float* a_dd = spread ? mdd.ptr<float>(y) : nullptr;
       float* out = fit->ptr<float>(y);
+      float* sp = spread ? spread->ptr<float>(y) : nullptr;
       for (int x = 0; x < cols; ++x) {
         const double s0 = m0[x];
         if (!(s0 > 1e-30)) {
           out[x] = 0.f;
+          if (sp) sp[x] = 0.f;
           continue;
         }
         // Moments about the pixel itself: its depth is the plane's intercept.
@@ -305,10 +316,29 @@ void Fit(cv::ximgproc::FastGlobalSmootherFilter& fgs, const cv::Mat& centred, co
         const double det = s0 * c00 - su * c01 + sv * c02;
         if (!(std::abs(det) > 1e-12 * s0 * s0 * s0 * r2 * r2) || !std::isfinite(det)) {
           out[x] = float(b0 / s0);
+          if (sp) sp[x] = float(std::sqrt(std::max(a_dd[x] / s0 - (b0 / s0) * (b0 / s0), 0.0)));
           continue;
         }
         const double det_a = b0 * c00 - su * (bu * svv - suv * bv) + sv * (bu * suv - suu * bv);
         out[x] = float(det_a / det);
+        if (sp) {
+          // The residual about the best plane of the data, sum w (d - a - b u - c v)^2 at the
+          // least-squares (a, b, c) = S_dd - (a, b, c) . (b0, bu, bv): without the ridge, which
+          // shrinks the slope as a prior, not as data (with it a tilted plane would leave a
+          // residual), unless the moments alone are near singular (a strip of measurements).
+          const double quu = suu - r2 * s0, qvv = svv - r2 * s0;
+          const double e00 = quu * qvv - suv * suv, e01 = su * qvv - suv * sv, e02 = su * suv - quu * sv;
+          const double det0 = s0 * e00 - su * e01 + sv * e02;
+          const bool plain = std::abs(det0) > 1e-6 * std::abs(det) && std::isfinite(det0);
+          const double pu = plain ? quu : suu, pv = plain ? qvv : svv, d = plain ? det0 : det;
+          const double f00 = pu * pv - suv * suv, f01 = su * pv - suv * sv, f02 = su * suv - pu * sv;
+          const double a = (b0 * f00 - su * (bu * pv - suv * bv) + sv * (bu * suv - pu * bv)) / d;
+          const double b = (s0 * (bu * pv - suv * bv) - b0 * f01 + sv * (su * bv - bu * sv)) / d;
+          const double c = (s0 * (pu * bv - bu * suv) - su * (su * bv - bu * sv) + b0 * f02) / d;
+          const double ss = a_dd[x] - 2.0 * (a * b0 + b * bu + c * bv) + a * a * s0 + b * b * quu + c * c * qvv +
+                            2.0 * (a * b * su + a * c * sv + b * c * suv);
+          sp[x] = float(std::sqrt(std::max(ss / s0, 0.0)));
+        }
       }
     }
   });
@@ -400,6 +430,7 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
     out.inferred = cv::Mat(depth_um.size(), CV_8UC1, cv::Scalar(255));
     out.support = cv::Mat(depth_um.size(), CV_32FC1, cv::Scalar(0));
     out.agreement = out.support.clone();
+    out.spread_um = out.support.clone();
     return out;
   }
   const double lo_um = all.lo, hi_um = all.hi, mean_um = all.sum / double(all.n);
@@ -418,7 +449,7 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
 
   cv::Ptr<cv::ximgproc::FastGlobalSmootherFilter> fgs =
       cv::ximgproc::createFastGlobalSmootherFilter(guide_s, lambda, options.sigma_color);
-  cv::Mat fit, den;
+  cv::Mat fit, den, spread;
   // The Cauchy scale from the measured pixels' residuals to the fit: robust_scale x 1.4826 x
   // their median absolute value, at least 1e-3 of the measured depth range.
   auto CauchyScale = [&](double multiple) {
@@ -435,7 +466,8 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
     return std::max(multiple * sigma, 1e-3 * std::max(hi_um - lo_um, 1e-30));
   };
   for (int it = 0;; ++it) {
-    Fit(*fgs, centred, w, options.local_planes, ridge, &fit, &den);
+    Fit(*fgs, centred, w, options.local_planes, ridge, &fit, &den,
+        it == options.robust_iterations ? &spread : nullptr);
     if (it == options.robust_iterations) break;
     const double cauchy = CauchyScale(options.robust_scale);
     w = cv::Mat(w_init.size(), CV_32FC1);
@@ -500,12 +532,14 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
   out.inferred.create(depth_um.size(), CV_8UC1);
   out.support.create(depth_um.size(), CV_32FC1);
   out.agreement.create(depth_um.size(), CV_32FC1);
+  out.spread_um.create(depth_um.size(), CV_32FC1);
   // Joint bilateral upsampling (k > 1): the 2 x 2 solve-grid neighbours of a pixel, bilinear
   // weights times a Gaussian of the colour difference between the pixel's guide and the
   // neighbour's block mean, so that a pixel takes the fit of the side of an edge it belongs to.
-  // The four fields the final pass reads, interleaved: fit, edge-aware fit, support, reach.
+  // The five fields the final pass reads, interleaved: fit, edge-aware fit, support, reach, spread.
+  using Vec5f = cv::Vec<float, 5>;
   cv::Mat fields;
-  cv::merge(std::vector<cv::Mat>{fit, fit_edge, den, reach}, fields);
+  cv::merge(std::vector<cv::Mat>{fit, fit_edge, den, reach, spread}, fields);
   const int channels = guide8.channels();
   const double inv_two_s2 = 1.0 / (2.0 * options.upsample_sigma_color * options.upsample_sigma_color);
   float range_lut[511];  // the Gaussian of one channel's difference, -255..255
@@ -537,8 +571,9 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
       uint8_t* inf = out.inferred.ptr<uint8_t>(y);
       float* agree = out.agreement.ptr<float>(y);
       float* sup = out.support.ptr<float>(y);
+      float* spr = out.spread_um.ptr<float>(y);
       const Tap& ty = row_taps[size_t(y)];
-      const cv::Vec4f* fr[2] = {fields.ptr<cv::Vec4f>(k == 1 ? y : ty.i0), fields.ptr<cv::Vec4f>(k == 1 ? y : ty.i1)};
+      const Vec5f* fr[2] = {fields.ptr<Vec5f>(k == 1 ? y : ty.i0), fields.ptr<Vec5f>(k == 1 ? y : ty.i1)};
       const uint8_t* gr[2] = {guide_s.ptr<uint8_t>(k == 1 ? y : ty.i0), guide_s.ptr<uint8_t>(k == 1 ? y : ty.i1)};
       const float wy[2] = {ty.w0, ty.w1};
       bool row_unreached = false;
@@ -547,13 +582,13 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
         const bool kept = options.keep_measured && m;
         // f, fe, support, reach; a kept measurement needs only fe (agreement, outlier test)
         // and the support.
-        float f, fe, dn, rc;
+        float f, fe, dn, rc, sd;
         if (k == 1) {
-          const cv::Vec4f& v = fr[0][x];
-          f = v[0], fe = v[1], dn = v[2], rc = v[3];
+          const Vec5f& v = fr[0][x];
+          f = v[0], fe = v[1], dn = v[2], rc = v[3], sd = v[4];
         } else {
           const Tap& tx = col_taps[size_t(x)];
-          const cv::Vec4f* q[4] = {fr[0] + tx.i0, fr[0] + tx.i1, fr[1] + tx.i0, fr[1] + tx.i1};
+          const Vec5f* q[4] = {fr[0] + tx.i0, fr[0] + tx.i1, fr[1] + tx.i0, fr[1] + tx.i1};
           const uint8_t* gq[4] = {gr[0] + tx.i0 * channels, gr[0] + tx.i1 * channels, gr[1] + tx.i0 * channels,
                                   gr[1] + tx.i1 * channels};
           const float bl[4] = {wy[0] * tx.w0, wy[0] * tx.w1, wy[1] * tx.w0, wy[1] * tx.w1};
@@ -569,6 +604,7 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
           const float inv = 1.f / sw;
           fe = inv * (wt[0] * (*q[0])[1] + wt[1] * (*q[1])[1] + wt[2] * (*q[2])[1] + wt[3] * (*q[3])[1]);
           dn = inv * (wt[0] * (*q[0])[2] + wt[1] * (*q[1])[2] + wt[2] * (*q[2])[2] + wt[3] * (*q[3])[2]);
+          sd = inv * (wt[0] * (*q[0])[4] + wt[1] * (*q[1])[4] + wt[2] * (*q[2])[4] + wt[3] * (*q[3])[4]);
           if (kept && !reject) {
             f = fe;
             rc = dn;
@@ -578,6 +614,7 @@ StatusOr<DenseDepth> DensifyDepthWithSupport(const cv::Mat& depth_um, const cv::
           }
         }
         sup[x] = std::min(std::max(dn, 0.f), 1.f);
+        spr[x] = sd;
         const float c = m ? z[x] - mean_f : 0.f;
         const float r = (c - fe) * inv_cauchy;
         const bool outlier = reject && m && std::abs((c - fe) * inv_limit) > 1.f;

@@ -116,6 +116,12 @@ struct DenseDepth {
   // CV_32FC1 in [0, 1]: the Cauchy weight of a measured pixel's residual r to the (edge-aware)
   // fit, 1 / (1 + (r / scale)^2), scale as robust_scale's; 0 where nothing was measured.
   cv::Mat agreement;
+  // CV_32FC1, depth units: how much the measured depths that the edge-aware fit draws on at the
+  // pixel disagree with its local model there (their weighted RMS residual about the local plane,
+  // or constant: sqrt(F(w (d - model)^2) / F(w))). Small amid one surface; large where the fit
+  // mixes surfaces at different depths (an untextured region between them), so its value there
+  // is uncertain. 0 where nothing was measured at all.
+  cv::Mat spread_um;
 };
 
 // depth_um: CV_32FC1, NaN = not measured. confidence: CV_32FC1 (empty: all measured pixels

@@ -17,6 +17,9 @@ Status DepthPostProcessOptions::Validate() const {
   if (dense_rank_radius_px < 0 || dense_rank_radius_px > 256) {
     return Status::InvalidArgument("dense_rank_radius_px must be between 0 and 256");
   }
+  if (!(dense_rank_spread_z_steps >= 0.0 && std::isfinite(dense_rank_spread_z_steps))) {
+    return Status::InvalidArgument("dense_rank_spread_z_steps must be >= 0");
+  }
   if (consistency) INSPECT_RETURN_IF_ERROR(consistency_options.Validate());
   INSPECT_RETURN_IF_ERROR(refinement.Validate());
   if (fill_low_confidence) INSPECT_RETURN_IF_ERROR(fill_options.Validate());
@@ -95,21 +98,32 @@ StatusOr<DepthResult> PostProcessDepth(const DepthResult& raw, const std::vector
         const int k = 2 * o.dense_rank_radius_px + 1;
         cv::boxFilter(share, share, -1, cv::Size(k, k), cv::Point(-1, -1), true, cv::BORDER_REFLECT);
       }
+      // The spread's scale in depth units (0: the spread is not used).
+      float inv_spread = 0.f;
+      if (o.dense_confidence && o.dense_rank_spread_z_steps > 0.0) {
+        const double z_step = MedianZStep(z_um);
+        if (!(z_step > 0.0)) return Status::InvalidArgument("z_um must hold at least two distinct positions");
+        inv_spread = float(1.0 / (o.dense_rank_spread_z_steps * z_step));
+      }
       cv::parallel_for_(cv::Range(0, d.depth_um.rows), [&](const cv::Range& rows) {
         for (int y = rows.start; y < rows.end; ++y) {
           const uint8_t* inferred = d.inferred.ptr<uint8_t>(y);
           const float* support = d.support.ptr<float>(y);
           const float* agreement = d.agreement.ptr<float>(y);
+          const float* spread = d.spread_um.ptr<float>(y);
           const float* measured = out.depth_um.ptr<float>(y);
           float* c = out.confidence.ptr<float>(y);
           for (int x = 0; x < d.depth_um.cols; ++x) {
+            const float q = spread[x] * inv_spread, spread_factor = 1.f / (1.f + q * q);
             if (inferred[x]) {
               // A rejected measurement ranks by its agreement with the fit as well.
               float rank = measured[x] == measured[x] ? support[x] * agreement[x] : support[x];
               if (!share.empty()) rank *= std::sqrt(std::max(share.at<float>(y, x), 0.f));
+              rank *= spread_factor;
               c[x] = o.dense_confidence ? std::min(below, min_confidence * rank) : std::min(c[x], below);
             } else if (o.dense_confidence) {
-              c[x] = min_confidence + (c[x] - min_confidence) * agreement[x];
+              c[x] = min_confidence + (c[x] - min_confidence) * agreement[x] *
+                                          (o.dense_rank_spread_measured ? spread_factor : 1.f);
             }
           }
         }

@@ -52,6 +52,18 @@ struct DepthPostProcessOptions {
   // 301-308 2.395 -> 2.435, 501-516 1.573 -> 1.484, 701-716 1.869 -> 2.089), so it stays off
   // (tests/bench/natural_heldout_output.md).
   int dense_rank_radius_px = 0;
+  // With dense_confidence: the rank is also divided by 1 + (spread / s)^2, spread = the weighted
+  // RMS residual of the measured depths the fit draws on at the pixel about its local plane
+  // (DenseDepth::spread_um), s = dense_rank_spread_z_steps x the stack's median z step: a pixel
+  // filled from measurements that agree ranks above one filled where the fit mixes surfaces at
+  // different depths. dense_rank_spread_measured: the part of a measured pixel's confidence above
+  // min_confidence is scaled by the same factor (measured pixels still rank above inferred ones).
+  // 0: off. 1 z step, measured too, chosen on the tuning scenes (seeds 1-8) of natural-evaluate
+  // --experiments among 0.25..4 (RMSE over the most confident half 1.268 -> 1.028 frames, AUSE
+  // 1.106 -> 0.859; the depth itself is unchanged; held out: 0.54x -> 0.50x focus-stack's on 56
+  // scenes; tests/bench/natural_heldout_output.md).
+  double dense_rank_spread_z_steps = 1.0;
+  bool dense_rank_spread_measured = true;
 
   Status Validate() const;  // INVALID_ARGUMENT naming the field
 };

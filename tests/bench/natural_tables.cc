@@ -419,6 +419,14 @@ struct DenseCandidate {
   double soft_min_conf = -1.0;  // prototype: the dense step sees pixels down to this confidence (< 0: off)
   int rank_radius = -1;  // DepthPostProcessOptions::dense_rank_radius_px (< 0: its default)
   bool soft_no_consistency = false;
+  // DepthPostProcessOptions::dense_rank_spread_z_steps / dense_rank_spread_measured (< 0: its default).
+  double spread_z_steps = -1.0;
+  int spread_measured = -1;
+  // Prototype: an inferred pixel whose own (unthresholded) depth agrees with the dense value ranks
+  // higher: rank x (1 + raw_beta g) / (1 + raw_beta), g = min(1, raw confidence / 0.4) /
+  // (1 + ((raw depth - dense) / raw_scale z steps)^2). < 0: off.
+  double raw_beta = -1.0;
+  double raw_scale = 1.0;
 };
 
 cv::Mat RadialAverageFill(const cv::Mat& depth);
@@ -451,6 +459,8 @@ DepthResult PostProcessed(const Scene& s, const DenseCandidate& c, Cache* cache,
   o.dense_confidence = c.dense_confidence;
   o.fill_low_confidence = !c.dense;
   if (c.rank_radius >= 0) o.dense_rank_radius_px = c.rank_radius;
+  if (c.spread_z_steps >= 0.0) o.dense_rank_spread_z_steps = c.spread_z_steps;
+  if (c.spread_measured >= 0) o.dense_rank_spread_measured = c.spread_measured != 0;
   if (c.soft_min_conf >= 0.0) {
     o.min_confidence = c.soft_min_conf;
     if (c.soft_no_consistency) o.consistency = false;
@@ -466,6 +476,17 @@ DepthResult PostProcessed(const Scene& s, const DenseCandidate& c, Cache* cache,
         else if (cf < float(c.soft_min_conf)) cf *= 0.3f;
       }
     o.min_confidence = 0.4;
+  }
+  if (c.raw_beta >= 0.0) {
+    const double z_step = MedianZStep(s.z);
+    for (int y = 0; y < r.confidence.rows; ++y)
+      for (int x = 0; x < r.confidence.cols; ++x) {
+        float& cf = r.confidence.at<float>(y, x);
+        if (cf >= float(o.min_confidence)) continue;
+        const double q = (raw.depth_um.at<float>(y, x) - r.depth_um.at<float>(y, x)) / (c.raw_scale * z_step);
+        const double g = std::min(1.0, raw.confidence.at<float>(y, x) / o.min_confidence) / (1.0 + q * q);
+        cf = float(std::min<double>(std::nextafter(float(o.min_confidence), 0.f), cf * (1.0 + c.raw_beta * g) / (1.0 + c.raw_beta)));
+      }
   }
   if (c.blend_b >= 0.0) {
     cv::Mat meas = r.depth_um.clone();
@@ -626,8 +647,17 @@ cv::Mat RadialAverageFill(const cv::Mat& depth) {
 }
 
 // Propagation alone: fills of the truth at our measured pixels (and of our measured depth), RMSE
-// at full coverage per region, mean over scenes [from, to).
-void DiagnosePropagation(const std::vector<Scene>& scenes, std::vector<Cache>& caches, int from, int to) {
+// at full coverage per region, mean over scenes [from, to). The oracle inputs bound what any fill
+// can do on this renderer: truth-tx = the true depth at every textured pixel (the renderer's
+// mask), truth-w3 / truth-w6 = also at every pixel within 3 / 6 px of a textured one (the 7 x 7
+// focus window sees texture there: the curve has a cue, if maybe of a neighbour's depth),
+// truth-pk = at every textured pixel and wherever the unthresholded focus peak is within 1 frame
+// of the truth (a perfect selector of the engine's own peaks), truth-sig = at every pixel with a
+// peak above noise (the engine's confidence > 0: more than 4 noise levels above the curve's
+// mean, which noise alone reaches on many untextured pixels); "hole mean" gives every connected
+// hole the mean of the truth over it (no fill that keeps one value per hole can do better).
+void DiagnosePropagation(const std::vector<Scene>& scenes, std::vector<Cache>& caches, int from, int to,
+                         bool have_fs) {
   struct Method {
     std::string name;
     std::function<cv::Mat(const cv::Mat&, const cv::Mat&, const cv::Mat&)> fill;  // depth, conf, guide
@@ -652,8 +682,13 @@ void DiagnosePropagation(const std::vector<Scene>& scenes, std::vector<Cache>& c
                        return cv::Mat(0.5 * DensifyDepth(d, c, g, DenseDepthOptions{}).value() + 0.5 * RadialAverageFill(d));
                      }});
   const int nm = int(methods.size());
-  std::vector<std::array<double, 8>> acc(size_t(4 * nm));
+  const char* input_names[] = {"truth", "measured", "cleaned", "truth-tx", "truth-w3", "truth-w6", "truth-pk", "truth-sig"};
+  constexpr int kInputs = 8;
+  // One more "method" per input: the hole mean (oracle, needs the truth).
+  const int nmh = nm + 1;
+  std::vector<std::array<double, 8>> acc(size_t(kInputs * nmh));
   for (auto& a : acc) a.fill(0.0);
+  double share[3] = {}, untextured = 0, fs100 = 0, input_cover[kInputs] = {};
   for (int k = from; k < to; ++k) {
     const Scene& s = scenes[size_t(k)];
     const cv::Mat& t = s.truth.depth_frames;
@@ -671,9 +706,56 @@ void DiagnosePropagation(const std::vector<Scene>& scenes, std::vector<Cache>& c
         if (std::abs(cleaned.at<float>(y, x) - t.at<float>(y, x)) > 2.f) cleaned.at<float>(y, x) = NAN;
     cv::Mat truth_textured(t.size(), CV_32FC1, cv::Scalar(NAN));
     t.copyTo(truth_textured, s.truth.textured);
-    for (int m = 0; m < 4 * nm; ++m) {
-      const cv::Mat f = methods[size_t(m % nm)].fill(m < nm ? truth_at : m < 2 * nm ? measured.depth_um : m < 3 * nm ? cleaned : truth_textured,
-                                                     measured.confidence, raw.all_in_focus);
+    // Every pixel whose focus window (7 x 7, the default) sees texture, or within 6 px of it.
+    cv::Mat truth_w3 = truth_textured.clone(), truth_w6 = truth_textured.clone(), near3, near6;
+    cv::dilate(s.truth.textured, near3, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(7, 7)));
+    cv::dilate(s.truth.textured, near6, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(13, 13)));
+    t.copyTo(truth_w3, near3);
+    t.copyTo(truth_w6, near6);
+    // Every pixel whose unthresholded focus peak lies within 1 frame of the truth (a perfect
+    // selector of the engine's own peaks), and every pixel with any peak above noise (confidence > 0).
+    cv::Mat truth_peak = truth_textured.clone(), truth_signal = truth_textured.clone();
+    for (int y = 0; y < t.rows; ++y)
+      for (int x = 0; x < t.cols; ++x) {
+        if (std::abs(raw.depth_um.at<float>(y, x) - t.at<float>(y, x)) <= 1.f) truth_peak.at<float>(y, x) = t.at<float>(y, x);
+        if (raw.confidence.at<float>(y, x) > 0.f) truth_signal.at<float>(y, x) = t.at<float>(y, x);
+      }
+    const cv::Mat* inputs[kInputs] = {&truth_at, &measured.depth_um, &cleaned, &truth_textured,
+                                      &truth_w3, &truth_w6, &truth_peak, &truth_signal};
+    for (int y = kBorderPx; y < t.rows - kBorderPx; ++y)
+      for (int x = kBorderPx; x < t.cols - kBorderPx; ++x) {
+        const int region = s.truth.occlusion_edge.at<uint8_t>(y, x) ? 2 : s.truth.textured.at<uint8_t>(y, x) ? 0 : 1;
+        share[region] += 1;
+        untextured += !s.truth.textured.at<uint8_t>(y, x);
+        for (int i = 0; i < kInputs; ++i) input_cover[i] += std::isfinite(inputs[i]->at<float>(y, x));
+      }
+    if (have_fs) fs100 += Sparsify(s.fs_depth, cv::Mat(), s.truth).rmse.back() / (to - from);
+    for (int m = 0; m < kInputs * nmh; ++m) {
+      const int input = m / nmh, method = m % nmh;
+      const cv::Mat& in = *inputs[input];
+      cv::Mat f;
+      if (method < nm) {
+        f = methods[size_t(method)].fill(in, measured.confidence, raw.all_in_focus);
+      } else {
+        // Hole mean: connected holes (8-connected non-finite pixels), each the mean of its truth.
+        f = in.clone();
+        cv::Mat labels, hole(in.size(), CV_8UC1);
+        for (int y = 0; y < t.rows; ++y)
+          for (int x = 0; x < t.cols; ++x) hole.at<uint8_t>(y, x) = std::isfinite(in.at<float>(y, x)) ? 0 : 255;
+        const int n = cv::connectedComponents(hole, labels, 8, CV_32S);
+        std::vector<double> sum(size_t(n), 0.0), cnt(size_t(n), 0.0);
+        for (int y = 0; y < t.rows; ++y)
+          for (int x = 0; x < t.cols; ++x) {
+            const int l = labels.at<int>(y, x);
+            sum[size_t(l)] += t.at<float>(y, x);
+            cnt[size_t(l)] += 1;
+          }
+        for (int y = 0; y < t.rows; ++y)
+          for (int x = 0; x < t.cols; ++x) {
+            const int l = labels.at<int>(y, x);
+            if (l > 0) f.at<float>(y, x) = float(sum[size_t(l)] / cnt[size_t(l)]);
+          }
+      }
       double se[4] = {}, n[4] = {};
       for (int y = kBorderPx; y < t.rows - kBorderPx; ++y)
         for (int x = kBorderPx; x < t.cols - kBorderPx; ++x) {
@@ -685,14 +767,42 @@ void DiagnosePropagation(const std::vector<Scene>& scenes, std::vector<Cache>& c
           se[3] += e * e;
           n[3] += 1;
         }
+      double use = 0, un = 0;
+      for (int y = kBorderPx; y < t.rows - kBorderPx; ++y)
+        for (int x = kBorderPx; x < t.cols - kBorderPx; ++x)
+          if (!s.truth.textured.at<uint8_t>(y, x)) {
+            const float v = f.at<float>(y, x);
+            const double e = std::isfinite(v) ? v - t.at<float>(y, x) : 1e3;
+            use += e * e;
+            un += 1;
+          }
       for (int g = 0; g < 4; ++g) acc[size_t(m)][size_t(g)] += std::sqrt(se[g] / std::max(n[g], 1.0)) / (to - from);
+      acc[size_t(m)][4] += std::sqrt(use / std::max(un, 1.0)) / (to - from);
     }
   }
-  std::printf("\nPropagation (mean over scenes of RMSE [frames] at full coverage; input = the truth at our measured "
-              "pixels, our measured depth, our measured depth without its errors > 2 frames, the truth at every textured pixel): all / textured / flat / edge\n");
-  for (int m = 0; m < 4 * nm; ++m)
-    std::printf("  %-8s %-44s %7.3f %7.3f %7.3f %7.3f\n", m < nm ? "truth" : m < 2 * nm ? "measured" : m < 3 * nm ? "cleaned" : "truth-tx", methods[size_t(m % nm)].name.c_str(),
-                acc[size_t(m)][3], acc[size_t(m)][0], acc[size_t(m)][1], acc[size_t(m)][2]);
+  const double all_px = share[0] + share[1] + share[2];
+  std::printf("\nPropagation, seeds %u..%u (mean over scenes of RMSE [frames] at full coverage; input = the truth at our "
+              "measured pixels, our measured depth, our measured depth without its errors > 2 frames, the truth at "
+              "every textured pixel (truth-tx), also at every pixel within 3 / 6 px of texture (truth-w3: the "
+              "7 x 7 focus window sees texture; truth-w6), at every textured pixel and every pixel whose "
+              "unthresholded focus peak is within 1 frame of the truth (truth-pk), at every textured pixel and "
+              "every pixel with a peak above noise (truth-sig: engine confidence > 0)): all / textured / flat / edge / untextured "
+              "(flat + untextured edge pixels); hole mean = each connected hole gets the truth's mean over it\n",
+              unsigned(scenes[size_t(from)].seed), unsigned(scenes[size_t(to - 1)].seed));
+  std::printf("pixels: textured %.1f %%, flat %.1f %%, edge %.1f %%; untextured (renderer mask) %.1f %%; input "
+              "coverage:",
+              100 * share[0] / all_px, 100 * share[1] / all_px, 100 * share[2] / all_px, 100 * untextured / all_px);
+  for (int i = 0; i < kInputs; ++i) std::printf(" %s %.1f %%", input_names[i], 100 * input_cover[i] / all_px);
+  std::printf("\n");
+  if (have_fs) std::printf("focus-stack RMSE at 100 %%: %.3f (0.7x = %.3f)\n", fs100, 0.7 * fs100);
+  for (int m = 0; m < kInputs * nmh; ++m) {
+    const int method = m % nmh;
+    std::printf("  %-9s %-44s %7.3f %7.3f %7.3f %7.3f %7.3f", input_names[m / nmh],
+                method < nm ? methods[size_t(method)].name.c_str() : "hole mean (oracle)", acc[size_t(m)][3],
+                acc[size_t(m)][0], acc[size_t(m)][1], acc[size_t(m)][2], acc[size_t(m)][4]);
+    if (have_fs) std::printf("  %.2fx", acc[size_t(m)][3] / fs100);
+    std::printf("\n");
+  }
 }
 
 // Per scene (scenes [from, to)): where the full-coverage error is and how good the 50 % ranking
@@ -1037,14 +1147,29 @@ int RunHeldOut(std::vector<Scene>& scenes, std::vector<Cache>& caches, int n_tun
 // rejection, blends with isotropic fills, a lower threshold for the dense input, rank radii.)
 template <typename F>
 void ExperimentVariants(F&& Variant) {
-  for (int rad : {0, 4, 8, 16})
-    Variant("rank radius " + std::to_string(rad), [=](DenseCandidate& c) { c.rank_radius = rad; });
-  Variant("reject 8", [=](DenseCandidate& c) { c.dense_options.reject_scale = 8; });
-  Variant("reject 8 + isotropic push-pull blend 0.75", [=](DenseCandidate& c) {
-    c.dense_options.reject_scale = 8;
-    c.blend_b = 0.75;
+  // Round 1 (seeds 1-8, the spread with the ridge's shrinkage counted as residual): spread 0.25 /
+  // 0.5 / 1 / 2 / 4 z steps, inferred only or measured too; raw agreement beta 1 / 4 x scale
+  // 0.5 / 1 / 2 alone; round 2: spread 0.75 / 1 / 1.5 with either or rank radius 8. Round 3
+  // (below, the spread about the unridged plane): 1 z step, measured too, shipped
+  // (tests/bench/natural_heldout_output.md).
+  for (double sp : {0.5, 0.75, 1.0, 1.5, 2.0}) {
+    char name[96];
+    std::snprintf(name, sizeof name, "rank spread %g z steps", sp);
+    Variant(name, [=](DenseCandidate& c) {
+      c.spread_z_steps = sp;
+      c.spread_measured = 0;
+    });
+    std::snprintf(name, sizeof name, "rank spread %g z steps, measured too", sp);
+    Variant(name, [=](DenseCandidate& c) {
+      c.spread_z_steps = sp;
+      c.spread_measured = 1;
+    });
+  }
+  Variant("rank spread 1 + raw agreement beta 1 scale 1", [=](DenseCandidate& c) { c.raw_beta = 1.0; });
+  Variant("rank by support alone (before)", [=](DenseCandidate& c) {
+    c.spread_z_steps = 0.0;
+    c.spread_measured = 0;
   });
-  Variant("dense sees confidence >= 0.1", [=](DenseCandidate& c) { c.soft_min_conf = 0.1; });
 }
 
 // Variants of the dense step tried on the scenes given (the tuning seeds 1-8): RMSE at 100 % and
@@ -1070,21 +1195,21 @@ void RunExperiments(std::vector<Scene>& scenes, std::vector<Cache>& caches, bool
   }
 }
 
-// The shipped default beside the previous one (no outlier rejection) on the scenes given, with
-// focus-stack's figures: per scene and the mean, RMSE at 100 % and 50 % (each method's own most
-// confident half; focus-stack on our half), AUSE, the dense step's seconds per scene.
+// The shipped default beside the one before the spread ranking (inferred pixels ranked by the
+// fit's support alone, measured ones by their agreement) on the scenes given, with focus-stack's
+// figures: per scene and the mean, RMSE at 100 % and 50 % (each method's own most confident half;
+// focus-stack on our half), AUSE, the dense step's seconds per scene. The depth is the same in
+// both rows (the ranking differs), so RMSE100 is too.
 void RunCompare(std::vector<Scene>& scenes, std::vector<Cache>& caches, bool have_fs) {
-  DenseCandidate shipped{"dense default (DenseDepthOptions{})", true, {}, true, true};
-  DenseCandidate previous{"previous default (no rejection, no radius)", true, {}, true, true};
-  previous.dense_options.reject_scale = 0.0;
-  previous.rank_radius = 0;
-  DenseCandidate with_radius{"rejection + rank radius 8 (not shipped)", true, {}, true, true};
-  with_radius.rank_radius = 8;
+  DenseCandidate shipped{"dense default (rank: support and spread)", true, {}, true, true};
+  DenseCandidate previous{"previous default (rank: support)", true, {}, true, true};
+  previous.spread_z_steps = 0.0;
+  previous.spread_measured = 0;
   std::printf("\nSeeds %u..%u: RMSE [frames] at 100 %% and 50 %% coverage (each method's own most confident half; "
               "focus-stack on the same pixels as the row's), AUSE over 5..100 %%; per scene: RMSE100 / RMSE50 "
               "(focus-stack's)\n",
               unsigned(scenes.front().seed), unsigned(scenes.back().seed));
-  for (const DenseCandidate* c : {&previous, &with_radius, &shipped}) {
+  for (const DenseCandidate* c : {&previous, &shipped}) {
     std::printf("%s per scene:", c->name.c_str());
     for (size_t k = 0; k < scenes.size(); ++k) {
       const HeldOutFigures h = ScoreOn(scenes, caches, int(k), int(k) + 1, *c, have_fs);
@@ -1094,7 +1219,7 @@ void RunCompare(std::vector<Scene>& scenes, std::vector<Cache>& caches, bool hav
   }
   std::printf("%-40s %8s %8s %8s %8s %8s %7s %7s %8s\n", "method", "RMSE100", "RMSE50", "AUSE", "FS100", "FS50same",
               "r100", "r50", "dense s");
-  for (const DenseCandidate* c : {&previous, &with_radius, &shipped}) {
+  for (const DenseCandidate* c : {&previous, &shipped}) {
     const HeldOutFigures h = ScoreOn(scenes, caches, 0, int(scenes.size()), *c, have_fs);
     std::printf("%-40s %8.3f %8.3f %8.3f %8.3f %8.3f %6.2fx %6.2fx %8.3f\n", c->name.c_str(), h.r100, h.r50, h.ause,
                 h.f100, h.f50, h.r100 / h.f100, h.r50 / h.f50, h.seconds);
@@ -1179,7 +1304,7 @@ int RunNaturalEvaluation(int argc, char** argv) {
   if (diagnose || experiments || propagation || compare) {
     // Every scene given (choose the seeds: tuning ones for experiments).
     if (diagnose) DiagnoseScenes(scenes, caches, 0, int(scenes.size()), DenseCandidate{"dense default (DenseDepthOptions{})", true, {}, true, true}, have_fs);
-    if (propagation) DiagnosePropagation(scenes, caches, 0, int(scenes.size()));
+    if (propagation) DiagnosePropagation(scenes, caches, 0, int(scenes.size()), have_fs);
     if (experiments) RunExperiments(scenes, caches, have_fs);
     if (compare) RunCompare(scenes, caches, have_fs);
     if (compare && timing) TimeDense(scenes[0]);

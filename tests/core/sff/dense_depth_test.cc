@@ -383,5 +383,87 @@ TEST(DenseDepthTest, PostProcessDenseMarksInferredByConfidence) {
   EXPECT_FLOAT_EQ(plain->confidence.at<float>(15, 15), 0.1f);
 }
 
+// DenseDepth::spread_um: the measured depths the fit draws on agree about a local plane amid one
+// (tilted) surface, and disagree where an untextured hole hides a depth step that the guide does
+// not show, so the fill's value there is a guess between the two sides.
+TEST(DenseDepthTest, SpreadIsSmallOnOneSurfaceAndLargeAcrossAHiddenStep) {
+  const cv::Size size(96, 64);
+  const cv::Mat guide(size, CV_8UC1, cv::Scalar(128));
+  const cv::Rect hole(40, 20, 16, 16);
+  cv::Mat plane(size, CV_32FC1), step(size, CV_32FC1);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      plane.at<float>(y, x) = 100.f + 0.25f * x + 0.1f * y;
+      step.at<float>(y, x) = x < 48 ? 100.f : 120.f;
+    }
+  plane(hole).setTo(kNan);
+  step(hole).setTo(kNan);
+  DenseDepthOptions o = Local();
+  o.reject_scale = 0.0;
+  auto on_plane = DensifyDepthWithSupport(plane, cv::Mat(), guide, o);
+  auto on_step = DensifyDepthWithSupport(step, cv::Mat(), guide, o);
+  ASSERT_TRUE(on_plane.ok() && on_step.ok());
+  // The hole's centre and a far corner: a plane fits the surroundings exactly (measured 0 and
+  // 0.004 um; with the slope ridge's shrinkage counted as residual it would be 0.6 um).
+  EXPECT_LT(on_plane->spread_um.at<float>(28, 48), 0.05f);
+  EXPECT_LT(on_plane->spread_um.at<float>(5, 5), 0.05f);
+  // Across the 20 um step (hole centre on it): 5.6 um measured; no plane fits both sides.
+  EXPECT_GT(on_step->spread_um.at<float>(28, 48), 4.f);
+  EXPECT_LT(on_step->spread_um.at<float>(28, 48), 10.f);
+  // 43 px away, on one side (guide uniform, so the fit still reaches the far side): 3.4 um.
+  EXPECT_LT(on_step->spread_um.at<float>(28, 5), 0.75f * on_step->spread_um.at<float>(28, 48));
+}
+
+// The dense confidence ranks two unmeasured holes of the same size and support by the spread:
+// the one amid a single surface above the one that hides a depth step (default
+// dense_rank_spread_z_steps 1: the rank / (1 + (spread / 1 z step)^2)).
+TEST(DenseDepthTest, PostProcessRanksAHoleAmidOneSurfaceAboveOneAcrossAStep) {
+  DepthResult raw;
+  const cv::Size size(128, 64);
+  raw.depth_um.create(size, CV_32FC1);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) raw.depth_um.at<float>(y, x) = x < 96 ? 100.f : 140.f;
+  raw.confidence = cv::Mat(size, CV_32FC1, cv::Scalar(0.9f));
+  const cv::Rect on_surface(16, 24, 16, 16), across_step(88, 24, 16, 16);
+  raw.confidence(on_surface).setTo(0.1f);
+  raw.confidence(across_step).setTo(0.1f);
+  // Two objects the guide tells apart (x < 64 dark, the rest bright); the step at x = 96 is
+  // inside the bright one, where the guide shows nothing.
+  raw.all_in_focus = cv::Mat(size, CV_8UC1, cv::Scalar(60));
+  raw.all_in_focus(cv::Rect(64, 0, 64, 64)).setTo(180);
+  raw.frame_count = 30;
+  std::vector<double> z;
+  for (int k = 0; k < 30; ++k) z.push_back(90.0 + 2.0 * k);
+  DepthPostProcessOptions o;
+  o.consistency = false;
+  o.dense = true;
+  o.dense_options.reject_scale = 0.0;
+  ASSERT_EQ(o.dense_rank_spread_z_steps, 1.0);
+  ASSERT_TRUE(o.dense_rank_spread_measured);
+  auto ranked = PostProcessDepth(raw, z, 7, o);
+  DepthPostProcessOptions support_only = o;
+  support_only.dense_rank_spread_z_steps = 0.0;
+  auto plain = PostProcessDepth(raw, z, 7, support_only);
+  ASSERT_TRUE(ranked.ok() && plain.ok());
+  const float a = ranked->confidence.at<float>(32, 24), b = ranked->confidence.at<float>(32, 96);
+  const float a0 = plain->confidence.at<float>(32, 24), b0 = plain->confidence.at<float>(32, 96);
+  // By support alone the two centres tie (0.337 both: 0.4 x the fit's weight there).
+  EXPECT_NEAR(a0, 0.337f, 0.005f);
+  EXPECT_NEAR(b0, a0, 0.005f);
+  // With the spread: the hole amid one surface keeps its rank (spread 0), the one across the
+  // hidden 40 um (20 z step) step drops to 0.015 (spread about 9.4 um: 0.337 / (1 + 4.7^2)).
+  EXPECT_NEAR(a, a0, 1e-4f);
+  EXPECT_LT(b, 0.1f * a);
+  EXPECT_GT(b, 0.f);
+  // Still inferred, and the measured pixels still measured: a measured pixel amid one surface
+  // keeps its 0.9; one beside the step keeps at least min_confidence.
+  EXPECT_LT(a, 0.4f);
+  EXPECT_FLOAT_EQ(ranked->confidence.at<float>(5, 5), 0.9f);
+  EXPECT_GE(ranked->confidence.at<float>(5, 95), 0.4f);
+  EXPECT_LE(ranked->confidence.at<float>(5, 95), plain->confidence.at<float>(5, 95));
+  // The depth is the ranking's business only: the same map either way.
+  EXPECT_EQ(cv::norm(ranked->depth_um, plain->depth_um, cv::NORM_INF), 0.0);
+}
+
 }  // namespace
 }  // namespace inspection
