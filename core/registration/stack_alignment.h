@@ -34,9 +34,9 @@ inline constexpr double kNegligibleAlignmentPx = 0.5;
 // An imported stack's default (no --alignment) leaves a stack whose measured motion moves no frame
 // corner by this much as captured, and says so (AlignmentFigures::decision). Measured on the lens
 // renderer's stacks (chain-evaluate moving, tuning seeds 8100-8105, 800x600 and 1600x1200):
-// warping with the TRUE transforms changed the depth error by no more than +-1 % up to 1 px of
-// corner motion (on the pixels both results measure), and improved every stack from 1.5 px of
-// shift on; a pure scale change was still neutral at 1.6 px (docs/alignment.md). Below this a warp
+// warping with the TRUE transforms changed the mean depth error by less than 1 % either way up
+// to 1 px of corner motion (on the pixels both results measure), and improved every stack at
+// 1.5 px of shift; a pure scale change was still neutral at 1.6 px (docs/alignment.md). Below this a warp
 // gains nothing measurable, and a false one (a still stack's defocus read as motion) costs a
 // misplaced depth map and several times the engine's time.
 inline constexpr double kImportedWarpPaysPx = 1.5;
@@ -164,9 +164,9 @@ class StackAligner {
   // frame is then about half of the stack's, which keeps the most pixels seen by every frame.
   // z_um: the stack's frame positions; the model must match frame_size. A model that moves no
   // frame corner by min_motion_px leaves the frames as they are (still): kNegligibleAlignmentPx
-  // for a rig's scan; an imported stack's default takes the chain's floor
-  // (ChainRegistrationOptions::min_motion_px), measured: warping a stack that moves less costs
-  // more depth accuracy in resampling than it corrects (docs/alignment.md).
+  // for a rig's scan; an imported stack's default passes kImportedWarpPaysPx, measured: below it
+  // even a warp with the true transforms gains nothing measurable in depth accuracy
+  // (docs/alignment.md).
   static StatusOr<StackAligner> Create(const FocusBreathingModel& model, FrameAlignment alignment,
                                        const std::vector<double>& z_um, cv::Size frame_size,
                                        double min_motion_px = kNegligibleAlignmentPx);
