@@ -13,6 +13,13 @@ namespace {
 
 constexpr float kNan = std::numeric_limits<float>::quiet_NaN();
 
+// The stage positions of a 30-frame stack at 2 um steps from first_um.
+std::vector<double> ThirtyFramesFrom(double first_um) {
+  std::vector<double> z;
+  for (int k = 0; k < 30; ++k) z.push_back(first_um + 2.0 * k);
+  return z;
+}
+
 // Two surfaces side by side: left half dark at 100 um, right half bright at 200 um. Each half
 // is measured only in a sparse grid (every 8th pixel); the guide's edge must keep the halves apart.
 TEST(DenseDepthTest, FillsEveryPixelAndStopsAtTheGuideEdge) {
@@ -282,8 +289,7 @@ TEST(DenseDepthTest, DefaultRejectsGrossOutliersWithoutReweighting) {
   raw.confidence(hole).setTo(0.1f);
   raw.all_in_focus = guide;
   raw.frame_count = 30;
-  std::vector<double> z;
-  for (int k = 0; k < 30; ++k) z.push_back(40.0 + 2.0 * k);
+  const std::vector<double> z = ThirtyFramesFrom(40.0);
   DepthPostProcessOptions po;
   po.consistency = false;
   po.dense = true;
@@ -342,8 +348,7 @@ TEST(DenseDepthTest, PostProcessDenseMarksInferredByConfidence) {
   raw.confidence(cv::Rect(10, 10, 10, 10)).setTo(0.1f);
   raw.all_in_focus = cv::Mat(size, CV_8UC1, cv::Scalar(100));
   raw.frame_count = 30;
-  std::vector<double> z;
-  for (int k = 0; k < 30; ++k) z.push_back(90.0 + 2.0 * k);
+  const std::vector<double> z = ThirtyFramesFrom(90.0);
   DepthPostProcessOptions o;
   o.consistency = false;
   o.dense = true;
@@ -432,8 +437,7 @@ TEST(DenseDepthTest, PostProcessRanksAHoleAmidOneSurfaceAboveOneAcrossAStep) {
   raw.all_in_focus = cv::Mat(size, CV_8UC1, cv::Scalar(60));
   raw.all_in_focus(cv::Rect(64, 0, 64, 64)).setTo(180);
   raw.frame_count = 30;
-  std::vector<double> z;
-  for (int k = 0; k < 30; ++k) z.push_back(90.0 + 2.0 * k);
+  const std::vector<double> z = ThirtyFramesFrom(90.0);
   DepthPostProcessOptions o;
   o.consistency = false;
   o.dense = true;
