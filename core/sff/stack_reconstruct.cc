@@ -157,10 +157,12 @@ StatusOr<std::optional<StackAligner>> PrepareAlignment(const StackFrameSource& s
     *figures = aligner.figures();
     // Said where the motion is significant and not negligible (kNegligibleAlignmentPx, a rig's
     // floor): a stack the old 0.5 px floor would have warped.
-    if (imported_default && !aligner.warps() && model.still_threshold > 0 && model.still_statistic > model.still_threshold &&
-        MaxCornerDisplacementPx(model, z_um) >= kNegligibleAlignmentPx) {
-      figures->decision = BelowTheFloor(MaxCornerDisplacementPx(model, z_um), model.still_statistic,
-                                        model.still_threshold, estimate_options.min_motion_px);
+    if (imported_default && !aligner.warps() && model.still_threshold > 0 && model.still_statistic > model.still_threshold) {
+      const double corner_px = MaxCornerDisplacementPx(model, z_um);
+      if (corner_px >= kNegligibleAlignmentPx) {
+        figures->decision =
+            BelowTheFloor(corner_px, model.still_statistic, model.still_threshold, estimate_options.min_motion_px);
+      }
     }
   }
   return std::optional<StackAligner>(std::move(aligner));
